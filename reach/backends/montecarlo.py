@@ -1,0 +1,381 @@
+"""The Monte Carlo referee: vectorised sampling of the same model, falsification first.
+
+Safety properties. Runs are drawn in three rounds, each one numpy batch:
+
+1. *structured*: corners, face centres and the centre of the initial box, crossed with the
+   ends and middle of the abort window;
+2. *random*: ``samples`` i.i.d. uniform initial states and switch instants;
+3. *search*: a cross-entropy falsifier that resamples around the runs that came closest to
+   the unsafe set (``search_rounds`` generations).
+
+Every visited state is checked against every unsafe piece of the property. A violation is
+replayed alone (:func:`replay`) and returned as UNSAFE with its counterexample. Otherwise the
+answer is UNKNOWN with the closest approach (depth) found and a one-sided 95 % Clopper-Pearson
+upper bound on the violation probability from the i.i.d. round. Monte Carlo never says SAFE.
+
+Reach and reach-avoid properties of stochastic models are estimated from ``samples`` runs
+with Gaussian kicks; the probability is a 95 % Wilson interval.
+"""
+
+from __future__ import annotations
+
+import itertools
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from reach.model.automaton import HybridAutomaton
+from reach.model.constraints import lambdify_margins
+from reach.model.simulate import Simulator
+from reach.result import Counterexample, Result, Status
+from reach.spec.properties import BoundEvent, BoundReach, BoundReachAvoid, BoundSafety
+from reach.stats import clopper_pearson_upper, wilson
+
+NAME = "montecarlo"
+
+
+@dataclass
+class Options:
+    samples: int = 1000            # i.i.d. runs (safety) or runs (stochastic reach)
+    search_rounds: int = 3         # cross-entropy generations after the i.i.d. round
+    search_size: int = 200         # runs per generation
+    seed: int = 0
+    dt: float | None = None        # simulator grid step (model default if None)
+    batch: int = 20000             # runs per numpy batch for stochastic estimates
+
+    @classmethod
+    def from_dict(cls, options: dict | None) -> "Options":
+        options = dict(options or {})
+        unknown = set(options) - set(cls.__dataclass_fields__)
+        if unknown:
+            raise ValueError(f"unknown montecarlo option '{sorted(unknown)[0]}'")
+        return cls(**options)
+
+
+# ------------------------------------------------------------------ the abort window
+
+def switch_window(model: HybridAutomaton):
+    """``(lo, hi, forced)`` of the model's may-transition window, or None if it has none.
+
+    ``forced``: every source mode's invariant bounds the clock by ``hi`` (the ARCH abort),
+    so every run switches; otherwise some runs never switch.
+    """
+    windows = {(tr.window[0], tr.window[1], tr.window[2]) for tr in model.transitions if tr.window}
+    if not windows:
+        return None
+    if len(windows) > 1:
+        raise ValueError("more than one distinct switching window")
+    clock, lo, hi = windows.pop()
+    forced = True
+    for tr in model.transitions:
+        if tr.window is None:
+            continue
+        hs = model.modes[tr.source].invariant_halfspaces
+        bounded = hs is not None and any(
+            row[clock] > 0 and np.count_nonzero(row) == 1 and g / row[clock] <= hi + 1e-12
+            for row, g in zip(*hs))
+        forced = forced and bounded
+    return lo, min(hi, model.horizon), forced
+
+
+# ------------------------------------------------------------------ monitoring
+
+class SafetyMonitor:
+    """Tracks, per run, the smallest depth into the unsafe set and the first violation."""
+
+    def __init__(self, model: HybridAutomaton, prop: BoundSafety, n_runs: int):
+        names = list(model.modes)
+        self.tests = {names.index(m): prop.violation(m) for m in prop.modes if prop.violation(m) is not None}
+        self.min_depth = np.full(n_runs, np.inf)
+        self.violation_time = np.full(n_runs, np.nan)
+        self.violation_state = np.full((n_runs, model.n), np.nan)
+        self.violation_mode = np.full(n_runs, -1)
+
+    def __call__(self, t, X, mode, rows):
+        for m_index, test in self.tests.items():
+            sel = np.flatnonzero(mode == m_index)
+            if sel.size == 0:
+                continue
+            violated, d = test(X[sel])
+            r = rows[sel]                      # a run may appear many times, in time order
+            np.minimum.at(self.min_depth, r, d)
+            hits = np.flatnonzero(violated & np.isnan(self.violation_time[r]))
+            if hits.size:
+                _, first = np.unique(r[hits], return_index=True)
+                k = sel[hits[first]]
+                self.violation_time[rows[k]] = t[k]
+                self.violation_state[rows[k]] = X[k]
+                self.violation_mode[rows[k]] = m_index
+
+    def first_violation(self) -> int | None:
+        """The violating run that went deepest into the unsafe set, if any."""
+        hit = np.flatnonzero(np.isfinite(self.violation_time))
+        return None if hit.size == 0 else int(hit[np.argmin(self.min_depth[hit])])
+
+
+@dataclass
+class Replay:
+    """One re-simulated run and whether it violates the property."""
+
+    violated: bool
+    time: float
+    mode: str
+    state: np.ndarray
+    depth: float
+    initial_state: np.ndarray
+    switch_time: float | None
+    dt: float
+    trajectory: dict = field(default_factory=dict)
+
+    def counterexample(self, model: HybridAutomaton, prop, found_by: str) -> Counterexample:
+        return Counterexample(
+            model=model.name, property=prop.id, model_file=model.file, property_file=prop.file,
+            initial_state=list(map(float, self.initial_state)),
+            switch_time=None if self.switch_time is None else float(self.switch_time),
+            violation_time=float(self.time), violation_mode=self.mode,
+            violation_state=list(map(float, self.state)), dt=self.dt,
+            trajectory=self.trajectory, found_by=found_by)
+
+
+def replay(model: HybridAutomaton, prop: BoundSafety, initial_state, switch_time: float | None,
+           dt: float | None = None) -> Replay:
+    """Simulate exactly one run (abort at ``switch_time``) and check ``prop`` along it."""
+    sim = Simulator(model, dt)
+    x0 = np.asarray(initial_state, dtype=float).reshape(1, -1)
+    tau = None if switch_time is None else np.array([float(switch_time)])
+    monitor = SafetyMonitor(model, prop, 1)
+    traj = sim.run(x0, tau, record=True, observers=[monitor])
+    names = list(model.modes)
+    violated = bool(np.isfinite(monitor.violation_time[0]))
+    times, modes, states = traj.path[0]
+    trajectory = {"t": times.tolist(), "mode": [names[int(m)] for m in modes], "x": states.tolist()}
+    if violated:
+        return Replay(True, float(monitor.violation_time[0]), names[int(monitor.violation_mode[0])],
+                      monitor.violation_state[0], float(monitor.min_depth[0]), x0[0], switch_time,
+                      sim.dt, trajectory)
+    return Replay(False, float("nan"), "", np.full(model.n, np.nan), float(monitor.min_depth[0]), x0[0],
+                  switch_time, sim.dt, trajectory)
+
+
+# ------------------------------------------------------------------ sampling plans
+
+def structured_plan(model: HybridAutomaton, window, max_corners: int = 256, rng=None):
+    """Corners, face centres and centre of the initial box x {window ends, middle}."""
+    low, high = model.initial.low, model.initial.high
+    free = np.flatnonzero(high > low)
+    centre = (low + high) / 2
+    points = [centre]
+    if free.size:
+        if 2 ** free.size <= max_corners:
+            signs = np.array(list(itertools.product([0, 1], repeat=free.size)))
+        else:
+            signs = rng.integers(0, 2, size=(max_corners, free.size))
+        for s in signs:
+            p = centre.copy()
+            p[free] = np.where(s == 1, high[free], low[free])
+            points.append(p)
+        for i in free:
+            for v in (low[i], high[i]):
+                p = centre.copy()
+                p[i] = v
+                points.append(p)
+    X = np.array(points)
+    if window is None:
+        return X, None
+    lo, hi, forced = window
+    taus = sorted({lo, hi, (lo + hi) / 2})
+    rows = [(x, tau) for x in X for tau in taus]
+    if not forced:
+        rows += [(x, np.nan) for x in X]
+    return np.array([r[0] for r in rows]), np.array([r[1] for r in rows])
+
+
+def random_plan(model: HybridAutomaton, window, count: int, rng):
+    low, high = model.initial.low, model.initial.high
+    X = low + (high - low) * rng.random((count, model.n))
+    if window is None:
+        return X, None
+    lo, hi, forced = window
+    tau = lo + (hi - lo) * rng.random(count)
+    if not forced:
+        tau[rng.random(count) < 0.1] = np.nan
+    return X, tau
+
+
+# ------------------------------------------------------------------ the back-end
+
+class MonteCarloBackend:
+    name = NAME
+
+    def supports(self, model: HybridAutomaton, prop) -> str | None:
+        try:
+            switch_window(model)
+        except ValueError as exc:
+            return str(exc)
+        if any(not tr.urgent and tr.window is None for tr in model.transitions):
+            return "a may-transition whose guard is not a window on a clock cannot be sampled"
+        if isinstance(prop, BoundEvent):
+            return "event properties are bounded by the taylor back-end (sampling them is not implemented here)"
+        if isinstance(prop, (BoundReach, BoundReachAvoid)) and model.disturbance is None:
+            if not np.array_equal(model.initial.low, model.initial.high):
+                return "a reach probability needs a distribution: the model has no disturbance"
+        if isinstance(prop, BoundSafety) and not prop.modes:
+            return f"the model has none of the property's modes ({', '.join(prop.missing_modes)})"
+        return None
+
+    def check(self, model: HybridAutomaton, prop, options: dict | None = None) -> Result:
+        return self.check_many(model, [prop], options)[0]
+
+    def check_many(self, model: HybridAutomaton, props: list, options: dict | None = None) -> list[Result]:
+        """Check several properties of one model; safety ones share the sampled runs."""
+        opts = Options.from_dict(options)
+        results = {}
+        safety = [p for p in props if isinstance(p, BoundSafety)]
+        if safety:
+            for prop, result in zip(safety, self._safety(model, safety, opts)):
+                results[id(prop)] = result
+        for prop in props:
+            if not isinstance(prop, BoundSafety):
+                start = time.perf_counter()
+                results[id(prop)] = self._probability(model, prop, opts)
+                results[id(prop)].seconds = time.perf_counter() - start
+        return [results[id(p)] for p in props]
+
+    # ---------------------------------------------------------- safety
+    def _safety(self, model, props: list[BoundSafety], opts: Options) -> list[Result]:
+        """Structured and i.i.d. runs shared by all properties, then a search per property."""
+        start = time.perf_counter()
+        rng = np.random.default_rng(opts.seed)
+        window = switch_window(model)
+        sim = Simulator(model, opts.dt)
+        kicks = _kicks(model, rng)
+        Xs, taus = structured_plan(model, window, rng=rng)
+        Xr, taur = random_plan(model, window, opts.samples, rng)
+        X = np.concatenate([Xs, Xr])
+        tau = None if window is None else np.concatenate([taus, taur])
+        n_structured = Xs.shape[0]
+        monitors = [SafetyMonitor(model, p, X.shape[0]) for p in props]
+        traj = sim.run(X, tau, observers=monitors, kicks=kicks)
+        shared = (time.perf_counter() - start) / len(props)
+        results = []
+        for prop, monitor in zip(props, monitors):
+            begin = time.perf_counter()
+            rounds = [("structured+random", X, tau, monitor)]
+            details = {"dt": sim.dt, "seed": opts.seed, "structured_runs": int(n_structured),
+                       "random_runs": int(opts.samples),
+                       "blocked_runs": int(np.count_nonzero(np.isfinite(traj.blocked_at))),
+                       "assumes": "states checked at grid points and event instants only "
+                                  "(a falsifier, not a proof)"}
+            fails = int(np.count_nonzero(np.isfinite(monitor.violation_time[n_structured:])))
+            details["violation_probability_upper_95"] = clopper_pearson_upper(fails, opts.samples)
+            found = monitor.first_violation()
+            found = None if found is None else (0, found)
+            if found is None and model.disturbance is None:
+                found = self._search(model, prop, window, sim, rounds, opts, rng)
+            details["search_runs"] = int(sum(r[1].shape[0] for r in rounds[1:]))
+            details["closest_depth"] = min(float(np.min(r[3].min_depth)) for r in rounds)
+            result = Result(NAME, model.name, prop.id, Status.UNKNOWN, details=details)
+            if found is not None:
+                k, i = found
+                label, Xk, tauk, _ = rounds[k]
+                t = None if tauk is None or np.isnan(tauk[i]) else float(tauk[i])
+                if model.disturbance is None:
+                    rep = replay(model, prop, Xk[i], t, sim.dt)
+                    if rep.violated:
+                        details["found_in"] = label
+                        result = Result(NAME, model.name, prop.id, Status.UNSAFE, details=details,
+                                        counterexample=rep.counterexample(model, prop, f"montecarlo/{label}"))
+                    else:
+                        details["note"] = "a sampled violation did not replay on its own"
+                else:
+                    details["note"] = ("violations were sampled under random disturbance; "
+                                       "a single run is not a replayable counterexample")
+            result.seconds = shared + time.perf_counter() - begin
+            results.append(result)
+        return results
+
+    def _search(self, model, prop, window, sim, rounds, opts: Options, rng):
+        """Cross-entropy falsification: resample around the runs closest to the unsafe set."""
+        low, high = model.initial.low, model.initial.high
+        span = np.where(high > low, high - low, 0.0)
+        for g in range(opts.search_rounds):
+            X_all = np.concatenate([r[1] for r in rounds])
+            d_all = np.concatenate([r[3].min_depth for r in rounds])
+            elite = np.argsort(d_all)[:max(5, opts.search_size // 10)]
+            scale = 0.25 * 0.6 ** g
+            pick = rng.choice(elite, opts.search_size)
+            X = np.clip(X_all[pick] + rng.normal(size=(opts.search_size, model.n)) * span * scale, low, high)
+            tau = None
+            if window is not None:
+                lo, hi, _ = window
+                base = np.concatenate([r[2] for r in rounds])[pick]
+                base = np.where(np.isnan(base), (lo + hi) / 2, base)
+                tau = np.clip(base + rng.normal(size=opts.search_size) * (hi - lo) * scale, lo, hi)
+            monitor = SafetyMonitor(model, prop, opts.search_size)
+            sim.run(X, tau, observers=[monitor])
+            rounds.append((f"search{g + 1}", X, tau, monitor))
+            i = monitor.first_violation()
+            if i is not None:
+                return len(rounds) - 1, i
+        return None
+
+    # ---------------------------------------------------------- reach / reach-avoid
+    def _probability(self, model, prop, opts: Options) -> Result:
+        rng = np.random.default_rng(opts.seed)
+        sim = Simulator(model, opts.dt)
+        kicks = _kicks(model, rng)
+        target = lambdify_margins(prop.target, model.symbols)
+        safe = lambdify_margins(prop.safe, model.symbols) if isinstance(prop, BoundReachAvoid) else None
+        step = model.disturbance.step if model.disturbance is not None else sim.dt
+        successes, total = 0, 0
+        remaining = opts.samples
+        while remaining > 0:
+            count = min(opts.batch, remaining)
+            remaining -= count
+            X0 = model.initial.low + (model.initial.high - model.initial.low) * rng.random((count, model.n))
+            ok = np.ones(count, bool)
+            final = np.full((count, model.n), np.nan)
+
+            def observe(t, X, mode, rows):
+                at_target = np.abs(t - prop.at) <= 1e-9 * max(1.0, prop.at)
+                if np.any(at_target):
+                    final[rows[at_target]] = X[at_target]
+                if safe is not None:
+                    k = t / step
+                    on_step = (np.abs(k - np.round(k)) <= 1e-9 * max(1.0, k.max(initial=1.0))) & (t < prop.at - 1e-9)
+                    if np.any(on_step):
+                        inside = np.all(safe(X[on_step]) <= 0, axis=1)
+                        ok[rows[on_step][~inside]] = False
+
+            horizon = model.horizon
+            model.horizon = prop.at
+            try:
+                sim.run(X0, None, observers=[observe], kicks=kicks)
+            finally:
+                model.horizon = horizon
+            hit = ok & np.all(target(final) <= 0, axis=1)
+            successes += int(np.count_nonzero(hit))
+            total += count
+        lo, hi = wilson(successes, total)
+        status = Status.UNKNOWN
+        details = {"samples": total, "successes": successes, "estimate": successes / total, "dt": sim.dt,
+                   "seed": opts.seed, "interval": "95 % Wilson"}
+        return Result(NAME, model.name, prop.id, status, probability=(lo, hi), details=details)
+
+
+def _kicks(model: HybridAutomaton, rng):
+    """Sampler of the Gaussian disturbance kicks (None for a deterministic model)."""
+    dist = model.disturbance
+    if dist is None:
+        return None
+    E = np.zeros((len(dist.enters), model.n))
+    E[np.arange(len(dist.enters)), dist.enters] = 1.0
+
+    def kicks(k: int, count: int) -> np.ndarray:
+        return rng.multivariate_normal(dist.mean, dist.cov, size=count, method="eigh") @ E
+
+    return kicks
+
+
+BACKEND = MonteCarloBackend()

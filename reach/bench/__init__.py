@@ -1,0 +1,1 @@
+"""The benchmark runner: suite files, executors, cross-checks, result tables and plots."""

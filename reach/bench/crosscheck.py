@@ -1,0 +1,77 @@
+"""Cross-checks between back-ends and against the suite's expectations.
+
+Failures (``reach bench`` exits 1):
+* a SAFE from one back-end where another gives UNSAFE with a counterexample that replays;
+* an UNSAFE whose counterexample does not replay (checked again here, independently);
+* two probability intervals for the same property that do not overlap;
+* an event bound that excludes a value sampled by Monte Carlo;
+* a verdict contradicting the expected one (SAFE where unsafe is expected, or UNSAFE where
+  safe is expected); an error or time-out.
+Notes: an expected-unsafe property that no back-end falsified.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+
+
+def _replays(row) -> bool:
+    from reach.backends.montecarlo import replay
+    from reach.model import load_model
+    from reach.spec import bind, load_properties
+
+    cex = row["counterexample"]
+    model = load_model(cex["model_file"])
+    prop = next(p for p in load_properties(cex["property_file"]) if p.id == cex["property"])
+    return replay(model, bind(prop, model), cex["initial_state"], cex["switch_time"], cex["dt"]).violated
+
+
+def cross_check(rows: list[dict]) -> list[dict]:
+    checks = []
+
+    def add(level, message):
+        checks.append({"level": level, "message": message})
+
+    by_key = defaultdict(list)
+    for r in rows:
+        by_key[(r["instance"], r["property"])].append(r)
+        if r["status"] in ("error", "timeout"):
+            add("fail", f"{r['instance']} with {r['backend']}: {r['status']}: {r['details'].get('error', '')}")
+    for (inst, prop), group in by_key.items():
+        if prop == "*":
+            continue
+        replayed = []
+        for r in group:
+            if r["status"] == "unsafe":
+                if r.get("counterexample") and _replays(r):
+                    replayed.append(r["backend"])
+                else:
+                    add("fail", f"{inst}/{prop}: {r['backend']} says UNSAFE without a counterexample that replays")
+        for r in group:
+            if r["status"] == "safe" and replayed:
+                add("fail", f"{inst}/{prop}: {r['backend']} says SAFE but {', '.join(replayed)} "
+                            f"found a counterexample that replays")
+        expected = group[0].get("expected")
+        for r in group:
+            if expected == "safe" and r["status"] == "unsafe":
+                add("fail", f"{inst}/{prop}: {r['backend']} says UNSAFE, expected safe ({r.get('source', '')})")
+            if expected == "unsafe" and r["status"] == "safe":
+                add("fail", f"{inst}/{prop}: {r['backend']} says SAFE, expected unsafe ({r.get('source', '')})")
+        if expected == "unsafe" and not replayed:
+            add("note", f"{inst}/{prop}: expected unsafe, but no back-end produced a counterexample")
+        intervals = [(r["backend"], r["probability"]) for r in group if r.get("probability")]
+        for i in range(len(intervals)):
+            for j in range(i + 1, len(intervals)):
+                (a, (alo, ahi)), (b, (blo, bhi)) = intervals[i], intervals[j]
+                if ahi < blo or bhi < alo:
+                    add("fail", f"{inst}/{prop}: probability intervals of {a} [{alo:.4f}, {ahi:.4f}] and "
+                                f"{b} [{blo:.4f}, {bhi:.4f}] do not overlap")
+        samples = [r["details"].get("sampled_range") for r in group if r["details"].get("sampled_range")]
+        for r in group:
+            if r.get("bound") and samples:
+                lo, hi = r["bound"]
+                for s_lo, s_hi in samples:
+                    if s_lo < lo or s_hi > hi:
+                        add("fail", f"{inst}/{prop}: {r['backend']} bound [{lo:.4g}, {hi:.4g}] excludes sampled "
+                                    f"values in [{s_lo:.4g}, {s_hi:.4g}]")
+    return checks

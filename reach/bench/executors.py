@@ -1,0 +1,92 @@
+"""Where work units run: local processes (default) or a Dask cluster.
+
+Both take a picklable function and a list of argument tuples and yield ``(index, result)``
+as units finish, so the runner can print progress. A unit that exceeds the time limit is
+stopped inside its worker (SIGALRM) and reported as timed out; a worker's address space is
+capped so one runaway case cannot take the machine down.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+
+MEMORY_LIMIT_BYTES = 16 * 2 ** 30
+
+
+class UnitTimeout(Exception):
+    pass
+
+
+def _alarm(signum, frame):
+    raise UnitTimeout()
+
+
+def guarded(fn, args, time_limit):
+    """Run ``fn(*args)`` under a time limit; return ``("ok", value)`` or ``("timeout", None)``."""
+    if time_limit:
+        signal.signal(signal.SIGALRM, _alarm)
+        signal.setitimer(signal.ITIMER_REAL, time_limit)
+    try:
+        return "ok", fn(*args)
+    except UnitTimeout:
+        return "timeout", None
+    finally:
+        if time_limit:
+            signal.setitimer(signal.ITIMER_REAL, 0)
+
+
+def _limit_memory():
+    try:
+        import resource
+        resource.setrlimit(resource.RLIMIT_AS, (MEMORY_LIMIT_BYTES, MEMORY_LIMIT_BYTES))
+    except (ImportError, ValueError, OSError):
+        pass
+
+
+class LocalExecutor:
+    """A pool of local worker processes (``jobs`` of them; all cores by default)."""
+
+    name = "local"
+
+    def __init__(self, jobs: int | None = None):
+        self.jobs = jobs or os.cpu_count() or 1
+
+    def map_unordered(self, fn, arg_list, time_limit=None):
+        if self.jobs == 1:
+            for i, args in enumerate(arg_list):
+                yield i, guarded(fn, args, time_limit)
+            return
+        with ProcessPoolExecutor(max_workers=self.jobs, initializer=_limit_memory) as pool:
+            futures = {pool.submit(guarded, fn, args, time_limit): i for i, args in enumerate(arg_list)}
+            pending = set(futures)
+            while pending:
+                done, pending = wait(pending, return_when=FIRST_COMPLETED)
+                for f in done:
+                    yield futures[f], f.result()
+
+
+class DaskExecutor:
+    """Units as tasks on a Dask cluster (``--scheduler tcp://host:8786``; the ``dist`` extra)."""
+
+    name = "dask"
+
+    def __init__(self, scheduler):
+        try:
+            from distributed import Client
+        except ImportError:
+            from reach.errors import InputError
+            raise InputError("Dask is not installed: pip install 'reach[dist]'", field="--scheduler") from None
+        self.client = scheduler if hasattr(scheduler, "submit") else Client(scheduler)
+
+    def map_unordered(self, fn, arg_list, time_limit=None):
+        from distributed import as_completed
+
+        futures = {self.client.submit(guarded, fn, args, None, pure=False): i for i, args in enumerate(arg_list)}
+        for f in as_completed(list(futures)):
+            yield futures[f], f.result()
+
+
+def make_executor(jobs=None, scheduler=None):
+    return DaskExecutor(scheduler) if scheduler else LocalExecutor(jobs)

@@ -1,0 +1,92 @@
+"""``reach bench``: run a suite, print progress, cross-check the back-ends, write results/."""
+
+from __future__ import annotations
+
+import json
+import platform
+import sys
+import time
+from datetime import datetime, timezone
+from pathlib import Path
+
+from reach.bench.crosscheck import cross_check
+from reach.bench.executors import make_executor
+from reach.bench.suite import load_suite
+from reach.bench.tables import markdown_table
+from reach.errors import InputError
+
+
+def run_unit(model_path: str, property_path: str, backend: str, options: dict) -> list[dict]:
+    """One work unit: every property of one instance with one back-end (plain dicts back)."""
+    from reach.checking import check_files
+
+    try:
+        return [r.to_dict() for r in check_files(model_path, property_path, backend, options)]
+    except InputError as exc:
+        return [{"backend": backend, "property": "*", "status": "error", "seconds": 0.0,
+                 "details": {"error": str(exc)}}]
+
+
+def run_suite(suite_path, backends=None, instances=None, out="results", jobs=None, scheduler=None,
+              time_limit=None, stream=sys.stdout) -> int:
+    """Run (a filtered part of) a suite; exit code 1 if a cross-check fails, else 0."""
+    suite = load_suite(suite_path)
+    from reach.backends import available
+    names = list(suite.backends)
+    if backends:
+        unknown = set(backends) - set(names)
+        if unknown:
+            raise InputError(f"back-end '{sorted(unknown)[0]}' is not in the suite ({', '.join(names)})",
+                             field="--backend")
+        names = [b for b in names if b in backends]
+    missing = [b for b in names if b not in available()]
+    chosen = suite.instances
+    if instances:
+        unknown = set(instances) - {i.id for i in chosen}
+        if unknown:
+            raise InputError(f"no instance '{sorted(unknown)[0]}' in {suite.file}", field="--instance")
+        chosen = [i for i in chosen if i.id in instances]
+    units = [(inst, b) for inst in chosen for b in names
+             if b not in missing and (inst.backends is None or b in inst.backends)]
+    executor = make_executor(jobs, scheduler)
+    print(f"reach bench: {len(units)} units ({len(chosen)} instances x {len(names)} back-ends) "
+          f"on {executor.name} executor", file=stream)
+    for b in missing:
+        print(f"  back-end '{b}' is not available in this installation; skipped", file=stream)
+    start = time.perf_counter()
+    rows = []
+    args = [(str(inst.model), str(inst.properties), b, suite.backends[b]) for inst, b in units]
+    for done, (i, (state, value)) in enumerate(executor.map_unordered(run_unit, args, time_limit), start=1):
+        inst, backend = units[i]
+        if state == "timeout":
+            value = [{"backend": backend, "property": "*", "status": "timeout", "seconds": time_limit,
+                      "details": {"error": f"stopped after {time_limit} s"}}]
+        for r in value:
+            r["instance"] = inst.id
+            r["expected"] = inst.expect.get(r["property"])
+            r["source"] = inst.source
+            rows.append(r)
+        verdicts = " ".join(f"{r['property']}={r['status']}" for r in value)
+        unit_seconds = sum(float(r.get("seconds") or 0) for r in value)
+        print(f"  [{done:>3}/{len(units)}] {inst.id:<14} {backend:<11} {unit_seconds:7.2f} s  {verdicts}",
+              file=stream, flush=True)
+    wall = time.perf_counter() - start
+    checks = cross_check(rows)
+    out = Path(out)
+    (out / "plots").mkdir(parents=True, exist_ok=True)
+    report = {
+        "suite": str(suite_path), "started": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "machine": {"python": platform.python_version(), "platform": platform.platform(),
+                    "processor": platform.machine()},
+        "executor": executor.name, "wall_seconds": wall, "backends": names,
+        "rows": rows, "cross_checks": checks,
+    }
+    (out / "results.json").write_text(json.dumps(report, indent=1))
+    (out / "results.md").write_text(markdown_table(report))
+    failures = [c for c in checks if c["level"] == "fail"]
+    print(f"wall time {wall:.1f} s; cross-checks: {len(checks) - len(failures)} notes, {len(failures)} failures",
+          file=stream)
+    for c in checks:
+        print(f"  {c['level'].upper()}: {c['message']}", file=stream)
+    print(f"wrote {out / 'results.json'} and {out / 'results.md'}", file=stream)
+    return 1 if failures else 0

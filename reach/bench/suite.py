@@ -1,0 +1,84 @@
+"""Suite files (``suite.yaml``): instances (model x property file), back-ends and their options,
+and expected verdicts with their source.
+
+    description: ...
+    backends:
+      montecarlo: {samples: 1000}     # options passed to the back-end
+      star: {}
+    instances:
+      - id: SRA01
+        model: models/SRA01.yaml
+        properties: properties/rendezvous.yaml
+        expect: {thrust: safe, los: safe, velocity: safe, collision: safe}
+        source: ARCH-COMP AFF (SRA01 is safe)
+        backends: [montecarlo, star]  # optional: a subset of the suite's back-ends
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from reach.errors import InputError
+from reach.yamlio import load
+
+EXPECTATIONS = ("safe", "unsafe")
+
+
+@dataclass
+class Instance:
+    id: str
+    model: Path
+    properties: Path
+    expect: dict[str, str] = field(default_factory=dict)
+    source: str = ""
+    backends: list[str] | None = None
+
+
+@dataclass
+class Suite:
+    description: str
+    backends: dict[str, dict]
+    instances: list[Instance]
+    file: str
+
+
+def load_suite(path) -> Suite:
+    doc = load(path)
+    data = doc.data
+    if not isinstance(data, dict):
+        raise InputError("a suite file is a mapping with 'backends' and 'instances'", doc.file, line=1)
+    extra = set(data) - {"description", "backends", "instances"}
+    if extra:
+        raise doc.where(sorted(extra)[0]).error(f"unknown field '{sorted(extra)[0]}'")
+    backends = data.get("backends")
+    if not isinstance(backends, dict) or not backends:
+        raise doc.where("backends").error("expected a mapping back-end: {options}")
+    for name, options in backends.items():
+        if options is not None and not isinstance(options, dict):
+            raise doc.where("backends", name).error("expected a mapping of options")
+    base = Path(doc.file).parent
+    items = data.get("instances")
+    if not isinstance(items, list) or not items:
+        raise doc.where("instances").error("expected a non-empty list of instances")
+    instances, seen = [], set()
+    for i, item in enumerate(items):
+        where = doc.where("instances", i)
+        if not isinstance(item, dict) or not {"id", "model", "properties"} <= set(item):
+            raise where.error("an instance needs id, model and properties")
+        extra = set(item) - {"id", "model", "properties", "expect", "source", "backends"}
+        if extra:
+            raise doc.where("instances", i, sorted(extra)[0]).error(f"unknown field '{sorted(extra)[0]}'")
+        if item["id"] in seen:
+            raise doc.where("instances", i, "id").error(f"duplicate instance id '{item['id']}'")
+        seen.add(item["id"])
+        expect = item.get("expect", {}) or {}
+        if not isinstance(expect, dict) or any(v not in EXPECTATIONS for v in expect.values()):
+            raise doc.where("instances", i, "expect").error("expected {property: safe|unsafe}")
+        chosen = item.get("backends")
+        if chosen is not None and (not isinstance(chosen, list) or set(chosen) - set(backends)):
+            raise doc.where("instances", i, "backends").error("expected a list of the suite's back-ends")
+        instances.append(Instance(str(item["id"]), base / item["model"], base / item["properties"],
+                                  dict(expect), str(item.get("source", "")), chosen))
+    return Suite(str(data.get("description", "")), {k: dict(v or {}) for k, v in backends.items()},
+                 instances, doc.file)

@@ -1,0 +1,207 @@
+"""The ``reach`` command.
+
+    reach check MODEL PROPS [--backend B] [--json] [--option KEY=VALUE ...]
+    reach replay COUNTEREXAMPLE.json
+    reach plot MODEL [--runs N] [--out FILE.png]
+    reach bench [--suite suite.yaml] [--backend B] [--instance I] [-j N] [--scheduler ADDR]
+    reach compare OLD.json NEW.json
+
+Bad input prints one line ``file:line: field: message`` and exits with 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import yaml
+
+from reach.errors import InputError
+from reach.locate import find_model
+from reach.result import Status
+
+
+def _parse_options(pairs: list[str]) -> dict:
+    options = {}
+    for pair in pairs or []:
+        if "=" not in pair:
+            raise InputError(f"expected KEY=VALUE, got '{pair}'", field="--option")
+        key, value = pair.split("=", 1)
+        try:
+            options[key.strip()] = yaml.safe_load(value)
+        except yaml.YAMLError:
+            raise InputError(f"cannot read the value of '{key}'", field="--option") from None
+    return options
+
+
+def cmd_check(args) -> int:
+    from reach.checking import check_files
+
+    model_path = find_model(args.model)
+    results = check_files(model_path, args.properties, args.backend, _parse_options(args.option),
+                          args.property)
+    saved = {}
+    if args.counterexamples:
+        out = Path(args.counterexamples)
+        for r in results:
+            if r.counterexample is not None:
+                out.mkdir(parents=True, exist_ok=True)
+                path = out / f"{r.model}_{r.property}_{r.backend}.json"
+                r.counterexample.save(path)
+                saved[r.property] = str(path)
+    if args.json:
+        rows = []
+        for r in results:
+            row = {"property": r.property, "status": r.status.value.lower(), "seconds": r.seconds}
+            row.update(r.to_dict())
+            if r.property in saved:
+                row["counterexample_file"] = saved[r.property]
+            rows.append(row)
+        print(json.dumps(rows, indent=1))
+        return 0
+    print(f"{results[0].model if results else args.model} with {args.backend}:")
+    for r in results:
+        print(f"  {r.property:<16} {r.status.value:<11} {r.seconds:8.2f} s  {summary(r)}")
+        if r.property in saved:
+            print(f"  {'':<16} counterexample: {saved[r.property]}  (reach replay {saved[r.property]})")
+    return 0
+
+
+def summary(result) -> str:
+    """One line of the most telling details of a result."""
+    d = result.details
+    if result.status == Status.UNSUPPORTED:
+        return d.get("reason", "")
+    if result.counterexample is not None:
+        c = result.counterexample
+        abort = "" if c.switch_time is None else f", switch at t={c.switch_time:g}"
+        return f"violated at t={c.violation_time:.4g} in {c.violation_mode}{abort}"
+    parts = []
+    if result.probability is not None:
+        parts.append(f"P in [{result.probability[0]:.4f}, {result.probability[1]:.4f}]")
+    if result.bound is not None:
+        parts.append(f"bound [{result.bound[0]:.4g}, {result.bound[1]:.4g}]")
+    if "closest_depth" in d:
+        parts.append(f"closest margin {d['closest_depth']:.4g}")
+    if "violation_probability_upper_95" in d:
+        parts.append(f"P(violation) <= {d['violation_probability_upper_95']:.2g} (95 %)")
+    if "argument" in d:
+        parts.append(str(d["argument"])[:80])
+    return ", ".join(parts)
+
+
+def cmd_replay(args) -> int:
+    from reach.backends.montecarlo import replay
+    from reach.model import load_model
+    from reach.result import Counterexample
+    from reach.spec import bind, load_properties
+
+    path = Path(args.counterexample)
+    try:
+        data = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise InputError("no such file", str(path)) from None
+    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"not a counterexample file: {exc.__class__.__name__}", str(path)) from None
+    if not isinstance(data, dict) or not {"model_file", "property_file", "property", "initial_state"} <= set(data):
+        raise InputError("not a counterexample file (needs model_file, property_file, property, initial_state)",
+                         str(path))
+    cex = Counterexample.from_dict(data)
+    model = load_model(cex.model_file)
+    props = [p for p in load_properties(cex.property_file) if p.id == cex.property]
+    if not props:
+        raise InputError(f"property '{cex.property}' is not in {cex.property_file}", str(path), "property")
+    if len(cex.initial_state) != model.n:
+        raise InputError(f"initial_state has {len(cex.initial_state)} values, the model {model.n}", str(path),
+                         "initial_state")
+    prop = bind(props[0], model)
+    rep = replay(model, prop, cex.initial_state, cex.switch_time, cex.dt or None)
+    state = ", ".join(f"{n}={v:.6g}" for n, v in zip(model.state, rep.state))
+    if rep.violated:
+        print(f"replayed: {model.name} violates '{prop.id}' at t={rep.time:.6g} in mode {rep.mode} "
+              f"(depth {rep.depth:.3g}); state {state}")
+        return 0
+    print(f"NOT replayed: {model.name} satisfies '{prop.id}' along this run (closest margin {rep.depth:.4g})")
+    return 1
+
+
+def cmd_plot(args) -> int:
+    from reach.bench.plots import plot_model_runs
+    from reach.model import load_model
+
+    model = load_model(find_model(args.model))
+    out = Path(args.out or f"results/plots/{model.name}_runs.png")
+    plot_model_runs(model, out, runs=args.runs, seed=args.seed)
+    print(f"wrote {out}")
+    return 0
+
+
+def cmd_bench(args) -> int:
+    from reach.bench.runner import run_suite
+
+    return run_suite(args.suite, backends=args.backend, instances=args.instance, out=args.out,
+                     jobs=args.jobs, scheduler=args.scheduler, time_limit=args.time_limit)
+
+
+def cmd_compare(args) -> int:
+    from reach.bench.tables import compare_runs
+
+    print(compare_runs(args.old, args.new))
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="reach", description="Reachability verification of spacecraft "
+                                     "guidance and control: one model, several back-ends.")
+    sub = parser.add_subparsers(dest="command", required=True)
+    p = sub.add_parser("check", help="check a model against a property file")
+    p.add_argument("model", help="model file, or a model's name (searched in models/)")
+    p.add_argument("properties", help="property file")
+    p.add_argument("--backend", "-b", default="montecarlo")
+    p.add_argument("--property", "-p", action="append", help="check only this property (repeatable)")
+    p.add_argument("--option", "-o", action="append", metavar="KEY=VALUE", help="back-end option")
+    p.add_argument("--json", action="store_true", help="print results as JSON")
+    p.add_argument("--counterexamples", default="counterexamples", metavar="DIR",
+                   help="where UNSAFE counterexamples are written (default: counterexamples/)")
+    p.set_defaults(func=cmd_check)
+    p = sub.add_parser("replay", help="replay a counterexample file with the simulator")
+    p.add_argument("counterexample")
+    p.set_defaults(func=cmd_replay)
+    p = sub.add_parser("plot", help="plot sample runs of a model, coloured by mode")
+    p.add_argument("model")
+    p.add_argument("--runs", type=int, default=20)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out")
+    p.set_defaults(func=cmd_plot)
+    p = sub.add_parser("bench", help="run the benchmark suite")
+    p.add_argument("--suite", default="suite.yaml")
+    p.add_argument("--backend", "-b", action="append", help="only this back-end (repeatable)")
+    p.add_argument("--instance", "-i", action="append", help="only this instance (repeatable)")
+    p.add_argument("--out", default="results")
+    p.add_argument("--jobs", "-j", type=int, default=None, help="local worker processes (default: cores)")
+    p.add_argument("--scheduler", help="Dask scheduler address, e.g. tcp://host:8786")
+    p.add_argument("--time-limit", type=float, default=None, help="seconds per work unit")
+    p.set_defaults(func=cmd_bench)
+    p = sub.add_parser("compare", help="what changed between two results.json files")
+    p.add_argument("old")
+    p.add_argument("new")
+    p.set_defaults(func=cmd_compare)
+    return parser
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except InputError as exc:
+        print(f"reach: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("reach: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

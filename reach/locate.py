@@ -1,0 +1,27 @@
+"""Finding model files by path or by their ``name:``."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import yaml
+
+from reach.errors import InputError
+
+
+def find_model(spec: str, search_dirs=("models",)) -> Path:
+    """``spec`` as a path if it exists, else the model file in ``search_dirs`` named ``spec``."""
+    path = Path(spec)
+    if path.exists():
+        return path
+    for directory in search_dirs:
+        for candidate in sorted(Path(directory).glob("*.yaml")):
+            if candidate.name.startswith("_"):
+                continue
+            try:
+                data = yaml.safe_load(candidate.read_text(encoding="utf-8"))
+            except (OSError, yaml.YAMLError, UnicodeDecodeError):
+                continue
+            if isinstance(data, dict) and data.get("name") == spec:
+                return candidate
+    raise InputError(f"no model file '{spec}', and no model named '{spec}' in {', '.join(search_dirs)}/")

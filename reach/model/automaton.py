@@ -1,0 +1,181 @@
+"""The hybrid automaton every back-end reads: modes with closed-loop flows, invariants,
+transitions (urgent, or may-transitions over a clock window), an initial box, a horizon
+and an optional Gaussian disturbance.
+
+All expressions are over the state symbols only: a mode's control law has already been
+substituted into its flow (``flow``) and is kept apart in ``control`` for properties that
+speak of inputs (thrust bounds). Linear parts are extracted once at load time:
+``Mode.linear = (A, b)`` with ``x' = A x + b`` and guards/invariants as ``H x <= g``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import numpy as np
+import sympy
+
+from reach.errors import Where
+from reach.model.constraints import Constraint, affine_coefficients, halfspaces, lambdify_margins
+from reach.model.units import UnitSystem
+
+
+@dataclass
+class Controller:
+    """How a mode's inputs were obtained (kept for reports): kind, gain, design weights."""
+
+    kind: str                                 # "gain" | "lqr" | "law"
+    gain: np.ndarray | None = None            # u = gain @ s (after any setpoint shift)
+    feedback: list[str] = field(default_factory=list)
+    Q: np.ndarray | None = None
+    R: np.ndarray | None = None
+
+
+@dataclass
+class Mode:
+    """One discrete mode; ``flow[i]`` is the closed-loop derivative of state ``i``."""
+
+    name: str
+    symbols: list[sympy.Symbol]
+    flow: list[sympy.Expr]
+    control: dict[str, sympy.Expr]
+    invariant: list[Constraint]
+    controller: Controller | None = None
+    where: Where | None = None
+
+    @cached_property
+    def linear(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """``(A, b)`` with ``x' = A x + b`` if the closed-loop flow is affine, else None."""
+        n = len(self.symbols)
+        A, b = np.zeros((n, n)), np.zeros(n)
+        for i, f in enumerate(self.flow):
+            coeffs = affine_coefficients(f, self.symbols)
+            if coeffs is None:
+                return None
+            A[i], b[i] = coeffs
+        return A, b
+
+    @cached_property
+    def invariant_halfspaces(self):
+        """``(H, g)`` with the invariant equal to ``H x <= g``, or None if nonlinear."""
+        return halfspaces(self.invariant, self.symbols)
+
+    @cached_property
+    def rhs(self):
+        """Vectorised closed-loop flow: ``X (N, n) -> X' (N, n)``."""
+        fn = sympy.lambdify([self.symbols], self.flow, modules="numpy", cse=True)
+
+        def rhs(X: np.ndarray) -> np.ndarray:
+            out = np.empty_like(X)
+            for i, column in enumerate(fn(X.T)):
+                out[:, i] = column
+            return out
+
+        return rhs
+
+    @cached_property
+    def inputs(self):
+        """Vectorised control law: ``X (N, n) -> U (N, m)`` (inputs in ``control`` order)."""
+        exprs = list(self.control.values())
+        if not exprs:
+            return lambda X: np.zeros((X.shape[0], 0))
+        fn = sympy.lambdify([self.symbols], exprs, modules="numpy")
+        return lambda X: np.stack([np.broadcast_to(np.asarray(c, dtype=float), X.shape[:1])
+                                   for c in fn(X.T)], axis=1)
+
+    @cached_property
+    def invariant_margins(self):
+        """Vectorised invariant constraint values ``g(X)``; the invariant holds where all <= 0."""
+        return lambdify_margins(self.invariant, self.symbols)
+
+
+@dataclass
+class Transition:
+    """A discrete jump ``source -> target``.
+
+    ``urgent``: taken the first instant the guard holds. Otherwise a may-transition; when its
+    guard is a window ``lo <= c <= hi`` on a clock ``c`` (rate 1 in the source mode),
+    ``window = (index of c, lo, hi)`` and the switch instant is a nondeterministic choice
+    in that window (the abort of the rendezvous benchmark).
+    """
+
+    name: str
+    source: str
+    target: str
+    guard: list[Constraint]
+    urgent: bool
+    reset: dict[int, sympy.Expr] = field(default_factory=dict)
+    window: tuple[int, float, float] | None = None
+    where: Where | None = None
+
+
+@dataclass
+class InitialSet:
+    """The initial mode and a box ``low <= x <= high`` (equal bounds: a fixed value)."""
+
+    mode: str
+    low: np.ndarray
+    high: np.ndarray
+
+
+@dataclass
+class Disturbance:
+    """i.i.d. Gaussian kicks ``w_k ~ N(mean, cov)`` added to the ``enters`` states at ``t = k*step``.
+
+    Discrete-time view (what the simulator does): with ``x[k]`` the state just before the kick
+    at ``k*step``, ``x[k+1] = Phi (x[k] + E w_k)`` where ``Phi`` is the mode's transition
+    matrix over one step and ``E`` selects the ``enters`` states.
+    """
+
+    mean: np.ndarray
+    cov: np.ndarray
+    enters: list[int]
+    step: float
+
+
+@dataclass
+class HybridAutomaton:
+    name: str
+    description: str
+    file: str
+    units: UnitSystem
+    constants: dict[str, float]
+    state: list[str]
+    inputs: list[str]
+    modes: dict[str, Mode]
+    transitions: list[Transition]
+    initial: InitialSet
+    horizon: float
+    disturbance: Disturbance | None = None
+    clocks: list[int] = field(default_factory=list)   # states with rate 1 in every mode
+
+    @cached_property
+    def symbols(self) -> list[sympy.Symbol]:
+        return [sympy.Symbol(s, real=True) for s in self.state]
+
+    def index(self, name: str) -> int:
+        return self.state.index(name)
+
+    @property
+    def n(self) -> int:
+        return len(self.state)
+
+    @property
+    def is_linear(self) -> bool:
+        """Affine flows in every mode and linear invariants, guards and resets."""
+        if any(m.linear is None or m.invariant_halfspaces is None for m in self.modes.values()):
+            return False
+        for tr in self.transitions:
+            if halfspaces(tr.guard, self.symbols) is None:
+                return False
+            if any(affine_coefficients(e, self.symbols) is None for e in tr.reset.values()):
+                return False
+        return True
+
+    def guard_halfspaces(self, transition: Transition):
+        """``(H, g)`` with the guard equal to ``H x <= g``, or None if nonlinear."""
+        return halfspaces(transition.guard, self.symbols)
+
+    def outgoing(self, mode: str) -> list[Transition]:
+        return [t for t in self.transitions if t.source == mode]

@@ -1,0 +1,132 @@
+"""Constraints ``g(x) <= 0`` over a model's state, linear ones as half-spaces ``a.x <= b``.
+
+Requirements, invariants and guards are conjunctions of constraints. The negation of a
+conjunction is a union of single negated constraints, which is how a safety requirement
+becomes a union of convex unsafe pieces.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+import sympy
+
+from reach.errors import Where
+from reach.model.expr import Comparison
+
+NUMERICAL_TOLERANCE = 1e-9
+
+
+@dataclass(frozen=True)
+class Constraint:
+    """``g <= 0`` (``g < 0`` when strict), ``text`` being what the user wrote."""
+
+    g: sympy.Expr
+    strict: bool
+    text: str
+    where: Where
+
+    def negated(self) -> "Constraint":
+        """The complement: ``-g < 0`` (or ``-g <= 0`` for a strict constraint)."""
+        return Constraint(-self.g, not self.strict, f"not ({self.text})", self.where)
+
+    def substitute(self, mapping) -> "Constraint":
+        return Constraint(sympy.sympify(self.g).subs(mapping), self.strict, self.text, self.where)
+
+
+def from_comparisons(comparisons: Sequence[Comparison], text: str, where: Where) -> list[Constraint]:
+    """Normalise ``lhs op rhs`` to ``g <= 0`` form; ``abs(e) <= c`` becomes ``e <= c, -e <= c``."""
+    out = []
+    for cmp in comparisons:
+        small, big = (cmp.lhs, cmp.rhs) if cmp.op in ("<=", "<") else (cmp.rhs, cmp.lhs)
+        strict = cmp.op in ("<", ">")
+        if isinstance(small, sympy.Abs):
+            inner = small.args[0]
+            out.append(Constraint(sympy.expand(inner - big), strict, text, where))
+            out.append(Constraint(sympy.expand(-inner - big), strict, text, where))
+        else:
+            out.append(Constraint(sympy.expand(small - big), strict, text, where))
+    return out
+
+
+def affine_coefficients(expr: sympy.Expr, symbols: Sequence[sympy.Symbol]):
+    """``(a, c)`` with ``expr == a . symbols + c`` if expr is affine in symbols, else None."""
+    expr = sympy.sympify(expr)
+    unknown = expr.free_symbols - set(symbols)
+    if unknown:
+        return None
+    a = np.zeros(len(symbols))
+    for i, s in enumerate(symbols):
+        d = sympy.diff(expr, s)
+        if d.free_symbols:
+            return None
+        try:
+            a[i] = float(d)
+        except (TypeError, ValueError):
+            return None
+    try:
+        c = float(expr.subs({s: 0 for s in symbols}))
+    except (TypeError, ValueError):
+        return None
+    if not (np.all(np.isfinite(a)) and np.isfinite(c)):
+        return None
+    return a, c
+
+
+def halfspaces(constraints: Sequence[Constraint], symbols: Sequence[sympy.Symbol]):
+    """``(A, b)`` with the conjunction equal to ``A x <= b``, or None if any is nonlinear.
+
+    Strict and non-strict inequalities give the same closed half-space here; the
+    closure is the sound choice for an unsafe set (it can only grow).
+    """
+    rows, rhs = [], []
+    for con in constraints:
+        coeffs = affine_coefficients(con.g, symbols)
+        if coeffs is None:
+            return None
+        rows.append(coeffs[0])
+        rhs.append(-coeffs[1])
+    n = len(symbols)
+    return np.array(rows, dtype=float).reshape(-1, n), np.array(rhs, dtype=float)
+
+
+def lambdify_margins(constraints: Sequence[Constraint], symbols: Sequence[sympy.Symbol]):
+    """A vectorised ``g(X)`` for all constraints: ``X (N, n) -> (N, m)``.
+
+    Affine constraints are evaluated as one matrix product ``X A^T - b``.
+    """
+    if not constraints:
+        return lambda X: np.zeros((X.shape[0], 0))
+    linear = halfspaces(constraints, symbols)
+    if linear is not None:
+        A, b = linear
+        return lambda X: X @ A.T - b
+    fn = sympy.lambdify([list(symbols)], [c.g for c in constraints], modules="numpy")
+
+    def margins(X: np.ndarray) -> np.ndarray:
+        cols = fn(X.T)
+        return np.stack([np.broadcast_to(np.asarray(c, dtype=float), X.shape[:1]) for c in cols],
+                        axis=1)
+
+    return margins
+
+
+def violation_test(constraints: Sequence[Constraint], symbols: Sequence[sympy.Symbol]):
+    """Vectorised robust membership in the conjunction: ``X -> (inside, depth)``.
+
+    ``depth = max_j g_j(X)`` is non-positive on the closure and its size is a margin.
+    ``inside`` asks for ``depth < -1e-9 (1 + |x|_inf)``: a point counts as inside only if
+    rounding errors of that relative size cannot have put it there, so a violation found
+    this way is a violation of the strict and the non-strict reading alike.
+    """
+    margins = lambdify_margins(constraints, symbols)
+
+    def test(X: np.ndarray):
+        g = margins(X)
+        depth = g.max(axis=1) if g.shape[1] else np.full(X.shape[0], -np.inf)
+        tolerance = NUMERICAL_TOLERANCE * (1.0 + np.abs(X).max(axis=1))
+        return depth < -tolerance, depth
+
+    return test

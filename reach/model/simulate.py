@@ -1,0 +1,366 @@
+"""Vectorised simulation of a hybrid automaton: thousands of runs per numpy call.
+
+Each run starts from its own initial state and (for models with a may-transition window)
+its own switch instant ``tau``. A run is simulated segment by segment; a segment is the
+stretch of time in one mode up to the run's next event, and all runs of a mode are advanced
+together:
+
+* linear modes use the exact flow ``[x; 1](t) = expm([[A, b], [0, 0]] t) [x; 1]``: the states
+  on the grid ``t_k = k dt`` of a whole segment come from precomputed powers of the one-step
+  matrix, so a segment of thousands of steps is one batched matrix product;
+* nonlinear modes step classical RK4 (``substeps`` per grid step), stopping once every run
+  of the group has met an event;
+* an urgent transition is taken at the first instant its guard holds, located by bisection
+  inside the grid interval where it first holds (to ``dt * 2**-40``); the window transition
+  is taken exactly at ``tau``; Gaussian kicks (if asked for) are applied at ``k * step``;
+* a run found outside its mode's invariant at a grid point with no transition taken is
+  *blocked* (it has no continuation in the automaton's semantics) and stops there.
+
+Observers see every state a run visits (grid points and event instants) together with the
+run's mode, in time order per run; properties are monitored this way without storing paths.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.linalg
+
+from reach.model.automaton import HybridAutomaton
+from reach.model.constraints import lambdify_margins
+
+BISECTION_STEPS = 40
+INVARIANT_TOLERANCE = 1e-7
+CHUNK_VALUES = 4_000_000          # states x steps x dims held at once in a linear segment
+
+
+def default_dt(model: HybridAutomaton) -> float:
+    """Grid step: 1/2400 of the horizon, and a divisor of the disturbance step if any."""
+    dt = model.horizon / 2400.0
+    if model.disturbance is not None:
+        step = model.disturbance.step
+        dt = step / max(1, int(np.ceil(step / dt)))
+    return dt
+
+
+def batched_expm(M: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """``expm(M h_k)`` for every ``h_k``, by scaling and squaring of a degree-16 Taylor series.
+
+    After scaling, ``||M h / 2^s||_1 <= 1/4``, where the truncation error of the series is
+    below ``(1/4)^17 / 17! < 1e-24``; the squarings are batched matrix products.
+    """
+    h = np.asarray(h, dtype=float)
+    norm = np.linalg.norm(M, 1) * float(np.max(np.abs(h), initial=0.0))
+    s = max(0, int(np.ceil(np.log2(norm / 0.25)))) if norm > 0.25 else 0
+    H = M[None, :, :] * (h / 2.0 ** s)[:, None, None]
+    eye = np.broadcast_to(np.eye(M.shape[0]), H.shape)
+    E = eye.copy()
+    for k in range(16, 0, -1):          # Horner: I + H/1 (I + H/2 (I + ... ))
+        E = eye + (H @ E) / k
+    for _ in range(s):
+        E = E @ E
+    return E
+
+
+@dataclass
+class Trajectories:
+    """Final state, mode and blocking time of every run; the visited states if recorded."""
+
+    final_state: np.ndarray
+    final_mode: np.ndarray
+    blocked_at: np.ndarray                      # time a run was blocked, nan if never
+    path: dict = field(default_factory=dict)    # run -> (t (K,), mode (K,), x (K, n)) if recorded
+
+
+class Simulator:
+    """Simulates ``model`` on a grid of step ``dt`` (see the module docstring)."""
+
+    def __init__(self, model: HybridAutomaton, dt: float | None = None, substeps: int = 2):
+        self.model = model
+        self.dt = float(dt) if dt else default_dt(model)
+        self.substeps = substeps
+        self.mode_names = list(model.modes)
+        self.n = model.n
+        self.steps = int(np.ceil(model.horizon / self.dt - 1e-9))
+        self.generators, self.powers = {}, {}
+        for name, mode in model.modes.items():
+            if mode.linear is not None:
+                A, b = mode.linear
+                M = np.zeros((self.n + 1, self.n + 1))
+                M[:self.n, :self.n], M[:self.n, self.n] = A, b
+                self.generators[name] = M
+                self.powers[name] = _powers(scipy.linalg.expm(M * self.dt), self.steps + 1)
+        self.urgent = {m: [] for m in model.modes}
+        self.window = {m: None for m in model.modes}
+        for tr in model.transitions:
+            if tr.urgent:
+                self.urgent[tr.source].append((tr, lambdify_margins(tr.guard, model.symbols)))
+            elif tr.window is not None:
+                self.window[tr.source] = tr
+        self.resets = {tr.name: _reset_function(tr, model) for tr in model.transitions if tr.reset}
+
+    # --------------------------------------------------------------- propagation
+    def propagate(self, mode: str, X: np.ndarray, h) -> np.ndarray:
+        """States after time ``h`` (scalar or one per run) in ``mode``, with no event."""
+        h = np.broadcast_to(np.asarray(h, dtype=float), X.shape[:1])
+        if X.shape[0] == 0:
+            return X.copy()
+        if mode in self.generators:
+            E = batched_expm(self.generators[mode], h)
+            return np.einsum("kij,kj->ki", E[:, :self.n, :self.n], X) + E[:, :self.n, self.n]
+        rhs = self.model.modes[mode].rhs
+        count = max(1, int(np.ceil(self.substeps * np.max(h) / self.dt)))
+        step = (h / count)[:, None]
+        Y = X.copy()
+        for _ in range(count):
+            k1 = rhs(Y)
+            k2 = rhs(Y + 0.5 * step * k1)
+            k3 = rhs(Y + 0.5 * step * k2)
+            k4 = rhs(Y + step * k3)
+            Y = Y + step / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+        return Y
+
+    def _grid_states(self, mode: str, Y0: np.ndarray, count: int, met=None) -> np.ndarray:
+        """States at ``count`` successive grid points, ``Y0`` being the first: (N, count, n).
+
+        Linear: powers of the one-step matrix. Nonlinear: RK4 steps, ending early (the rest
+        left NaN) once every run has met its event; ``met(states, j0)`` says which runs meet
+        one among the columns ``j0...`` of ``states``.
+        """
+        N = Y0.shape[0]
+        if mode in self.powers:
+            P = self.powers[mode][:count]
+            Z = np.concatenate([Y0, np.ones((N, 1))], axis=1)
+            return np.einsum("jab,rb->rja", P[:, :self.n, :], Z)
+        out = np.full((N, count, self.n), np.nan)
+        out[:, 0] = Y0
+        done = np.zeros(N, dtype=bool)
+        checked = 0
+        for j in range(1, count):
+            out[:, j] = self.propagate(mode, out[:, j - 1], self.dt)
+            if met is not None and (j % 16 == 0 or j == count - 1):
+                done |= met(out[:, checked:j + 1], checked)
+                checked = j + 1
+                if done.all():
+                    break
+        return out
+    def _first_entry(self, mode: str, X: np.ndarray, h: np.ndarray, guard) -> np.ndarray:
+        """Earliest time in ``(0, h]`` at which ``guard`` holds (it holds at ``h``), by bisection."""
+        lo, hi = np.zeros_like(h), h.copy()
+        for _ in range(BISECTION_STEPS):
+            mid = 0.5 * (lo + hi)
+            inside = np.all(guard(self.propagate(mode, X, mid)) <= 0, axis=1)
+            hi = np.where(inside, mid, hi)
+            lo = np.where(inside, lo, mid)
+        return hi
+
+    # --------------------------------------------------------------- runs
+    def run(self, x0: np.ndarray, switch_times: np.ndarray | None = None, record: bool = False,
+            observers=(), kicks=None) -> Trajectories:
+        """Simulate runs from ``x0`` (N, n) with window switch instants ``switch_times`` (N,).
+
+        ``observers``: callables ``f(t, X, mode_index, rows)`` (``t`` per row) called with the
+        visited states. ``kicks(k, count) -> (count, n)``: disturbance added at ``k * step``.
+        """
+        X = np.array(x0, dtype=float).reshape(-1, self.n).copy()
+        N = X.shape[0]
+        tau = np.full(N, np.nan) if switch_times is None else np.array(switch_times, dtype=float).reshape(N)
+        mode = np.full(N, self.mode_names.index(self.model.initial.mode))
+        t = np.zeros(N)
+        blocked_at = np.full(N, np.nan)
+        kick_step = self.model.disturbance.step if (kicks is not None and self.model.disturbance) else None
+        next_kick = np.zeros(N) if kick_step else np.full(N, np.inf)
+        kick_count = np.zeros(N, dtype=int)
+        recorder = _Recorder() if record else None
+        watchers = list(observers) + ([recorder] if recorder else [])
+        self._urgent_now(X, mode, np.arange(N))
+        for f in watchers:
+            f(t.copy(), X.copy(), mode.copy(), np.arange(N))
+        horizon = self.model.horizon
+        while True:
+            active = np.flatnonzero((t < horizon - 1e-12) & np.isnan(blocked_at))
+            if active.size == 0:
+                break
+            if kick_step:   # disturbance kicks due now
+                due = active[np.abs(next_kick[active] - t[active]) <= 1e-9 * max(1.0, horizon)]
+                if due.size:
+                    for k in np.unique(kick_count[due]):
+                        sel = due[kick_count[due] == k]
+                        X[sel] += kicks(int(k), sel.size)
+                    kick_count[due] += 1
+                    next_kick[due] = kick_count[due] * kick_step
+            for m_index, name in enumerate(self.mode_names):
+                rows = active[mode[active] == m_index]
+                if rows.size:
+                    self._segment(name, rows, X, mode, t, tau, blocked_at, next_kick, watchers)
+        return Trajectories(X, mode, blocked_at, recorder.paths(N) if recorder else {})
+
+    def _urgent_now(self, X, mode, rows):
+        """Take urgent transitions whose guard already holds (at the start, or after a jump)."""
+        for _ in range(len(self.mode_names) + 1):
+            moved = False
+            for m_index, name in enumerate(self.mode_names):
+                for tr, guard in self.urgent[name]:
+                    sel = rows[mode[rows] == m_index]
+                    if sel.size:
+                        inside = sel[np.all(guard(X[sel]) <= 0, axis=1)]
+                        if inside.size:
+                            self._jump(tr, X, mode, inside)
+                            moved = True
+            if not moved:
+                return
+
+    def _jump(self, tr, X, mode, rows):
+        mode[rows] = self.mode_names.index(tr.target)
+        if tr.name in self.resets:
+            X[rows] = self.resets[tr.name](X[rows])
+
+    def _segment(self, name, rows, X, mode, t, tau, blocked_at, next_kick, watchers):
+        """Advance ``rows`` (all in mode ``name``) to their next event, kick, or the horizon."""
+        horizon = self.model.horizon
+        per_run = max(1, CHUNK_VALUES // ((self.steps + 1) * self.n))
+        for start in range(0, rows.size, per_run):
+            self._segment_chunk(name, rows[start:start + per_run], X, mode, t, tau, blocked_at,
+                                next_kick, watchers, horizon)
+
+    def _segment_chunk(self, name, rows, X, mode, t, tau, blocked_at, next_kick, watchers, horizon):
+        n_rows = rows.size
+        t0 = t[rows]
+        k0 = np.floor(t0 / self.dt + 1e-9).astype(int) + 1                 # first grid point after t0
+        end = np.minimum(next_kick[rows], horizon)
+        window = self.window[name]
+        win_time = np.full(n_rows, np.inf)
+        if window is not None:
+            w = tau[rows]
+            win_time = np.where((w >= t0 - 1e-12) & (w <= end), np.maximum(w, t0), np.inf)
+        stop_at = np.minimum(end, win_time)                                # known limits
+        count = int(np.max(np.ceil(np.minimum(stop_at, horizon) / self.dt - 1e-9) - k0 + 1, initial=0)) + 1
+        count = max(1, min(count, self.steps + 2 - int(k0.min())))
+        first = k0 * self.dt
+        Y0 = self.propagate(name, X[rows], np.maximum(first - t0, 0.0))
+        grid_t = (k0[:, None] + np.arange(count)[None, :]) * self.dt       # (R, count)
+
+        guards = self.urgent[name]
+
+        def met(states, j0):
+            j1 = j0 + states.shape[1]
+            done = grid_t[:, j1 - 1] >= stop_at
+            for _, guard in guards:
+                G = guard(states.reshape(-1, self.n)).reshape(n_rows, j1 - j0, -1)
+                done |= np.any(np.all(G <= 0, axis=2), axis=1)
+            return done
+
+        Y = self._grid_states(name, Y0, count, met)
+        valid = (grid_t <= stop_at[:, None] + 1e-12) & np.isfinite(Y[:, :, 0])
+        # the earliest urgent guard entry
+        event_time, event_tr = win_time.copy(), np.where(np.isfinite(win_time), 0, -1)
+        candidates = [window]
+        for j_tr, (tr, guard) in enumerate(guards, start=1):
+            candidates.append(tr)
+            G = guard(np.nan_to_num(Y).reshape(-1, self.n)).reshape(n_rows, count, -1)
+            inside = np.all(G <= 0, axis=2) & valid
+            hit = np.flatnonzero(inside.any(axis=1))
+            if hit.size:
+                j = inside[hit].argmax(axis=1)
+                prev_t = np.where(j == 0, t0[hit], grid_t[hit, np.maximum(j - 1, 0)])
+                prev_x = np.where((j == 0)[:, None], X[rows[hit]], Y[hit, np.maximum(j - 1, 0)])
+                s = self._first_entry(name, prev_x, grid_t[hit, j] - prev_t, guard)
+                when = prev_t + s
+                better = when < event_time[hit]
+                event_time[hit[better]] = when[better]
+                event_tr[hit[better]] = j_tr
+        # invariant: the first grid point outside it blocks the run
+        inv = self.model.modes[name].invariant_margins
+        M = inv(np.nan_to_num(Y).reshape(-1, self.n)).reshape(n_rows, count, -1)
+        scale = 1.0 + np.abs(np.nan_to_num(Y)).max(axis=2, keepdims=True)
+        outside = np.any(M > INVARIANT_TOLERANCE * scale, axis=2) & valid & (grid_t < event_time[:, None])
+        blocked = outside.any(axis=1)
+        block_j = outside.argmax(axis=1)
+        limit = np.where(blocked, grid_t[np.arange(n_rows), block_j], np.minimum(event_time, stop_at))
+        seen = valid & (grid_t <= limit[:, None]) & (grid_t < event_time[:, None])
+        r_idx, j_idx = np.nonzero(seen)
+        if r_idx.size:
+            for f in watchers:
+                f(grid_t[r_idx, j_idx], Y[r_idx, j_idx], np.full(r_idx.size, mode[rows[0]]), rows[r_idx])
+        # runs that are blocked
+        b = np.flatnonzero(blocked)
+        X[rows[b]] = Y[b, block_j[b]]
+        t[rows[b]] = limit[b]
+        blocked_at[rows[b]] = limit[b]
+        # runs with an event: go to it exactly, jump
+        e = np.flatnonzero(~blocked & (event_tr >= 0) & (event_time <= end))
+        if e.size:
+            last = np.where(seen[e].any(axis=1), (seen[e] * np.arange(count)).max(axis=1), -1)
+            base_t = np.where(last >= 0, grid_t[e, np.maximum(last, 0)], t0[e])
+            base_x = np.where((last >= 0)[:, None], Y[e, np.maximum(last, 0)], X[rows[e]])
+            Xe = self.propagate(name, base_x, event_time[e] - base_t)
+            X[rows[e]] = Xe
+            t[rows[e]] = event_time[e]
+            for f in watchers:
+                f(event_time[e], Xe, mode[rows[e]], rows[e])
+            for j_tr, tr in enumerate(candidates):
+                sel = rows[e][event_tr[e] == j_tr]
+                if sel.size:
+                    if tr is window:
+                        tau[sel] = np.nan                  # the window transition is taken once
+                    self._jump(tr, X, mode, sel)
+                    self._urgent_now(X, mode, sel)
+                    for f in watchers:
+                        f(t[sel], X[sel], mode[sel], sel)
+        # the others run to the end of the segment (a kick or the horizon)
+        q = np.flatnonzero(~blocked & ~((event_tr >= 0) & (event_time <= end)))
+        if q.size:
+            last = np.where(seen[q].any(axis=1), (seen[q] * np.arange(count)).max(axis=1), -1)
+            last_t = np.where(last >= 0, grid_t[q, np.maximum(last, 0)], t0[q])
+            last_x = np.where((last >= 0)[:, None], Y[q, np.maximum(last, 0)], X[rows[q]])
+            X[rows[q]] = self.propagate(name, last_x, end[q] - last_t)
+            t[rows[q]] = end[q]
+            off_grid = np.flatnonzero(end[q] - last_t > 1e-9 * max(1.0, horizon))
+            if off_grid.size:
+                sel = rows[q][off_grid]
+                for f in watchers:
+                    f(t[sel], X[sel], mode[sel], sel)
+
+
+class _Recorder:
+    """Observer that keeps every visited state (for replays and plots of a few runs)."""
+
+    def __init__(self):
+        self.chunks = []
+
+    def __call__(self, t, X, mode, rows):
+        self.chunks.append((np.asarray(t, float).copy(), X.copy(), np.asarray(mode).copy(), rows.copy()))
+
+    def paths(self, n_runs: int) -> dict:
+        t = np.concatenate([c[0] for c in self.chunks])
+        X = np.concatenate([c[1] for c in self.chunks])
+        m = np.concatenate([c[2] for c in self.chunks])
+        r = np.concatenate([c[3] for c in self.chunks])
+        order = np.lexsort((np.arange(t.size), t, r))      # by run, then time, then arrival
+        t, X, m, r = t[order], X[order], m[order], r[order]
+        return {int(i): (t[r == i], m[r == i], X[r == i]) for i in range(n_runs)}
+
+
+def _powers(step: np.ndarray, count: int) -> np.ndarray:
+    """``[I, step, step^2, ..., step^(count-1)]``."""
+    out = np.empty((count,) + step.shape)
+    out[0] = np.eye(step.shape[0])
+    for k in range(1, count):
+        out[k] = out[k - 1] @ step
+    return out
+
+
+def _reset_function(tr, model):
+    """Vectorised reset map of a transition (unlisted states keep their value)."""
+    import sympy
+
+    fns = {i: sympy.lambdify([model.symbols], e, modules="numpy") for i, e in tr.reset.items()}
+
+    def reset(X):
+        Y = X.copy()
+        for i, fn in fns.items():
+            Y[:, i] = np.broadcast_to(np.asarray(fn(X.T), dtype=float), X.shape[:1])
+        return Y
+
+    return reset

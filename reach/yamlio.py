@@ -1,0 +1,119 @@
+"""YAML reading with line numbers, for error messages that point into the user's file.
+
+``load(path)`` returns a :class:`Doc`: the plain data (dicts, lists, scalars, via the safe
+loader only) and a map from field path to line, so a loader can say
+``models/x.yaml:14: modes.approach.flow.vx: unknown name 'vyy'``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import yaml
+
+from reach.errors import InputError, Where
+
+MAX_NODES = 200_000
+MAX_BYTES = 5_000_000
+
+
+class Doc:
+    """Parsed YAML plus the line of every field; ``where(path)`` builds error locations."""
+
+    def __init__(self, data, lines: dict[tuple, tuple[str, int]], file: str):
+        self.data = data
+        self.lines = lines
+        self.file = file
+
+    def where(self, *path) -> Where:
+        file, line = self.lines.get(tuple(path), (self.file, None))
+        if line is None:  # nearest ancestor with a known line
+            for k in range(len(path) - 1, -1, -1):
+                if tuple(path[:k]) in self.lines:
+                    file, line = self.lines[tuple(path[:k])]
+                    break
+        field = ""
+        for key in path:
+            field = f"{field}[{key}]" if isinstance(key, int) else (f"{field}.{key}" if field else str(key))
+        return Where(file, field, line)
+
+
+def _convert(node, loader, path, lines, file, budget):
+    budget[0] += 1
+    if budget[0] > MAX_NODES:
+        raise InputError(f"more than {MAX_NODES} YAML nodes (aliases expanding?)", file)
+    lines.setdefault(path, (file, node.start_mark.line + 1))
+    if isinstance(node, yaml.MappingNode):
+        out = {}
+        for key_node, value_node in node.value:
+            if not isinstance(key_node, yaml.ScalarNode):
+                raise InputError("mapping keys must be plain names", file, line=key_node.start_mark.line + 1)
+            key = loader.construct_object(key_node)
+            if not isinstance(key, (str, int, float)) or isinstance(key, bool):
+                key = str(key)
+            if key in out:
+                raise InputError(f"duplicate key '{key}'", file, line=key_node.start_mark.line + 1)
+            lines[path + (key,)] = (file, key_node.start_mark.line + 1)
+            out[key] = _convert(value_node, loader, path + (key,), lines, file, budget)
+        return out
+    if isinstance(node, yaml.SequenceNode):
+        return [_convert(v, loader, path + (i,), lines, file, budget) for i, v in enumerate(node.value)]
+    return loader.construct_object(node)
+
+
+def parse_text(text: str, file: str) -> Doc:
+    """Parse YAML text (safe loader only) into a :class:`Doc`."""
+    if len(text) > MAX_BYTES:
+        raise InputError(f"file larger than {MAX_BYTES} bytes", file)
+    loader = yaml.SafeLoader(text)
+    try:
+        node = loader.get_single_node()
+        lines: dict[tuple, tuple[str, int]] = {}
+        data = None if node is None else _convert(node, loader, (), lines, file, [0])
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        line = mark.line + 1 if mark else None
+        hint = ""
+        if "expected ','" in str(exc.problem):
+            hint = " (inside { } or [ ], quote values that contain brackets: \"10[N]\")"
+        raise InputError(f"invalid YAML: {exc.problem or exc.context}{hint}", file, line=line) from None
+    except yaml.YAMLError as exc:
+        raise InputError(f"invalid YAML: {exc}", file) from None
+    except (RecursionError, ValueError, TypeError, OverflowError) as exc:
+        raise InputError(f"invalid YAML: {type(exc).__name__}", file) from None
+    finally:
+        loader.dispose()
+    return Doc(data, lines, file)
+
+
+def load(path) -> Doc:
+    """Read and parse a YAML file; a missing or unreadable file is an InputError."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise InputError("no such file", str(path)) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read file: {exc.__class__.__name__}", str(path)) from None
+    return parse_text(text, str(path))
+
+
+def merge(base: Doc, child: Doc) -> Doc:
+    """Child over base: mappings merge key by key, everything else is replaced."""
+    lines = dict(base.lines)
+
+    def rec(b, c, path):
+        if isinstance(b, dict) and isinstance(c, dict):
+            out = dict(b)
+            for key, value in c.items():
+                out[key] = rec(b.get(key), value, path + (key,)) if key in b else value
+                if key not in b or not (isinstance(b.get(key), dict) and isinstance(value, dict)):
+                    for p in [p for p in lines if p[:len(path) + 1] == path + (key,)]:
+                        del lines[p]
+            return out
+        return c
+
+    data = rec(base.data, child.data, ())
+    for path, loc in child.lines.items():
+        lines[path] = loc
+    return Doc(data, lines, child.file)

@@ -1,0 +1,89 @@
+"""The expression parser: whitelist only, units, constraint normalisation."""
+
+import math
+
+import pytest
+import sympy
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from reach.errors import InputError, Where
+from reach.model.constraints import affine_coefficients, from_comparisons
+from reach.model.expr import parse_comparison, parse_expr
+from reach.model.units import UnitSystem
+
+x, y = sympy.symbols("x y", real=True)
+NAMES = {"x": x, "y": y, "k": sympy.Float(2.0)}
+W = Where("m.yaml", "modes.a.flow.x", 3)
+
+
+def test_arithmetic_and_functions():
+    e = parse_expr("3*k**2*x + sqrt(y) - abs(x)/2 + atan2(y, x)", NAMES, W)
+    expected = 12 * x + sympy.sqrt(y) - sympy.Abs(x) / 2 + sympy.atan2(y, x)
+    assert sympy.simplify(e - expected) == 0
+
+
+def test_units_convert_to_model_base_units():
+    minutes = UnitSystem(length="m", time="min", mass="kg")
+    assert float(parse_expr("10[N]", {}, W, minutes)) == pytest.approx(36000.0)
+    assert float(parse_expr("0.055[m/s]", {}, W, minutes)) == pytest.approx(3.3)
+    assert float(parse_expr("42164[km]", {}, W)) == pytest.approx(42164e3)
+    assert float(parse_expr("3.986e14[m**3/s**2]", {}, W, minutes)) == pytest.approx(3.986e14 * 3600)
+
+
+@pytest.mark.parametrize("text, message", [
+    ("__import__('os').system('true')", "only plain function calls"),
+    ("eval('1')", "unknown function 'eval'"),
+    ("x.__class__", "unsupported syntax 'Attribute'"),
+    ("[x for x in y]", "unsupported syntax"),
+    ("lambda: 1", "unsupported syntax 'Lambda'"),
+    ("vyy + 1", "unknown name 'vyy'"),
+    ("9**9**9", "too large"),
+    ("'abc'", "unexpected constant"),
+    ("x +", "cannot parse"),
+    ("10[furlong]", "unknown unit 'furlong'"),
+    ("sin(x, y)", "takes 1 argument"),
+    ("x / 0", "division by zero"),
+])
+def test_rejections_name_the_place(text, message):
+    with pytest.raises(InputError) as err:
+        parse_expr(text, NAMES, W)
+    assert message in str(err.value)
+    assert str(err.value).startswith("m.yaml:3: modes.a.flow.x: ")
+
+
+def test_abs_comparison_splits_in_two_halfspaces():
+    cons = from_comparisons(parse_comparison("abs(x - y) <= 3", NAMES, W), "abs(x - y) <= 3", W)
+    rows = sorted(tuple(affine_coefficients(c.g, [x, y])[0]) + (affine_coefficients(c.g, [x, y])[1],)
+                  for c in cons)
+    assert rows == [(-1.0, 1.0, -3.0), (1.0, -1.0, -3.0)]
+
+
+def test_chained_comparison():
+    cons = from_comparisons(parse_comparison("-1 <= x < 2", NAMES, W), "", W)
+    assert [c.strict for c in cons] == [False, True]
+    assert [sympy.simplify(c.g) for c in cons] == [-x - 1, x - 2]
+
+
+def test_negation_is_the_complement():
+    (con,) = from_comparisons(parse_comparison("x <= 1", NAMES, W), "x <= 1", W)
+    neg = con.negated()
+    assert neg.strict and sympy.simplify(neg.g - (1 - x)) == 0
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.text(alphabet="xyk0123456789+-*/().,[]<=> _abcdefgimnoqrstuvw'\"", max_size=40))
+def test_random_text_never_crashes(text):
+    """Any text either parses to sympy or raises InputError; nothing else escapes."""
+    try:
+        parse_expr(text, NAMES, W)
+    except InputError:
+        pass
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.floats(-1e6, 1e6, allow_nan=False), st.floats(-1e6, 1e6, allow_nan=False))
+def test_parsed_affine_expression_evaluates_like_python(a, b):
+    e = parse_expr(f"({a!r})*x + ({b!r})*y - 7", NAMES, W)
+    value = float(e.subs({x: 1.5, y: -2.0}))
+    assert math.isclose(value, a * 1.5 - b * 2.0 - 7, rel_tol=1e-12, abs_tol=1e-6)

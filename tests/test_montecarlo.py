@@ -1,0 +1,114 @@
+"""The Monte Carlo referee: counterexamples that replay, honest UNKNOWNs, statistics."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from reach.backends.montecarlo import BACKEND, replay
+from reach.checking import check_files
+from reach.model import load_model
+from reach.result import Status
+from reach.spec import bind, load_properties
+from reach.stats import clopper_pearson_upper, wilson
+
+FAST = {"samples": 200, "search_rounds": 1, "search_size": 50}
+
+
+def test_thrust_bound_of_7N_is_violated_with_a_replaying_counterexample():
+    (result,) = check_files("models/SRA01.yaml", "properties/thrust_7N.yaml", "montecarlo", FAST)
+    assert result.status == Status.UNSAFE
+    cex = result.counterexample
+    assert cex.violation_time == 0.0 and cex.violation_mode == "approach"
+    # independent check: the published gains at the violating state ask for more than 7 N
+    K1 = np.array([[-28.8287, 0.1005, -1449.9754, 0.0046], [-0.087, -33.2562, 0.00462, -1451.5013]])
+    assert np.abs(K1 @ np.array(cex.violation_state[:4])).max() / 3600 > 7.0
+    model = load_model(cex.model_file)
+    prop = bind(load_properties(cex.property_file)[0], model)
+    assert replay(model, prop, cex.initial_state, cex.switch_time, cex.dt).violated
+
+
+def test_safe_instance_is_unknown_with_an_upper_bound_never_safe():
+    results = check_files("models/SRA01.yaml", "properties/rendezvous.yaml", "montecarlo", FAST)
+    assert [r.status for r in results] == [Status.UNKNOWN] * 4
+    for r in results:
+        assert r.details["violation_probability_upper_95"] == pytest.approx(1 - 0.05 ** (1 / 200), rel=1e-6)
+        assert r.details["closest_depth"] >= -1e-9        # LOS is touched at docking, x = -100
+    # thrust margin: 10 N - 7.40 N at the worst corner (ANCHORS), in kg m/min^2
+    assert results[0].details["closest_depth"] / 3600 == pytest.approx(10 - 7.40, abs=0.01)
+
+
+def test_late_abort_collides_with_the_0p2_box_and_misses_the_0p1_box():
+    (hit,) = check_files("models/SRU01.yaml", "properties/collision_box_0p2.yaml", "montecarlo", FAST)
+    assert hit.status == Status.UNSAFE and hit.counterexample.switch_time == 260.0
+    assert max(abs(v) for v in hit.counterexample.violation_state[:2]) < 0.2
+    miss = check_files("models/SRU01.yaml", "properties/rendezvous.yaml", "montecarlo", FAST,
+                       only=["collision"])[0]
+    assert miss.status == Status.UNKNOWN
+    assert 0.15 < 0.1 + miss.details["closest_depth"] < 0.2     # closest max-norm distance, metres
+
+
+def test_same_seed_same_answer():
+    a = check_files("models/SRA02.yaml", "properties/rendezvous.yaml", "montecarlo", FAST, only=["velocity"])[0]
+    b = check_files("models/SRA02.yaml", "properties/rendezvous.yaml", "montecarlo", FAST, only=["velocity"])[0]
+    assert a.details["closest_depth"] == b.details["closest_depth"]
+
+
+def test_nonlinear_model_runs_on_its_own_dynamics():
+    (r,) = check_files("models/SRNA01.yaml", "properties/rendezvous.yaml", "montecarlo",
+                       {"samples": 50, "search_rounds": 0}, only=["velocity"])
+    assert r.status == Status.UNKNOWN and r.details["closest_depth"] > 0
+
+
+def test_gaussian_kicks_give_the_analytic_reach_probability(tmp_path):
+    """A free particle kicked by N(0, s^2) k times: x ~ N(0, k s^2), P(|x| <= a) in closed form."""
+    (tmp_path / "m.yaml").write_text(
+        "name: kicked\nstate: [x]\nmodes: {free: {flow: {x: 0}}}\ninitial: {mode: free, box: {x: 0}}\n"
+        "horizon: 10\ndisturbance: {gaussian: {cov: [[0.25]]}, enters: [x], step: 1}\n")
+    (tmp_path / "p.yaml").write_text(
+        "properties:\n  - id: near\n    kind: reach\n    at: 10\n    target: {box: {x: [-1, 1]}}\n")
+    (r,) = check_files(tmp_path / "m.yaml", tmp_path / "p.yaml", "montecarlo", {"samples": 40000})
+    exact = 2 * stats.norm.cdf(1 / np.sqrt(10 * 0.25)) - 1      # kicks at t = 0, 1, ..., 9
+    lo, hi = r.probability
+    standard_error = np.sqrt(exact * (1 - exact) / 40000)
+    assert abs(r.details["estimate"] - exact) < 3.3 * standard_error     # a 99.9 % two-sided check
+    assert hi - lo == pytest.approx(2 * 1.96 * standard_error, rel=0.05)
+
+
+def test_confidence_intervals():
+    assert clopper_pearson_upper(0, 1000) == pytest.approx(1 - 0.05 ** (1 / 1000), rel=1e-9)
+    lo, hi = wilson(640, 1000)
+    assert lo < 0.64 < hi and hi - lo == pytest.approx(2 * 1.96 * np.sqrt(0.64 * 0.36 / 1000), rel=0.02)
+
+
+def test_cli_check_json_and_replay(tmp_path):
+    out = subprocess.run([sys.executable, "-m", "reach", "check", "SRA01", "properties/thrust_7N.yaml",
+                          "--json", "-o", "samples=100", "-o", "search_rounds=0",
+                          "--counterexamples", str(tmp_path)], capture_output=True, text=True, check=True)
+    rows = json.loads(out.stdout)
+    assert rows[0]["property"] == "thrust_7N" and rows[0]["status"] == "unsafe" and rows[0]["seconds"] > 0
+    replayed = subprocess.run([sys.executable, "-m", "reach", "replay", rows[0]["counterexample_file"]],
+                              capture_output=True, text=True)
+    assert replayed.returncode == 0 and replayed.stdout.startswith("replayed:")
+    # a tampered counterexample (start moved inside the bound) does not replay
+    data = json.loads(open(rows[0]["counterexample_file"]).read())
+    data["initial_state"] = [-500.0, -200.0, 0.0, 0.0, 0.0]
+    (tmp_path / "tampered.json").write_text(json.dumps(data))
+    tampered = subprocess.run([sys.executable, "-m", "reach", "replay", str(tmp_path / "tampered.json")],
+                              capture_output=True, text=True)
+    assert tampered.returncode == 1 and tampered.stdout.startswith("NOT replayed")
+
+
+@pytest.mark.parametrize("args, message", [
+    (["check", "NOPE", "properties/rendezvous.yaml"], "no model named 'NOPE'"),
+    (["check", "SRA01", "properties/rendezvous.yaml", "-b", "magic"], "unknown back-end 'magic'"),
+    (["check", "SRA01", "properties/missing.yaml"], "properties/missing.yaml: no such file"),
+    (["replay", "suite.yaml"], "not a counterexample file"),
+])
+def test_cli_bad_input_is_one_line_and_exit_2(args, message):
+    out = subprocess.run([sys.executable, "-m", "reach", *args], capture_output=True, text=True)
+    assert out.returncode == 2
+    assert out.stderr.count("\n") == 1 and message in out.stderr and "Traceback" not in out.stderr
