@@ -130,9 +130,9 @@ class Simulator:
         """
         N = Y0.shape[0]
         if mode in self.powers:
-            P = self.powers[mode][:count]
-            Z = np.concatenate([Y0, np.ones((N, 1))], axis=1)
-            return np.einsum("jab,rb->rja", P[:, :self.n, :], Z)
+            P = self.powers[mode][:count, :self.n, :]                    # (count, n, n+1)
+            Z = np.concatenate([Y0, np.ones((N, 1))], axis=1)            # (N, n+1)
+            return (Z @ P.reshape(-1, self.n + 1).T).reshape(N, count, self.n)
         out = np.full((N, count, self.n), np.nan)
         out[:, 0] = Y0
         done = np.zeros(N, dtype=bool)
@@ -252,13 +252,15 @@ class Simulator:
             return done
 
         Y = self._grid_states(name, Y0, count, met)
-        valid = (grid_t <= stop_at[:, None] + 1e-12) & np.isfinite(Y[:, :, 0])
+        finite = np.isfinite(Y[:, :, 0])
+        valid = (grid_t <= stop_at[:, None] + 1e-12) & finite
+        flat = (Y if finite.all() else np.where(finite[:, :, None], Y, 0.0)).reshape(-1, self.n)
         # the earliest urgent guard entry
         event_time, event_tr = win_time.copy(), np.where(np.isfinite(win_time), 0, -1)
         candidates = [window]
         for j_tr, (tr, guard) in enumerate(guards, start=1):
             candidates.append(tr)
-            G = guard(np.nan_to_num(Y).reshape(-1, self.n)).reshape(n_rows, count, -1)
+            G = guard(flat).reshape(n_rows, count, -1)
             inside = np.all(G <= 0, axis=2) & valid
             hit = np.flatnonzero(inside.any(axis=1))
             if hit.size:
@@ -272,8 +274,8 @@ class Simulator:
                 event_tr[hit[better]] = j_tr
         # invariant: the first grid point outside it blocks the run
         inv = self.model.modes[name].invariant_margins
-        M = inv(np.nan_to_num(Y).reshape(-1, self.n)).reshape(n_rows, count, -1)
-        scale = 1.0 + np.abs(np.nan_to_num(Y)).max(axis=2, keepdims=True)
+        M = inv(flat).reshape(n_rows, count, -1)
+        scale = 1.0 + np.abs(flat).max(axis=1).reshape(n_rows, count, 1)
         outside = np.any(M > INVARIANT_TOLERANCE * scale, axis=2) & valid & (grid_t < event_time[:, None])
         blocked = outside.any(axis=1)
         block_j = outside.argmax(axis=1)
