@@ -74,7 +74,7 @@ def parse_text(text: str, file: str) -> Doc:
         mark = exc.problem_mark or exc.context_mark
         line = mark.line + 1 if mark else None
         hint = ""
-        if "expected ','" in str(exc.problem):
+        if "got '['" in str(exc.problem):
             hint = " (inside { } or [ ], quote values that contain brackets: \"10[N]\")"
         raise InputError(f"invalid YAML: {exc.problem or exc.context}{hint}", file, line=line) from None
     except yaml.YAMLError as exc:

@@ -87,7 +87,7 @@ class _Builder:
 
     def need(self, key):
         if key not in self.data:
-            raise InputError(f"missing required field '{key}'", self.file, key, 1)
+            raise InputError(f"missing required field '{key}'", self.file, line=1)
         return self.data[key]
 
     # ----------------------------------------------------------- pieces

@@ -1,0 +1,36 @@
+"""Executors: local processes and a real Dask LocalCluster give the same results."""
+
+import pytest
+
+from reach.bench.executors import DaskExecutor, LocalExecutor
+from reach.bench.runner import run_unit
+
+UNITS = [("models/SRA01.yaml", "properties/thrust_7N.yaml", "montecarlo", {"samples": 40, "search_rounds": 0}),
+         ("models/SRU01.yaml", "properties/collision_box_0p2.yaml", "montecarlo", {"samples": 40, "search_rounds": 0}),
+         ("models/SRA02.yaml", "properties/rendezvous.yaml", "montecarlo", {"samples": 40, "search_rounds": 0})]
+
+
+def _essence(results):
+    out = {}
+    for index, (state, rows) in results:
+        assert state == "ok"
+        out[index] = [(r["property"], r["status"], r["details"].get("closest_depth"),
+                       (r["counterexample"] or {}).get("initial_state")) for r in rows]
+    return out
+
+
+def test_local_processes_and_dask_local_cluster_agree():
+    distributed = pytest.importorskip("distributed")
+    local = _essence(LocalExecutor(jobs=2).map_unordered(run_unit, UNITS))
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster, distributed.Client(cluster) as client:
+        dask = _essence(DaskExecutor(client).map_unordered(run_unit, UNITS))
+    serial = _essence(LocalExecutor(jobs=1).map_unordered(run_unit, UNITS))
+    assert local == dask == serial
+    assert local[0][0][1] == "unsafe" and local[1][0][1] == "unsafe"
+
+
+def test_time_limit_stops_a_unit():
+    slow = [("models/SRNA01.yaml", "properties/rendezvous.yaml", "montecarlo", {"samples": 5000})]
+    ((index, (state, value)),) = list(LocalExecutor(jobs=1).map_unordered(run_unit, slow, time_limit=1.0))
+    assert state == "timeout" and value is None
