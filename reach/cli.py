@@ -182,7 +182,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="results")
     p.add_argument("--jobs", "-j", type=int, default=None, help="local worker processes (default: cores)")
     p.add_argument("--scheduler", help="Dask scheduler address, e.g. tcp://host:8786")
-    p.add_argument("--time-limit", type=float, default=None, help="seconds per work unit")
+    p.add_argument("--time-limit", type=float, default=900.0,
+                   help="seconds per work unit before it is stopped (default 900)")
     p.set_defaults(func=cmd_bench)
     p = sub.add_parser("compare", help="what changed between two results.json files")
     p.add_argument("old")

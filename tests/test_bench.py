@@ -4,6 +4,7 @@ import json
 
 from reach.bench.crosscheck import cross_check
 from reach.bench.runner import run_suite
+from reach.bench.tables import compare_runs
 
 
 def _row(backend, status, **extra):
@@ -39,6 +40,9 @@ instances:
     table = (tmp_path / "out" / "results.md").read_text()
     assert "| SRA01-7N | thrust_7N | unsafe | UNSAFE" in table
     assert "[  2/2]" in log.read_text()
+    assert (tmp_path / "out" / "plots" / "SRA01_runs.png").stat().st_size > 10_000
+    assert "| SRA01-7N | thrust_7N | montecarlo | unsafe |" in compare_runs(tmp_path / "out" / "results.json",
+                                                                         tmp_path / "out" / "results.json")
 
 
 def test_cross_check_flags_disagreements():

@@ -27,6 +27,24 @@ def run_unit(model_path: str, property_path: str, backend: str, options: dict) -
                  "details": {"error": str(exc)}}]
 
 
+def plot_models(instances, folder: Path, stream) -> list[str]:
+    """Sample runs of every model of the suite, coloured by mode (one PNG per model)."""
+    from reach.bench.plots import plot_model_runs
+    from reach.model import load_model
+
+    written = []
+    for path in sorted({str(inst.model) for inst in instances}):
+        try:
+            model = load_model(path)
+        except InputError as exc:
+            print(f"  no plot for {path}: {exc}", file=stream)
+            continue
+        target = folder / f"{model.name}_runs.png"
+        plot_model_runs(model, target, runs=12)
+        written.append(str(target))
+    return written
+
+
 def run_suite(suite_path, backends=None, instances=None, out="results", jobs=None, scheduler=None,
               time_limit=None, stream=sys.stdout) -> int:
     """Run (a filtered part of) a suite; exit code 1 if a cross-check fails, else 0."""
@@ -81,6 +99,7 @@ def run_suite(suite_path, backends=None, instances=None, out="results", jobs=Non
         "executor": executor.name, "wall_seconds": wall, "backends": names,
         "rows": rows, "cross_checks": checks,
     }
+    report["plots"] = plot_models(chosen, out / "plots", stream)
     (out / "results.json").write_text(json.dumps(report, indent=1))
     (out / "results.md").write_text(markdown_table(report))
     failures = [c for c in checks if c["level"] == "fail"]
