@@ -9,6 +9,7 @@ BACKENDS = {
     "montecarlo": "reach.backends.montecarlo",
     "star": "reach.backends.star",
     "fsr": "reach.backends.fsr",
+    "taylor": "reach.backends.taylor",
 }
 
 

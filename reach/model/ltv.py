@@ -57,14 +57,13 @@ class KickedLinearSystem:
         M = np.zeros((n + 1, n + 1))
         M[:n, :n] = A
         M[:n, n] = np.zeros(n) if b is None else b
-        cache = {}
-        Phi, c = np.zeros((times.size - 1, n, n)), np.zeros((times.size - 1, n))
-        for k, dt in enumerate(np.diff(times)):
-            key = round(dt, 12)
-            if key not in cache:
-                cache[key] = scipy.linalg.expm(M * dt)
-            E = cache[key]
-            Phi[k], c[k] = E[:n, :n], E[:n, n]
+        gaps = np.diff(times)
+        E = scipy.linalg.expm(M * step)
+        Phi = np.repeat(E[None, :n, :n], gaps.size, axis=0)
+        c = np.repeat(E[None, :n, n], gaps.size, axis=0)
+        if gaps.size and gaps[-1] != step:          # a shorter last interval up to ``at``
+            E = scipy.linalg.expm(M * gaps[-1])
+            Phi[-1], c[-1] = E[:n, :n], E[:n, n]
         return cls(Phi, c, np.asarray(G, dtype=float), times)
 
     @property
@@ -76,18 +75,36 @@ class KickedLinearSystem:
         return self.G.shape[0]
 
     def moments(self, mean0, cov0, w_mean, w_cov):
-        """Means ``(K+1, n)`` and covariances ``(K+1, n, n)`` of ``x[0..K]`` (eqs. 12-14)."""
+        """Means ``(K+1, n)`` and covariances ``(K+1, n, n)`` of ``x[0..K]`` (eqs. 12-14).
+
+        While the steps are identical (``Phi[k] = Phi``, ``c[k] = c``) the recursion unrolls to
+        ``m[k] = Phi^k m[0] + sum_{j<k} Phi^j a`` and ``P[k] = Phi^k P[0] Phi^kT + sum_{j<k} Phi^j Q Phi^jT``
+        with ``a = Phi G mu + c``, ``Q = Phi G Sigma G^T Phi^T``, evaluated for all ``k`` at once from
+        the powers of ``Phi``; the remaining steps use the recursion.
+        """
         n, K = self.n, self.steps
         means, covs = np.zeros((K + 1, n)), np.zeros((K + 1, n, n))
         means[0] = mean0
         covs[0] = np.zeros((n, n)) if cov0 is None else cov0
         kick_mean = self.G @ np.asarray(w_mean, dtype=float)
         kick_cov = self.G @ np.asarray(w_cov, dtype=float) @ self.G.T
-        for k in range(K):
+        same = 0
+        if K:
+            same = 1 + int(np.argmin(np.append(np.all(self.Phi[1:] == self.Phi[0], axis=(1, 2))
+                                               & np.all(self.c[1:] == self.c[0], axis=1), False)))
+            Phi = self.Phi[0]
+            powers = _powers(Phi, same + 1)
+            a = Phi @ kick_mean + self.c[0]
+            Q = Phi @ kick_cov @ Phi.T
+            drift = np.concatenate([np.zeros((1, n)), np.cumsum(powers[:-1] @ a, axis=0)])
+            spread = np.concatenate([np.zeros((1, n, n)),
+                                     np.cumsum(powers[:-1] @ Q @ powers[:-1].transpose(0, 2, 1), axis=0)])
+            means[:same + 1] = powers @ means[0] + drift
+            covs[:same + 1] = powers @ covs[0] @ powers.transpose(0, 2, 1) + spread
+        for k in range(same, K):
             means[k + 1] = self.Phi[k] @ (means[k] + kick_mean) + self.c[k]
-            P = self.Phi[k] @ (covs[k] + kick_cov) @ self.Phi[k].T
-            covs[k + 1] = 0.5 * (P + P.T)
-        return means, covs
+            covs[k + 1] = self.Phi[k] @ (covs[k] + kick_cov) @ self.Phi[k].T
+        return means, 0.5 * (covs + covs.transpose(0, 2, 1))
 
     def propagator(self, k: int, j: int) -> np.ndarray:
         """``Psi(k, j) = Phi[k-1] ... Phi[j]`` (identity for ``k == j``)."""
@@ -95,6 +112,14 @@ class KickedLinearSystem:
         for i in range(j, k):
             out = self.Phi[i] @ out
         return out
+
+
+def _powers(Phi: np.ndarray, count: int) -> np.ndarray:
+    """``[Phi^0, ..., Phi^(count-1)]`` by doubling (``O(log count)`` batched products)."""
+    out = np.eye(Phi.shape[0])[None]
+    while out.shape[0] < count:
+        out = np.concatenate([out, out @ (out[-1] @ Phi)])
+    return out[:count]
 
 
 # ------------------------------------------------------------------ relative orbital motion

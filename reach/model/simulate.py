@@ -177,6 +177,9 @@ class Simulator:
         self._urgent_now(X, mode, np.arange(N))
         for f in watchers:
             f(t.copy(), X.copy(), mode.copy(), np.arange(N))
+        if self._eventless():
+            self._step_eventless(X, mode, t, kicks if kick_step else None, kick_step, watchers)
+            return Trajectories(X, mode, blocked_at, recorder.paths(N) if recorder else {})
         horizon = self.model.horizon
         while True:
             active = np.flatnonzero((t < horizon - 1e-12) & np.isnan(blocked_at))
@@ -195,6 +198,28 @@ class Simulator:
                 if rows.size:
                     self._segment(name, rows, X, mode, t, tau, blocked_at, next_kick, watchers)
         return Trajectories(X, mode, blocked_at, recorder.paths(N) if recorder else {})
+
+    def _eventless(self) -> bool:
+        """One linear mode with no transitions and no invariant: nothing can happen but the flow."""
+        (name, mode), = self.model.modes.items() if len(self.model.modes) == 1 else [(None, None)]
+        return (mode is not None and name in self.powers and not self.model.transitions
+                and not mode.invariant)
+
+    def _step_eventless(self, X, mode, t, kicks, kick_step, watchers):
+        """Grid stepping ``x <- Phi x + phi`` with kicks: the fast path for disturbed LTI models."""
+        (name,) = self.model.modes
+        E = self.powers[name][1]
+        Phi, phi = E[:self.n, :self.n].T, E[:self.n, self.n]
+        rows = np.arange(X.shape[0])
+        kick_every = int(round(kick_step / self.dt)) if kicks is not None else 0
+        for k in range(self.steps):
+            if kick_every and k % kick_every == 0:
+                X += kicks(k // kick_every, X.shape[0])
+            h = min(self.dt, self.model.horizon - k * self.dt)
+            X[:] = X @ Phi + phi if h == self.dt else self.propagate(name, X, h)
+            t[:] = k * self.dt + h
+            for f in watchers:
+                f(t.copy(), X, mode, rows)
 
     def _urgent_now(self, X, mode, rows):
         """Take urgent transitions whose guard already holds (at the start, or after a jump)."""

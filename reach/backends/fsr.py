@@ -1,0 +1,327 @@
+"""The fsr back-end: forward stochastic reach and reach-avoid (Vinod et al.; Crane et al., the seed).
+
+Model. One linear mode ``x' = A x + b`` (controller substituted) with i.i.d. kicks
+``w ~ N(mu, Sigma)`` added to the ``enters`` states at ``t_k = k * step < at``; discretised
+exactly into ``x[k+1] = Phi (x[k] + G w[k]) + c`` (:mod:`reach.model.ltv`, seed eq. 4), with
+``x[k]`` the state at ``t_k`` before its kick, as the Monte Carlo simulator observes it.
+
+Reach, ``P(x(at) in S)`` with ``S = {H x <= g}`` (eqs. 5, 11): ``x[K] ~ N(m[K], P[K])`` by the
+moment recursion (eqs. 12-14), and the probability is the Gaussian polytope integral of
+:mod:`reach.sets.gaussian`.
+
+Reach-avoid, ``P(x(at) in S and x(t_k) in safe for every k < K)``: the stacked trajectory is
+Gaussian, so the answer is one Gaussian polytope integral over the rows ``(k, h)`` (one per
+constraint and step) with ``Cov(h_j x[j], h_k x[k]) = h_k Psi(k, j) P[j] h_j^T`` for ``j <= k``
+(Markov structure: the kicks after ``t_j`` are independent of ``x[j]``). Made fast by structure:
+
+* *dropping*: each one-sided constraint has a marginal violation probability ``q``; the
+  smallest are dropped while their sum stays within ``drop_budget``. Dropping only enlarges
+  the event, and by Boole's inequality the dropped constraints remove at most ``sum q``, so
+  ``P in [P_kept - sum q, P_kept]`` rigorously;
+* the kept rows are integrated either by Genz's method on their stacked covariance with
+  variable prioritisation (``method: genz``, the default), or by *sequential conditioning*
+  along time (``method: markov``): each quasi-Monte Carlo path carries only the conditional
+  mean of the state; the conditional covariance, shared by all paths, is updated by scalar
+  Kalman steps ``C <- C - C h h^T C / (h C h^T)`` and propagated by ``Phi`` between steps, so
+  a row costs ``O(n)`` per path instead of ``O(rows)``. Measured on the tight LQR-1 corridor
+  (1003 rows, 141 kept; benchmarks/fsr_vs_montecarlo.py): Genz with dropping reaches an
+  interval width of 1.1e-3 in 0.2 s (6e-4 in 1 s); without dropping it keeps 515 rows (all
+  with a non-zero violation probability) and reaches 2e-3 in 1.2 s; sequential conditioning
+  reaches 1.9e-3 in 5.6 s, its fixed time order leaving far more variance than Genz's
+  prioritisation, which outweighs its cheaper rows. Genz with dropping is the default.
+
+The interval reported is the integration interval (:class:`~reach.sets.gaussian.Probability`)
+widened downwards by the Boole sum. Verdict for ``probability: {at_least: p}``: SAFE when the
+lower end is ``>= p``; otherwise UNKNOWN (there is no single counterexample run to give for a
+probability) with ``details["verdict"]`` ``violated`` (upper end ``< p``) or ``undecided``.
+
+Non-Gaussian laws go through :mod:`reach.backends.fsr_fourier`; from a model this is the case
+for a reach property when the initial state is a box (uniformly distributed over it, as the
+Monte Carlo back-end samples it), or on request with ``method: fourier``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.special import ndtr
+
+from reach.backends import fsr_fourier
+from reach.backends.base import unsupported
+from reach.model.ltv import KickedLinearSystem
+from reach.model.constraints import halfspaces
+from reach.result import Result, Status
+from reach.sets.gaussian import (ZERO_VARIANCE, Probability, box_probability, interval_form,
+                                 mass_and_draw, normal_mass, polytope_probability, randomized_qmc)
+from reach.spec.properties import BoundReach, BoundReachAvoid
+
+NAME = "fsr"
+METHODS = ("auto", "genz", "markov", "fourier")   # auto: genz, or fourier for a box initial state
+
+
+@dataclass
+class Options:
+    abs_error: float = 1e-3          # target half-width of the integration error
+    drop_budget: float | None = None  # Boole budget for dropped constraints (default abs_error / 10)
+    method: str = "auto"             # auto | genz | markov | fourier
+    seed: int = 0
+    max_points: int = 2 ** 22        # quasi-Monte Carlo evaluations at most
+    max_frequencies: int = fsr_fourier.MAX_FREQUENCIES   # Fourier path: frequency vectors at most
+
+    @classmethod
+    def from_dict(cls, options: dict | None) -> "Options":
+        options = dict(options or {})
+        unknown = set(options) - set(cls.__dataclass_fields__)
+        if unknown:
+            raise ValueError(f"unknown fsr option '{sorted(unknown)[0]}'")
+        opts = cls(**options)
+        if opts.method not in METHODS:
+            raise ValueError(f"fsr method must be one of {', '.join(METHODS)}")
+        return opts
+
+
+# ------------------------------------------------------------------ the stochastic model
+
+@dataclass
+class GaussianProblem:
+    """The discretised model with its Gaussian kicks and initial state ``N(x0, P0)``."""
+
+    system: KickedLinearSystem
+    x0: np.ndarray
+    P0: np.ndarray
+    w_mean: np.ndarray
+    w_cov: np.ndarray
+
+    @classmethod
+    def from_model(cls, model, at: float) -> "GaussianProblem":
+        A, b = model.modes[model.initial.mode].linear
+        dist = model.disturbance
+        G = np.zeros((model.n, len(dist.enters)))
+        G[dist.enters, np.arange(len(dist.enters))] = 1.0
+        system = KickedLinearSystem.from_continuous(A, b, G, dist.step, at)
+        x0 = 0.5 * (model.initial.low + model.initial.high)
+        return cls(system, x0, np.zeros((model.n, model.n)), dist.mean, dist.cov)
+
+    def moments(self):
+        return self.system.moments(self.x0, self.P0, self.w_mean, self.w_cov)
+
+
+def reach(problem: GaussianProblem, H, g, abs_error: float = 1e-3, seed: int = 0,
+          max_points: int = 2 ** 22) -> Probability:
+    """``P(H x[K] <= g)`` (eqs. 11-15)."""
+    means, covs = problem.moments()
+    return polytope_probability(means[-1], covs[-1], H, g, abs_error=abs_error, rng=seed,
+                                max_points=max_points)
+
+
+@dataclass
+class _Rows:
+    """One-dimensional constraints ``lower <= h . x[step] <= upper`` sorted by step."""
+
+    step: np.ndarray
+    h: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+
+
+def _rows(K: int, target, safe) -> _Rows:
+    Tt, lt, ut = interval_form(*target)
+    Ts, ls, us = interval_form(*safe)
+    steps = [np.repeat(np.arange(K), Ts.shape[0]), np.full(Tt.shape[0], K)]
+    return _Rows(np.concatenate(steps).astype(int), np.vstack([np.tile(Ts, (K, 1)), Tt]),
+                 np.concatenate([np.tile(ls, K), lt]), np.concatenate([np.tile(us, K), ut]))
+
+
+def reach_avoid(problem: GaussianProblem, target, safe, abs_error: float = 1e-3,
+                drop_budget: float | None = None, method: str = "genz", seed: int = 0,
+                max_points: int = 2 ** 22):
+    """``P(H_t x[K] <= g_t and H_s x[k] <= g_s for k < K)`` and a dict describing the work.
+
+    ``target`` and ``safe`` are ``(H, g)`` pairs; see the module docstring for the method.
+    """
+    budget = abs_error / 10 if drop_budget is None else drop_budget
+    means, covs = problem.moments()
+    K = problem.system.steps
+    rows = _rows(K, target, safe)
+    mu = np.einsum("ri,ri->r", rows.h, means[rows.step])
+    var = np.einsum("ri,rij,rj->r", rows.h, covs[rows.step], rows.h)
+    scale = max(float(np.max(var, initial=0.0)), np.finfo(float).tiny)
+    fixed = var <= ZERO_VARIANCE * scale
+    info = {"rows": int(mu.size), "method": method}
+    if np.any(fixed & ((mu < rows.lower) | (mu > rows.upper))) or np.any(rows.lower > rows.upper):
+        info.update(kept=0, dropped=int(mu.size), boole=0.0, reason="a deterministic constraint fails")
+        return Probability(0.0, 0.0, 0.0), info
+    sd = np.sqrt(np.where(fixed, 1.0, var))
+    q_low = np.where(fixed, 0.0, ndtr((rows.lower - mu) / sd))      # P(h.x < lower)
+    q_high = np.where(fixed, 0.0, ndtr((mu - rows.upper) / sd))     # P(h.x > upper)
+    sides = np.concatenate([q_low, q_high])
+    order = np.argsort(sides, kind="stable")
+    dropped = np.zeros(sides.size, bool)
+    dropped[order[np.cumsum(sides[order]) <= budget]] = True
+    boole = float(np.sum(sides[dropped]))
+    lower = np.where(dropped[:mu.size], -np.inf, rows.lower)
+    upper = np.where(dropped[mu.size:], np.inf, rows.upper)
+    keep = np.isfinite(lower) | np.isfinite(upper)
+    kept = _Rows(rows.step[keep], rows.h[keep], lower[keep], upper[keep])
+    info.update(kept=int(keep.sum()), dropped=int(mu.size - keep.sum()), boole=boole)
+    if not np.any(keep):
+        p = Probability(1.0, 1.0, 1.0)
+    elif method == "genz":
+        mean_k, cov_k = _stacked(problem.system, means, covs, kept)
+        p = box_probability(mean_k, cov_k, kept.lower, kept.upper, abs_error=abs_error, rng=seed,
+                            max_points=max_points)
+    else:
+        p = _sequential(problem, means, covs, kept, abs_error, seed, max_points)
+    info["points"] = p.points
+    return Probability(p.value, max(0.0, p.low - boole), p.high, p.dimension, p.points), info
+
+
+def _stacked(system: KickedLinearSystem, means, covs, rows: _Rows):
+    """Mean and covariance of ``(h_r . x[step_r])_r`` (rows sorted by step), Markov recursion."""
+    D = rows.step.size
+    S = np.zeros((D, D))
+    W = np.zeros((system.n, 0))             # columns Psi(k, step_s) P[step_s] h_s^T
+    k_now = 0
+    for k in np.unique(rows.step):
+        for i in range(k_now, k):
+            W = system.Phi[i] @ W
+        k_now = k
+        here = np.flatnonzero(rows.step == k)
+        W = np.hstack([W, covs[k] @ rows.h[here].T])
+        S[here, :W.shape[1]] = rows.h[here] @ W
+    S = np.tril(S) + np.tril(S, -1).T
+    return np.einsum("ri,ri->r", rows.h, means[rows.step]), S
+
+
+def _sequential(problem: GaussianProblem, means, covs, rows: _Rows, abs_error, seed, max_points):
+    """Sequential conditioning along time (module docstring); randomised QMC over the rows."""
+    system = problem.system
+    kick_cov = system.G @ problem.w_cov @ system.G.T
+    D = rows.step.size
+    C = covs[0].copy()
+    k_now = 0
+    plan = []                                # per row: propagator since the previous row, h, gain, sd
+    for r in range(D):
+        k = rows.step[r]
+        Psi = np.eye(system.n)
+        for i in range(k_now, k):
+            Psi = system.Phi[i] @ Psi
+            C = system.Phi[i] @ (C + kick_cov) @ system.Phi[i].T
+        k_now = k
+        Ch = C @ rows.h[r]
+        s2 = float(rows.h[r] @ Ch)
+        s = np.sqrt(s2) if s2 > ZERO_VARIANCE * max(float(np.trace(covs[k])), 1e-300) else 0.0
+        gain = Ch / s if s > 0 else np.zeros(system.n)
+        if s > 0:
+            C = C - np.outer(Ch, Ch) / s2
+            C = 0.5 * (C + C.T)
+        plan.append((Psi, rows.h[r], gain, s, means[k] @ rows.h[r], rows.lower[r], rows.upper[r]))
+
+    def integrand(W):
+        N = W.shape[0]
+        delta = np.zeros((N, system.n))
+        weight = np.ones(N)
+        for r, (Psi, h, gain, s, centre, lo, hi) in enumerate(plan):
+            delta = delta @ Psi.T
+            nu = centre + delta @ h
+            if s == 0.0:
+                weight *= (nu >= lo) & (nu <= hi)
+                continue
+            a, b = (lo - nu) / s, (hi - nu) / s
+            if r < D - 1:
+                mass, v = mass_and_draw(a, b, W[:, r])
+                delta += np.outer(v, gain)
+            else:
+                mass = normal_mass(a, b)
+            weight *= mass
+        return weight.mean()
+
+    if D == 1:
+        value = float(integrand(np.zeros((1, 1))))
+        return Probability(value, max(0.0, value - 1e-12), min(1.0, value + 1e-12))
+    return randomized_qmc(integrand, D - 1, abs_error, max_points, np.random.default_rng(seed))
+
+
+# ------------------------------------------------------------------ the back-end
+
+class FsrBackend:
+    name = NAME
+
+    def supports(self, model, prop) -> str | None:
+        if not isinstance(prop, (BoundReach, BoundReachAvoid)):
+            return (f"fsr computes reach and reach-avoid probabilities; a {prop.kind} property is "
+                    "for the star, taylor or montecarlo back-ends")
+        if model.disturbance is None:
+            return ("deterministic model (no disturbance): there is no distribution to integrate; "
+                    "use the star or taylor back-end")
+        if len(model.modes) != 1 or model.transitions:
+            return "fsr handles one linear mode; this model switches between modes"
+        mode = model.modes[model.initial.mode]
+        if mode.linear is None:
+            return f"the flow of mode '{mode.name}' is nonlinear; fsr needs a linear closed loop"
+        if mode.invariant:
+            return f"mode '{mode.name}' has an invariant, which would truncate the distribution"
+        if halfspaces(prop.target, prop.symbols) is None:
+            return "the target is not a polytope (nonlinear constraint)"
+        if isinstance(prop, BoundReachAvoid) and halfspaces(prop.safe, prop.symbols) is None:
+            return "the safe set is not a polytope (nonlinear constraint)"
+        point = np.array_equal(model.initial.low, model.initial.high)
+        if not point and isinstance(prop, BoundReachAvoid):
+            return "reach-avoid from a distributed (box) initial state is not supported; use a point"
+        return None
+
+    def check(self, model, prop, options: dict | None = None) -> Result:
+        opts = Options.from_dict(options)
+        start = time.perf_counter()
+        target = halfspaces(prop.target, prop.symbols)
+        point = np.array_equal(model.initial.low, model.initial.high)
+        problem = GaussianProblem.from_model(model, prop.at)
+        details = {"kicks": problem.system.steps, "step": model.disturbance.step,
+                   "semantics": "kicks at k*step < at, states observed before the kick"}
+        if isinstance(prop, BoundReach):
+            if opts.method == "fourier" or not point:
+                initial = (fsr_fourier.point_law(problem.x0) if point
+                           else fsr_fourier.UniformLaw(model.initial.low, model.initial.high))
+                T, lower, upper = interval_form(*target)
+                z = fsr_fourier.ProjectedSum.of(problem.system, T, initial,
+                                                fsr_fourier.GaussianLaw(problem.w_mean, problem.w_cov))
+                p = fsr_fourier.box_probability(z, lower, upper, tol=opts.abs_error,
+                                                max_frequencies=opts.max_frequencies)
+                details.update(method="fourier", frequencies=p.points,
+                               initial="point" if point else "uniform over the initial box",
+                               error="periodisation bound + truncation estimate")
+            else:
+                p = reach(problem, *target, abs_error=opts.abs_error, seed=opts.seed,
+                          max_points=opts.max_points)
+                details.update(method="gaussian", dimension=p.dimension, points=p.points,
+                               error="randomised QMC, 3.5 standard errors")
+        else:
+            if opts.method == "fourier":
+                return unsupported(NAME, model, prop, "the fourier method computes reach probabilities only")
+            safe = halfspaces(prop.safe, prop.symbols)
+            method = "markov" if opts.method == "markov" else "genz"
+            p, info = reach_avoid(problem, target, safe, abs_error=opts.abs_error,
+                                  drop_budget=opts.drop_budget, method=method, seed=opts.seed,
+                                  max_points=opts.max_points)
+            details.update(info)
+            details["error"] = "randomised QMC, 3.5 standard errors, plus Boole bound of dropped constraints"
+        status, verdict = _verdict(p, prop.at_least)
+        details["verdict"] = verdict
+        details["estimate"] = p.value
+        return Result(NAME, model.name, prop.id, status, time.perf_counter() - start,
+                      probability=(p.low, p.high), details=details)
+
+
+def _verdict(p: Probability, at_least):
+    if at_least is None:
+        return Status.UNKNOWN, "no threshold"
+    if p.low >= at_least:
+        return Status.SAFE, "holds"
+    if p.high < at_least:
+        return Status.UNKNOWN, "violated"
+    return Status.UNKNOWN, "undecided"
+
+
+BACKEND = FsrBackend()

@@ -1,0 +1,895 @@
+"""The ``star`` back-end: generalized-star-set reachability of linear hybrid automata.
+
+Method
+------
+Each mode has affine dynamics ``x' = A x + b``. A star ``S`` advances by one step ``h`` as
+``e^{Ah} S + psi(h)`` (``[Phi psi; 0 1] = expm([A b; 0 0] h)``: the affine term by state
+augmentation), so a whole chain of grid stars ``Y_0, Y_1, ...`` is a stack of matrix
+products. Between grid points every run is covered by the **segment** of its cell
+``[t_j, t_j + h]``: the exact convex hull of ``Y_j`` and ``Y_{j+1}`` with a shared
+predicate (:func:`reach.sets.star.chord_hull`) plus the linear-interpolation error
+
+    |x_i(t_j + lam h) - chord_i(lam)| <= lam (1 - lam) h^2 / 2 * M_i,   M_i >= sup |x_i''|
+
+on the cell. ``x'' = A^2 x + A b`` is an affine function of the state; ``M`` comes from
+``q + 1`` sub-samples at spacing ``delta = h / q`` (support bounds of ``Y_j`` in the
+directions of ``A^2 e^{A s}``) and the closure argument ``y := x''``, ``y'' = A^2 y``:
+
+    sup |y| <= max_samples |y| + delta^2/8 |A^2| sup |y|
+    =>  M = (I - delta^2/8 |A^2|)^{-1} max_samples |y|,
+
+valid because ``q`` is chosen so that the spectral radius of ``delta^2/8 |A^2|`` is at
+most 1/4 (the inverse is then a non-negative Neumann series).
+
+Transitions -- urgent ones (the octagon entry) and may-transitions over a clock window
+(the abort) alike -- fire from a segment intersected with the guard and the source
+invariant: that set contains the state at every switching instant inside the cell, so the
+continuum of switching times is covered without aggregation; each such set starts a
+successor star that carries the global clock, so no alignment of time grids is assumed.
+Invariants are intersected exactly (predicate rows). Every unsafe convex piece of the
+property is checked per segment: cheap support bounds first (vectorised over the chain),
+an LP on the segment only where they do not exclude the piece.
+
+Refinement. Each cell's segment adds a block of coefficients (hull weights, chord weight,
+error terms) to its star, and successors keep their ancestors' blocks. When a piece is
+met, the block with the largest spread along the piece is blamed and only the cell that
+owns it is bisected (halved step, a quarter of the error), with everything downstream of
+it; up to ``max_refinements`` times per cell. A witness -- an LP point of a segment inside a
+piece -- maps back through the coefficients (the original ones are kept in every derived
+star) to an initial state and abort time; it is replayed with the Monte Carlo simulator
+when nothing is left to refine or when it lies deeper in the piece than all refinable
+spread. UNSAFE only if the replay violates; otherwise UNKNOWN.
+
+``discrete_time=True`` checks and switches at grid points only (Hylaa's semantics): no
+segments, no error terms -- not a proof for continuous time.
+
+:func:`safe_abort_time` / :func:`safe_abort_map` sweep initial cells for the latest abort
+time up to which every abort is proven safe (Fig. 5 of the rendezvous benchmark).
+"""
+
+from __future__ import annotations
+
+import time
+import weakref
+from dataclasses import dataclass, fields
+from functools import cached_property
+
+import numpy as np
+from scipy.linalg import expm
+
+from reach import lp
+from reach.result import Result, Status
+from reach.sets import Box, Star, chord_hull
+from reach.model.constraints import affine_coefficients
+
+NAME = "star"
+
+#: a cell is bisected before any check while its interpolation error exceeds this fraction
+#: of the state's magnitude (fast transients, e.g. right after a controller switch)
+ERROR_RATIO = 0.25
+
+#: a witness is replayed at once when the spread refinement could still remove is below
+#: this fraction of the unsafe piece's inradius: the over-approximation is already tight
+TIGHT_RATIO = 0.1
+
+
+@dataclass
+class StarOptions:
+    """Settings of the star back-end (the problem -- model, property -- is separate).
+
+    step: base time step in model time units (default: horizon / 60; cells that need it are
+        bisected).
+    discrete_time: check and switch at grid points only (Hylaa-like; not a proof).
+    max_refinements: how many times a failing cell may be bisected.
+    replay: replay LP witnesses with the Monte Carlo simulator.
+    max_replays: at most this many replays per check.
+    max_unresolved: stop (UNKNOWN) after this many cells that refinement cannot clear.
+    max_lps: LP budget; when exhausted the answer is UNKNOWN.
+    max_jumps: bound on discrete jumps along a path (cyclic automata); UNKNOWN beyond.
+    touch_tolerance: a set that reaches a piece made only of strict inequalities by at
+        most this much (after row normalisation) only touches its boundary: no violation.
+    replay_dt: simulator step for replays (None: the simulator's default).
+    """
+
+    step: float | None = None
+    discrete_time: bool = False
+    max_refinements: int = 8
+    replay: bool = True
+    max_replays: int = 20
+    max_unresolved: int = 8
+    max_lps: int = 50_000
+    max_jumps: int = 10
+    touch_tolerance: float = 1e-6
+    replay_dt: float | None = None
+
+    @classmethod
+    def from_dict(cls, options: dict | None) -> "StarOptions":
+        if isinstance(options, StarOptions):
+            return options
+        options = dict(options or {})
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(options) - known)
+        if unknown:
+            raise ValueError(f"unknown star option(s) {', '.join(unknown)}; "
+                             f"known: {', '.join(sorted(known))}")
+        return cls(**options)
+
+
+# ---------------------------------------------------------------------- dynamics
+
+class AffineFlow:
+    """``x' = A x + b`` of one mode: step maps, stacked powers and the curvature data."""
+
+    def __init__(self, A: np.ndarray, b: np.ndarray):
+        self.A, self.b = A, b
+        self.n = A.shape[0]
+        self.A2 = A @ A
+        self.Ab = A @ b
+        self.rho = float(np.max(np.abs(np.linalg.eigvals(np.abs(self.A2))))) if self.n else 0.0
+        self._steps: dict[float, tuple[np.ndarray, np.ndarray]] = {}
+        self._powers: dict[float, tuple[np.ndarray, np.ndarray]] = {}
+        self._curvature: dict[float, tuple] = {}
+
+    def step(self, h: float):
+        """``(Phi, psi)`` with ``x(t + h) = Phi x(t) + psi``."""
+        if h not in self._steps:
+            n = self.n
+            aug = np.zeros((n + 1, n + 1))
+            aug[:n, :n], aug[:n, n] = self.A, self.b
+            E = expm(aug * h)
+            self._steps[h] = (E[:n, :n], E[:n, n])
+        return self._steps[h]
+
+    def powers(self, h: float, count: int):
+        """``Phi_j, psi_j`` for ``j = 0..count`` (``x(t + j h) = Phi_j x + psi_j``)."""
+        Phis, psis = self._powers.get(h, (np.eye(self.n)[None], np.zeros((1, self.n))))
+        if Phis.shape[0] <= count:
+            Phi, psi = self.step(h)
+            P, p = list(Phis), list(psis)
+            while len(P) <= count:
+                P.append(Phi @ P[-1])
+                p.append(Phi @ p[-1] + psi)
+            Phis, psis = np.array(P), np.array(p)
+            self._powers[h] = (Phis, psis)
+        return Phis[:count + 1], psis[:count + 1]
+
+    def curvature(self, h: float):
+        """Sub-sample data for ``M >= sup |x''|`` on a cell of length ``h``.
+
+        Returns ``(D, d, F, q)``: ``x''(s_l) = D_l x + d_l`` at ``s_l = l h / q``, the
+        closure factor ``F = (I - delta^2/8 |A^2|)^{-1}`` and ``q``, the least number of
+        sub-steps with spectral radius of ``delta^2/8 |A^2|`` at most 1/4.
+        """
+        if h not in self._curvature:
+            q = 1 if self.rho == 0 else max(1, int(np.ceil(h / np.sqrt(2.0 / self.rho))))
+            delta = h / q
+            Phi, psi = self.step(delta)
+            D, d = [], []
+            P, p = np.eye(self.n), np.zeros(self.n)
+            for _ in range(q + 1):
+                D.append(self.A2 @ P)
+                d.append(self.A2 @ p + self.Ab)
+                P, p = Phi @ P, Phi @ p + psi
+            F = np.linalg.inv(np.eye(self.n) - delta ** 2 / 8 * np.abs(self.A2))
+            self._curvature[h] = (np.array(D), np.array(d), F, q)
+        return self._curvature[h]
+
+
+def _chain_bounds(center, basis, box, W):
+    """Support bounds ``max_{x in Y_j} w^T x`` for every grid star ``j`` and row ``w`` of
+    ``W`` from the coefficient box: ``(J, rows)``; ``center (J, n)``, ``basis (J, n, m)``."""
+    G = np.einsum("rn,jnm->jrm", W, basis)
+    return center @ W.T + G @ box.center + np.abs(G) @ box.radius
+
+
+def _chain_abs_bounds(center, basis, box, D, d):
+    """``max |D_l x + d_l|`` over each ``Y_j``, per sample ``l`` and component: ``(J, L, n)``."""
+    G = np.einsum("lin,jnm->jlim", D, basis)
+    mid = np.einsum("lin,jn->jli", D, center) + d[None] + G @ box.center
+    return np.abs(mid) + np.abs(G) @ box.radius
+
+
+# ---------------------------------------------------------------------- problem data
+
+@dataclass
+class _Piece:
+    """One convex unsafe piece ``H x <= g`` (rows normalised); ``strict`` if every row is;
+    ``inradius``: radius of the largest ball inside it (``inf`` if unbounded)."""
+
+    H: np.ndarray
+    g: np.ndarray
+    strict: bool
+    label: str
+
+    @cached_property
+    def inradius(self) -> float:
+        n = self.H.shape[1]
+        res = lp.maximize(np.eye(n + 1)[n], np.hstack([self.H, np.ones((len(self.g), 1))]), self.g)
+        return res.value if res.optimal else (np.inf if res.unbounded else -np.inf)
+
+
+@dataclass
+class _Jump:
+    """An outgoing transition: guard rows, reset ``x+ = R x + r``, window (clock, lo, hi)."""
+
+    name: str
+    target: str
+    H: np.ndarray
+    g: np.ndarray
+    R: np.ndarray
+    r: np.ndarray
+    window: tuple[int, float, float] | None
+
+
+@dataclass
+class _Entry:
+    """How a star was entered: the transition and the clock at the switch as an affine
+    function ``offset + row . a[:len(row)]`` of the star's coefficients."""
+
+    transition: str
+    window: bool
+    offset: float
+    row: np.ndarray
+
+
+@dataclass(frozen=True)
+class _Path:
+    """The discrete history of a star: entries, and for each ancestor cell the first
+    coefficient of its segment block and whether that cell may still be bisected."""
+
+    entries: tuple[_Entry, ...] = ()
+    blocks: tuple[int, ...] = ()
+    open: tuple[bool, ...] = ()
+    abort: float = np.inf          # earliest clock of the first window switch on the path
+
+    def descend(self, entry: _Entry, block: int, can_refine: bool, clock: float) -> "_Path":
+        abort = min(self.abort, clock) if entry.window and self.abort == np.inf else self.abort
+        return _Path(self.entries + (entry,), self.blocks + (block,), self.open + (can_refine,), abort)
+
+
+@dataclass
+class _Witness:
+    """A point of an over-approximated segment inside an unsafe piece."""
+
+    mode: str
+    piece: str
+    depth: float
+    alpha: np.ndarray
+    state: np.ndarray
+    history: tuple[_Entry, ...]
+
+
+class _Stop(Exception):
+    """Abort the exploration: a replayed counterexample, or the LP budget is spent."""
+
+    def __init__(self, status: Status, reason: str, counterexample=None, witness=None):
+        super().__init__(reason)
+        self.status, self.reason = status, reason
+        self.counterexample, self.witness = counterexample, witness
+
+
+# ---------------------------------------------------------------------- model data
+
+_CACHE: dict[int, tuple[weakref.ref, object]] = {}
+
+
+def _cached(obj, build):
+    """``build(obj)``, computed once per live object (symbolic extraction is slow)."""
+    key = id(obj)
+    ref, value = _CACHE.get(key, (None, None))
+    if ref is None or ref() is not obj:
+        value = build(obj)
+        _CACHE[key] = (weakref.ref(obj, lambda _: _CACHE.pop(key, None)), value)
+    return value
+
+
+def _unsafe_pieces(prop) -> dict[str, list[_Piece] | None]:
+    """The property's unsafe pieces per mode, rows normalised (None for a nonlinear mode)."""
+    def build(prop):
+        out = {}
+        for mode in prop.modes:
+            halfspaces = prop.halfspace_pieces(mode)
+            if halfspaces is None:
+                out[mode] = None
+                continue
+            out[mode] = []
+            for k, ((H, g), constraints) in enumerate(zip(halfspaces, prop.pieces[mode])):
+                label = " and ".join(c.text for c in constraints) or f"piece {k}"
+                out[mode].append(_Piece(*_normalised(H, g), all(c.strict for c in constraints), label))
+        return out
+    return _cached(prop, build)
+
+
+class _LinearModel:
+    """The matrices of a linear hybrid automaton, extracted once per model object (the
+    symbolic extraction costs more than a small check): flows, normalised invariants,
+    outgoing jumps, and whether the model is linear at all."""
+
+    def __init__(self, model):
+        self.jumps = {name: [self._jump(model, tr) for tr in model.outgoing(name)]
+                      for name in model.modes}
+        self.linear = (all(m.linear is not None and m.invariant_halfspaces is not None
+                           for m in model.modes.values())
+                       and all(j is not None for js in self.jumps.values() for j in js))
+        if self.linear:
+            self.flows = {name: AffineFlow(*mode.linear) for name, mode in model.modes.items()}
+            self.invariants = {name: _normalised(*mode.invariant_halfspaces)
+                               for name, mode in model.modes.items()}
+
+    @classmethod
+    def of(cls, model) -> "_LinearModel":
+        return _cached(model, cls)
+
+    @staticmethod
+    def _jump(model, tr) -> _Jump | None:
+        """The transition as matrices, or None if its guard or reset is nonlinear."""
+        guard = model.guard_halfspaces(tr)
+        if guard is None:
+            return None
+        R, r = np.eye(model.n), np.zeros(model.n)
+        for index, expr in tr.reset.items():
+            coeffs = affine_coefficients(expr, model.symbols)
+            if coeffs is None:
+                return None
+            R[index], r[index] = coeffs
+        return _Jump(tr.name, tr.target, *_normalised(*guard), R, r, tr.window)
+
+
+# ---------------------------------------------------------------------- the explorer
+
+@dataclass
+class _Stats:
+    chains: int = 0
+    cells: int = 0
+    refined: int = 0
+    deepest: int = 0
+    lps: int = 0
+    replays: int = 0
+
+
+class _Explorer:
+    """One check of one safety property on one linear hybrid automaton."""
+
+    def __init__(self, model, prop, options: StarOptions, initial: Star | None = None,
+                 cutoff: float | None = None):
+        """``cutoff`` switches to the safe-abort sweep: instead of a verdict, the explorer
+        lowers ``cutoff`` to the earliest time from which a run may violate (an abort at or
+        after it, or a violation before any abort at it) and skips everything later."""
+        self.model, self.prop, self.opt = model, prop, options
+        self.sweep = cutoff is not None
+        self.cutoff = np.inf if cutoff is None else float(cutoff)
+        self.n = model.n
+        self.clock = model.clocks[0]
+        self.horizon = float(model.horizon)
+        self.h = float(options.step) if options.step else self.horizon / 60.0
+        data = _LinearModel.of(model)
+        self.flows, self.invariants, self.jumps = data.flows, data.invariants, data.jumps
+        self.pieces = _unsafe_pieces(prop)
+        self.relevant = _modes_leading_to(model, set(self.pieces))
+        self.stats = _Stats()
+        self.unresolved: list[_Witness] = []
+        self.replayed: list = []
+        box = Box(model.initial.low, model.initial.high)
+        self.root = initial if initial is not None else Star.from_box(box)
+        self.root_mode = model.initial.mode
+
+    # ---- LPs
+
+    def _lp_budget(self):
+        self.stats.lps += 1
+        if self.stats.lps > self.opt.max_lps:
+            raise _Stop(Status.UNKNOWN, f"LP budget of {self.opt.max_lps} exhausted")
+
+    def _feasible(self, star: Star):
+        """Coefficients of a point of ``star`` (an LP), or None if it is empty."""
+        self._lp_budget()
+        return star.feasible_alpha()
+
+    # ---- exploration
+
+    def _point(self, star: Star, guess, direction=None):
+        """Coefficients of a point of ``star`` without an LP if possible: ``guess``, or the
+        middle of the stretch of ``guess + s direction`` (``0 <= s <= 1``) inside the
+        predicate; else an LP's point. None if ``star`` is empty."""
+        if guess is not None:
+            if direction is not None:
+                A, b = star.predicate.A, star.predicate.b
+                slope, room = A @ direction, b - A @ guess
+                lo = max([0.0] + [r / k for r, k in zip(room, slope) if k < 0])
+                hi = min([1.0] + [r / k for r, k in zip(room, slope) if k > 0])
+                guess = guess + (lo + hi) / 2 * direction if lo <= hi else guess
+            if star.box.contains(guess, 1e-12) and star.predicate.contains(guess):
+                return guess
+        return self._feasible(star)
+
+    def run(self):
+        start = self.root.intersect_halfspaces(*self.invariants[self.root_mode])
+        self._chain(self.root_mode, start, _Path(), self.root.box.center)
+
+    def _chain(self, mode: str, star: Star, path: _Path, guess=None, direction=None):
+        """Explore ``star`` in ``mode`` up to the horizon: checks, jumps, refinement.
+
+        ``guess`` (and ``direction``): where a point of ``star`` may be (see :meth:`_point`).
+        The run of a known point proves the chain non-empty for as long as it stays inside
+        the invariant, without LPs.
+        """
+        if mode not in self.relevant:
+            return
+        point = self._point(star, guess, direction)
+        if point is None:
+            return
+        if len(path.entries) > self.opt.max_jumps:
+            raise _Stop(Status.UNKNOWN, f"more than {self.opt.max_jumps} discrete jumps on a path")
+        self.stats.chains += 1
+        flow, h = self.flows[mode], self.h
+        t0 = -star.support_bounds(-np.eye(self.n)[self.clock])[0]
+        count = max(1, int(np.ceil((self.horizon - t0) / h - 1e-9)))
+        Phis, psis = flow.powers(h, count)
+        centers = star.center @ np.swapaxes(Phis, 1, 2) + psis
+        bases = np.einsum("jab,bm->jam", Phis, star.basis)
+        box = star.box
+        Hi, gi = self.invariants[mode]
+
+        # invariant: the first grid star entirely outside ends the chain; rows that are not
+        # implied by the coefficient box join the predicate exactly, step by step
+        last = count
+        extra = {}
+        if Hi.shape[0]:
+            upper = _chain_bounds(centers, bases, box, Hi)
+            lower = -_chain_bounds(centers, bases, box, -Hi)
+            outside = np.flatnonzero(np.any(lower > gi + 1e-12 * (1 + np.abs(gi)), axis=1))
+            if outside.size:
+                last = min(last, int(outside[0]))
+            for j in range(1, last + 1):
+                active = upper[j] > gi
+                if np.any(active):
+                    extra[j] = (Hi[active], gi[active])
+
+        stars = {}          # grid stars with their accumulated predicate, built lazily
+
+        def grid_star(j: int) -> Star:
+            if j not in stars:
+                s = Star(centers[j], bases[j], star.predicate, box)
+                for i in sorted(k for k in extra if k <= j):
+                    s = s.intersect_halfspaces(*extra[i])
+                stars[j] = s
+            return stars[j]
+
+        for j in sorted(extra):                  # `point` stays a point of every grid star
+            if j > last:
+                break
+            H, g = extra[j]
+            if np.all(H @ (centers[j] + bases[j] @ point) <= g):
+                continue
+            found = self._feasible(grid_star(j))
+            if found is None:
+                last = j
+                break
+            point = found
+        ended_inside = last == count            # by the horizon, not by the invariant
+        cells = range(last + 1) if self.opt.discrete_time and ended_inside else range(last)
+        if not len(cells):
+            return
+        self.stats.cells += len(cells)
+
+        # cheap screening, vectorised over the chain
+        candidates = set()
+        if self.opt.discrete_time:
+            error = np.zeros((last + 1, self.n))
+        else:
+            D, d, F, _ = flow.curvature(h)
+            samples = _chain_abs_bounds(centers[:last], bases[:last], box, D, d).max(axis=1)
+            error = h * h / 8 * samples @ F.T
+        for piece in self.pieces.get(mode, []):
+            candidates |= self._screen(centers, bases, box, error, piece.H, piece.g, cells)
+        for jump in self.jumps[mode]:
+            if jump.target in self.relevant:
+                candidates |= self._screen(centers, bases, box, error, jump.H, jump.g, cells)
+
+        for j in sorted(candidates):
+            self._cell(mode, grid_star(j), h, path, 0, point)
+
+    def _screen(self, centers, bases, box, error, H, g, cells) -> set[int]:
+        """Cells whose segment may meet ``{H x <= g}`` by support bounds (cheap)."""
+        if H.shape[0] == 0:
+            return set(cells)
+        lower = -_chain_bounds(centers, bases, box, -H)          # (J, rows)
+        if self.opt.discrete_time:
+            seg = lower[:len(cells)]
+        else:
+            seg = np.minimum(lower[:-1], lower[1:])[:len(cells)] - error[:len(cells)] @ np.abs(H).T
+        missed = np.any(seg > g, axis=1)
+        return {j for j in cells if not missed[j]}
+
+    # ---- one cell
+
+    def _segment(self, mode: str, start: Star, h: float) -> tuple[Star, np.ndarray]:
+        """``(segment, error)`` of the cell of length ``h`` starting at ``start``."""
+        if self.opt.discrete_time:
+            return start, np.zeros(self.n)
+        seg, _, error = _segment(self.flows[mode], start, h)
+        return seg.intersect_halfspaces(*self.invariants[mode]), error
+
+    def _cell(self, mode: str, start: Star, h: float, path: _Path, depth: int, point):
+        """Check one cell and launch its successors; bisect when a failure is blamed on it.
+
+        The segment's own coefficients are the block starting at ``start.nvars``; a failure
+        (here or in a successor) names the block that contributes most to it, and only
+        the cell owning that block is bisected. ``point``: coefficients of a point of
+        ``start`` (passed on as a guess to successors).
+        """
+        if self.sweep:
+            since = path.abort if path.abort < np.inf else \
+                -start.support_bounds(-np.eye(self.n)[self.clock])[0]
+            if since >= self.cutoff:
+                return
+        seg, error = self._segment(mode, start, h)
+        final = depth >= self.opt.max_refinements or self.opt.discrete_time
+        block = start.nvars
+        try:
+            hull = seg.box_bound()
+            if not final and np.any(error > ERROR_RATIO * np.maximum(-hull.low, hull.high)):
+                raise _Refine(None, block)          # a fast transient: refine before checking
+            self._check_segment(mode, seg, path, block, not final)
+            self._jump_from(mode, seg, path, block, not final, point)
+        except _Refine as failure:
+            if final or failure.blame != block:
+                raise
+            self.stats.refined += 1
+            self.stats.deepest = max(self.stats.deepest, depth + 1)
+            half = h / 2
+            self._cell(mode, start, half, path, depth + 1, point)
+            mid = start.affine_map(*self.flows[mode].step(half))
+            mid = mid.intersect_halfspaces(*self.invariants[mode])
+            mid_point = self._point(mid, point)
+            if mid_point is not None:
+                self._cell(mode, mid, half, path, depth + 1, mid_point)
+
+    def _check_segment(self, mode: str, seg: Star, path: _Path, block: int, own_open: bool):
+        """Check every unsafe piece of ``mode`` on a segment.
+
+        Cheap support bounds first. When they fail, the interpolation error of each cell
+        along the path (its error coefficients' extent along each piece row) is compared with
+        the row's deficit: an error larger than the deficit cannot be argued away by an LP,
+        so that cell is refined at once. Otherwise an LP decides; on a hit the open block
+        (an ancestor cell or this one) with the largest spread is blamed, and the witness is
+        replayed when nothing can be refined or when it lies deeper in the piece than all
+        refinable spread together.
+        """
+        horizon_row = np.eye(self.n)[self.clock][None]
+        blocks, open_ = path.blocks + (block,), path.open + (own_open,)
+        for piece in self.pieces.get(mode, []):
+            lower = -seg.support_bounds(-piece.H)
+            if np.any(lower > piece.g):
+                continue
+            spread, error = _block_spreads(seg, piece.H, blocks)     # (blocks, rows) each
+            gain = np.where(np.array(open_)[:, None], error - (piece.g - lower), -np.inf)
+            if gain.max(initial=-np.inf) > 0:
+                raise _Refine(None, blocks[int(np.argmax(gain.max(axis=1)))])
+            self._lp_budget()
+            H = np.vstack([piece.H, horizon_row])
+            g = np.append(piece.g, self.horizon)
+            depth, alpha = _depth(seg, H, g, len(piece.g))
+            if depth < 0 or (piece.strict and depth <= self.opt.touch_tolerance):
+                continue
+            witness = _Witness(mode, piece.label, depth, alpha, seg.point(alpha), path.entries)
+            row = int(np.argmax(lower - piece.g))
+            refinable = np.where(open_, spread[:, row], -np.inf)
+            blame = blocks[int(np.argmax(refinable))] if any(open_) else None
+            removable = refinable[np.isfinite(refinable)].sum()
+            tight = np.isfinite(piece.inradius) and removable < TIGHT_RATIO * piece.inradius
+            if blame is None or depth > removable or tight:
+                self._try_replay(witness)
+            if blame is not None:
+                raise _Refine(witness, blame)
+            if self.sweep:
+                self.cutoff = min(self.cutoff, self._failure_time(witness, seg))
+                continue
+            self.unresolved.append(witness)
+            if len(self.unresolved) >= self.opt.max_unresolved:
+                raise _Stop(Status.UNKNOWN, f"{len(self.unresolved)} cells still meet an unsafe "
+                                            f"piece after refinement; no witness replayed",
+                            witness=self.unresolved[0])
+
+    def _failure_time(self, witness: _Witness, seg: Star) -> float:
+        """Earliest time from which the runs behind a failing segment may violate: the
+        earliest abort on its path, or, with no abort, the segment's earliest clock."""
+        windows = [e for e in witness.history if e.window]
+        if windows:
+            e = windows[-1]
+            box = Box(seg.box.low[:e.row.size], seg.box.high[:e.row.size])
+            return e.offset - box.support(-e.row)
+        return -seg.support_bounds(-np.eye(self.n)[self.clock])[0]
+
+    def _jump_from(self, mode: str, seg: Star, path: _Path, block: int, own_open: bool, point):
+        for jump in self.jumps[mode]:
+            if jump.target not in self.relevant:
+                continue
+            if self.sweep and jump.window is not None and path.abort == np.inf and \
+                    -seg.support_bounds(-np.eye(self.n)[self.clock])[0] >= self.cutoff:
+                continue
+            if jump.H.shape[0] and np.any(-seg.support_bounds(-jump.H) > jump.g):
+                continue
+            entered = seg.intersect_halfspaces(jump.H, jump.g)
+            clock = _Entry(jump.name, jump.window is not None,
+                           float(entered.center[self.clock]), entered.basis[self.clock].copy())
+            earliest = -entered.support_bounds(-np.eye(self.n)[self.clock])[0]
+            successor = entered.affine_map(jump.R, jump.r)
+            successor = successor.intersect_halfspaces(*self.invariants[jump.target])
+            # the known point's own chord: (a, lam a, lam, 0) from lam = 0 to 1
+            m, pad = point.size, successor.nvars - point.size
+            guess = np.concatenate([point, np.zeros(pad)])
+            direction = np.concatenate([np.zeros(m), point, [1.0], np.zeros(pad - m - 1)]) \
+                if pad > m else None
+            self._chain(jump.target, successor, path.descend(clock, block, own_open, earliest),
+                        guess, direction)
+
+    # ---- witnesses
+
+    def _try_replay(self, witness: _Witness):
+        if not self.opt.replay or self.stats.replays >= self.opt.max_replays:
+            return
+        try:
+            from reach.backends.montecarlo import replay
+        except ImportError:
+            return
+        self.stats.replays += 1
+        x0, switch = self.initial_point(witness)
+        run = replay(self.model, self.prop, x0, switch, self.opt.replay_dt)
+        self.replayed.append({"initial_state": x0.tolist(), "switch_time": switch,
+                              "violated": bool(run.violated)})
+        if run.violated:
+            raise _Stop(Status.UNSAFE, "replayed counterexample",
+                        counterexample=run.counterexample(self.model, self.prop, NAME),
+                        witness=witness)
+
+    def initial_point(self, witness: _Witness):
+        """Initial state and abort time of a witness, read off its coefficients."""
+        m0 = self.root.nvars
+        x0 = self.root.point(witness.alpha[:m0])
+        x0 = np.clip(x0, self.model.initial.low, self.model.initial.high)
+        windows = [e for e in witness.history if e.window]
+        if windows:
+            e = windows[-1]
+            switch = float(e.offset + e.row @ witness.alpha[:e.row.size])
+        else:
+            switch = self._latest_abort(witness.mode)
+        return x0, switch
+
+    def _latest_abort(self, mode: str):
+        """Without an abort on the witness's path: the latest abort of its mode's windows
+        (the run stays in the mode as long as possible), or None if there is none."""
+        his = [j.window[2] for j in self.jumps[mode] if j.window is not None]
+        return max(his) if his else None
+
+
+class _Refine(Exception):
+    """A segment (or a successor of it) may meet an unsafe piece. ``blame`` is the first
+    coefficient of the segment block to refine; ``witness`` is None when the cheap bounds
+    alone asked for the refinement."""
+
+    def __init__(self, witness: _Witness | None, blame: int):
+        super().__init__("refine")
+        self.witness, self.blame = witness, blame
+
+
+# ---------------------------------------------------------------------- helpers
+
+def _normalised(H, g):
+    """Rows scaled to unit norm (zero rows dropped if satisfied, kept as 0 <= g if not)."""
+    H = np.atleast_2d(np.asarray(H, dtype=float))
+    g = np.atleast_1d(np.asarray(g, dtype=float))
+    norms = np.linalg.norm(H, axis=1)
+    keep = (norms > 0) | (g < 0)
+    norms = np.where(norms > 0, norms, 1.0)
+    return (H / norms[:, None])[keep], (g / norms)[keep]
+
+
+def _segment(flow: AffineFlow, start: Star, h: float):
+    """The segment of the cell ``[0, h]`` from ``start``: ``(segment, end star, error)``.
+
+    ``error_i = h^2/8 M_i`` is the interpolation error at mid-cell; ``M`` bounds
+    ``|x''|`` on the cell from the sub-samples of :meth:`AffineFlow.curvature`.
+    """
+    end = start.affine_map(*flow.step(h))
+    D, d, F, _ = flow.curvature(h)
+    n = flow.n
+    upper = start.support_bounds(np.concatenate([D, -D]).reshape(-1, n))
+    upper = upper.reshape(2, -1) + np.concatenate([d, -d]).reshape(2, -1)
+    error = h * h / 8 * (F @ upper.max(axis=0).reshape(-1, n).max(axis=0))
+    return chord_hull(start, end.center, end.basis, error), end, error
+
+
+def flowpipe(A, b, initial: Star, step: float, duration: float) -> list[Star]:
+    """Segments covering every trajectory of ``x' = A x + b`` from ``initial`` over
+    ``[0, duration]`` in continuous time (one star per cell of length ``step``)."""
+    flow = AffineFlow(np.asarray(A, dtype=float), np.asarray(b, dtype=float))
+    segments, star = [], initial
+    for _ in range(max(1, int(np.ceil(duration / step - 1e-9)))):
+        seg, star, _ = _segment(flow, star, step)
+        segments.append(seg)
+    return segments
+
+
+def _block_spreads(seg: Star, H: np.ndarray, blocks: tuple[int, ...]):
+    """Per block ``b`` (coefficients from ``blocks[b]`` to the next start) and row ``r``:
+    the spread ``sum |H_r . V_col| * radius_col`` the block is responsible for, and the
+    part of it due to the block's interpolation-error coefficients. A cell block starting
+    at ``s`` holds ``s`` hull coefficients, the chord weight, then the error coefficients
+    (see :func:`reach.sets.star.chord_hull`)."""
+    contribution = np.abs(H @ seg.basis) * seg.box.radius                # (rows, vars)
+    ends = blocks[1:] + (seg.nvars,)
+    spread = np.array([contribution[:, a:b].sum(axis=1) for a, b in zip(blocks, ends)])
+    error = np.array([contribution[:, 2 * a + 1:b].sum(axis=1) if a else np.zeros(len(H))
+                      for a, b in zip(blocks, ends)])
+    return spread, error
+
+
+def _depth(seg: Star, H, g, piece_rows: int):
+    """``Star.depth`` on the piece rows, with further rows (the horizon) as hard limits."""
+    hard = H[piece_rows:], g[piece_rows:]
+    star = seg.intersect_halfspaces(*hard)
+    return star.depth(H[:piece_rows], g[:piece_rows])
+
+
+def _modes_leading_to(model, targets: set[str]) -> set[str]:
+    """Modes from which some mode in ``targets`` can be reached (targets included)."""
+    reach = set(targets)
+    changed = True
+    while changed:
+        changed = False
+        for tr in model.transitions:
+            if tr.target in reach and tr.source not in reach:
+                reach.add(tr.source)
+                changed = True
+    return reach
+
+
+# ---------------------------------------------------------------------- the back-end
+
+_SOUNDNESS = (
+    "continuous time: each cell [t, t+h] is covered by the exact convex hull of its two grid "
+    "stars (shared predicate) plus the interpolation error lam(1-lam) h^2/2 M, "
+    "M >= sup|x''| from {q} sub-samples per cell and the closure (I - delta^2/8 |A^2|)^-1; "
+    "transitions (urgent and window) fire from segment-and-guard sets, so every switching "
+    "instant is covered; invariants and guards are exact LP rows; strict unsafe pieces touched "
+    "within {tol:g} count as not entered; LPs by HiGHS (feasibility tolerance ~1e-7) and "
+    "matrix exponentials in floating point (rounding not enclosed)")
+
+_DISCRETE = ("discrete time: states checked and switched at grid points t = k*h only "
+             "(Hylaa's semantics); behaviour between grid points is not covered")
+
+
+class StarBackend:
+    name = NAME
+
+    def supports(self, model, prop) -> str | None:
+        if getattr(prop, "kind", None) != "safety":
+            return f"the star back-end checks safety properties only (got '{getattr(prop, 'kind', '?')}')"
+        if not _LinearModel.of(model).linear:
+            return ("nonlinear dynamics, invariants, guards or resets: generalized star sets need "
+                    "affine flows (the taylor back-end covers nonlinear models)")
+        if model.disturbance is not None:
+            return "stochastic disturbance: the star back-end is deterministic (use fsr or montecarlo)"
+        if not model.clocks:
+            return "no global clock (a state with rate 1 in every mode) to bound the horizon"
+        for mode in prop.modes:
+            if _unsafe_pieces(prop).get(mode) is None:
+                return f"nonlinear unsafe set in mode '{mode}': needs a polygonal approximation"
+        return None
+
+    def check(self, model, prop, options=None) -> Result:
+        start = time.perf_counter()
+        reason = self.supports(model, prop)
+        if reason is not None:
+            return Result(NAME, model.name, prop.id, Status.UNSUPPORTED, details={"reason": reason})
+        opt = StarOptions.from_dict(options)
+        explorer = _Explorer(model, prop, opt)
+        status, counterexample = Status.SAFE, None
+        details = {}
+        try:
+            explorer.run()
+            if explorer.unresolved:
+                raise _Stop(Status.UNKNOWN, f"{len(explorer.unresolved)} cell(s) still meet an unsafe "
+                                            f"piece after refinement; no witness replayed",
+                            witness=explorer.unresolved[0])
+        except _Stop as stop:
+            status, counterexample = stop.status, stop.counterexample
+            details["reason"] = stop.reason
+            if stop.witness is not None:
+                details["witness"] = _witness_details(explorer, stop.witness)
+        details.update(_run_details(explorer))
+        return Result(NAME, model.name, prop.id, status, time.perf_counter() - start,
+                      counterexample=counterexample, details=details)
+
+
+def _run_details(explorer: _Explorer) -> dict:
+    s, opt = explorer.stats, explorer.opt
+    substeps = {m: f.curvature(explorer.h)[3] for m, f in explorer.flows.items()}
+    soundness = _DISCRETE if opt.discrete_time else _SOUNDNESS.format(
+        q=", ".join(f"{m}: {q + 1}" for m, q in substeps.items()), tol=opt.touch_tolerance)
+    return {"method": "generalized star sets", "semantics": soundness, "step": explorer.h,
+            "stars": s.chains, "cells": s.cells, "refined_cells": s.refined,
+            "deepest_refinement": s.deepest, "lps": s.lps, "replays": explorer.replayed}
+
+
+def _witness_details(explorer: _Explorer, w: _Witness) -> dict:
+    x0, switch = explorer.initial_point(w)
+    return {"mode": w.mode, "piece": w.piece, "depth": w.depth, "state": w.state.tolist(),
+            "initial_state": x0.tolist(), "switch_time": switch}
+
+
+BACKEND = StarBackend()
+
+
+# ---------------------------------------------------------------------- safe-abort map
+
+def safe_abort_time(model, props, low, high, options=None) -> float:
+    """The latest ``T`` such that, from every initial state in the box ``[low, high]``, every
+    run that aborts in ``[lo, T]`` (``lo, hi`` the model's abort window) is proven to satisfy
+    every property of ``props`` (bound safety properties); ``hi`` if all aborts are safe.
+
+    One exploration per property with the whole window: the first segment that cannot be
+    cleared after refinement bounds ``T`` by its earliest abort time (or, before any abort,
+    by its earliest clock); later aborts are skipped. No replays: a value below ``hi`` means
+    "not proven beyond", not "unsafe".
+    """
+    windows = [tr.window for tr in model.transitions if tr.window is not None]
+    if not windows:
+        raise ValueError(f"model '{model.name}' has no abort window to sweep")
+    opt = StarOptions.from_dict({**dict(options or {}), "replay": False})
+    initial = Star.from_box(Box(low, high))
+    latest = max(w[2] for w in windows)
+    for prop in props:
+        reason = BACKEND.supports(model, prop)
+        if reason is not None:
+            raise ValueError(f"{prop.id}: {reason}")
+        explorer = _Explorer(model, prop, opt, initial=initial, cutoff=latest)
+        explorer.run()
+        latest = min(latest, explorer.cutoff)
+    return float(latest)
+
+
+def arc_cells(model, radius: float, count: int, start_deg: float = 180.0, end_deg: float = 270.0,
+              x: str = "x", y: str = "y"):
+    """Initial cells along an arc of ``radius`` (angles in degrees, counter-clockwise):
+    ``count`` boxes, each the bounding box of its stretch of arc in ``(x, y)``, the other
+    states as in the model's initial box. Returns ``[(low, high, angle_mid)]``."""
+    ix, iy = model.index(x), model.index(y)
+    edges = np.radians(np.linspace(start_deg, end_deg, count + 1))
+    cells = []
+    for a, b in zip(edges[:-1], edges[1:]):
+        angles = np.concatenate([[a, b], [k * np.pi / 2 for k in range(-4, 9) if a < k * np.pi / 2 < b]])
+        low, high = model.initial.low.copy(), model.initial.high.copy()
+        low[ix], high[ix] = radius * np.cos(angles).min(), radius * np.cos(angles).max()
+        low[iy], high[iy] = radius * np.sin(angles).min(), radius * np.sin(angles).max()
+        cells.append((low, high, float(np.degrees((a + b) / 2))))
+    return cells
+
+
+def _sweep_unit(model_file: str, property_files: tuple[str, ...], property_ids, low, high, options):
+    """One cell of a sweep, loading its inputs itself (picklable for any executor)."""
+    from reach.model.loader import load_model
+    from reach.spec import bind, load_properties
+    model = load_model(model_file)
+    props = [bind(p, model) for f in property_files for p in load_properties(f)
+             if property_ids is None or p.id in property_ids]
+    props = [p for p in props if BACKEND.supports(model, p) is None]
+    return safe_abort_time(model, props, low, high, options)
+
+
+def safe_abort_map(model_file: str, property_files, cells, property_ids=None, options=None,
+                   executor=None) -> list[float]:
+    """:func:`safe_abort_time` for every cell ``(low, high, ...)`` of ``cells`` (e.g. from
+    :func:`arc_cells`), through ``executor`` (``map_unordered(fn, arg_list)`` yielding
+    ``(index, ("ok", value))``, as :mod:`reach.bench.executors`; in-process if None).
+    Properties the back-end does not support are left out. Returns one time per cell."""
+    args = [(str(model_file), tuple(map(str, property_files)), property_ids, cell[0], cell[1], options)
+            for cell in cells]
+    if executor is None:
+        return [_sweep_unit(*a) for a in args]
+    out = [float("nan")] * len(args)
+    for index, (status, value) in executor.map_unordered(_sweep_unit, args):
+        if status == "ok":
+            out[index] = value
+    return out

@@ -1,0 +1,300 @@
+"""Differential algebra: truncated multivariate power series of order ``n`` in ``d`` variables.
+
+A DA number is ``a(xi) = sum_{|beta| <= n} a_beta xi^beta`` (eq. 18 of the Taylor-ADS paper),
+stored densely as the coefficient array ``c[..., k]`` over the monomials ``beta_k`` of an
+:class:`Algebra`, graded by total degree (``k = 0`` is the constant). Leading axes of ``c``
+are batch axes, so a vector of DA numbers (a network layer, a state) is one array.
+
+Products are truncated at order ``n``: ``(ab)_gamma = sum_{alpha + beta = gamma} a_alpha b_beta``.
+The pairs ``(alpha, beta)`` with ``|alpha + beta| <= n`` are tabulated once per algebra, sorted
+by ``gamma``, so a product is one gather, one multiply and one ``np.add.reduceat``.
+
+An analytic ``f`` of a DA ``a = a0 + da`` (``da`` nilpotent: ``da^(n+1) = 0``) is the finite sum
+``f(a) = sum_{k <= n} f^(k)(a0)/k! da^k``; sin, cos, exp, log, sqrt, powers and the reciprocal
+are built that way. :meth:`DA.compose` evaluates a DA at DA arguments and :func:`invert` inverts
+an origin-preserving map by the fixed point ``G = L^-1 (Id - N o G)``, one order per pass.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from itertools import combinations_with_replacement
+from math import factorial
+
+import numpy as np
+
+
+class Algebra:
+    """Monomial tables of the truncated power series of order ``order`` in ``nvars`` variables."""
+
+    def __init__(self, order: int, nvars: int):
+        self.order, self.nvars = order, nvars
+        exps = [np.zeros(nvars, dtype=int)]
+        for deg in range(1, order + 1):
+            for combo in combinations_with_replacement(range(nvars), deg):
+                e = np.zeros(nvars, dtype=int)
+                np.add.at(e, list(combo), 1)
+                exps.append(e)
+        self.exps = np.array(exps, dtype=int).reshape(-1, nvars)
+        self.size = len(self.exps)
+        self.degree = self.exps.sum(axis=1)
+        self.index = {tuple(e): k for k, e in enumerate(self.exps)}
+        pairs = [(i, j, self.index[tuple(self.exps[i] + self.exps[j])])
+                 for i in range(self.size) for j in range(self.size)
+                 if self.degree[i] + self.degree[j] <= order]
+        pairs.sort(key=lambda p: p[2])
+        P = np.array(pairs, dtype=int)
+        self.left, self.right, target = P[:, 0], P[:, 1], P[:, 2]
+        self.starts = np.flatnonzero(np.r_[True, target[1:] != target[:-1]])
+        # every monomial beta != 0 is parent[k] * xi_{step[k]} (for evaluation and composition)
+        self.parent = np.zeros(self.size, dtype=int)
+        self.step = np.zeros(self.size, dtype=int)
+        for k in range(1, self.size):
+            v = int(np.flatnonzero(self.exps[k])[0])
+            e = self.exps[k].copy()
+            e[v] -= 1
+            self.parent[k], self.step[k] = self.index[tuple(e)], v
+
+    def multiply(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        return np.add.reduceat(a[..., self.left] * b[..., self.right], self.starts, axis=-1)
+
+
+@lru_cache(maxsize=None)
+def algebra(order: int, nvars: int) -> Algebra:
+    return Algebra(order, nvars)
+
+
+class DA:
+    """A (batch of) truncated power series; arithmetic mixes freely with floats and arrays."""
+
+    __slots__ = ("alg", "c")
+    __array_priority__ = 100
+
+    def __init__(self, alg: Algebra, c: np.ndarray):
+        self.alg, self.c = alg, np.asarray(c, dtype=float)
+
+    # ------------------------------------------------------------ construction
+    @classmethod
+    def const(cls, alg: Algebra, value) -> "DA":
+        value = np.asarray(value, dtype=float)
+        c = np.zeros(value.shape + (alg.size,))
+        c[..., 0] = value
+        return cls(alg, c)
+
+    @classmethod
+    def var(cls, alg: Algebra, i: int, center: float = 0.0, scale: float = 1.0) -> "DA":
+        """``center + scale * xi_i`` (eq. 3: the initial value plus its deviation)."""
+        c = np.zeros(alg.size)
+        c[0] = center
+        if alg.order >= 1:
+            c[1 + i] = scale
+        return cls(alg, c)
+
+    @classmethod
+    def variables(cls, alg: Algebra, centers, scales) -> list["DA"]:
+        return [cls.var(alg, i, c, s) for i, (c, s) in enumerate(zip(centers, scales))]
+
+    # ------------------------------------------------------------ access
+    @property
+    def cons(self):
+        return self.c[..., 0]
+
+    def __getitem__(self, item) -> "DA":
+        return DA(self.alg, self.c[item])
+
+    @property
+    def shape(self):
+        return self.c.shape[:-1]
+
+    # ------------------------------------------------------------ arithmetic
+    def __add__(self, other):
+        if isinstance(other, DA):
+            return DA(self.alg, self.c + other.c)
+        c = self.c.copy() if np.ndim(other) == 0 else np.broadcast_to(self.c, np.shape(other) + (self.alg.size,)).copy()
+        c[..., 0] = c[..., 0] + other
+        return DA(self.alg, c)
+
+    __radd__ = __add__
+
+    def __neg__(self):
+        return DA(self.alg, -self.c)
+
+    def __sub__(self, other):
+        return self + (-other)
+
+    def __rsub__(self, other):
+        return (-self) + other
+
+    def __mul__(self, other):
+        if isinstance(other, DA):
+            return DA(self.alg, self.alg.multiply(self.c, other.c))
+        return DA(self.alg, self.c * np.asarray(other, dtype=float)[..., None])
+
+    __rmul__ = __mul__
+
+    def __truediv__(self, other):
+        if isinstance(other, DA):
+            return self * other.reciprocal()
+        return DA(self.alg, self.c / np.asarray(other, dtype=float)[..., None])
+
+    def __rtruediv__(self, other):
+        return self.reciprocal() * other
+
+    def __pow__(self, p):
+        if isinstance(p, (int, np.integer)) or (np.ndim(p) == 0 and float(p).is_integer() and p >= 0):
+            p = int(p)
+            if p >= 0:
+                out, base = DA.const(self.alg, np.ones(self.shape)), self
+                while p:
+                    if p & 1:
+                        out = out * base
+                    p >>= 1
+                    if p:
+                        base = base * base
+                return out
+        p = float(p)
+        return self._series(lambda a0, k: _binomial(p, k) * a0 ** (p - k))
+
+    def reciprocal(self):
+        return self ** -1.0
+
+    # ------------------------------------------------------------ elementary functions
+    def _powers_of_deviation(self):
+        """``[1, da, da^2, ..., da^n]`` with ``da = a - a0``."""
+        d = self.c.copy()
+        d[..., 0] = 0.0
+        out = [DA.const(self.alg, np.ones(self.shape)), DA(self.alg, d)]
+        for _ in range(2, self.alg.order + 1):
+            out.append(out[-1] * out[1])
+        return out
+
+    def _series(self, coefficient):
+        """``sum_k coefficient(a0, k) da^k``; ``coefficient(a0, k) = f^(k)(a0)/k!``."""
+        a0 = self.cons
+        powers = self._powers_of_deviation()
+        c = np.zeros_like(self.c)
+        for k, pk in enumerate(powers[: self.alg.order + 1]):
+            c += np.asarray(coefficient(a0, k))[..., None] * pk.c
+        return DA(self.alg, c)
+
+    def exp(self):
+        return self._series(lambda a0, k: np.exp(a0) / factorial(k))
+
+    def log(self):
+        return self._series(lambda a0, k: np.log(a0) if k == 0 else (-1.0) ** (k + 1) / (k * a0 ** k))
+
+    def sin(self):
+        return self._series(lambda a0, k: _sin_derivative(a0, k) / factorial(k))
+
+    def cos(self):
+        return self._series(lambda a0, k: _sin_derivative(a0, k + 1) / factorial(k))
+
+    def sqrt(self):
+        return self ** 0.5
+
+    # ------------------------------------------------------------ calculus
+    def integrate(self, i: int, scale: float = 1.0) -> "DA":
+        """Antiderivative in ``xi_i`` vanishing at ``xi_i = 0`` (times ``scale``), truncated."""
+        alg = self.alg
+        c = np.zeros_like(self.c)
+        for k in range(alg.size):
+            if alg.degree[k] < alg.order:
+                e = alg.exps[k].copy()
+                e[i] += 1
+                c[..., alg.index[tuple(e)]] += self.c[..., k] * scale / e[i]
+        return DA(alg, c)
+
+    def derivative(self, i: int) -> "DA":
+        alg = self.alg
+        c = np.zeros_like(self.c)
+        for k in range(alg.size):
+            e = alg.exps[k]
+            if e[i] > 0:
+                f = e.copy()
+                f[i] -= 1
+                c[..., alg.index[tuple(f)]] += e[i] * self.c[..., k]
+        return DA(alg, c)
+
+    # ------------------------------------------------------------ evaluation
+    def monomials(self, args):
+        """Values of every monomial at ``args`` (floats/arrays or DAs), by the parent table."""
+        alg = self.alg
+        one = DA.const(args[0].alg, 1.0) if isinstance(args[0], DA) else np.ones_like(np.asarray(args[0], dtype=float))
+        values = [one]
+        for k in range(1, alg.size):
+            values.append(values[alg.parent[k]] * args[alg.step[k]])
+        return values
+
+    def __call__(self, points: np.ndarray) -> np.ndarray:
+        """Evaluate at points ``(N, d)`` in the scaled variables: ``(*shape, N)``."""
+        P = np.atleast_2d(np.asarray(points, dtype=float))
+        values = np.stack(self.monomials(list(P.T)), axis=0)          # (M, N)
+        return np.tensordot(self.c, values, axes=([-1], [0]))
+
+    def compose(self, args: list["DA"]) -> "DA":
+        """``self(args)``: substitute a DA (of any algebra) for each variable."""
+        values = self.monomials(args)
+        target = args[0].alg
+        c = np.zeros(self.shape + (target.size,))
+        for k, v in enumerate(values):
+            c += self.c[..., k, None] * v.c
+        return DA(target, c)
+
+    # ------------------------------------------------------------ sizes
+    def order_norms(self) -> np.ndarray:
+        """``S_i = sum_{|beta| = i} |a_beta|`` for ``i = 0..n`` (eq. 19)."""
+        S = np.zeros(self.shape + (self.alg.order + 1,))
+        for i in range(self.alg.order + 1):
+            S[..., i] = np.abs(self.c[..., self.alg.degree == i]).sum(axis=-1)
+        return S
+
+    def variable_norms(self, j: int) -> np.ndarray:
+        """Coefficient sizes by the power of ``xi_j`` alone: ``sum_{beta_j = i} |a_beta|``."""
+        S = np.zeros(self.shape + (self.alg.order + 1,))
+        for i in range(self.alg.order + 1):
+            S[..., i] = np.abs(self.c[..., self.alg.exps[:, j] == i]).sum(axis=-1)
+        return S
+
+    def __repr__(self):
+        return f"DA(order={self.alg.order}, nvars={self.alg.nvars}, shape={self.shape}, cons={self.cons})"
+
+
+def _binomial(p: float, k: int) -> float:
+    out = 1.0
+    for j in range(k):
+        out *= (p - j) / (j + 1)
+    return out
+
+
+def _sin_derivative(a0, k: int):
+    return (np.sin(a0), np.cos(a0), -np.sin(a0), -np.cos(a0))[k % 4]
+
+
+def stack(items: list[DA]) -> DA:
+    return DA(items[0].alg, np.stack([x.c for x in items], axis=0))
+
+
+def invert(F: list[DA]) -> list[DA]:
+    """Inverse of the map ``xi -> F(xi) - F(0)`` (``m`` components in ``m`` variables).
+
+    With ``F - F(0) = L + N`` (linear part ``L``, invertible, and nonlinear part ``N``) the
+    inverse ``G`` solves ``G = L^-1 (Id - N o G)``; each pass fixes one more order, so ``n``
+    passes give the order-``n`` inverse. The returned ``G`` takes ``F - F(0)`` to ``xi``.
+    """
+    alg = F[0].alg
+    m = alg.nvars
+    C = np.stack([f.c for f in F], axis=0).copy()
+    C[:, 0] = 0.0
+    lin = alg.degree == 1
+    L = C[:, lin]
+    Linv = np.linalg.inv(L)
+    N = C.copy()
+    N[:, lin] = 0.0
+    nonlinear = DA(alg, N)
+    identity = np.zeros((m, alg.size))
+    identity[:, lin] = np.eye(m)
+    G = DA(alg, Linv @ identity)
+    for _ in range(alg.order):
+        NG = nonlinear.compose([G[i] for i in range(m)])
+        G = DA(alg, Linv @ (identity - NG.c))
+    return [G[i] for i in range(m)]

@@ -1,0 +1,251 @@
+"""Flow expansion (section 2.1, eqs. 1-4): a mode's closed-loop vector field compiled once from
+its sympy expressions into a function that runs on floats, numpy arrays and DA numbers alike,
+and an 8th-order Runge-Kutta on DA states.
+
+Integrator: explicit Runge-Kutta with the 8th-order Dormand-Prince tableau (the DOP853
+coefficients, as shipped with scipy), with the step sequence chosen on the constant part: the
+nominal run is integrated by scipy's adaptive DOP853 at the requested tolerance and the DA run
+steps through the same accepted nodes, each step cut in two. Every DA coefficient is propagated by
+the same RK formula, so the nominal accuracy is the step-size control (as in the paper's DA
+integrators). The nominal run itself (event detection, start points of the refinement) is a dense
+DOP853 solution at 1e-12.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import sympy
+from scipy.integrate import solve_ivp
+
+from reach.backends.taylor.da import DA
+
+_UNARY = {
+    sympy.sin: ("sin", np.sin), sympy.cos: ("cos", np.cos), sympy.exp: ("exp", np.exp),
+    sympy.log: ("log", np.log),
+}
+
+
+class Unsmooth(ValueError):
+    """The expression has a non-smooth or unsupported part (abs, min, piecewise...)."""
+
+
+def compile_expressions(exprs: list[sympy.Expr], symbols: list[sympy.Symbol]):
+    """``f(values) -> list`` evaluating ``exprs`` at ``values`` (floats, arrays or DAs).
+
+    Common subexpressions are shared (``sympy.cse``); the tree is walked once here and turned
+    into nested closures, so no text is evaluated.
+    """
+    replacements, reduced = sympy.cse([sympy.sympify(e) for e in exprs])
+    index = {s: i for i, s in enumerate(symbols)}
+    temps = {}
+    for j, (sym, _) in enumerate(replacements):
+        temps[sym] = len(symbols) + j
+    steps = [_build(e, index, temps) for _, e in replacements]
+    outputs = [_build(e, index, temps) for e in reduced]
+
+    def f(values):
+        env = list(values)
+        for step in steps:
+            env.append(step(env))
+        outs = [out(env) for out in outputs]
+        da = next((v for v in env if isinstance(v, DA)), None)
+        if da is not None:      # constant rates (a clock's 1) become constant DAs
+            outs = [o if isinstance(o, DA) else DA.const(da.alg, o) for o in outs]
+        return outs
+
+    return f
+
+
+def compile_numeric(exprs: list[sympy.Expr], symbols: list[sympy.Symbol]):
+    """The same function for floats and numpy arrays only (numpy code from ``sympy.lambdify``)."""
+    fn = sympy.lambdify([symbols], [sympy.sympify(e) for e in exprs], modules="numpy", cse=True)
+    return lambda values: [np.asarray(v, dtype=float) + 0.0 * values[0] for v in fn(list(values))]
+
+
+def _build(e, index, temps):
+    if e in temps:
+        k = temps[e]
+        return lambda env: env[k]
+    if e in index:
+        k = index[e]
+        return lambda env: env[k]
+    if e.is_Number or (e.is_number and not e.free_symbols):
+        v = float(e)
+        return lambda env: v
+    if e.is_Add:
+        return _build_sum(e, index, temps)
+    if e.is_Mul:
+        parts = [_build(a, index, temps) for a in e.args]
+        return lambda env: _product(p(env) for p in parts)
+    if e.is_Pow:
+        base = _build(e.base, index, temps)
+        if not e.exp.is_number:
+            exponent = _build(e.exp, index, temps)
+            return lambda env: _exp(_log(base(env)) * exponent(env))
+        p = float(e.exp)
+        if p.is_integer() and p >= 0:
+            p = int(p)
+        if p == 0.5:
+            return lambda env: _sqrt(base(env))
+        return lambda env: base(env) ** p
+    if e.func in _UNARY:
+        name, fn = _UNARY[e.func]
+        arg = _build(e.args[0], index, temps)
+        return lambda env: (getattr(a, name)() if isinstance(a := arg(env), DA) else fn(a))
+    raise Unsmooth(f"cannot expand '{e.func.__name__}' in a Taylor series ({e})")
+
+
+def _build_sum(e, index, temps):
+    """A sum; its terms ``number * variable`` are gathered into one weighted sum of arrays."""
+    slots, weights, rest = [], [], []
+    for a in e.args:
+        coeff, factor = a.as_coeff_Mul()
+        if coeff.is_Number and (factor in index or factor in temps):
+            slots.append(index[factor] if factor in index else temps[factor])
+            weights.append(float(coeff))
+        else:
+            rest.append(_build(a, index, temps))
+    w = np.array(weights)
+
+    def linear(env):
+        items = [env[k] for k in slots]
+        if any(isinstance(v, DA) for v in items):
+            alg = next(v.alg for v in items if isinstance(v, DA))
+            rows = np.stack([v.c if isinstance(v, DA) else DA.const(alg, v).c for v in items])
+            return DA(alg, np.tensordot(w, rows, axes=1))
+        return _sum(wk * v for wk, v in zip(w, items))
+
+    if not slots:
+        return lambda env: _sum(p(env) for p in rest)
+    if not rest:
+        return linear
+    return lambda env: _sum([linear(env)] + [p(env) for p in rest])
+
+
+def _sum(items):
+    items = iter(items)
+    out = next(items)
+    for x in items:
+        out = out + x
+    return out
+
+
+def _product(items):
+    items = iter(items)
+    out = next(items)
+    for x in items:
+        out = x * out if isinstance(x, DA) else out * x
+    return out
+
+
+def _sqrt(a):
+    return a.sqrt() if isinstance(a, DA) else np.sqrt(a)
+
+
+def _log(a):
+    return a.log() if isinstance(a, DA) else np.log(a)
+
+
+def _exp(a):
+    return a.exp() if isinstance(a, DA) else np.exp(a)
+
+
+def _tableau():
+    """Butcher tableau of the 12-stage, 8th-order Dormand-Prince solution (DOP853)."""
+    from scipy.integrate._ivp import dop853_coefficients as dop
+    s = dop.N_STAGES
+    return dop.A[:s, :s], dop.B
+
+
+A_DOP853, B_DOP853 = _tableau()
+
+
+def rk8(f, x: list, h: float, steps: int) -> list:
+    """``steps`` explicit DOP853 steps (8th order) of size ``h`` of the autonomous ``x' = f(x)``.
+
+    The state is held as one array (``(n, M)`` coefficients for DA states), so each stage is
+    one weighted sum of the previous stages' rates.
+    """
+    alg = next((v.alg for v in x if isinstance(v, DA)), None)
+
+    def pack(values):
+        if alg is None:
+            return np.stack(np.broadcast_arrays(*[np.asarray(v, dtype=float) for v in values]))
+        return np.stack([v.c if isinstance(v, DA) else DA.const(alg, v).c for v in values])
+
+    def unpack(X):
+        return list(X) if alg is None else [DA(alg, row) for row in X]
+
+    X = pack(x)
+    K = np.empty((len(B_DOP853),) + X.shape)
+    for _ in range(steps):
+        for i in range(len(B_DOP853)):
+            Xi = X if i == 0 else X + h * np.tensordot(A_DOP853[i, :i], K[:i], axes=1)
+            K[i] = pack(f(unpack(Xi)))
+        X = X + h * np.tensordot(B_DOP853, K, axes=1)
+    return unpack(X)
+
+
+@dataclass
+class Nominal:
+    """The nominal (constant-part) run: dense solution and the step nodes of the DA runs."""
+
+    solution: object        # scipy OdeSolution, callable on times
+    nodes: np.ndarray       # 0 = t_0 < t_1 < ... < t_N = T
+
+    def grid(self, last: int | None = None) -> np.ndarray:
+        """States at the nodes ``t_0..t_last`` (all by default): ``(last + 1, n)``."""
+        last = len(self.nodes) - 1 if last is None else last
+        return self.solution(self.nodes[: last + 1]).T
+
+    def sharpen(self, k: int, score, samples: int = 64) -> float:
+        """The time in ``[t_{k-1}, t_{k+1}]`` maximising ``score(states (n, N))`` on a dense sampling."""
+        lo, hi = self.nodes[max(k - 1, 0)], self.nodes[min(k + 1, len(self.nodes) - 1)]
+        times = np.linspace(lo, hi, samples + 1)
+        return float(times[int(np.argmax(score(self.solution(times))))])
+
+
+def nominal(f_numeric, x0: np.ndarray, T: float, tol: float = 1e-9, refine: int = 2) -> Nominal:
+    """Nominal run: the accepted steps of an adaptive DOP853 (``rtol = tol``), each cut into
+    ``refine`` equal steps, are the DA step nodes; a dense DOP853 solution at 1e-12 is the
+    nominal state for detection and refinement."""
+    def fun(_, x):
+        return np.array(f_numeric(list(x)), dtype=float)
+
+    scale = np.maximum(1.0, np.abs(np.asarray(x0, dtype=float)))
+    coarse = solve_ivp(fun, (0.0, T), x0, method="DOP853", rtol=tol, atol=tol * scale)
+    dense = solve_ivp(fun, (0.0, T), x0, method="DOP853", rtol=1e-12, atol=1e-12 * scale,
+                      dense_output=True)
+    if not (coarse.success and dense.success):
+        raise RuntimeError(f"nominal run failed: {dense.message}")
+    t = coarse.t
+    nodes = np.concatenate([np.linspace(a, b, refine + 1)[:-1] for a, b in zip(t[:-1], t[1:])] + [t[-1:]])
+    return Nominal(dense.sol, nodes)
+
+
+def propagate(f, x: list, nodes: np.ndarray, t_end: float) -> list:
+    """DA (or float) state from ``nodes[0]`` to ``t_end``: RK8 steps along the nodes, then a
+    last partial step."""
+    t = nodes[0]
+    for t_next in nodes[1:]:
+        if t_next > t_end:
+            break
+        x = rk8(f, x, t_next - t, 1)
+        t = t_next
+    if t_end > t:
+        x = rk8(f, x, t_end - t, 1)
+    return x
+
+
+def flow_map(f, alg, center: np.ndarray, half_width: np.ndarray, uncertain: list[int],
+             nodes: np.ndarray, T: float) -> list[DA]:
+    """Taylor expansion of the flow ``x(T)`` in the scaled deviations (eqs. 3-4).
+
+    ``x0_i = center_i + half_width_i xi_j`` for the ``j``-th uncertain state ``i``, so each
+    ``xi_j`` ranges over ``[-1, 1]`` on the box.
+    """
+    x = [DA.var(alg, uncertain.index(i), c, half_width[i]) if i in uncertain else DA.const(alg, c)
+         for i, c in enumerate(center)]
+    return propagate(f, x, nodes, T)

@@ -1,0 +1,101 @@
+"""The one linear-programming layer: every LP in reach goes through here.
+
+Problems have the form
+
+    minimize  c^T x   subject to  A_ub x <= b_ub,  A_eq x = b_eq,  lo <= x <= hi
+
+with free variables unless ``bounds`` says otherwise (scipy's default of ``x >= 0`` is
+*not* used). They are solved with HiGHS through :func:`scipy.optimize.linprog`. The result
+is an :class:`LPResult` whose ``status`` is one of ``"optimal"``, ``"infeasible"`` or
+``"unbounded"``; anything else (iteration limit, numerical trouble) raises
+:class:`LPError`, so a caller never mistakes a solver failure for an answer.
+
+HiGHS works with a primal feasibility tolerance of about 1e-7: "infeasible" means no
+point satisfies the constraints to that tolerance.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import linprog
+
+OPTIMAL, INFEASIBLE, UNBOUNDED = "optimal", "infeasible", "unbounded"
+
+
+class LPError(RuntimeError):
+    """The solver stopped without a verdict (iteration limit, numerical difficulties)."""
+
+
+@dataclass
+class LPResult:
+    """``status``; on ``"optimal"`` the objective ``value`` (in the caller's sense: the
+    maximum for :func:`maximize`) and a solution ``x``."""
+
+    status: str
+    value: float | None = None
+    x: np.ndarray | None = None
+
+    @property
+    def optimal(self) -> bool:
+        return self.status == OPTIMAL
+
+    @property
+    def infeasible(self) -> bool:
+        return self.status == INFEASIBLE
+
+    @property
+    def unbounded(self) -> bool:
+        return self.status == UNBOUNDED
+
+
+def _bounds(bounds, n: int):
+    if bounds is None:
+        return [(None, None)] * n
+    if isinstance(bounds, tuple) and len(bounds) == 2 and np.ndim(bounds[0]) == 1:
+        lo, hi = bounds
+        return [(None if not np.isfinite(a) else float(a), None if not np.isfinite(b) else float(b))
+                for a, b in zip(lo, hi)]
+    return bounds
+
+
+def minimize(c, A_ub=None, b_ub=None, *, A_eq=None, b_eq=None, bounds=None) -> LPResult:
+    """Minimize ``c^T x`` over the polyhedron; ``bounds`` is None (all free), a list of
+    ``(lo, hi)`` pairs (None for infinite) or a pair of arrays ``(lo, hi)``."""
+    c = np.asarray(c, dtype=float)
+    n = c.size
+    if n == 0:                  # no variables: the constraints are plain inequalities
+        ok = (A_ub is None or np.all(np.asarray(b_ub) >= -1e-9)) and \
+             (A_eq is None or np.allclose(b_eq, 0.0, atol=1e-9))
+        return LPResult(OPTIMAL, 0.0, np.zeros(0)) if ok else LPResult(INFEASIBLE)
+    if A_ub is not None and np.size(A_ub) == 0:
+        A_ub, b_ub = None, None
+    if A_eq is not None and np.size(A_eq) == 0:
+        A_eq, b_eq = None, None
+    res = linprog(c, A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=b_eq, bounds=_bounds(bounds, n),
+                  method="highs")
+    if res.status == 0:
+        return LPResult(OPTIMAL, float(res.fun), np.asarray(res.x, dtype=float))
+    if res.status == 2:
+        return LPResult(INFEASIBLE)
+    if res.status == 3:
+        return LPResult(UNBOUNDED)
+    raise LPError(f"LP solver stopped without a verdict: {res.message}")
+
+
+def maximize(c, A_ub=None, b_ub=None, *, A_eq=None, b_eq=None, bounds=None) -> LPResult:
+    """Maximize ``c^T x``; ``value`` is the maximum."""
+    res = minimize(-np.asarray(c, dtype=float), A_ub, b_ub, A_eq=A_eq, b_eq=b_eq, bounds=bounds)
+    if res.optimal:
+        res.value = -res.value
+    return res
+
+
+def feasible_point(A_ub=None, b_ub=None, *, A_eq=None, b_eq=None, bounds=None, n: int | None = None):
+    """A point of the polyhedron, or None if it is empty. ``n`` is needed only when no
+    constraint matrix tells the dimension."""
+    if n is None:
+        n = np.shape(A_ub)[1] if A_ub is not None else np.shape(A_eq)[1]
+    res = minimize(np.zeros(n), A_ub, b_ub, A_eq=A_eq, b_eq=b_eq, bounds=bounds)
+    return res.x if res.optimal else None

@@ -1,0 +1,356 @@
+"""The fsr back-end: moments, reach and reach-avoid probabilities, the Fourier path and the
+eccentric-orbit transition matrix, each against an independent reference."""
+
+import copy
+from math import comb
+
+import numpy as np
+import pytest
+import scipy.linalg
+from scipy.integrate import solve_ivp
+from scipy.special import ndtr
+
+from reach.backends import fsr_fourier as F
+from reach.backends.base import run
+from reach.backends.fsr import BACKEND, GaussianProblem, reach, reach_avoid
+from reach.model.constraints import halfspaces
+from reach.model.loader import load_model
+from reach.model.ltv import (KickedLinearSystem, cwh_matrix, eccentric_orbit_system, kick_times,
+                             mean_anomaly, true_anomaly, yamanaka_ankersen)
+from reach.result import Status
+from reach.sets.gaussian import interval_form
+from reach.spec.properties import bind, load_properties
+
+MU = 398600.4418          # km^3/s^2
+A_ORBIT = 7000.0          # km
+
+
+def cwh_transition(n, t):
+    """Closed-form CWH transition matrix (Clohessy-Wiltshire solution), x radial, y along-track."""
+    s, c = np.sin(n * t), np.cos(n * t)
+    return np.array([
+        [4 - 3 * c, 0, 0, s / n, 2 * (1 - c) / n, 0],
+        [6 * (s - n * t), 1, 0, -2 * (1 - c) / n, (4 * s - 3 * n * t) / n, 0],
+        [0, 0, c, 0, 0, s / n],
+        [3 * n * s, 0, 0, c, 2 * s, 0],
+        [-6 * n * (1 - c), 0, 0, -2 * s, 4 * c - 3, 0],
+        [0, 0, -n * s, 0, 0, c]])
+
+
+def velocity_kicks():
+    G = np.zeros((6, 3))
+    G[3:] = np.eye(3)
+    return G
+
+
+def load(model, properties):
+    m = load_model(f"models/{model}.yaml")
+    return m, {p.id: bind(p, m) for p in load_properties(f"properties/{properties}.yaml")}
+
+
+# ------------------------------------------------------------------ discretisation and moments
+
+def test_kick_times_match_the_simulator_convention():
+    assert np.allclose(kick_times(10.0, 30.0), [0, 10, 20, 30])
+    assert np.allclose(kick_times(10.0, 25.0), [0, 10, 20, 25])
+    assert np.allclose(kick_times(10.0, 0.0), [0])
+
+
+def test_exact_discretisation_of_cwh():
+    n = np.sqrt(MU / A_ORBIT ** 3)
+    system = KickedLinearSystem.from_continuous(cwh_matrix(n), None, velocity_kicks(), 7.0, 70.0)
+    assert np.allclose(system.Phi[3], cwh_transition(n, 7.0), rtol=1e-12, atol=1e-15)
+
+
+def test_moments_equal_the_controllability_form():
+    """Recursion against eqs. (13)-(14): C = [B, AB, ...], B = Phi G, mean A^tau x0 + C (1 (x) mu)."""
+    rng = np.random.default_rng(0)
+    A = 0.05 * rng.normal(size=(4, 4)) - 0.02 * np.eye(4)
+    G = rng.normal(size=(4, 2))
+    system = KickedLinearSystem.from_continuous(A, None, G, 0.5, 6.0)
+    x0, mu = rng.normal(size=4), rng.normal(size=2)
+    Sigma = np.array([[0.3, 0.1], [0.1, 0.2]])
+    means, covs = system.moments(x0, None, mu, Sigma)
+    Phi = system.Phi[0]
+    for tau in (1, 5, system.steps):
+        C = np.hstack([np.linalg.matrix_power(Phi, j) @ Phi @ G for j in range(tau - 1, -1, -1)])
+        mean = np.linalg.matrix_power(Phi, tau) @ x0 + C @ np.tile(mu, tau)
+        cov = C @ np.kron(np.eye(tau), Sigma) @ C.T
+        assert np.allclose(means[tau], mean, rtol=1e-12, atol=1e-12)
+        assert np.allclose(covs[tau], cov, rtol=1e-12, atol=1e-14)
+
+
+def test_moments_time_varying_recursion():
+    rng = np.random.default_rng(1)
+    Phi = np.eye(3) + 0.1 * rng.normal(size=(5, 3, 3))
+    G = rng.normal(size=(3, 1))
+    system = KickedLinearSystem(Phi, np.zeros((5, 3)), G, np.arange(6.0))
+    means, covs = system.moments(np.ones(3), 0.1 * np.eye(3), [0.5], [[2.0]])
+    B = [Phi[k] @ G for k in range(5)]
+    cov = system.propagator(5, 0) @ (0.1 * np.eye(3)) @ system.propagator(5, 0).T
+    mean = system.propagator(5, 0) @ np.ones(3)
+    for k in range(5):
+        M = system.propagator(5, k + 1) @ B[k]
+        cov = cov + 2.0 * M @ M.T
+        mean = mean + 0.5 * M[:, 0]
+    assert np.allclose(means[5], mean) and np.allclose(covs[5], cov)
+
+
+def test_moments_against_sampled_trajectories():
+    """Sampled from the closed-form CWH solution (not the matrix exponential)."""
+    n = np.sqrt(MU / A_ORBIT ** 3)
+    G = velocity_kicks()
+    system = KickedLinearSystem.from_continuous(cwh_matrix(n), None, G, 60.0, 600.0)
+    x0 = np.array([0.1, -1.0, 0.05, 0.0, 1e-4, 0.0])
+    mu, Sigma = np.array([1e-5, 0, -1e-5]), np.diag([4e-8, 1e-8, 9e-8])
+    means, covs = system.moments(x0, None, mu, Sigma)
+    rng = np.random.default_rng(2)
+    N = 200_000
+    Phi = cwh_transition(n, 60.0)
+    X = np.tile(x0, (N, 1))
+    for _ in range(10):
+        X = (X + rng.multivariate_normal(mu, Sigma, size=N) @ G.T) @ Phi.T
+    sd = np.sqrt(np.diag(covs[-1]))
+    assert np.all(np.abs(X.mean(axis=0) - means[-1]) < 5 * sd / np.sqrt(N))
+    corr = np.cov(X.T) / np.outer(sd, sd)
+    assert np.allclose(corr, covs[-1] / np.outer(sd, sd), atol=0.015)
+
+
+# ------------------------------------------------------------------ probabilities with exact answers
+
+def scalar_problem(a, step, at, x0, mu, var):
+    system = KickedLinearSystem.from_continuous([[a]], None, [[1.0]], step, at)
+    return GaussianProblem(system, np.array([x0]), np.zeros((1, 1)), np.array([mu]), np.array([[var]]))
+
+
+def test_one_dimensional_reach_is_analytic():
+    """x' = a x with N(mu, var) kicks: x[K] = r^K x0 + sum_{j=1..K} r^j w, r = exp(a step)."""
+    a, step, K, x0, mu, var = -0.3, 1.0, 8, 2.0, 0.1, 0.25
+    problem = scalar_problem(a, step, K * step, x0, mu, var)
+    r = np.exp(a * step)
+    mean = r ** K * x0 + mu * sum(r ** j for j in range(1, K + 1))
+    sd = np.sqrt(var * sum(r ** (2 * j) for j in range(1, K + 1)))
+    p = reach(problem, np.array([[1.0], [-1.0]]), np.array([0.6, 0.2]))
+    exact = ndtr((0.6 - mean) / sd) - ndtr((-0.2 - mean) / sd)
+    assert p.low <= exact <= p.high and p.width < 1e-11
+
+
+@pytest.mark.parametrize("method", ["genz", "markov"])
+@pytest.mark.parametrize("steps", [2, 10])
+def test_reach_avoid_random_walk_is_sparre_andersen(method, steps):
+    """P(S_1 >= 0, ..., S_n >= 0) = C(2n, n) / 4^n for a symmetric continuous random walk."""
+    problem = scalar_problem(0.0, 1.0, float(steps), 0.0, 0.0, 1.0)
+    positive = (np.array([[-1.0]]), np.array([0.0]))
+    p, info = reach_avoid(problem, positive, positive, abs_error=2e-4, method=method, drop_budget=0.0)
+    exact = comb(2 * steps, steps) / 4 ** steps
+    assert p.low <= exact <= p.high
+    assert info["kept"] == steps                       # x[0] = 0 is checked, not integrated
+
+
+def test_boole_dropping_keeps_the_interval_rigorous():
+    """A corridor far from the mean is dropped; the interval still contains the exact value."""
+    problem = scalar_problem(0.0, 1.0, 6.0, 0.0, 0.0, 1.0)
+    target = (np.array([[-1.0]]), np.array([0.0]))
+    wide = (np.array([[-1.0]]), np.array([3.0]))     # x >= -3 at every step
+    p, info = reach_avoid(problem, target, wide, abs_error=1e-4, drop_budget=0.02)
+    exact_plain, _ = reach_avoid(problem, target, wide, abs_error=1e-5, drop_budget=0.0)
+    assert info["dropped"] > 0 and 0 < info["boole"] <= 0.02
+    assert p.low <= exact_plain.value <= p.high
+
+
+def test_deterministic_violation_gives_zero():
+    problem = scalar_problem(0.0, 1.0, 3.0, -1.0, 0.0, 1.0)
+    positive = (np.array([[-1.0]]), np.array([0.0]))
+    p, info = reach_avoid(problem, positive, positive)
+    assert p.high == 0.0 and info["reason"]
+
+
+# ------------------------------------------------------------------ the Fourier path
+
+def test_fourier_equals_gaussian_closed_form_on_cwh():
+    n = np.sqrt(MU / A_ORBIT ** 3)
+    G = velocity_kicks()
+    system = KickedLinearSystem.from_continuous(cwh_matrix(n), None, G, 10.0, 600.0)
+    x0 = np.array([0.1, -2, 0.1, 0, -5e-4, 0])
+    Sigma = 2e-13 * np.eye(3)
+    problem = GaussianProblem(system, x0, np.zeros((6, 6)), np.zeros(3), Sigma)
+    means, _ = problem.moments()
+    T = np.eye(3, 6)
+    lower, upper = T @ means[-1] - 0.004, T @ means[-1] + 0.006
+    gaussian = reach(problem, np.vstack([T, -T]), np.concatenate([upper, -lower]), abs_error=1e-6)
+    z = F.ProjectedSum.of(system, T, F.point_law(x0), F.GaussianLaw(np.zeros(3), Sigma))
+    fourier = F.box_probability(z, lower, upper, tol=1e-7)
+    assert abs(fourier.value - gaussian.value) < 2e-6
+    assert fourier.low <= gaussian.high and gaussian.low <= fourier.high
+
+
+def test_fourier_density_is_the_gaussian_density():
+    """FFT inversion (eq. 8) against eq. (15) for a correlated 2-D Gaussian sum."""
+    G = np.array([[1.0, 0.0], [0.5, 1.0]])
+    system = KickedLinearSystem(np.repeat(np.eye(2)[None], 3, axis=0), np.zeros((3, 2)), G,
+                                np.arange(4.0))
+    Sigma = np.diag([1.0, 0.5])
+    z = F.ProjectedSum.of(system, np.eye(2), F.point_law([0.3, -0.2]), F.GaussianLaw(np.zeros(2), Sigma))
+    axes, density = F.density_on_grid(z, points=64)
+    X, Y = np.meshgrid(*axes, indexing="ij")
+    P = 3 * G @ Sigma @ G.T
+    d = np.stack([X - 0.3, Y + 0.2], axis=-1)
+    pdf = np.exp(-0.5 * np.einsum("...i,ij,...j->...", d, np.linalg.inv(P), d)) / (2 * np.pi * np.sqrt(np.linalg.det(P)))
+    assert np.max(np.abs(density - pdf)) < 1e-8 * pdf.max()
+
+
+def sum_of_two(law):
+    """x = w0 + w1 (no dynamics), the law of the 1-D sum of two kicks."""
+    system = KickedLinearSystem(np.ones((2, 1, 1)), np.zeros((2, 1)), np.ones((1, 1)), np.arange(3.0))
+    return F.ProjectedSum.of(system, np.ones((1, 1)), F.point_law([0.0]), law)
+
+
+def test_fourier_uniform_sum_is_triangular():
+    """U(-1, 1) + U(-1, 1) is triangular on [-2, 2]: P(-0.5 <= x <= 1) = 1 - 1/8 - 1.5^2/8."""
+    p = F.box_probability(sum_of_two(F.UniformLaw([-1.0], [1.0])), [-0.5], [1.0], tol=1e-6)
+    exact = 1 - 1 / 8 - 1.5 ** 2 / 8
+    assert p.low <= exact <= p.high and p.width < 2e-6
+
+
+def test_fourier_laplace_sum_has_its_closed_form():
+    """Laplace(1) + Laplace(1): P(|x| > t) = (2 + t) exp(-t) / 2; its window is sized by Chernoff."""
+    p = F.box_probability(sum_of_two(F.LaplaceLaw([0.0], [1.0])), [-1.0], [1.0], tol=1e-6)
+    exact = 1 - 1.5 * np.exp(-1.0)
+    assert p.low <= exact <= p.high and p.width < 2e-6
+
+
+def test_fourier_mixture_against_sampling():
+    law = F.MixtureLaw(np.array([0.7, 0.3]), (F.GaussianLaw(np.array([-1.0]), np.array([[0.2]])),
+                                              F.UniformLaw(np.array([0.5]), np.array([2.5]))))
+    z = sum_of_two(law)
+    p = F.box_probability(z, [-1.0], [1.5], tol=1e-5)
+    rng = np.random.default_rng(4)
+    X = law.sample(rng, 400_000) + law.sample(rng, 400_000)
+    hit = np.mean((X >= -1.0) & (X <= 1.5))
+    assert abs(hit - p.value) < 4 * np.sqrt(hit * (1 - hit) / 400_000) + p.width
+
+
+# ------------------------------------------------------------------ eccentric orbits
+
+def test_yamanaka_ankersen_equals_cwh_at_zero_eccentricity():
+    n = np.sqrt(MU / A_ORBIT ** 3)
+    for theta0 in (0.0, 1.0, 4.0):
+        for dt in (10.0, 1000.0, 7000.0):
+            reference = scipy.linalg.expm(cwh_matrix(n) * dt)
+            Phi = yamanaka_ankersen(0.0, A_ORBIT, MU, theta0, dt)
+            assert np.max(np.abs(Phi - reference)) <= 1e-13 * np.max(np.abs(reference))
+
+
+def test_eccentric_trajectory_equals_cwh_at_zero_eccentricity():
+    """The seed's Fig. 8 check: from (0, -2, 0) km with -0.5 m/s along-track, no control, no noise."""
+    n = np.sqrt(MU / A_ORBIT ** 3)
+    G = velocity_kicks()
+    ltv = eccentric_orbit_system(0.0, A_ORBIT, MU, 0.3, G, 60.0, 6000.0)
+    lti = KickedLinearSystem.from_continuous(cwh_matrix(n), None, G, 60.0, 6000.0)
+    x0 = np.array([0, -2, 0, 0, -5e-4, 0])
+    a, _ = ltv.moments(x0, None, np.zeros(3), np.zeros((3, 3)))
+    b, _ = lti.moments(x0, None, np.zeros(3), np.zeros((3, 3)))
+    assert np.max(np.abs(a - b)) <= 1e-13 * np.max(np.abs(b))
+
+
+def test_yamanaka_ankersen_against_integrated_tschauner_hempel():
+    """Time-domain linearised relative motion about a Keplerian orbit, integrated numerically."""
+    e, theta0, dt = 0.3, 0.7, 3000.0
+    p = A_ORBIT * (1 - e ** 2)
+    h = np.sqrt(MU * p)
+    n = np.sqrt(MU / A_ORBIT ** 3)
+
+    def rhs(t, X):
+        theta = true_anomaly(mean_anomaly(theta0, e) + n * t, e)
+        r = p / (1 + e * np.cos(theta))
+        w, wdot = h / r ** 2, -2 * h * np.sqrt(MU / p) * e * np.sin(theta) / r ** 3
+        x, y, z, vx, vy, vz = X
+        k = MU / r ** 3
+        return [vx, vy, vz, 2 * w * vy + wdot * y + w ** 2 * x + 2 * k * x,
+                -2 * w * vx - wdot * x + w ** 2 * y - k * y, -k * z]
+
+    columns = [solve_ivp(rhs, [0, dt], np.eye(6)[i], rtol=1e-12, atol=1e-14, method="DOP853").y[:, -1]
+               for i in range(6)]
+    reference = np.array(columns).T
+    Phi = yamanaka_ankersen(e, A_ORBIT, MU, theta0, dt)
+    assert np.max(np.abs(Phi - reference)) <= 1e-9 * np.max(np.abs(reference))
+
+
+# ------------------------------------------------------------------ the back-end on the scenario models
+
+SCENARIOS = [("fsr_lqr1_reach", "fsr_lqr1_reach", "dock"),
+             ("fsr_lqr1_reach_avoid", "fsr_lqr1_reach_avoid", "corridor"),
+             ("fsr_lqr2_reach", "fsr_lqr2_reach", "dock"),
+             ("fsr_burn", "fsr_burn", "arrive")]
+
+
+@pytest.mark.parametrize("model,properties,pid", SCENARIOS)
+def test_targets_are_centred_at_the_nominal_position(model, properties, pid):
+    m, props = load(model, properties)
+    prop = props[pid]
+    means, _ = GaussianProblem.from_model(m, prop.at).moments()
+    T, lower, upper = interval_form(*halfspaces(prop.target, prop.symbols))
+    centre = 0.5 * (lower + upper)
+    assert np.max(np.abs(centre - T @ means[-1])) < 1e-6       # km: within a millimetre
+
+
+def test_lqr1_design_matches_the_documented_behaviour():
+    m, _ = load("fsr_lqr1_reach", "fsr_lqr1_reach")
+    means, _ = GaussianProblem.from_model(m, 2110.0).moments()
+    assert 1.4 < np.linalg.norm(means[-1, :3]) < 1.6            # "~1.5 km from the chief"
+    assert -2.15 < means[:, 1].min() < -2.13                    # the seed's corridor holds nominally
+
+
+def test_burn_reach_is_one_dimensional_closed_form():
+    """One scalar kick: position = p + d w, so P is a normal interval probability."""
+    m, props = load("fsr_burn", "fsr_burn")
+    prop = props["arrive"]
+    result = BACKEND.check(m, prop, {})
+    A, _ = m.modes["coast"].linear
+    d = scipy.linalg.expm(A * 500.0)[:3, 4] * np.sqrt(m.disturbance.cov[0, 0])
+    w = np.min(0.025 / np.abs(d[:2]))                            # |d_i w| <= 25 m on x and y
+    exact = ndtr(w) - ndtr(-w)
+    assert result.probability[0] <= exact <= result.probability[1]
+    assert result.status is Status.SAFE
+
+
+def test_verdicts_follow_the_interval():
+    m, props = load("fsr_lqr1_reach", "fsr_lqr1_reach")
+    holds = BACKEND.check(m, props["dock"], {})
+    fails = BACKEND.check(m, props["dock_strict"], {})
+    assert holds.status is Status.SAFE and holds.probability[0] >= 0.6
+    assert fails.status is Status.UNKNOWN and fails.details["verdict"] == "violated"
+    assert fails.probability[1] < 0.9
+
+
+def test_tight_corridor_methods_agree():
+    m, props = load("fsr_lqr1_reach_avoid", "fsr_lqr1_reach_avoid")
+    genz = BACKEND.check(m, props["corridor_tight"], {"method": "genz", "abs_error": 3e-3})
+    markov = BACKEND.check(m, props["corridor_tight"], {"method": "markov", "abs_error": 3e-3})
+    reach_only = BACKEND.check(m, props["box5"], {})
+    assert genz.probability[0] <= markov.probability[1] and markov.probability[0] <= genz.probability[1]
+    assert genz.probability[1] < reach_only.probability[0]      # the corridor costs probability
+    assert genz.details["dropped"] > 0 and genz.details["boole"] <= 3e-4
+
+
+def test_uniform_initial_box_uses_the_fourier_path():
+    m, props = load("fsr_burn_uniform", "fsr_burn")
+    result = BACKEND.check(m, props["arrive"], {"abs_error": 1e-2})
+    assert result.details["method"] == "fourier"
+    assert 0 < result.probability[0] <= result.probability[1] < 1
+    assert run(BACKEND, m, props["arrive_safe"]).status is Status.UNSUPPORTED
+
+
+def test_unsupported_models_and_properties_say_why():
+    m, props = load("fsr_burn", "fsr_burn")
+    deterministic = copy.copy(m)
+    deterministic.disturbance = None
+    assert "deterministic" in BACKEND.supports(deterministic, props["arrive"])
+    arch = load_model("models/SRA01.yaml")
+    safety = [bind(p, arch) for p in load_properties("properties/rendezvous.yaml")][0]
+    assert "safety" in BACKEND.supports(arch, safety)
+    arch.disturbance = m.disturbance
+    reach_prop = props["arrive"]
+    assert BACKEND.supports(arch, reach_prop) is not None
+    result = run(BACKEND, arch, safety)
+    assert result.status is Status.UNSUPPORTED and result.details["reason"]

@@ -1,0 +1,178 @@
+"""The LP layer and the set types against independent references.
+
+References: closed-form box formulas, brute-force vertex enumeration in 2-D (pairs of
+constraint lines, no LP), and direct evaluation of sampled points.
+"""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from reach import lp
+from reach.sets import Box, HPolytope, Star, chord_hull
+
+SEEDS = st.integers(0, 2**32 - 1)
+
+
+def random_polygon(rng, k=6):
+    """A bounded 2-D polytope: ``k`` random half-planes around a point plus a bounding box."""
+    angles = rng.uniform(0, 2 * np.pi, k)
+    A = np.column_stack([np.cos(angles), np.sin(angles)])
+    b = rng.uniform(0.5, 2.0, k)
+    box = Box([-3, -3], [3, 3]).to_hpolytope()
+    return HPolytope(A, b).intersection(box)
+
+
+# ---------------------------------------------------------------------- LP layer
+
+def test_lp_statuses():
+    A = np.array([[1.0, 0.0], [-1.0, 0.0]])
+    assert lp.maximize([1, 0], A, [1, 0]).value == pytest.approx(1.0)
+    assert lp.minimize([0, 1], A, [1, 0]).unbounded
+    assert lp.minimize([1, 0], A, [-1, 0]).infeasible
+    assert lp.feasible_point(A, [-1, 0]) is None
+    x = lp.feasible_point(A, [1, 0])
+    assert 0 <= x[0] <= 1
+    # variables are free by default (scipy's default would be x >= 0)
+    assert lp.minimize([1], np.array([[-1.0]]), [5.0]).value == pytest.approx(-5.0)
+
+
+# ---------------------------------------------------------------------- Box
+
+@given(SEEDS)
+@settings(max_examples=30, deadline=None)
+def test_box_support_and_affine_hull(seed):
+    rng = np.random.default_rng(seed)
+    low = rng.uniform(-2, 0, 3)
+    box = Box(low, low + rng.uniform(0, 2, 3))
+    corners = box.corners()
+    d = rng.normal(size=3)
+    assert box.support(d) == pytest.approx(np.max(corners @ d))
+    M, t = rng.normal(size=(2, 3)), rng.normal(size=2)
+    hull = box.affine_map(M, t)
+    images = corners @ M.T + t
+    np.testing.assert_allclose(hull.low, images.min(axis=0), atol=1e-12)
+    np.testing.assert_allclose(hull.high, images.max(axis=0), atol=1e-12)
+
+
+# ---------------------------------------------------------------------- HPolytope
+
+@given(SEEDS)
+@settings(max_examples=30, deadline=None)
+def test_hpolytope_support_against_vertices(seed):
+    rng = np.random.default_rng(seed)
+    P = random_polygon(rng)
+    V = P.vertices_2d()
+    assert len(V) >= 3
+    for _ in range(4):
+        d = rng.normal(size=2)
+        assert P.support(d) == pytest.approx(np.max(V @ d), abs=1e-7)
+    box = P.bounding_box()
+    np.testing.assert_allclose(box.low, V.min(axis=0), atol=1e-7)
+    np.testing.assert_allclose(box.high, V.max(axis=0), atol=1e-7)
+    assert all(P.contains(v) for v in V)
+    assert not P.contains(V.max(axis=0) + 0.1)
+
+
+@given(SEEDS)
+@settings(max_examples=30, deadline=None)
+def test_hpolytope_intersection_emptiness_against_vertices(seed):
+    rng = np.random.default_rng(seed)
+    P, Q = random_polygon(rng), random_polygon(rng)
+    Q = HPolytope(Q.A, Q.b - Q.A @ rng.uniform(-4, 4, 2))       # shifted copy
+    both = P.intersection(Q)
+    assert both.is_empty() == (len(both.vertices_2d()) == 0)
+
+
+# ---------------------------------------------------------------------- Star
+
+def star_as_polygon(star: Star) -> HPolytope:
+    """A 2-D star with an invertible basis, rewritten in x: ``a = V^-1 (x - c)``."""
+    Vinv = np.linalg.inv(star.basis)
+    pred = star.predicate.intersection(star.box.to_hpolytope())
+    return HPolytope(pred.A @ Vinv, pred.b + pred.A @ Vinv @ star.center)
+
+
+def random_star(rng) -> Star:
+    basis = rng.normal(size=(2, 2)) + 2 * np.eye(2)
+    star = Star(rng.normal(size=2), basis, box=Box([-1, -1], [1, 1]))
+    return star.intersect_halfspaces(rng.normal(size=(1, 2)), [0.5])
+
+
+@given(SEEDS)
+@settings(max_examples=30, deadline=None)
+def test_star_intersection_against_vertex_enumeration(seed):
+    """Star predicates after exact intersections: LP support vs brute-force vertices."""
+    rng = np.random.default_rng(seed)
+    star = random_star(rng)
+    H = rng.normal(size=(2, 2))
+    g = H @ star.center + rng.uniform(-0.5, 1.0, 2)
+    cut = star.intersect_halfspaces(H, g)
+    V = star_as_polygon(star).intersect_halfspaces(H, g).vertices_2d()
+    assert cut.is_empty() == (len(V) == 0)
+    if len(V):
+        for _ in range(3):
+            d = rng.normal(size=2)
+            assert cut.support(d) == pytest.approx(np.max(V @ d), abs=1e-6)
+            assert cut.support_bounds(d)[0] >= np.max(V @ d) - 1e-9     # the cheap bound is an upper bound
+
+
+@given(SEEDS)
+@settings(max_examples=30, deadline=None)
+def test_star_affine_map_of_sampled_points(seed):
+    rng = np.random.default_rng(seed)
+    star = Star.from_box(Box(rng.uniform(-1, 0, 3), rng.uniform(0, 1, 3)))
+    M, t = rng.normal(size=(3, 3)), rng.normal(size=3)
+    image = star.affine_map(M, t)
+    for alpha in rng.uniform(-1, 1, (5, star.nvars)):
+        x = star.point(alpha)
+        assert image.contains(M @ x + t)
+        np.testing.assert_allclose(image.point(alpha), M @ x + t)
+    outside = star.box_bound().high + 1.0
+    assert not star.contains(outside)
+
+
+@given(SEEDS)
+@settings(max_examples=25, deadline=None)
+def test_depth_sign_matches_disjointness(seed):
+    rng = np.random.default_rng(seed)
+    star = random_star(rng)
+    H = rng.normal(size=(3, 2))
+    g = H @ rng.uniform(-3, 3, 2) + rng.uniform(0.1, 1.0, 3)
+    depth, alpha = star.depth(H, g)
+    meet = star_as_polygon(star).intersect_halfspaces(H, g).vertices_2d()
+    assert (depth >= -1e-7) == (len(meet) > 0)
+    if alpha is not None and depth >= 0:
+        assert np.all(H @ star.point(alpha) <= g + 1e-7)
+
+
+@given(SEEDS)
+@settings(max_examples=25, deadline=None)
+def test_chord_hull_contains_interpolants_and_is_the_convex_hull(seed):
+    rng = np.random.default_rng(seed)
+    start = random_star(rng)
+    M = rng.normal(size=(2, 2))
+    c1, V1 = M @ start.center + 1.0, M @ start.basis
+    error = rng.uniform(0, 0.3, 2)
+    seg = chord_hull(start, c1, V1, error)
+    alphas = []
+    while len(alphas) < 5:
+        a = rng.uniform(-1, 1, 2)
+        if start.predicate.contains(a):
+            alphas.append(a)
+    for a in alphas:
+        lam = rng.uniform()
+        e = rng.uniform(-1, 1, 2) * 4 * lam * (1 - lam) * error
+        x = (1 - lam) * start.point(a) + lam * (c1 + V1 @ a) + e
+        assert seg.contains(x)
+    # support equals the brute-force convex hull of both polygons, plus the mid-cell error
+    V0 = star_as_polygon(start).vertices_2d()
+    Vend = V0 @ M.T + 1.0
+    for _ in range(3):
+        d = rng.normal(size=2)
+        hull = max(np.max(V0 @ d), np.max(Vend @ d))
+        assert hull - 1e-6 <= seg.support(d) <= hull + np.abs(d) @ error + 1e-6
+    # the first coefficients of a hull point are the start's coefficients
+    res = seg.maximize(rng.normal(size=2))
+    assert start.predicate.contains(res.x[:2], tol=1e-6)

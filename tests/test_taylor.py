@@ -1,0 +1,160 @@
+"""The taylor back-end: DA flows against exact and numerical references, event maps against
+dense solve_ivp events, and the back-end's bounds against Monte Carlo runs of the simulator."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+import scipy.linalg
+import sympy
+from scipy.integrate import solve_ivp
+
+from reach.backends.taylor import BACKEND
+from reach.backends.taylor.da import DA, algebra
+from reach.backends.taylor.event import event_map, refine_time
+from reach.backends.taylor.flow import compile_expressions, compile_numeric, flow_map, nominal
+from reach.model.loader import load_model
+from reach.model.simulate import Simulator
+from reach.result import Status
+from reach.spec.properties import bind, load_properties
+
+
+@pytest.fixture(scope="module")
+def srna():
+    return load_model("models/SRNA01.yaml")
+
+
+def events(model):
+    return {p.id: bind(p, model) for p in load_properties("properties/rendezvous_events.yaml")}
+
+
+def rhs(model, mode):
+    f = compile_numeric(model.modes[mode].flow, model.symbols)
+    return lambda t, x: np.array(f(list(x)), dtype=float)
+
+
+def test_compiled_flow_matches_lambdify_and_sympy_derivatives(srna):
+    mode = srna.modes["approach"]
+    f = compile_expressions(mode.flow, srna.symbols)
+    point = np.array([-700.0, -300.0, 1.5, 0.7, 12.0])
+    reference = sympy.lambdify([srna.symbols], mode.flow)(point)
+    np.testing.assert_allclose([float(v) for v in f(list(point))], reference, rtol=1e-12)
+    alg = algebra(2, 5)
+    values = f(DA.variables(alg, point, np.ones(5)))
+    for i, expr in enumerate(mode.flow):
+        for j, s in enumerate(srna.symbols):
+            exact = float(sympy.diff(expr, s).subs(dict(zip(srna.symbols, point))))
+            assert values[i].c[1 + j] == pytest.approx(exact, rel=1e-10, abs=1e-14)
+
+
+def test_cwh_flow_is_the_exact_linear_map():
+    """Passive CWH: first-order coefficients are expm(A T), higher orders vanish."""
+    model = load_model("models/SRA01.yaml")
+    mode = model.modes["passive"]
+    A, b = mode.linear
+    f = compile_expressions(mode.flow, model.symbols)
+    x0 = np.array([-300.0, 200.0, 1.0, -0.5, 0.0])
+    T = 90.0
+    run = nominal(compile_numeric(mode.flow, model.symbols), x0, T)
+    x = flow_map(f, algebra(3, 4), x0, np.ones(5), [0, 1, 2, 3], run.nodes, T)
+    phi = scipy.linalg.expm(A * T)
+    C = np.stack([xi.c for xi in x])
+    np.testing.assert_allclose(C[:4, 1:5], phi[:4, :4], rtol=1e-8, atol=1e-9)
+    np.testing.assert_allclose(C[:, 0], phi @ x0 + [0, 0, 0, 0, T], rtol=1e-9, atol=1e-8)
+    assert np.abs(C[:, 5:]).max() < 1e-12
+
+
+def test_nonlinear_flow_matches_solve_ivp(srna):
+    mode = srna.modes["approach"]
+    f = compile_expressions(mode.flow, srna.symbols)
+    center = np.array([-900.0, -400.0, 0.0, 0.0, 0.0])
+    half = np.array([25.0, 25.0, 0.0, 0.0, 0.0])
+    T = 30.0
+    run = nominal(compile_numeric(mode.flow, srna.symbols), center, T)
+    x = flow_map(f, algebra(4, 2), center, half, [0, 1], run.nodes, T)
+    for xi in ([1.0, 1.0], [-1.0, 0.3], [0.5, -1.0]):
+        x0 = center + half * np.r_[xi, 0, 0, 0]
+        ref = solve_ivp(rhs(srna, "approach"), (0, T), x0, method="DOP853", rtol=1e-12, atol=1e-12).y[:, -1]
+        got = np.array([float(v(np.array([xi]))[0]) for v in x])
+        np.testing.assert_allclose(got, ref, rtol=1e-9, atol=1e-7)
+
+
+def test_event_time_and_map_match_a_dense_solve_ivp_event(srna):
+    """Peak of vx in approach: dvx/dt = 0, refined (eqs. 5-9) and mapped (eqs. 10-14)."""
+    mode = srna.modes["approach"]
+    f = compile_expressions(mode.flow, srna.symbols)
+    accel = compile_expressions([mode.flow[2]], srna.symbols)
+    event = lambda x: accel(x)[0]
+    center = np.array([-900.0, -400.0, 0.0, 0.0, 0.0])
+    half = np.array([25.0, 25.0, 0.0, 0.0, 0.0])
+    fun = rhs(srna, "approach")
+    stop = lambda t, x: fun(t, x)[2]
+    run = nominal(compile_numeric(mode.flow, srna.symbols), center, 20.0)
+    k = int(np.argmax(run.grid()[:, 2]))
+    t_e, x_e = refine_time(f, event, run.solution, run.nodes[k], 4)
+    ref = solve_ivp(fun, (0, 20), center, method="DOP853", rtol=1e-12, atol=1e-12, events=stop)
+    assert t_e == pytest.approx(ref.t_events[0][0], abs=1e-8)
+    np.testing.assert_allclose(x_e, ref.y_events[0][0], rtol=1e-10, atol=1e-7)
+    em = event_map(f, event, center, half, [0, 1], run.nodes, t_e, 4)
+    for xi in ([1.0, 1.0], [-1.0, 0.5], [0.3, -1.0]):
+        ref = solve_ivp(fun, (0, 20), center + half * np.r_[xi, 0, 0, 0], method="DOP853",
+                        rtol=1e-12, atol=1e-12, events=stop)
+        assert em.time(np.array([xi]))[0] == pytest.approx(ref.t_events[0][0], abs=1e-8)
+        got = np.array([float(v(np.array([xi]))[0]) for v in em.state])
+        np.testing.assert_allclose(got, ref.y_events[0][0], rtol=1e-9, atol=1e-7)
+
+
+def test_supports_names_what_it_cannot_do(srna):
+    props = {p.id: bind(p, srna) for p in load_properties("properties/rendezvous.yaml")}
+    assert "event properties" in BACKEND.supports(srna, props["thrust"])
+    ev = events(srna)["thrust_x_min"]
+    assert BACKEND.supports(srna, ev) is None
+    other = dataclasses.replace(ev, modes=["approach", "rendezvous"])
+    assert "initial mode" in BACKEND.supports(srna, other)
+    abort = load_model("models/SRA01.yaml")
+    assert "nondeterministic" in BACKEND.supports(abort, events(abort)["thrust_x_min"])
+
+
+def test_thrust_events_on_srna01_are_bounded_and_never_claimed_safe(srna):
+    result = BACKEND.check(srna, events(srna)["thrust_x_max"], {})
+    assert result.status is Status.UNKNOWN and result.details["remainder"] == "estimated"
+    lo, hi = result.bound
+    # the largest Fx is at t = 0 (exact: Fx = -K1 x0 over the initial box)
+    K = np.array([-28.82867767694, 0.1004799482599])
+    corners = [K @ [x, y] for x in (-925, -875) for y in (-425, -375)]
+    assert lo == pytest.approx(min(corners), rel=1e-9) and hi == pytest.approx(max(corners), rel=1e-9)
+    assert "met" in result.details["requirement"]
+
+
+def test_monte_carlo_events_lie_in_their_subdomain_bounds(srna):
+    """1000 simulated runs: the minimum of Fx over each run is inside its subdomain's bound,
+    with either remainder; the next-order bound is compared with the estimated one."""
+    model = dataclasses.replace(srna, horizon=15.0)
+    prop = events(model)["thrust_x_min"]
+    results = {r: BACKEND.check(model, prop, {"e_tol": 1e-12, "max_splits": 2, "remainder": r})
+               for r in ("estimated", "next-order")}
+    quantity = sympy.lambdify([model.symbols], prop.quantity["approach"])
+    rng = np.random.default_rng(7)
+    N = 1000
+    x0 = model.initial.low + rng.random((N, model.n)) * (model.initial.high - model.initial.low)
+    lowest = np.full(N, np.inf)
+
+    def observe(t, X, mode, rows):
+        np.minimum.at(lowest, rows, np.asarray(quantity(X.T)) * np.ones(len(rows)))
+
+    Simulator(model, dt=0.01).run(x0, observers=[observe])
+    slack = 0.05            # grid minimum vs true minimum: |Fx''| dt^2 / 8 is far below this
+    for remainder, result in results.items():
+        rows = result.details["subdomains"]
+        assert len(rows) == 4 and result.status is Status.UNKNOWN
+        counted = 0
+        for row in rows:
+            inside = np.all((x0[:, :2] >= row["low"]) & (x0[:, :2] <= row["high"]), axis=1)
+            counted += inside.sum()
+            lo, hi = row["bound"]
+            assert np.all(lowest[inside] >= lo) and np.all(lowest[inside] <= hi + slack), remainder
+        assert counted == N
+    for est, nxt in zip(results["estimated"].details["subdomains"],
+                        results["next-order"].details["subdomains"]):
+        for name, (lo, hi, R) in est["candidates"].items():
+            assert np.isfinite(nxt["candidates"][name][2])
