@@ -4,6 +4,7 @@
     reach replay COUNTEREXAMPLE.json
     reach plot MODEL [--runs N] [--out FILE.png]
     reach bench [--suite suite.yaml] [--backend B] [--instance I] [-j N] [--scheduler ADDR]
+    reach sweep MODEL PROPS [--radius R] [--cells N]
     reach compare OLD.json NEW.json
 
 Bad input prints one line ``file:line: field: message`` and exits with 2.
@@ -87,8 +88,10 @@ def summary(result) -> str:
         parts.append(f"closest margin {d['closest_depth']:.4g}")
     if "violation_probability_upper_95" in d:
         parts.append(f"P(violation) <= {d['violation_probability_upper_95']:.2g} (95 %)")
-    if "argument" in d:
-        parts.append(str(d["argument"])[:80])
+    if "method" in d:
+        parts.append(str(d["method"]))
+    if "remainder" in d:
+        parts.append(f"remainder {d['remainder']}")
     return ", ".join(parts)
 
 
@@ -145,6 +148,35 @@ def cmd_bench(args) -> int:
                      jobs=args.jobs, scheduler=args.scheduler, time_limit=args.time_limit)
 
 
+def cmd_sweep(args) -> int:
+    import time
+
+    from reach.backends.star import arc_cells, safe_abort_map
+    from reach.bench.executors import make_executor
+    from reach.bench.plots import plot_abort_map
+    from reach.model import load_model
+
+    model_path = find_model(args.model)
+    model = load_model(model_path)
+    windows = [tr.window for tr in model.transitions if tr.window is not None]
+    if not windows:
+        raise InputError(f"model '{model.name}' has no abort window to sweep", str(model_path))
+    window = (min(w[1] for w in windows), max(w[2] for w in windows))
+    cells = arc_cells(model, args.radius, args.cells, args.start, args.end)
+    start = time.perf_counter()
+    times = safe_abort_map(model_path, [args.properties], cells, args.property, {},
+                           make_executor(args.jobs, args.scheduler))
+    seconds = time.perf_counter() - start
+    out = Path(args.out or f"results/plots/{model.name}_abort_map.png")
+    plot_abort_map(cells, times, window, out, f"{model.name}: latest safe abort ({seconds:.1f} s)")
+    print(f"| angle [deg] | x [m] | y [m] | latest safe abort [{model.units.time}] |")
+    print("|---|---|---|---|")
+    for (low, high, angle), t in zip(cells, times):
+        print(f"| {angle:.1f} | [{low[0]:.0f}, {high[0]:.0f}] | [{low[1]:.0f}, {high[1]:.0f}] | {t:.2f} |")
+    print(f"{len(cells)} cells in {seconds:.1f} s; wrote {out}")
+    return 0
+
+
 def cmd_compare(args) -> int:
     from reach.bench.tables import compare_runs
 
@@ -185,6 +217,18 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--time-limit", type=float, default=900.0,
                    help="seconds per work unit before it is stopped (default 900)")
     p.set_defaults(func=cmd_bench)
+    p = sub.add_parser("sweep", help="safe-abort map: latest safe abort time per initial cell (star)")
+    p.add_argument("model")
+    p.add_argument("properties")
+    p.add_argument("--property", "-p", action="append", help="only this property (repeatable)")
+    p.add_argument("--radius", type=float, default=1000.0, help="initial arc radius (model units)")
+    p.add_argument("--cells", type=int, default=12)
+    p.add_argument("--start", type=float, default=180.0, help="arc start angle, degrees")
+    p.add_argument("--end", type=float, default=270.0, help="arc end angle, degrees")
+    p.add_argument("--jobs", "-j", type=int, default=None)
+    p.add_argument("--scheduler", help="Dask scheduler address")
+    p.add_argument("--out")
+    p.set_defaults(func=cmd_sweep)
     p = sub.add_parser("compare", help="what changed between two results.json files")
     p.add_argument("old")
     p.add_argument("new")

@@ -58,3 +58,16 @@ def test_cross_check_flags_disagreements():
     bound = cross_check([_row("taylor", "safe", bound=[0.0, 1.0]),
                          _row("montecarlo", "unknown", details={"sampled_range": [0.2, 1.3]})])
     assert bound[0]["level"] == "fail" and "excludes sampled" in bound[0]["message"]
+
+
+def test_sweep_writes_the_abort_map(tmp_path):
+    import subprocess
+    import sys
+    out = tmp_path / "map.png"
+    run = subprocess.run([sys.executable, "-m", "reach", "sweep", "SRA02", "properties/rendezvous.yaml",
+                          "-p", "collision", "--cells", "2", "-j", "1", "--out", str(out)],
+                         capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    rows = [line for line in run.stdout.splitlines() if line.startswith("| 2")]
+    assert len(rows) == 2 and all(row.endswith("| 125.00 |") for row in rows)   # window end: all safe
+    assert out.stat().st_size > 10_000

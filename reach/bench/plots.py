@@ -62,3 +62,30 @@ def plot_model_runs(model, out: Path, runs: int = 20, seed: int = 0) -> None:
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=110)
     plt.close(fig)
+
+
+def plot_abort_map(cells, times, window, out: Path, title: str) -> None:
+    """Fig. 5 of the rendezvous paper: initial cells coloured by the latest safe abort time."""
+    plt = _pyplot()
+    import matplotlib.colors as mcolors
+
+    lo, hi = window
+    norm = mcolors.Normalize(vmin=lo, vmax=hi)
+    cmap = plt.cm.viridis
+    fig, ax = plt.subplots(figsize=(6.5, 6))
+    for (low, high, _), t in zip(cells, times):
+        colour = "lightgrey" if not np.isfinite(t) else cmap(norm(t))
+        ax.add_patch(plt.Rectangle((low[0], low[1]), high[0] - low[0], high[1] - low[1],
+                                   facecolor=colour, edgecolor="k", lw=0.5))
+    ax.plot([0], [0], "r*", ms=12, label="target")
+    ax.autoscale_view()
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_title(title)
+    fig.colorbar(plt.cm.ScalarMappable(norm=norm, cmap=cmap), ax=ax, label="latest safe abort time")
+    ax.legend(loc="lower left")
+    fig.tight_layout()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
