@@ -49,6 +49,14 @@ class LPResult:
     def unbounded(self) -> bool:
         return self.status == UNBOUNDED
 
+    def support_value(self) -> float:
+        """The maximum read as a support function: ``-inf`` if infeasible, ``+inf`` if unbounded."""
+        if self.infeasible:
+            return -np.inf
+        if self.unbounded:
+            return np.inf
+        return self.value
+
 
 def _bounds(bounds, n: int):
     if bounds is None:

@@ -37,8 +37,3 @@ def run(backend: Backend, model, prop, options: dict | None = None) -> Result:
     result.seconds = time.perf_counter() - start
     return result
 
-
-def get_backend(name: str) -> Backend:
-    """The back-end called ``name``; raises KeyError listing the known ones."""
-    from reach.backends import registry
-    return registry()[name]

@@ -66,12 +66,7 @@ class HPolytope:
 
     def support(self, direction) -> float:
         """``h_P(d)``; ``-inf`` for an empty ``P``, ``+inf`` if unbounded along ``d``."""
-        res = self.maximize(direction)
-        if res.infeasible:
-            return -np.inf
-        if res.unbounded:
-            return np.inf
-        return res.value
+        return self.maximize(direction).support_value()
 
     def bounding_box(self) -> Box:
         """The interval hull ``[-h_P(-e_i), h_P(e_i)]`` (infinite where unbounded)."""

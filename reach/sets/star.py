@@ -111,12 +111,7 @@ class Star:
 
     def support(self, direction) -> float:
         """``h_S(w)``: ``-inf`` if ``S`` is empty, ``+inf`` if unbounded along ``w``."""
-        res = self.maximize(direction)
-        if res.infeasible:
-            return -np.inf
-        if res.unbounded:
-            return np.inf
-        return res.value
+        return self.maximize(direction).support_value()
 
     def bounding_box(self) -> Box:
         """Exact interval hull (``2 n`` LPs)."""
