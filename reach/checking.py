@@ -2,10 +2,8 @@
 
 from __future__ import annotations
 
-import time
-
 from reach.backends import registry
-from reach.backends.base import unsupported
+from reach.backends.base import run, unsupported
 from reach.errors import InputError
 from reach.model import load_model
 from reach.result import Result
@@ -48,8 +46,5 @@ def check_model(backend, model, bound: list, options: dict | None = None) -> lis
             results[id(prop)] = result
     else:
         for prop in todo:
-            start = time.perf_counter()
-            result = backend.check(model, prop, options or {})
-            result.seconds = time.perf_counter() - start
-            results[id(prop)] = result
+            results[id(prop)] = run(backend, model, prop, options)
     return [results[id(p)] for p in bound]
