@@ -11,7 +11,7 @@ from scipy.integrate import solve_ivp
 
 from reach.backends.taylor import BACKEND
 from reach.backends.taylor.da import DA, algebra
-from reach.backends.taylor.event import event_map, refine_time
+from reach.backends.taylor.event import event_map, initial_state, refine_time
 from reach.backends.taylor.flow import compile_expressions, compile_numeric, flow_map, nominal
 from reach.model.loader import load_model
 from reach.model.simulate import Simulator
@@ -95,7 +95,7 @@ def test_event_time_and_map_match_a_dense_solve_ivp_event(srna):
     ref = solve_ivp(fun, (0, 20), center, method="DOP853", rtol=1e-12, atol=1e-12, events=stop)
     assert t_e == pytest.approx(ref.t_events[0][0], abs=1e-8)
     np.testing.assert_allclose(x_e, ref.y_events[0][0], rtol=1e-10, atol=1e-7)
-    em = event_map(f, event, center, half, [0, 1], run.nodes, t_e, 4)
+    em = event_map(f, event, initial_state(algebra(4, 2), center, half, [0, 1]), run.nodes, t_e, 4)
     for xi in ([1.0, 1.0], [-1.0, 0.5], [0.3, -1.0]):
         ref = solve_ivp(fun, (0, 20), center + half * np.r_[xi, 0, 0, 0], method="DOP853",
                         rtol=1e-12, atol=1e-12, events=stop)
@@ -110,7 +110,8 @@ def test_supports_names_what_it_cannot_do(srna):
     ev = events(srna)["thrust_x_min"]
     assert BACKEND.supports(srna, ev) is None
     other = dataclasses.replace(ev, modes=["approach", "rendezvous"])
-    assert "initial mode" in BACKEND.supports(srna, other)
+    assert BACKEND.supports(srna, other) is None
+    assert "global clock" in BACKEND.supports(dataclasses.replace(srna, clocks=[]), other)
     abort = load_model("models/SRA01.yaml")
     assert "nondeterministic" in BACKEND.supports(abort, events(abort)["thrust_x_min"])
 

@@ -2,24 +2,25 @@
 (Evans & Armellin, "Sample-free safety assessment of neural network controllers via Taylor
 methods").
 
-For an event property (extremum of a quantity ``q`` over the run in the initial mode) the
-initial box is covered by ADS subdomains (:mod:`.ads`); on each, the candidates for the
-extremum are expanded as Taylor maps of the scaled initial deviations:
+For an event property (extremum of a quantity ``q`` over the run in some modes) the initial box is
+covered by ADS subdomains (:mod:`.ads`). On each, the run is followed from the initial mode
+through its urgent switches (:mod:`.problem`) and the candidates for the extremum — ``q`` on
+entering a mode, at every interior local extremum (the event ``dq/dt = 0``, :mod:`.event`,
+eqs. 5-14), and on leaving (guard crossing or horizon) — are expanded as Taylor maps of the scaled
+initial deviations. The ADS splitting criterion is the truncation estimate of these maps.
 
-* the run's start, ``q(x0)``;
-* every interior local extremum of ``q`` on the subdomain's nominal run, as the event
-  ``dq/dt = 0`` (:mod:`.event`, eqs. 5-14);
-* the end of the stretch: the crossing of the urgent guard face the nominal run leaves through
-  (an event ``g(x) = 0``), or the horizon (the transfer map, eq. 4).
+Bounds, by the ``remainder`` option:
 
-Each candidate is enclosed by eq. (27) plus a remainder (:mod:`.bound`); the extremum over the
-run lies between the extreme candidate bounds. Assumptions (listed in ``details``): perturbed
-runs have no other local extremum of ``q`` than the continuations of the nominal ones, and
-leave the stretch through the same guard face; the remainder is an estimate (``estimated``,
-eq. 28) or a next-order interval bound with a geometric tail (``next-order``). None of this is a
-proof, so the verdict is UNKNOWN with the bound; ``details["requirement"]`` says whether every
-subdomain's bound meets the requirement.
+* ``estimated`` (the paper's eq. 28) and ``next-order``: each candidate is enclosed by eq. (27)
+  plus an estimated remainder (:mod:`.bound`). They assume that perturbed runs have no other local
+  extremum than the continuations of the nominal ones and switch through the same guard face, and
+  that the remainder estimate holds: the verdict is UNKNOWN with the bound.
+* ``rigorous``: a verified enclosure of every run on the subdomain (:mod:`.verified`: Taylor-model
+  defect bound, logarithmic-norm Gronwall estimate), swept step by step for the extremum
+  (:meth:`.problem.EventProblem.sweep`). It needs none of those assumptions, so a bound meeting
+  the requirement on every subdomain is a proof: SAFE.
 """
+
 
 from __future__ import annotations
 
@@ -28,12 +29,14 @@ from dataclasses import dataclass, fields
 import numpy as np
 import sympy
 
-from reach.backends.taylor.ads import split_domain
-from reach.backends.taylor.bound import enclose, estimated_remainder, next_order_remainder, truncate
-from reach.backends.taylor.da import DA, algebra, stack
-from reach.backends.taylor.event import event_map, fixed_time_map, local_extrema, refine_time
-from reach.backends.taylor.flow import Unsmooth, compile_expressions, compile_numeric, nominal
-from reach.model.constraints import lambdify_margins
+from reach.backends.taylor.ads import Subdomain, split_domain, truncation_estimate
+from reach.backends.taylor.bound import enclose, estimated_remainder, next_order_remainder
+from reach.backends.taylor.da import stack
+from reach.backends.taylor.flow import Unsmooth
+from reach.backends.taylor.keys import picklable
+from reach.backends.taylor import units
+from reach.backends.taylor.problem import EventProblem, global_clock
+from reach.backends.taylor.units import expand_box, sweep_box
 from reach.result import Result, Status
 from reach.spec.properties import BoundEvent
 
@@ -43,8 +46,12 @@ class Options:
     order: int = 4                  # Taylor order n
     e_tol: float | None = None      # ADS tolerance on the event value; default 1e-4 (1 + |value|)
     max_splits: int = 6             # N_max: halvings on the way to one subdomain
-    remainder: str = "estimated"    # "estimated" (eq. 28) or "next-order"
+    remainder: str = "estimated"    # "estimated" (eq. 28), "next-order" or "rigorous"
     integration_tol: float = 1e-9   # step doubling tolerance on the nominal run
+    step_tol: float = 1e-4          # rigorous mode: largest step defect relative to the rates
+    refine: int = 0                 # extra halvings of subdomains whose bound straddles the requirement
+    jobs: int = 1                   # local worker processes for ADS boxes and sweeps
+    scheduler: object = None        # or a Dask scheduler address (or Client) to run them on
 
     @classmethod
     def from_dict(cls, options: dict | None) -> "Options":
@@ -54,77 +61,8 @@ class Options:
         if unknown:
             raise ValueError(f"unknown taylor option(s): {', '.join(sorted(unknown))}")
         out = cls(**options)
-        if out.remainder not in ("estimated", "next-order"):
-            raise ValueError("remainder must be 'estimated' or 'next-order'")
-        return out
-
-
-class EventProblem:
-    """One event property on the initial-mode stretch of a model, compiled for DA and floats."""
-
-    def __init__(self, model, prop: BoundEvent):
-        self.model, self.prop = model, prop
-        mode = model.modes[model.initial.mode]
-        symbols = model.symbols
-        quantity = sympy.sympify(prop.quantity[mode.name])
-        rate = sum(sympy.diff(quantity, s) * f for s, f in zip(symbols, mode.flow))
-        self.f = compile_expressions(mode.flow, symbols)
-        self.f_numeric = compile_numeric(mode.flow, symbols)
-        q_numeric = compile_numeric([quantity], symbols)
-        self.q_numeric = lambda x: q_numeric(x)[0]
-        q = compile_expressions([quantity], symbols)
-        qdot = compile_expressions([rate], symbols)
-        self.q = lambda x: q(x)[0]
-        self.qdot = lambda x: qdot(x)[0]
-        self.guards = []
-        for tr in model.outgoing(mode.name):
-            faces = [compile_expressions([c.g], symbols) for c in tr.guard]
-            self.guards.append((tr, lambdify_margins(tr.guard, symbols), faces))
-        self.low, self.high = model.initial.low, model.initial.high
-        self.uncertain = [i for i in range(model.n) if self.high[i] > self.low[i]]
-
-    def exit(self, grid: np.ndarray):
-        """First node index where an urgent guard holds, with the guard's margins and the face
-        left last, or None."""
-        best = None
-        for _, margins, faces in self.guards:
-            hits = np.flatnonzero(np.all(margins(grid) <= 0, axis=1))
-            if hits.size and hits[0] > 0 and (best is None or hits[0] < best[0]):
-                k = hits[0]
-                face = int(np.argmax(margins(grid[k - 1:k])[0]))
-                best = (k, margins, faces[face])
-        return best
-
-    def candidates(self, center: np.ndarray, half_width: np.ndarray, order: int, tol: float):
-        """Taylor maps (in the subdomain's scaled deviations) of the extremum candidates."""
-        m, T = len(self.uncertain), self.model.horizon
-        run = nominal(self.f_numeric, center, T, tol)
-        grid = run.grid()
-        alg = algebra(order, m)
-        x0 = [DA.var(alg, self.uncertain.index(i), c, half_width[i]) if i in self.uncertain
-              else DA.const(alg, c) for i, c in enumerate(center)]
-        out = {"start": self.q(x0)}
-        leave = self.exit(grid)
-        last = len(run.nodes) - 1 if leave is None else leave[0]
-        values = np.asarray(self.q_numeric(list(grid[: last + 1].T)))
-        sign = 1.0 if self.prop.sense == "max" else -1.0
-        for k in local_extrema(values, self.prop.sense):
-            t0 = run.sharpen(k, lambda X: sign * np.asarray(self.q_numeric(list(X))))
-            t_e, _ = refine_time(self.f, self.qdot, run.solution, t0, order)
-            em = event_map(self.f, self.qdot, center, half_width, self.uncertain, run.nodes, t_e, order)
-            out[f"extremum@{t_e:.6g}"] = self.q(em.state)
-        if leave is None:
-            em = fixed_time_map(self.f, center, half_width, self.uncertain, run.nodes, T, order)
-            out["horizon"] = self.q(em.state)
-        else:
-            _, margins, face = leave
-            # first dense sample inside the guard: maximise "inside" then earliness
-            t0 = run.sharpen(last, lambda X: np.where(np.all(margins(X.T) <= 0, axis=1),
-                                                      -np.arange(X.shape[1]), -np.inf))
-            crossing = lambda x: face(x)[0]
-            t_e, _ = refine_time(self.f, crossing, run.solution, t0, order)
-            em = event_map(self.f, crossing, center, half_width, self.uncertain, run.nodes, t_e, order)
-            out[f"exit@{t_e:.6g}"] = self.q(em.state)
+        if out.remainder not in ("estimated", "next-order", "rigorous"):
+            raise ValueError("remainder must be 'estimated', 'next-order' or 'rigorous'")
         return out
 
 
@@ -136,16 +74,12 @@ class TaylorBackend:
             return "taylor checks event properties (extremum of a quantity along the run) only"
         if model.disturbance is not None:
             return "stochastic models are not handled (the flow must be deterministic)"
-        initial = model.initial.mode
-        if prop.modes != [initial]:
-            return (f"only the stretch in the initial mode '{initial}' is mapped; the property "
-                    f"asks for modes {prop.modes} (events after a mode switch are not handled)")
-        for tr in model.outgoing(initial):
-            if not tr.urgent and tr.window is not None and tr.window[1] < model.horizon:
-                return (f"the may-transition '{tr.name}' leaves '{initial}' at a nondeterministic "
-                        "instant inside the horizon")
-            if not tr.urgent and tr.window is None:
-                return f"may-transition '{tr.name}' without a clock window"
+        for tr in model.transitions:
+            if not tr.urgent and (tr.window is None or tr.window[1] < model.horizon):
+                return (f"the may-transition '{tr.name}' switches at a nondeterministic instant inside "
+                        "the horizon (only urgent switches are followed)")
+        if prop.modes != [model.initial.mode] and global_clock(model) is None:
+            return "events after a mode switch need a global clock state (rate 1, starting at 0)"
         try:
             EventProblem(model, prop)
         except Unsmooth as err:
@@ -154,63 +88,143 @@ class TaylorBackend:
 
     def check(self, model, prop, options=None) -> Result:
         opts = Options.from_dict(options)
-        problem = EventProblem(model, prop)
+        problem = units.problem(model, prop)
         e_tol = opts.e_tol if opts.e_tol is not None else 1e-4 * (1.0 + abs(prop.value))
         u = problem.uncertain
+        rigorous = opts.remainder == "rigorous"
         expand_order = opts.order + (1 if opts.remainder == "next-order" else 0)
 
-        def expand(center_u, half_u):
+        def full_box(center_u, half_u):
             center = problem.low + 0.5 * (problem.high - problem.low)
             half = np.zeros(model.n)
             center[u], half[u] = center_u, half_u
-            maps = problem.candidates(center, half, expand_order, opts.integration_tol)
-            return {name: truncate(p, opts.order) if expand_order > opts.order else p
-                    for name, p in maps.items()}, maps
+            return center, half
 
-        subdomains = split_domain(expand, problem.low[u], problem.high[u], e_tol, opts.max_splits,
-                                  measure=lambda result: stack(list(result[0].values())))
+        run_units = _unit_runner(opts, picklable(model, prop))
+
+        def expand_level(boxes):
+            return run_units(expand_box, [(model, prop, opts.order, expand_order, opts.integration_tol,
+                                           *full_box(c, h)) for c, h in boxes])
+
+        subdomains = split_domain(None, problem.low[u], problem.high[u], e_tol, opts.max_splits,
+                                  measure=lambda result: stack(list(result[0].values())),
+                                  map_boxes=expand_level)
         pick = max if prop.sense == "max" else min
-        rows, volume = [], np.prod(problem.high[u] - problem.low[u])
+
+        def evaluate(subs) -> list[dict]:
+            """A row per subdomain: candidate bounds, the estimated bound and (rigorous) the sweep."""
+            sweeps = run_units(sweep_box, [(model, prop, opts.order, opts.step_tol, opts.integration_tol,
+                                            *full_box(sub.center, sub.half_width)) for sub in subs]) \
+                if rigorous else [None] * len(subs)
+            out = []
+            for sub, sweep in zip(subs, sweeps):
+                polys, full = sub.poly
+                bounds = {}
+                for name, p in polys.items():
+                    R = (next_order_remainder(full[name]) if opts.remainder == "next-order"
+                         else estimated_remainder(p))
+                    lo, hi = enclose(p, R)
+                    bounds[name] = (float(lo), float(hi), float(R))
+                estimated = (pick(b[0] for b in bounds.values()), pick(b[1] for b in bounds.values()))
+                row = {"low": sub.low, "high": sub.high, "splits": sub.splits,
+                       "truncation_estimate": sub.error, "converged": sub.converged, "candidates": bounds,
+                       "bound": sweep["bound"] if rigorous else estimated}
+                if rigorous:
+                    row["estimated_bound"], row["verified"] = estimated, sweep
+                out.append(row)
+            return out
+
+        def decided(row) -> bool:
+            lo, hi = row["bound"]
+            return (hi <= prop.value or lo > prop.value) if prop.op == "<=" else (lo >= prop.value or hi < prop.value)
+
+        rows = evaluate(subdomains)
+        for _ in range(opts.refine):          # splitting on the bound: halve the undecided subdomains
+            open_rows = [r for r in rows if not decided(r)]
+            if not open_rows:
+                break
+            halves = []
+            for r in open_rows:
+                width = (r["high"] - r["low"]) / (problem.high[u] - problem.low[u])
+                k = int(np.argmax(width))
+                mid = 0.5 * (r["low"][k] + r["high"][k])
+                left_hi, right_lo = r["high"].copy(), r["low"].copy()
+                left_hi[k], right_lo[k] = mid, mid
+                halves += [(r["low"], left_hi, r["splits"] + 1), (right_lo, r["high"], r["splits"] + 1)]
+            results = expand_level([(0.5 * (lo + hi), 0.5 * (hi - lo)) for lo, hi, _ in halves])
+            children = []
+            for (lo, hi, depth), result in zip(halves, results):
+                error, _ = truncation_estimate(stack(list(result[0].values())))
+                children.append(Subdomain(lo, hi, result, error, depth, error <= e_tol))
+            rows = [r for r in rows if decided(r)] + evaluate(children)
+        rows.sort(key=lambda r: tuple(r["low"]))
+        volume = np.prod(problem.high[u] - problem.low[u])
         meets = violates = 0.0
-        for sub in subdomains:
-            polys, full = sub.poly
-            bounds = {}
-            for name, p in polys.items():
-                R = (estimated_remainder(p) if opts.remainder == "estimated"
-                     else next_order_remainder(full[name]))
-                lo, hi = enclose(p, R)
-                bounds[name] = (float(lo), float(hi), float(R))
-            lo = pick(b[0] for b in bounds.values())
-            hi = pick(b[1] for b in bounds.values())
-            share = np.prod(sub.high - sub.low) / volume
-            ok = hi <= prop.value if prop.op == "<=" else lo >= prop.value
-            bad = lo > prop.value if prop.op == "<=" else hi < prop.value
-            meets += share * ok
-            violates += share * bad
-            rows.append({"low": sub.low, "high": sub.high, "bound": (lo, hi), "splits": sub.splits,
-                         "truncation_estimate": sub.error, "converged": sub.converged,
-                         "candidates": bounds})
+        for row in rows:
+            lo, hi = row["bound"]
+            share = np.prod(row["high"] - row["low"]) / volume
+            meets += share * (hi <= prop.value if prop.op == "<=" else lo >= prop.value)
+            violates += share * (lo > prop.value if prop.op == "<=" else hi < prop.value)
         lo, hi = min(r["bound"][0] for r in rows), max(r["bound"][1] for r in rows)
         verdict = "met" if meets >= 1 - 1e-12 else "violated" if violates >= 1 - 1e-12 else "undecided"
         details = {
-            "remainder": "estimated" if opts.remainder == "estimated" else "next-order (not rigorous)",
+            "remainder": {"estimated": "estimated", "next-order": "next-order (not rigorous)",
+                          "rigorous": "rigorous (verified enclosure)"}[opts.remainder],
             "requirement": f"{prop.sense} {prop.op} {prop.value:g}: bound {verdict}",
+            "sense": prop.sense, "op": prop.op, "value": prop.value,
             "share_meeting_requirement": meets, "share_violating_requirement": violates,
             "variables": [model.state[i] for i in u], "order": opts.order, "e_tol": e_tol,
-            "max_splits": opts.max_splits, "subdomain_count": len(rows), "subdomains": rows,
+            "max_splits": opts.max_splits, "refine": opts.refine, "subdomain_count": len(rows), "subdomains": rows,
             "integrator": f"fixed-step DOP853 tableau, steps doubled to {opts.integration_tol:g}",
-            "assumptions": [
+        }
+        if rigorous:
+            details["argument"] = (
+                "on every subdomain the runs lie in a verified enclosure of the flow (Taylor-model "
+                "defect bound and a logarithmic-norm Gronwall estimate, reach.backends.taylor.verified) "
+                "and the extremum over the mode's stretch lies in the Taylor-model bound of the quantity "
+                "over all its steps, up to the step where every run is inside the urgent guard")
+            details["assumptions"] = [
+                "floating-point rounding is covered by a relative allowance of 1e-12, not by directed rounding",
+                "the initial set lies in the mode's invariant (runs are not blocked at t = 0)",
+            ]
+            details["max_error_radius"] = max(r["verified"]["error"] for r in rows)
+            status = Status.SAFE if verdict == "met" else Status.UNKNOWN
+            coverage = meets
+        else:
+            details["assumptions"] = [
                 "the truncation remainder is " + ("extrapolated from the coefficient decay (eq. 28)"
                                                   if opts.remainder == "estimated" else
                                                   "the next-order terms plus a geometric tail"),
                 "perturbed runs have no local extremum besides the continuations of the nominal ones",
                 "perturbed runs leave the initial mode through the nominal run's guard face",
                 "the integration error of the flow is negligible",
-            ],
-            "why_not_safe": "the remainder is not enclosed by a verified integration",
-        }
-        return Result(self.name, model.name, prop.id, Status.UNKNOWN, bound=(lo, hi), coverage=0.0,
+            ]
+            details["why_not_safe"] = "the remainder is estimated; remainder: rigorous proves bounds"
+            status, coverage = Status.UNKNOWN, 0.0
+        return Result(self.name, model.name, prop.id, status, bound=(lo, hi), coverage=coverage,
                       details=details)
+
+
+def _unit_runner(opts: Options, portable: bool):
+    """``run(fn, arg_list) -> results in order``: in this process, or through an executor (when
+    the model can be sent to worker processes)."""
+    if (opts.jobs <= 1 and opts.scheduler is None) or not portable:
+        return lambda fn, arg_list: [fn(*args) for args in arg_list]
+    from reach.bench.executors import make_executor
+
+    executor = make_executor(opts.jobs, opts.scheduler)
+
+    def run(fn, arg_list):
+        if len(arg_list) == 1:
+            return [fn(*arg_list[0])]
+        out = [None] * len(arg_list)
+        for i, (status, value) in executor.map_unordered(fn, arg_list):
+            if status != "ok":
+                raise RuntimeError(f"a taylor work unit did not finish ({status})")
+            out[i] = value
+        return out
+
+    return run
 
 
 BACKEND = TaylorBackend()

@@ -68,25 +68,31 @@ class Subdomain:
         return 0.5 * (self.high - self.low)
 
 
-def split_domain(expand, low, high, e_tol: float, max_splits: int, measure=None) -> list[Subdomain]:
-    """Adaptive subdomains of the box ``[low, high]``.
+def split_domain(expand, low, high, e_tol: float, max_splits: int, measure=None,
+                 map_boxes=None) -> list[Subdomain]:
+    """Adaptive subdomains of the box ``[low, high]``, level by level.
 
     ``expand(center, half_width)`` returns an object whose ``measure`` (default: itself) is a
-    DA in the scaled deviations of the box's variables.
+    DA in the scaled deviations of the box's variables. ``map_boxes(list of (center,
+    half_width))`` expands a whole level at once (default: one after the other), so a level's
+    boxes can run on an executor's workers.
     """
     measure = measure or (lambda result: result)
-    todo = [(np.asarray(low, dtype=float), np.asarray(high, dtype=float), 0)]
+    map_boxes = map_boxes or (lambda boxes: [expand(c, h) for c, h in boxes])
+    frontier = [(np.asarray(low, dtype=float), np.asarray(high, dtype=float), 0)]
     done = []
-    while todo:
-        lo, hi, depth = todo.pop()
-        result = expand(0.5 * (lo + hi), 0.5 * (hi - lo))
-        error, var = truncation_estimate(measure(result))
-        if error > e_tol and depth < max_splits:
-            mid = 0.5 * (lo[var] + hi[var])
-            left_hi, right_lo = hi.copy(), lo.copy()
-            left_hi[var], right_lo[var] = mid, mid
-            todo.append((right_lo, hi, depth + 1))
-            todo.append((lo, left_hi, depth + 1))
-        else:
-            done.append(Subdomain(lo, hi, result, error, depth, error <= e_tol))
+    while frontier:
+        results = map_boxes([(0.5 * (lo + hi), 0.5 * (hi - lo)) for lo, hi, _ in frontier])
+        deeper = []
+        for (lo, hi, depth), result in zip(frontier, results):
+            error, var = truncation_estimate(measure(result))
+            if error > e_tol and depth < max_splits:
+                mid = 0.5 * (lo[var] + hi[var])
+                left_hi, right_lo = hi.copy(), lo.copy()
+                left_hi[var], right_lo[var] = mid, mid
+                deeper += [(lo, left_hi, depth + 1), (right_lo, hi, depth + 1)]
+            else:
+                done.append(Subdomain(lo, hi, result, error, depth, error <= e_tol))
+        frontier = deeper
+    done.sort(key=lambda sub: tuple(sub.low))
     return done

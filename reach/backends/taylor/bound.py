@@ -22,6 +22,8 @@ bounds therefore never claim SAFE.
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 from reach.backends.taylor.ads import NEGLIGIBLE, extrapolate
@@ -30,15 +32,24 @@ from reach.backends.taylor.da import DA, algebra
 
 def polynomial_range(poly: DA) -> tuple[np.ndarray, np.ndarray]:
     """Enclosure ``I_P`` of eq. (27) over ``xi in [-1, 1]^d`` (componentwise for a batch)."""
-    alg = poly.alg
-    even = np.all(alg.exps % 2 == 0, axis=1)
-    even[0] = False
+    even, odd = _parity(poly.alg.order, poly.alg.nvars)
     c = poly.c
     const = c[..., 0]
-    odd_part = np.abs(c[..., ~even]).sum(axis=-1) - np.abs(const)
+    odd_part = np.abs(c[..., odd]).sum(axis=-1)
     lo = const - odd_part + np.minimum(c[..., even], 0.0).sum(axis=-1)
     hi = const + odd_part + np.maximum(c[..., even], 0.0).sum(axis=-1)
     return lo, hi
+
+
+@lru_cache(maxsize=None)
+def _parity(order: int, nvars: int) -> tuple[np.ndarray, np.ndarray]:
+    """Indices of the non-constant monomials with every exponent even, and of the others."""
+    exps = algebra(order, nvars).exps
+    even = np.all(exps % 2 == 0, axis=1)
+    even[0] = False
+    odd = ~even
+    odd[0] = False
+    return np.flatnonzero(even), np.flatnonzero(odd)
 
 
 def estimated_remainder(poly: DA) -> np.ndarray:

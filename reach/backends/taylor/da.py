@@ -81,6 +81,13 @@ class DA:
         c[..., 0] = value
         return cls(alg, c)
 
+    def __reduce__(self):
+        """Pickled as order, variables and coefficients (the tables are rebuilt once per process)."""
+        return _rebuild, (self.alg.order, self.alg.nvars, self.c)
+
+    def const_like(self, value) -> "DA":
+        return DA.const(self.alg, value)
+
     @classmethod
     def var(cls, alg: Algebra, i: int, center: float = 0.0, scale: float = 1.0) -> "DA":
         """``center + scale * xi_i`` (eq. 3: the initial value plus its deviation)."""
@@ -105,6 +112,37 @@ class DA:
     @property
     def shape(self):
         return self.c.shape[:-1]
+
+    def embed(self, target: Algebra) -> "DA":
+        """The same series in an algebra with more variables (the new ones last), same order."""
+        index = _embedding(self.alg.order, self.alg.nvars, target.order, target.nvars)
+        c = np.zeros(self.shape + (target.size,))
+        c[..., index] = self.c
+        return DA(target, c)
+
+    # ------------------------------------------------------------ vectors (network layers)
+    @staticmethod
+    def stack(items: list["DA"]) -> "DA":
+        """A vector of scalar DAs as one batch DA of shape ``(len(items),)``."""
+        return stack(items)
+
+    def affine(self, W: np.ndarray, b: np.ndarray | None = None) -> "DA":
+        """``W a + b`` for a vector DA ``a`` (shape ``(m,)``): one matrix product on the coefficients."""
+        c = np.asarray(W, dtype=float) @ self.c
+        if b is not None:
+            c[..., 0] += np.asarray(b, dtype=float)
+        return DA(self.alg, c)
+
+    @staticmethod
+    def weighted_sum(weights: np.ndarray, items: list) -> "DA":
+        """``sum_k w_k a_k`` for scalar DAs and floats (one product on the stacked coefficients)."""
+        alg = next(v.alg for v in items if isinstance(v, DA))
+        rows = np.stack([v.c if isinstance(v, DA) else DA.const(alg, v).c for v in items])
+        return DA(alg, np.tensordot(weights, rows, axes=1))
+
+    def unstack(self) -> list["DA"]:
+        """The scalar DAs of a vector DA."""
+        return [DA(self.alg, row) for row in self.c]
 
     # ------------------------------------------------------------ arithmetic
     def __add__(self, other):
@@ -195,25 +233,17 @@ class DA:
     # ------------------------------------------------------------ calculus
     def integrate(self, i: int, scale: float = 1.0) -> "DA":
         """Antiderivative in ``xi_i`` vanishing at ``xi_i = 0`` (times ``scale``), truncated."""
-        alg = self.alg
+        source, target, factor = _integration_table(self.alg.order, self.alg.nvars, i)
         c = np.zeros_like(self.c)
-        for k in range(alg.size):
-            if alg.degree[k] < alg.order:
-                e = alg.exps[k].copy()
-                e[i] += 1
-                c[..., alg.index[tuple(e)]] += self.c[..., k] * scale / e[i]
-        return DA(alg, c)
+        c[..., target] = self.c[..., source] * (factor * scale)
+        return DA(self.alg, c)
 
     def derivative(self, i: int) -> "DA":
-        alg = self.alg
+        """Partial derivative in ``xi_i``."""
+        source, target, factor = _derivative_table(self.alg.order, self.alg.nvars, i)
         c = np.zeros_like(self.c)
-        for k in range(alg.size):
-            e = alg.exps[k]
-            if e[i] > 0:
-                f = e.copy()
-                f[i] -= 1
-                c[..., alg.index[tuple(f)]] += e[i] * self.c[..., k]
-        return DA(alg, c)
+        c[..., target] = self.c[..., source] * factor
+        return DA(self.alg, c)
 
     # ------------------------------------------------------------ evaluation
     def monomials(self, args):
@@ -259,6 +289,10 @@ class DA:
         return f"DA(order={self.alg.order}, nvars={self.alg.nvars}, shape={self.shape}, cons={self.cons})"
 
 
+def _rebuild(order: int, nvars: int, c: np.ndarray) -> DA:
+    return DA(algebra(order, nvars), c)
+
+
 def _binomial(p: float, k: int) -> float:
     out = 1.0
     for j in range(k):
@@ -268,6 +302,35 @@ def _binomial(p: float, k: int) -> float:
 
 def _sin_derivative(a0, k: int):
     return (np.sin(a0), np.cos(a0), -np.sin(a0), -np.cos(a0))[k % 4]
+
+
+@lru_cache(maxsize=None)
+def _embedding(order: int, nvars: int, target_order: int, target_nvars: int) -> np.ndarray:
+    small, big = algebra(order, nvars), algebra(target_order, target_nvars)
+    pad = np.zeros((small.size, target_nvars - nvars), dtype=int)
+    return np.array([big.index[tuple(e)] for e in np.hstack([small.exps, pad])], dtype=int)
+
+
+@lru_cache(maxsize=None)
+def _integration_table(order: int, nvars: int, i: int):
+    """Monomials ``beta`` of degree ``< n``, the index of ``beta + e_i`` and ``1/(beta_i + 1)``."""
+    alg = algebra(order, nvars)
+    source = np.flatnonzero(alg.degree < order)
+    raised = alg.exps[source].copy()
+    raised[:, i] += 1
+    target = np.array([alg.index[tuple(e)] for e in raised], dtype=int)
+    return source, target, 1.0 / raised[:, i]
+
+
+@lru_cache(maxsize=None)
+def _derivative_table(order: int, nvars: int, i: int):
+    """Monomials ``beta`` with ``beta_i > 0``, the index of ``beta - e_i`` and ``beta_i``."""
+    alg = algebra(order, nvars)
+    source = np.flatnonzero(alg.exps[:, i] > 0)
+    lowered = alg.exps[source].copy()
+    lowered[:, i] -= 1
+    target = np.array([alg.index[tuple(e)] for e in lowered], dtype=int)
+    return source, target, alg.exps[source, i].astype(float)
 
 
 def stack(items: list[DA]) -> DA:

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from reach.backends.taylor.da import DA, algebra, invert
-from reach.backends.taylor.flow import flow_map
+from reach.backends.taylor.flow import propagate
 
 
 @dataclass
@@ -65,15 +65,22 @@ def refine_time(f, event, state_at, t_e: float, order: int, passes: int = 8):
     return t_e, np.asarray(state_at(t_e), dtype=float)
 
 
-def event_map(f, event, center, half_width, uncertain: list[int], nodes: np.ndarray, t_e: float,
-              order: int) -> EventMap:
+def initial_state(alg, center, half_width, uncertain: list[int]) -> list[DA]:
+    """``x0_i = center_i + half_width_i xi_j`` for the ``j``-th uncertain state ``i`` (eq. 3)."""
+    return [DA.var(alg, uncertain.index(i), c, half_width[i]) if i in uncertain else DA.const(alg, c)
+            for i, c in enumerate(center)]
+
+
+def event_map(f, event, x0: list[DA], nodes: np.ndarray, t_e: float, order: int) -> EventMap:
     """The map of eq. (14) from ``xi`` to the event, around the refined nominal time ``t_e``.
 
-    ``nodes``: RK step nodes of the nominal run; ``event(x) -> DA`` is ``E``.
+    ``x0``: the state at ``nodes[0]`` as DAs in the ``m`` scaled deviations (the initial box, or
+    the state entering a mode); ``nodes``: RK step nodes of the nominal run from there;
+    ``event(x) -> DA`` is ``E``. Times are counted from ``nodes[0]``.
     """
-    m = len(uncertain)
+    m = x0[0].alg.nvars
     alg = algebra(order, m + 1)
-    x_e = flow_map(f, alg, center, half_width, uncertain, nodes, t_e)
+    x_e = propagate(f, [x.embed(alg) for x in x0], nodes, t_e)
     x = picard(f, x_e, m, order)                                   # eq. (11)
     E = event(x)                                                   # eq. (12)
     identity = [DA.var(alg, j) for j in range(m)]
@@ -85,12 +92,10 @@ def event_map(f, event, center, half_width, uncertain: list[int], nodes: np.ndar
     return EventMap(dt + t_e, state)
 
 
-def fixed_time_map(f, center, half_width, uncertain: list[int], nodes: np.ndarray, T: float,
-                   order: int) -> EventMap:
+def fixed_time_map(f, x0: list[DA], nodes: np.ndarray, T: float) -> EventMap:
     """The transfer map of eq. (4) at a fixed time ``T`` (an event that does not move)."""
-    alg = algebra(order, len(uncertain))
-    x = flow_map(f, alg, center, half_width, uncertain, nodes, T)
-    return EventMap(DA.const(alg, T), x)
+    x = propagate(f, list(x0), nodes, T)
+    return EventMap(DA.const(x0[0].alg, T), x)
 
 
 def local_extrema(values: np.ndarray, sense: str) -> list[int]:

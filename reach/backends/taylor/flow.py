@@ -32,7 +32,9 @@ class Unsmooth(ValueError):
 
 
 def compile_expressions(exprs: list[sympy.Expr], symbols: list[sympy.Symbol]):
-    """``f(values) -> list`` evaluating ``exprs`` at ``values`` (floats, arrays or DAs).
+    """``f(values) -> list`` evaluating ``exprs`` at ``values``: floats, arrays, DAs, Taylor models
+    or interval jets (anything with the arithmetic operators, ``sin``/``cos``/``exp``/``log``/``sqrt``
+    methods and ``const_like``).
 
     Common subexpressions are shared (``sympy.cse``); the tree is walked once here and turned
     into nested closures, so no text is evaluated.
@@ -50,9 +52,9 @@ def compile_expressions(exprs: list[sympy.Expr], symbols: list[sympy.Symbol]):
         for step in steps:
             env.append(step(env))
         outs = [out(env) for out in outputs]
-        da = next((v for v in env if isinstance(v, DA)), None)
-        if da is not None:      # constant rates (a clock's 1) become constant DAs
-            outs = [o if isinstance(o, DA) else DA.const(da.alg, o) for o in outs]
+        series = next((v for v in env if hasattr(v, "const_like")), None)
+        if series is not None:      # constant rates (a clock's 1) become constant series
+            outs = [o if hasattr(o, "const_like") else series.const_like(o) for o in outs]
         return outs
 
     return f
@@ -90,10 +92,13 @@ def _build(e, index, temps):
         if p == 0.5:
             return lambda env: _sqrt(base(env))
         return lambda env: base(env) ** p
+    if hasattr(e.func, "_imp_"):     # a function implemented in Python, e.g. a network output
+        impl, args = e.func._imp_, [_build(a, index, temps) for a in e.args]
+        return lambda env: impl(*[a(env) for a in args])
     if e.func in _UNARY:
         name, fn = _UNARY[e.func]
         arg = _build(e.args[0], index, temps)
-        return lambda env: (getattr(a, name)() if isinstance(a := arg(env), DA) else fn(a))
+        return lambda env: (getattr(a, name)() if hasattr(a := arg(env), name) else fn(a))
     raise Unsmooth(f"cannot expand '{e.func.__name__}' in a Taylor series ({e})")
 
 
@@ -111,11 +116,10 @@ def _build_sum(e, index, temps):
 
     def linear(env):
         items = [env[k] for k in slots]
-        if any(isinstance(v, DA) for v in items):
-            alg = next(v.alg for v in items if isinstance(v, DA))
-            rows = np.stack([v.c if isinstance(v, DA) else DA.const(alg, v).c for v in items])
-            return DA(alg, np.tensordot(w, rows, axes=1))
-        return _sum(wk * v for wk, v in zip(w, items))
+        series = next((v for v in items if hasattr(v, "weighted_sum")), None)
+        if series is not None:
+            return type(series).weighted_sum(w, items)
+        return _sum(float(wk) * v for wk, v in zip(w, items))
 
     if not slots:
         return lambda env: _sum(p(env) for p in rest)
@@ -141,15 +145,15 @@ def _product(items):
 
 
 def _sqrt(a):
-    return a.sqrt() if isinstance(a, DA) else np.sqrt(a)
+    return a.sqrt() if hasattr(a, "sqrt") else np.sqrt(a)
 
 
 def _log(a):
-    return a.log() if isinstance(a, DA) else np.log(a)
+    return a.log() if hasattr(a, "log") else np.log(a)
 
 
 def _exp(a):
-    return a.exp() if isinstance(a, DA) else np.exp(a)
+    return a.exp() if hasattr(a, "exp") else np.exp(a)
 
 
 def _tableau():

@@ -1,0 +1,280 @@
+"""An event property on a chain of modes: the estimated candidate maps and the verified sweep.
+
+The run is followed from the initial mode through its urgent switches (the chain the nominal run
+takes). In each mode the property lists, the extremum of ``q`` over the run is one of:
+
+* ``q`` on entering the mode (the start, or the state an urgent switch lands in);
+* an interior local extremum of ``q`` on the nominal run, as the event ``dq/dt = 0`` (eqs. 5-14);
+* ``q`` on leaving the mode: the crossing of the urgent guard face (an event ``g(x) = 0``), or the
+  horizon (the transfer map, eq. 4, in the initial mode; the event ``t = T`` on the global clock
+  after a switch, since runs enter later modes at different times).
+
+The state after a switch is the crossing map (reset applied), so the next mode's maps are maps of
+the same initial deviations. :meth:`EventProblem.sweep` is the rigorous counterpart
+(:mod:`.verified`).
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+from dataclasses import dataclass
+
+import numpy as np
+import sympy
+
+from reach.backends.taylor.da import DA, algebra
+from reach.backends.taylor.event import event_map, fixed_time_map, initial_state, local_extrema, refine_time
+from reach.backends.taylor.flow import compile_expressions, compile_numeric, nominal
+from reach.backends.taylor.interval import Jet
+from reach.backends.taylor.keys import fingerprint
+from reach.backends.taylor.tm import TM
+from reach.backends.taylor.verified import at_sigma, enclose_stretch
+from reach.model.constraints import affine_coefficients, lambdify_margins
+from reach.spec.properties import BoundEvent
+
+MAX_SWITCHES = 8
+KEEP_ENCLOSURES = 8
+_ENCLOSURES: OrderedDict = OrderedDict()
+
+
+@dataclass
+class Exit:
+    transition: object
+    margins: object          # numpy margins of the guard, (N, n) -> (N, k)
+    faces: list              # compiled g_j for DA / Taylor models
+    reset: object | None     # compiled reset (all states) or None
+
+
+class ModeCode:
+    """A mode's flow, its urgent exits and (when the property lists the mode) ``q`` and ``dq/dt``,
+    compiled once for floats, DAs, Taylor models and interval jets."""
+
+    def __init__(self, model, name: str, quantity):
+        mode, symbols = model.modes[name], model.symbols
+        self.name = name
+        self.f = compile_expressions(mode.flow, symbols)
+        self.f_numeric = compile_numeric(mode.flow, symbols)
+        self.exits = []
+        for tr in model.outgoing(name):
+            if not tr.urgent:
+                continue
+            reset = None
+            if tr.reset:
+                reset = compile_expressions([tr.reset.get(i, s) for i, s in enumerate(symbols)], symbols)
+            faces = [_first(compile_expressions([c.g], symbols)) for c in tr.guard]
+            self.exits.append(Exit(tr, lambdify_margins(tr.guard, symbols), faces, reset))
+        self.q = self.qdot = self.q_numeric = None
+        if quantity is not None:
+            quantity = sympy.sympify(quantity)
+            rate = sum(sympy.diff(quantity, s) * f for s, f in zip(symbols, mode.flow))
+            self.q = _first(compile_expressions([quantity], symbols))
+            self.qdot = _first(compile_expressions([rate], symbols))
+            self.q_numeric = _first(compile_numeric([quantity], symbols))
+
+    def exit(self, grid: np.ndarray):
+        """First node index where an urgent guard holds, with the exit and the face left last."""
+        best = None
+        for ex in self.exits:
+            hits = np.flatnonzero(np.all(ex.margins(grid) <= 0, axis=1))
+            if hits.size and hits[0] > 0 and (best is None or hits[0] < best[0]):
+                k = hits[0]
+                face = int(np.argmax(ex.margins(grid[k - 1:k])[0]))
+                best = (k, ex, ex.faces[face])
+        return best
+
+    def inside(self, X, certainly: bool) -> Exit | None:
+        """An exit whose guard holds for the Taylor models ``X``: for every deviation
+        (``certainly``) or possibly for some."""
+        for ex in self.exits:
+            bounds = [face(X).bound() for face in ex.faces]
+            if all((hi if certainly else lo) <= 0 for lo, hi in bounds):
+                return ex
+        return None
+
+
+def _first(fn):
+    return lambda x: fn(x)[0]
+
+
+def global_clock(model) -> int | None:
+    """A state with rate 1 in every mode, starting at 0 and never reset: the global time."""
+    for i in model.clocks:
+        if model.initial.low[i] == 0 == model.initial.high[i] and \
+                not any(i in tr.reset for tr in model.transitions):
+            return i
+    return None
+
+
+class EventProblem:
+    """One event property of a model, compiled per mode along the chain of urgent switches."""
+
+    def __init__(self, model, prop: BoundEvent):
+        self.model, self.prop = model, prop
+        self.low, self.high = model.initial.low, model.initial.high
+        self.uncertain = [i for i in range(model.n) if self.high[i] > self.low[i]]
+        self.clock = global_clock(model)
+        self._codes: dict[str, ModeCode] = {}
+        self.code(model.initial.mode)
+        for name in prop.modes:
+            self.code(name)
+
+    def code(self, name: str) -> ModeCode:
+        if name not in self._codes:
+            quantity = self.prop.quantity.get(name) if name in self.prop.modes else None
+            self._codes[name] = ModeCode(self.model, name, quantity)
+        return self._codes[name]
+
+    # ------------------------------------------------------------ estimated (event maps)
+    def candidates(self, center: np.ndarray, half_width: np.ndarray, order: int, tol: float) -> dict:
+        """Taylor maps (in the subdomain's scaled deviations) of the extremum candidates."""
+        T = self.model.horizon
+        X = initial_state(algebra(order, len(self.uncertain)), center, half_width, self.uncertain)
+        mode, t0, out, visited = self.model.initial.mode, 0.0, {}, set()
+        sign = 1.0 if self.prop.sense == "max" else -1.0
+        for hop in range(MAX_SWITCHES + 1):
+            code = self.code(mode)
+            run = nominal(code.f_numeric, np.array([x.cons for x in X]), T - t0, tol)
+            grid = run.grid()
+            leave = code.exit(grid)
+            last = len(run.nodes) - 1 if leave is None else leave[0]
+            if code.q is not None:
+                out[f"{mode}:entry" if hop else "start"] = code.q(X)
+                values = np.asarray(code.q_numeric(list(grid[: last + 1].T)))
+                for k in local_extrema(values, self.prop.sense):
+                    tk = run.sharpen(k, lambda Y: sign * np.asarray(code.q_numeric(list(Y))))
+                    t_e, _ = refine_time(code.f, code.qdot, run.solution, tk, order)
+                    em = event_map(code.f, code.qdot, X, run.nodes, t_e, order)
+                    out[f"{mode}:extremum@{t0 + t_e:.6g}"] = code.q(em.state)
+            visited.add(mode)
+            if leave is None:
+                if code.q is not None:
+                    if hop == 0:
+                        em = fixed_time_map(code.f, X, run.nodes, T)
+                    else:
+                        c = self.clock
+                        em = event_map(code.f, lambda x: x[c] - T, X, run.nodes, T - t0, order)
+                    out[f"{mode}:horizon"] = code.q(em.state)
+                return out
+            _, ex, face = leave
+            tk = run.sharpen(last, lambda Y: np.where(np.all(ex.margins(Y.T) <= 0, axis=1),
+                                                      -np.arange(Y.shape[1]), -np.inf))
+            t_e, _ = refine_time(code.f, face, run.solution, tk, order)
+            em = event_map(code.f, face, X, run.nodes, t_e, order)
+            if code.q is not None:
+                out[f"{mode}:exit@{t0 + t_e:.6g}"] = code.q(em.state)
+            if visited >= set(self.prop.modes):
+                return out
+            X = ex.reset(em.state) if ex.reset else em.state
+            t0, mode = t0 + t_e, ex.transition.target
+            if self.clock is None:
+                raise ValueError("events after a mode switch need a global clock state")
+        raise ValueError(f"more than {MAX_SWITCHES} mode switches")
+
+    # ------------------------------------------------------------ rigorous (verified sweep)
+    def _enclosure(self, code: ModeCode, x0: list[DA], duration: float, rel_tol: float, tol: float):
+        """The verified enclosure of one mode's stretch, shared by the properties of a model (it
+        does not depend on the quantity): kept for the last few subdomains."""
+        key = fingerprint(self.model, code.name, [x.c for x in x0], duration, rel_tol, tol)
+        if key in _ENCLOSURES:
+            _ENCLOSURES.move_to_end(key)
+            return _ENCLOSURES[key][0]
+        run = nominal(code.f_numeric, np.array([x.cons for x in x0]), duration, tol)
+        stop = lambda step: code.inside([TM(at_sigma(p, 1.0)) for p in step.poly], True) is not None
+        enc = enclose_stretch(code.f, x0, run.nodes, stop, rel_tol)
+        _ENCLOSURES[key] = (enc, self.model)      # the model stays alive with its entry
+        while len(_ENCLOSURES) > KEEP_ENCLOSURES:
+            _ENCLOSURES.popitem(last=False)
+        return enc
+
+    def sweep(self, center: np.ndarray, half_width: np.ndarray, order: int, rel_tol: float,
+              tol: float) -> dict:
+        """Rigorous bounds of the extremum of ``q`` over the listed modes' stretches.
+
+        In each mode the verified enclosure (:mod:`.verified`) runs until the step whose end lies
+        inside an urgent guard for every deviation (every run has switched by then) or the
+        horizon; runs that switched earlier are followed on with the mode's flow, which only
+        enlarges the set. The upper end (for a maximum) is the largest Taylor-model bound of ``q``
+        over those steps. The states entering the next mode lie in the hull of the step boxes that
+        may meet the guard, clipped to the guard's single-variable bounds and mapped by the
+        reset; the next mode starts from that box (up to the horizon counted from its earliest
+        entry). The lower end is the best bound of ``q`` at the initial mode's step nodes that no
+        run can have left the mode before, or on an entry box."""
+        T = self.model.horizon
+        m = len(self.uncertain)
+        x0 = initial_state(algebra(order, m + 1), center, half_width, self.uncertain)
+        mode, t_earliest = self.model.initial.mode, 0.0
+        sign = 1.0 if self.prop.sense == "max" else -1.0
+        outer, inner, steps, error, visited = -np.inf, -np.inf, 0, 0.0, set()
+        for hop in range(MAX_SWITCHES + 1):
+            code = self.code(mode)
+            if len(code.exits) > 1:
+                return _unbounded(f"mode '{mode}' has several urgent exits")
+            try:
+                enc = self._enclosure(code, x0, T - t_earliest, rel_tol, tol)
+            except ArithmeticError as err:
+                return _unbounded(str(err))
+            if enc is None:
+                return _unbounded(f"no verified enclosure in mode '{mode}'")
+            steps, error = steps + len(enc.steps), max(error, float(np.max(enc.error_box)))
+            certified, exit_taken, entry = hop == 0, None, []
+            if code.q is not None and hop > 0:
+                lo, hi = code.q([TM(at_sigma(x, -1.0)) for x in x0]).bound()
+                inner = max(inner, lo if sign > 0 else -hi)
+            for k in range(len(enc.steps)):
+                X = enc.tm(k)
+                if code.q is not None:
+                    lo, hi = code.q(X).bound()
+                    outer = max(outer, hi if sign > 0 else -lo)
+                    if certified:
+                        lo0, hi0 = code.q([TM(at_sigma(x.poly, -1.0), x.lo, x.hi) for x in X]).bound()
+                        inner = max(inner, lo0 if sign > 0 else -hi0)
+                if code.inside(X, False) is not None:
+                    certified = False
+                    entry.append(np.array([x.bound() for x in X]))
+                exit_taken = code.inside(enc.tm_at_end(k), True)
+                if exit_taken is not None:
+                    break
+            end = enc.steps[k].t0 + enc.steps[k].h
+            visited.add(mode)
+            if exit_taken is None:
+                if end < (T - t_earliest) * (1 - 1e-12):
+                    return _unbounded(f"could not prove that every run leaves '{mode}' (to t = {end:g})")
+                break
+            if visited >= set(self.prop.modes):
+                break
+            box = _entry_box(exit_taken, entry, self.model)
+            if exit_taken.reset is not None:
+                out = exit_taken.reset(Jet.seed(box[:, 0], box[:, 1]))
+                box = np.array([[o.lo, o.hi] if isinstance(o, Jet) else [o, o] for o in out], dtype=float)
+            if self.clock is None:
+                return _unbounded("events after a mode switch need a global clock state")
+            t_earliest, mode = box[self.clock, 0], exit_taken.transition.target
+            wide = [i for i in range(self.model.n) if box[i, 1] > box[i, 0]]
+            x0 = initial_state(algebra(order, len(wide) + 1), box.mean(axis=1), 0.5 * (box[:, 1] - box[:, 0]), wide)
+        bound = (inner, outer) if sign > 0 else (-outer, -inner)
+        return {"bound": tuple(float(v) for v in bound), "steps": steps, "error": error}
+
+
+def _unbounded(why: str) -> dict:
+    return {"bound": (-np.inf, np.inf), "steps": 0, "error": np.inf, "why": why}
+
+
+def _entry_box(ex: Exit, boxes: list[np.ndarray], model) -> np.ndarray:
+    """Hull of the step boxes that may meet the guard, clipped to its single-variable bounds."""
+    stacked = np.stack(boxes)                        # (k, n, 2)
+    box = np.stack([stacked[:, :, 0].min(axis=0), stacked[:, :, 1].max(axis=0)], axis=1)
+    for c in ex.transition.guard:
+        coeffs = affine_coefficients(c.g, model.symbols)
+        if coeffs is None:
+            continue
+        a, b = coeffs                                 # a . x + b <= 0
+        nz = np.flatnonzero(a)
+        if len(nz) == 1:
+            i = nz[0]
+            limit = -b / a[i]
+            if a[i] > 0:
+                box[i, 1] = min(box[i, 1], limit)
+            else:
+                box[i, 0] = max(box[i, 0], limit)
+    box[:, 1] = np.maximum(box[:, 1], box[:, 0])
+    return box

@@ -1,0 +1,35 @@
+"""The taylor back-end's work units: expanding one ADS box and sweeping one subdomain.
+
+They are module-level functions of picklable arguments (the model, the bound property, plain
+numbers), so a level of ADS boxes or the rigorous sweeps of all subdomains can run on local worker
+processes or a Dask cluster (:mod:`reach.bench.executors`). Each process compiles a problem once
+and keeps it, keyed by a digest of the pickled model and property.
+"""
+
+from __future__ import annotations
+
+from reach.backends.taylor.bound import truncate
+from reach.backends.taylor.keys import fingerprint
+from reach.backends.taylor.problem import EventProblem
+
+_PROBLEMS: dict[str, tuple] = {}
+
+
+def problem(model, prop) -> EventProblem:
+    key = fingerprint(model, prop)
+    if key not in _PROBLEMS:
+        if len(_PROBLEMS) > 16:
+            _PROBLEMS.clear()
+        _PROBLEMS[key] = (EventProblem(model, prop), model, prop)   # keeps the objects alive
+    return _PROBLEMS[key][0]
+
+
+def expand_box(model, prop, order: int, expand_order: int, tol: float, center, half_width):
+    """Candidate maps of one box: ``(maps truncated to order, maps as expanded)``."""
+    maps = problem(model, prop).candidates(center, half_width, expand_order, tol)
+    return {name: truncate(p, order) if expand_order > order else p for name, p in maps.items()}, maps
+
+
+def sweep_box(model, prop, order: int, rel_tol: float, tol: float, center, half_width) -> dict:
+    """The rigorous sweep of one subdomain (:meth:`EventProblem.sweep`)."""
+    return problem(model, prop).sweep(center, half_width, order, rel_tol, tol)

@@ -1,0 +1,207 @@
+"""The rigorous mode of the taylor back-end: Taylor models and interval Jacobians enclose what they
+claim at sampled points, the verified flow enclosure contains solve_ivp runs, and a SAFE from it
+is consistent with simulated runs."""
+
+import dataclasses
+import warnings
+
+import numpy as np
+import pytest
+import sympy
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.integrate import solve_ivp
+
+from reach.backends.taylor import BACKEND
+from reach.backends.taylor.da import DA, algebra
+from reach.backends.taylor.flow import compile_expressions, compile_numeric, nominal
+from reach.backends.taylor.interval import Jet
+from reach.backends.taylor.tm import TM
+from reach.backends.taylor.verified import at_sigma, enclose_stretch
+from reach.model.loader import load_model
+from reach.model.simulate import Simulator
+from reach.result import Status
+from reach.spec.properties import bind, load_properties
+
+warnings.filterwarnings("ignore", category=RuntimeWarning)
+
+
+@pytest.fixture(scope="module")
+def srna():
+    return load_model("models/SRNA01.yaml")
+
+
+def _contains(tm: TM, truth, points):
+    """``truth - P`` lies in the remainder interval at every point (up to rounding)."""
+    gap = truth - tm.poly(points)
+    tol = 1e-12 * (1 + np.abs(truth))
+    return np.all(gap >= tm.lo - tol) and np.all(gap <= tm.hi + tol)
+
+
+@settings(max_examples=40, deadline=None)
+@given(cx=st.floats(0.3, 2.0), fraction=st.floats(0.01, 0.9), cy=st.floats(-1.0, 1.0),
+       sy=st.floats(0.01, 0.8), order=st.integers(1, 5))
+def test_taylor_models_enclose_elementary_functions(cx, fraction, cy, sy, order):
+    """For ``x = cx + sx xi1`` (positive) and ``y = cy + sy xi2`` every operation's model contains
+    the function it models at random points of the box."""
+    sx = fraction * cx
+    alg = algebra(order, 2)
+    x, y = TM(DA.var(alg, 0, cx, sx)), TM(DA.var(alg, 1, cy, sy))
+    pts = np.random.default_rng(1).uniform(-1, 1, (400, 2))
+    X, Y = cx + sx * pts[:, 0], cy + sy * pts[:, 1]
+    cases = {
+        "product": (x * y * y, X * Y * Y),
+        "sin": ((x * y).sin(), np.sin(X * Y)),
+        "cos": ((x + y).cos(), np.cos(X + Y)),
+        "exp": (y.exp() * x, np.exp(Y) * X),
+        "reciprocal": (1.0 / x, 1.0 / X),
+        "sqrt": ((x + y * y).sqrt(), np.sqrt(X + Y * Y)),
+        "power": (x ** -1.5, X ** -1.5),
+        "log": (x.log(), np.log(X)),
+    }
+    for name, (tm, truth) in cases.items():
+        assert _contains(tm, truth, pts), name
+        lo, hi = tm.bound()
+        assert np.all(truth >= lo - 1e-12) and np.all(truth <= hi + 1e-12), name
+
+
+def test_network_layers_in_taylor_models_enclose_the_layer():
+    """``sin(W a + b)`` on a vector of Taylor models (the SIREN layer of eq. 29)."""
+    rng = np.random.default_rng(3)
+    alg = algebra(3, 2)
+    inputs = [TM(DA.var(alg, 0, 0.2, 0.1)), TM(DA.var(alg, 1, -0.1, 0.1))]
+    W, b = rng.normal(size=(6, 2)) * 3, rng.normal(size=6)
+    out = TM.stack(inputs).affine(W, b).sin().unstack()
+    pts = rng.uniform(-1, 1, (300, 2))
+    Z = np.stack([0.2 + 0.1 * pts[:, 0], -0.1 + 0.1 * pts[:, 1]])
+    truth = np.sin(W @ Z + b[:, None])
+    for k, tm in enumerate(out):
+        assert _contains(tm, truth[k], pts)
+
+
+def test_interval_jacobian_contains_pointwise_jacobians(srna):
+    mode = srna.modes["approach"]
+    f = compile_expressions(mode.flow, srna.symbols)
+    low = np.array([-950.0, -450.0, -2.0, -1.0, 0.0])
+    high = np.array([-850.0, -350.0, 2.0, 1.0, 10.0])
+    out = f(Jet.seed(low, high))
+    glo, ghi = np.array([o.glo for o in out]), np.array([o.ghi for o in out])
+    jac = sympy.lambdify([srna.symbols], sympy.Matrix(mode.flow).jacobian(srna.symbols))
+    for z in np.random.default_rng(2).uniform(low, high, (200, 5)):
+        J = np.array(jac(z), dtype=float)
+        assert np.all(J >= glo - 1e-12 * np.abs(J)) and np.all(J <= ghi + 1e-12 * np.abs(J))
+        value = np.array([float(v) for v in f(list(z))])
+        assert np.all(value >= [o.lo for o in out]) and np.all(value <= [o.hi for o in out])
+
+
+def test_verified_enclosure_contains_solve_ivp_runs(srna):
+    """Nonlinear SRNA01 approach flow over 30 min from a 50 m x 50 m box: at every step end the
+    DOP853 reference (rtol 1e-12) lies in the polynomial plus the proved error box."""
+    mode = srna.modes["approach"]
+    f = compile_expressions(mode.flow, srna.symbols)
+    fn = compile_numeric(mode.flow, srna.symbols)
+    center, half = np.array([-900.0, -400.0, 0.0, 0.0, 0.0]), np.array([25.0, 25.0, 0, 0, 0])
+    T = 30.0
+    run = nominal(fn, center, T)
+    alg = algebra(4, 3)
+    x0 = [DA.var(alg, 0, center[0], half[0]), DA.var(alg, 1, center[1], half[1])] + \
+         [DA.const(alg, v) for v in center[2:]]
+    enc = enclose_stretch(f, x0, run.nodes, rel_tol=1e-4)
+    assert enc is not None and enc.steps[-1].t0 + enc.steps[-1].h == pytest.approx(T)
+    error = np.max(enc.error_box)
+    assert 0 < error < 1e-2
+    xi = np.random.default_rng(5).uniform(-1, 1, (12, 2))
+    ends = np.array([s.t0 + s.h for s in enc.steps])
+    rhs = lambda t, x: np.array(fn(list(x)), dtype=float)
+    for point in xi:
+        x_start = center + half * np.r_[point, 0, 0, 0]
+        ref = solve_ivp(rhs, (0, T), x_start, method="DOP853", rtol=1e-12, atol=1e-9, t_eval=ends).y.T
+        for k, step in enumerate(enc.steps):
+            tms = enc.tm_at_end(k)
+            for i, tm in enumerate(tms):
+                value = float(tm.poly(np.r_[point, 1.0][None, :])[0])
+                assert tm.lo - 1e-6 <= ref[k, i] - value <= tm.hi + 1e-6
+
+
+def test_at_sigma_substitutes_the_time_variable():
+    alg = algebra(3, 2)
+    p = DA.var(alg, 0, 1.0, 2.0) * DA.var(alg, 1, 0.5, 1.5) + DA.var(alg, 1) ** 3
+    for s in (-1.0, 0.3, 1.0):
+        q = at_sigma(p, s)
+        pts = np.random.default_rng(0).uniform(-1, 1, (50, 2))
+        assert np.allclose(q(np.c_[pts[:, 0], np.full(50, 7.0)]), p(np.c_[pts[:, 0], np.full(50, s)]))
+
+
+def test_rigorous_thrust_bound_is_safe_and_contains_simulated_runs(srna):
+    """Rigorous mode on the first 20 min of SRNA01: SAFE, the bound contains the minimum of Fx
+    over 500 simulated runs and the estimated bound, and is at most modestly wider."""
+    model = dataclasses.replace(srna, horizon=20.0)
+    prop = {p.id: bind(p, model) for p in load_properties("properties/rendezvous_events.yaml")}["thrust_x_min"]
+    rig = BACKEND.check(model, prop, {"remainder": "rigorous", "max_splits": 1, "e_tol": 1e-12})
+    assert rig.status is Status.SAFE and rig.coverage == 1.0
+    assert rig.details["remainder"].startswith("rigorous")
+    quantity = sympy.lambdify([model.symbols], prop.quantity["approach"])
+    rng = np.random.default_rng(11)
+    N = 500
+    x0 = model.initial.low + rng.random((N, model.n)) * (model.initial.high - model.initial.low)
+    lowest = np.full(N, np.inf)
+
+    def observe(t, X, mode, rows):
+        np.minimum.at(lowest, rows, np.asarray(quantity(X.T)) * np.ones(len(rows)))
+
+    Simulator(model, dt=0.01).run(x0, observers=[observe])
+    for row in rig.details["subdomains"]:
+        inside = np.all((x0[:, :2] >= row["low"]) & (x0[:, :2] <= row["high"]), axis=1)
+        lo, hi = row["bound"]
+        assert inside.any() and np.all(lowest[inside] >= lo) and np.all(lowest[inside] <= hi + 0.05)
+        e_lo, e_hi = row["estimated_bound"]
+        assert lo <= e_lo + 1e-9 and (hi - lo) <= 3 * (e_hi - e_lo) + 1.0
+
+
+def test_events_after_the_urgent_switch_contain_sampled_runs(srna):
+    """Line-of-sight margin in the rendezvous mode, 20 min past the switch: the estimated maps
+    (event past the guard crossing) and the rigorous sweep (entry box, then the rendezvous flow)
+    both contain the sampled minimum of 120 simulated runs; the rigorous one proves the margin."""
+    from reach.backends.event_sampling import sample_extrema
+
+    model = dataclasses.replace(srna, horizon=130.0)
+    prop = {p.id: bind(p, model) for p in load_properties("properties/rendezvous_events.yaml")}["los_upper_margin"]
+    est = BACKEND.check(model, prop, {"max_splits": 0})
+    rig = BACKEND.check(model, prop, {"max_splits": 0, "remainder": "rigorous"})
+    assert est.status is Status.UNKNOWN and rig.status is Status.SAFE
+    assert any(name.startswith("rendezvous:") for name in est.details["subdomains"][0]["candidates"])
+    rng = np.random.default_rng(4)
+    x0 = model.initial.low + rng.random((120, model.n)) * (model.initial.high - model.initial.low)
+    monitor, _, _ = sample_extrema(model, prop, x0, 0.05)
+    values = monitor.extrema()
+    assert np.all(np.isfinite(values))                 # every run reached the rendezvous mode
+    for result in (est, rig):
+        lo, hi = result.bound
+        assert values.min() >= lo - 1e-9 and values.max() <= hi + monitor.slack
+    assert rig.bound[0] <= est.bound[0] and rig.bound[0] > 0
+
+
+def test_splitting_on_the_bound_decides_more_of_the_box(srna):
+    """A threshold inside the range of the smallest Fy: halving the undecided subdomains twice
+    proves part of the box safe and part unsafe, and every sampled run stays inside its bound."""
+    model = dataclasses.replace(srna, horizon=10.0)
+    prop = {p.id: bind(p, model) for p in load_properties("properties/rendezvous_events.yaml")}["thrust_y_min"]
+    prop = dataclasses.replace(prop, value=-25.0)
+    base = {"e_tol": 1e-12, "max_splits": 2, "remainder": "rigorous"}
+    coarse = BACKEND.check(model, prop, base)
+    fine = BACKEND.check(model, prop, {**base, "refine": 2})
+    decided = lambda r: r.details["share_meeting_requirement"] + r.details["share_violating_requirement"]
+    assert decided(coarse) < decided(fine) and fine.details["share_meeting_requirement"] > 0
+    assert fine.details["subdomain_count"] > coarse.details["subdomain_count"]
+    quantity = sympy.lambdify([model.symbols], prop.quantity["approach"])
+    rng = np.random.default_rng(8)
+    x0 = model.initial.low + rng.random((300, model.n)) * (model.initial.high - model.initial.low)
+    lowest = np.full(len(x0), np.inf)
+
+    def observe(t, X, mode, rows):
+        np.minimum.at(lowest, rows, np.asarray(quantity(X.T)) * np.ones(len(rows)))
+
+    Simulator(model, dt=0.01).run(x0, observers=[observe])
+    for row in fine.details["subdomains"]:
+        inside = np.all((x0[:, :2] >= row["low"]) & (x0[:, :2] <= row["high"]), axis=1)
+        assert np.all(lowest[inside] >= row["bound"][0]) and np.all(lowest[inside] <= row["bound"][1] + 0.05)
