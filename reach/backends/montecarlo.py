@@ -15,6 +15,9 @@ upper bound on the violation probability from the i.i.d. round. Monte Carlo neve
 
 Reach and reach-avoid properties of stochastic models are estimated from ``samples`` runs
 with Gaussian kicks; the probability is a 95 % Wilson interval.
+
+Event properties (the extremum of a quantity along the run) are sampled from the structured
+and ``samples`` i.i.d. initial states (:mod:`reach.backends.event_sampling`).
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from reach.backends.event_sampling import check_events, replay_event
 from reach.model.automaton import HybridAutomaton
 from reach.model.constraints import lambdify_margins
 from reach.model.simulate import Simulator
@@ -140,7 +144,10 @@ class Replay:
 
 def replay(model: HybridAutomaton, prop: BoundSafety, initial_state, switch_time: float | None,
            dt: float | None = None) -> Replay:
-    """Simulate exactly one run (abort at ``switch_time``) and check ``prop`` along it."""
+    """Simulate exactly one run (abort at ``switch_time``) and check ``prop`` along it (an event
+    property: its extremum along the run, :func:`reach.backends.event_sampling.replay_event`)."""
+    if isinstance(prop, BoundEvent):
+        return replay_event(model, prop, initial_state, dt)
     sim = Simulator(model, dt)
     x0 = np.asarray(initial_state, dtype=float).reshape(1, -1)
     tau = None if switch_time is None else np.array([float(switch_time)])
@@ -215,8 +222,8 @@ class MonteCarloBackend:
             return str(exc)
         if any(not tr.urgent and tr.window is None for tr in model.transitions):
             return "a may-transition whose guard is not a window on a clock cannot be sampled"
-        if isinstance(prop, BoundEvent):
-            return "event properties are bounded by the taylor back-end (sampling them is not implemented here)"
+        if isinstance(prop, BoundEvent) and switch_window(model) is not None:
+            return "sampling an event property with an abort window is not implemented"
         if isinstance(prop, (BoundReach, BoundReachAvoid)) and model.disturbance is None:
             if not np.array_equal(model.initial.low, model.initial.high):
                 return "a reach probability needs a distribution: the model has no disturbance"
@@ -235,8 +242,14 @@ class MonteCarloBackend:
         if safety:
             for prop, result in zip(safety, self._safety(model, safety, opts)):
                 results[id(prop)] = result
+        events = [p for p in props if isinstance(p, BoundEvent)]
+        if events:
+            structured, _ = structured_plan(model, None, rng=np.random.default_rng(opts.seed))
+            for prop, result in zip(events, check_events(model, events, opts.samples, opts.seed, opts.dt,
+                                                         structured)):
+                results[id(prop)] = result
         for prop in props:
-            if not isinstance(prop, BoundSafety):
+            if not isinstance(prop, (BoundSafety, BoundEvent)):
                 start = time.perf_counter()
                 results[id(prop)] = self._probability(model, prop, opts)
                 results[id(prop)].seconds = time.perf_counter() - start

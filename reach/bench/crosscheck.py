@@ -66,12 +66,21 @@ def cross_check(rows: list[dict]) -> list[dict]:
                 if ahi < blo or bhi < alo:
                     add("fail", f"{inst}/{prop}: probability intervals of {a} [{alo:.4f}, {ahi:.4f}] and "
                                 f"{b} [{blo:.4f}, {bhi:.4f}] do not overlap")
-        samples = [r["details"].get("sampled_range") for r in group if r["details"].get("sampled_range")]
+        # A sampled extremum is a value at a real state: it cannot lie beyond the outer end of a
+        # sound bound (above a maximum's, below a minimum's); on the inner side the grid may
+        # miss the true extremum by up to the sampler's grid slack.
+        samples = [r["details"] for r in group if r["details"].get("sampled_range")]
         for r in group:
             if r.get("bound") and samples:
                 lo, hi = r["bound"]
-                for s_lo, s_hi in samples:
-                    if s_lo < lo or s_hi > hi:
-                        add("fail", f"{inst}/{prop}: {r['backend']} bound [{lo:.4g}, {hi:.4g}] excludes sampled "
-                                    f"values in [{s_lo:.4g}, {s_hi:.4g}]")
+                for d in samples:
+                    s_lo, s_hi = d["sampled_range"]
+                    slack = d.get("grid_slack", 0.0)
+                    tol = 1e-9 * max(1.0, abs(lo), abs(hi))
+                    maximum = d.get("sense", "max") == "max"
+                    low_ok = s_lo >= lo - tol - (slack if maximum else 0.0)
+                    high_ok = s_hi <= hi + tol + (0.0 if maximum else slack)
+                    if not (low_ok and high_ok):
+                        add("fail", f"{inst}/{prop}: {r['backend']} bound [{lo:.6g}, {hi:.6g}] excludes sampled "
+                                    f"values in [{s_lo:.6g}, {s_hi:.6g}]")
     return checks

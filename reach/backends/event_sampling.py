@@ -1,0 +1,187 @@
+"""Sampling event properties: the extremum of a quantity along simulated runs (the Monte Carlo
+referee for the taylor back-end).
+
+For each run the quantity ``q`` of the property is evaluated at every visited state in the listed
+modes (the simulator's grid, guard crossings and switch instants) and its extremum kept. The
+grid extremum is a value of ``q`` at a real state, so every sound bound of the run's extremum on
+the side of the requirement contains it; it may miss the true extremum between grid points by
+about the change of ``q`` over one grid step, reported as ``grid_slack``.
+
+A run whose sampled extremum breaks the requirement is a counterexample: it is replayed alone
+and reported UNSAFE only if the replay breaks it too. Otherwise the answer is UNKNOWN with the
+sampled range of the extremum over the runs.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import sympy
+
+from reach.model.automaton import HybridAutomaton
+from reach.model.simulate import Simulator
+from reach.result import Counterexample, Result, Status
+from reach.spec.properties import BoundEvent
+from reach.stats import clopper_pearson_upper
+
+
+class EventMonitor:
+    """Per run: the extremum of ``q`` over the listed modes, when and where it was reached, and
+    the largest change of ``q`` between consecutive visits in one mode (the grid slack)."""
+
+    def __init__(self, model: HybridAutomaton, prop: BoundEvent, n_runs: int):
+        names = list(model.modes)
+        self.q = {names.index(m): sympy.lambdify([model.symbols], sympy.sympify(prop.quantity[m]), "numpy")
+                  for m in prop.modes}
+        self.sign = 1.0 if prop.sense == "max" else -1.0
+        self.best = np.full(n_runs, -np.inf)          # sign * extremum
+        self.time = np.full(n_runs, np.nan)
+        self.state = np.full((n_runs, model.n), np.nan)
+        self.mode = np.full(n_runs, -1)
+        self.last = {m: np.full(n_runs, np.nan) for m in self.q}     # previous visit, per mode
+        self.slack = 0.0
+
+    def __call__(self, t, X, mode, rows):
+        for m_index, q in self.q.items():
+            sel = np.flatnonzero(mode == m_index)
+            if sel.size == 0:
+                continue
+            values = self.sign * (np.asarray(q(X[sel].T), dtype=float) * np.ones(sel.size))
+            r = rows[sel]
+            # the first visit of each run in this batch, against the previous batch
+            _, first = np.unique(r, return_index=True)
+            prev = self.last[m_index][r[first]]
+            ok = np.isfinite(prev)
+            if ok.any():
+                self.slack = max(self.slack, float(np.max(np.abs(values[first][ok] - prev[ok]))))
+            if sel.size > first.size:
+                order = np.lexsort((np.arange(sel.size), r))
+                same = r[order][1:] == r[order][:-1]
+                if same.any():
+                    jumps = np.abs(np.diff(values[order]))[same]
+                    self.slack = max(self.slack, float(np.max(jumps)))
+            last = np.full(len(self.best), np.nan)
+            last[r] = values                         # later visits overwrite earlier ones
+            seen = np.isfinite(last)
+            self.last[m_index][seen] = last[seen]
+            better = values > self.best[r]
+            if better.any():
+                order = np.argsort(values[better], kind="stable")
+                idx = sel[better][order]
+                rr = rows[idx]
+                self.best[rr] = values[better][order]
+                self.time[rr] = t[idx]
+                self.state[rr] = X[idx]
+                self.mode[rr] = m_index
+
+    def extrema(self) -> np.ndarray:
+        """Sampled extremum of ``q`` per run (``nan`` for runs that never visited a listed mode)."""
+        out = self.sign * self.best
+        return np.where(np.isfinite(out), out, np.nan)
+
+
+def violates(prop: BoundEvent, value) -> np.ndarray:
+    value = np.asarray(value, dtype=float)
+    bad = value > prop.value if prop.op == "<=" else value < prop.value
+    return bad & np.isfinite(value)
+
+
+def sample_extrema(model: HybridAutomaton, prop: BoundEvent, x0: np.ndarray, dt: float | None = None,
+                   record: bool = False):
+    """Simulate the runs from ``x0`` (N, n): ``(monitor, trajectories, grid step)``."""
+    monitors, traj, step = sample_many(model, [prop], x0, dt, record)
+    return monitors[0], traj, step
+
+
+def sample_many(model: HybridAutomaton, props: list[BoundEvent], x0: np.ndarray, dt: float | None = None,
+                record: bool = False):
+    """One simulation of the runs from ``x0`` watched by a monitor per property."""
+    sim = Simulator(model, dt)
+    monitors = [EventMonitor(model, prop, len(x0)) for prop in props]
+    traj = sim.run(np.asarray(x0, dtype=float), None, record=record, observers=monitors)
+    return monitors, traj, sim.dt
+
+
+@dataclass
+class EventReplay:
+    """One re-simulated run: its sampled extremum ``value`` (reached at ``time``, ``mode``,
+    ``state``) and ``depth``, by how much it breaks the requirement (positive) or meets it."""
+
+    violated: bool
+    value: float
+    time: float
+    mode: str
+    state: np.ndarray
+    initial_state: np.ndarray
+    dt: float
+    depth: float
+    trajectory: dict = field(default_factory=dict)
+
+    def counterexample(self, model, prop, found_by: str) -> Counterexample:
+        return Counterexample(
+            model=model.name, property=prop.id, model_file=model.file, property_file=prop.file,
+            initial_state=list(map(float, self.initial_state)), switch_time=None,
+            violation_time=float(self.time), violation_mode=self.mode,
+            violation_state=list(map(float, self.state)), dt=self.dt, trajectory=self.trajectory,
+            found_by=found_by)
+
+
+def replay_event(model: HybridAutomaton, prop: BoundEvent, initial_state, dt: float | None = None) -> EventReplay:
+    """Simulate one run and evaluate the event property along it."""
+    x0 = np.asarray(initial_state, dtype=float).reshape(1, -1)
+    monitor, traj, step = sample_extrema(model, prop, x0, dt, record=True)
+    names = list(model.modes)
+    times, modes, states = traj.path[0]
+    trajectory = {"t": times.tolist(), "mode": [names[int(m)] for m in modes], "x": states.tolist()}
+    value = float(monitor.extrema()[0])
+    mode = names[int(monitor.mode[0])] if monitor.mode[0] >= 0 else ""
+    depth = value - prop.value if prop.op == "<=" else prop.value - value
+    return EventReplay(bool(violates(prop, value)), value, float(monitor.time[0]), mode, monitor.state[0],
+                       x0[0], step, float(depth), trajectory)
+
+
+def check_events(model: HybridAutomaton, props: list[BoundEvent], samples: int, seed: int,
+                 dt: float | None, structured: np.ndarray) -> list[Result]:
+    """Per property: UNSAFE with a replayed counterexample, or UNKNOWN with the sampled range of
+    the extremum. The properties share one simulation of the structured and i.i.d. runs."""
+    start = time.perf_counter()
+    rng = np.random.default_rng(seed)
+    low, high = model.initial.low, model.initial.high
+    iid = low + (high - low) * rng.random((samples, model.n))
+    x0 = np.vstack([structured, iid])
+    monitors, _, step = sample_many(model, props, x0, dt)
+    shared = (time.perf_counter() - start) / max(len(props), 1)
+    results = []
+    for prop, monitor in zip(props, monitors):
+        begin = time.perf_counter()
+        result = _verdict(model, prop, monitor, x0, len(structured), samples, step)
+        result.seconds = shared + time.perf_counter() - begin
+        results.append(result)
+    return results
+
+
+def _verdict(model, prop, monitor, x0, n_structured, samples, step) -> Result:
+    values = monitor.extrema()
+    visited = np.isfinite(values)
+    details = {"runs": int(len(x0)), "iid_runs": int(samples), "dt": step, "sense": prop.sense,
+               "grid_slack": monitor.slack,
+               "semantics": "extremum of the quantity at the simulator's grid points, guard crossings and "
+                            "switch instants in the listed modes"}
+    if visited.any():
+        details["sampled_range"] = (float(np.nanmin(values)), float(np.nanmax(values)))
+        margin = (prop.value - values) if prop.op == "<=" else (values - prop.value)
+        details["closest_margin"] = float(np.nanmin(margin))
+    bad = np.flatnonzero(violates(prop, values))
+    if bad.size:
+        worst = bad[np.argmax(np.abs(values[bad] - prop.value))]
+        rep = replay_event(model, prop, x0[worst], step)
+        if rep.violated:
+            found = "structured" if worst < n_structured else "random"
+            return Result("montecarlo", model.name, prop.id, Status.UNSAFE,
+                          counterexample=rep.counterexample(model, prop, found), details=details)
+        details["unreplayed"] = "a sampled violation did not replay alone"
+    iid_bad = int(violates(prop, values[n_structured:]).sum())
+    details["violation_probability_upper_95"] = clopper_pearson_upper(iid_bad, samples)
+    return Result("montecarlo", model.name, prop.id, Status.UNKNOWN, details=details)
