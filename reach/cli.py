@@ -1,13 +1,15 @@
 """The ``reach`` command.
 
     reach check MODEL PROPS [--backend B] [--json] [--option KEY=VALUE ...]
+    reach lint MODEL... (files or directories of models)
     reach replay COUNTEREXAMPLE.json
     reach plot MODEL [--runs N] [--out FILE.png]
     reach bench [--suite suite.yaml] [--backend B] [--instance I] [-j N] [--scheduler ADDR]
     reach sweep MODEL PROPS [--radius R] [--cells N]
     reach compare OLD.json NEW.json
 
-Bad input prints one line ``file:line: field: message`` and exits with 2.
+Bad input prints one line ``file:line: field: message`` and exits with 2. ``check`` prints the
+model's lints (structural findings, :mod:`reach.model.lint`) to stderr as ``warning: ...``.
 """
 
 from __future__ import annotations
@@ -41,6 +43,9 @@ def cmd_check(args) -> int:
     from reach.checking import check_files
 
     model_path = find_model(args.model)
+    from reach.model import load_model
+    for finding in load_model(model_path).lints:
+        print(f"warning: {finding}", file=sys.stderr)
     results = check_files(model_path, args.properties, args.backend, _parse_options(args.option),
                           args.property)
     saved = {}
@@ -93,6 +98,26 @@ def summary(result) -> str:
     if "remainder" in d:
         parts.append(f"remainder {d['remainder']}")
     return ", ".join(parts)
+
+
+def cmd_lint(args) -> int:
+    """Lint model files (a directory: every ``*.yaml`` in it except ``_`` templates); exit 1
+    if anything is found."""
+    from reach.model import load_model
+
+    files = []
+    for name in args.models:
+        path = Path(name)
+        if path.is_dir():
+            files.extend(sorted(p for p in path.glob("*.yaml") if not p.name.startswith("_")))
+        else:
+            files.append(find_model(name))
+    findings = [line for f in files for line in load_model(f).lints]
+    for line in findings:
+        print(line)
+    if not findings:
+        print(f"no findings ({len(files)} model{'s' if len(files) != 1 else ''})")
+    return 1 if findings else 0
 
 
 def cmd_replay(args) -> int:
@@ -198,6 +223,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--counterexamples", default="counterexamples", metavar="DIR",
                    help="where UNSAFE counterexamples are written (default: counterexamples/)")
     p.set_defaults(func=cmd_check)
+    p = sub.add_parser("lint", help="structural checks of models (zero-dwell cycles); exit 1 on findings")
+    p.add_argument("models", nargs="+", help="model files, names, or directories of models")
+    p.set_defaults(func=cmd_lint)
     p = sub.add_parser("replay", help="replay a counterexample file with the simulator")
     p.add_argument("counterexample")
     p.set_defaults(func=cmd_replay)

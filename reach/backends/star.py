@@ -40,6 +40,22 @@ star) to an initial state and abort time; it is replayed with the Monte Carlo si
 when nothing is left to refine or when it lies deeper in the piece than all refinable
 spread. UNSAFE only if the replay violates; otherwise UNKNOWN.
 
+Timed modes. In a mode whose flow is a constant (``A = 0``: clocks, counters, stopwatches
+of a timed or linear hybrid automaton) every run is the ray ``x + s b``; the cell
+``[0, h]`` from ``S`` is then exactly ``S + [0, h] b`` -- one new coefficient ``s in [0, 1]``
+instead of a chord hull, no interpolation error, nothing to refine -- so coefficient counts
+grow by one per mode visit and hundreds of jumps stay cheap. A transition whose guard,
+within the source invariant, lies inside the guard of another transition with the same
+target and reset is *subsumed* (its successors are contained in the other's) and is not
+fired separately (an urgent time-out at the end of a window, for example).
+
+Jumps. ``max_jumps`` bounds the jumps along a path; by default there is no bound when the
+model has no zero-dwell cycle (:mod:`reach.model.lint`: every cycle of the transition graph
+takes a positive time, so the number of jumps before the horizon is finite) and 10 otherwise.
+A witness whose path takes more than one window switch, or a window on a clock other than
+the global one, is replayed without a switch time (the simulator takes one switch at a
+global time): if that run does not violate, the answer stays UNKNOWN.
+
 ``discrete_time=True`` checks and switches at grid points only (Hylaa's semantics): no
 segments, no error terms -- not a proof for continuous time.
 
@@ -60,6 +76,7 @@ from scipy.linalg import expm
 from reach import lp
 from reach.result import Result, Status
 from reach.sets import Box, Star, chord_hull
+from reach.sets.hpolytope import HPolytope
 from reach.model.constraints import affine_coefficients
 
 NAME = "star"
@@ -86,6 +103,7 @@ class StarOptions:
     max_unresolved: stop (UNKNOWN) after this many cells that refinement cannot clear.
     max_lps: LP budget; when exhausted the answer is UNKNOWN.
     max_jumps: bound on discrete jumps along a path (cyclic automata); UNKNOWN beyond.
+        None (default): unbounded if the model has no zero-dwell cycle, else 10.
     touch_tolerance: a set that reaches a piece made only of strict inequalities by at
         most this much (after row normalisation) only touches its boundary: no violation.
     replay_dt: simulator step for replays (None: the simulator's default).
@@ -98,7 +116,7 @@ class StarOptions:
     max_replays: int = 20
     max_unresolved: int = 8
     max_lps: int = 50_000
-    max_jumps: int = 10
+    max_jumps: int | None = None
     touch_tolerance: float = 1e-6
     replay_dt: float | None = None
 
@@ -125,6 +143,7 @@ class AffineFlow:
         self.n = A.shape[0]
         self.A2 = A @ A
         self.Ab = A @ b
+        self.drift = not np.any(A)          # constant flow: exact segments, no refinement
         self.rho = float(np.max(np.abs(np.linalg.eigvals(np.abs(self.A2))))) if self.n else 0.0
         self._steps: dict[float, tuple[np.ndarray, np.ndarray]] = {}
         self._powers: dict[float, tuple[np.ndarray, np.ndarray]] = {}
@@ -230,6 +249,7 @@ class _Entry:
     window: bool
     offset: float
     row: np.ndarray
+    global_window: bool = True      # a window on the global clock (replayable switch time)
 
 
 @dataclass(frozen=True)
@@ -315,6 +335,8 @@ class _LinearModel:
             self.flows = {name: AffineFlow(*mode.linear) for name, mode in model.modes.items()}
             self.invariants = {name: _normalised(*mode.invariant_halfspaces)
                                for name, mode in model.modes.items()}
+            self.fired = {name: _unsubsumed(js, *self.invariants[name])
+                          for name, js in self.jumps.items()}
 
     @classmethod
     def of(cls, model) -> "_LinearModel":
@@ -363,7 +385,11 @@ class _Explorer:
         self.horizon = float(model.horizon)
         self.h = float(options.step) if options.step else self.horizon / 60.0
         data = _LinearModel.of(model)
-        self.flows, self.invariants, self.jumps = data.flows, data.invariants, data.jumps
+        self.flows, self.invariants, self.jumps = data.flows, data.invariants, data.fired
+        self.max_jumps = options.max_jumps
+        if self.max_jumps is None:
+            from reach.model.lint import zero_dwell_cycles
+            self.max_jumps = np.inf if not zero_dwell_cycles(model)[0] else 10
         self.pieces = _unsafe_pieces(prop)
         self.relevant = _modes_leading_to(model, set(self.pieces))
         self.stats = _Stats()
@@ -418,8 +444,8 @@ class _Explorer:
         point = self._point(star, guess, direction)
         if point is None:
             return
-        if len(path.entries) > self.opt.max_jumps:
-            raise _Stop(Status.UNKNOWN, f"more than {self.opt.max_jumps} discrete jumps on a path")
+        if len(path.entries) > self.max_jumps:
+            raise _Stop(Status.UNKNOWN, f"more than {self.max_jumps} discrete jumps on a path")
         self.stats.chains += 1
         flow, h = self.flows[mode], self.h
         t0 = -star.support_bounds(-np.eye(self.n)[self.clock])[0]
@@ -444,6 +470,7 @@ class _Explorer:
                 active = upper[j] > gi
                 if np.any(active):
                     extra[j] = (Hi[active], gi[active])
+        known_empty = last < count              # grid star `last` lies outside the invariant
 
         stars = {}          # grid stars with their accumulated predicate, built lazily
 
@@ -456,7 +483,7 @@ class _Explorer:
             return stars[j]
 
         for j in sorted(extra):                  # `point` stays a point of every grid star
-            if j > last:
+            if j > last or (j == last and known_empty):
                 break
             H, g = extra[j]
             if np.all(H @ (centers[j] + bases[j] @ point) <= g):
@@ -508,7 +535,9 @@ class _Explorer:
         if self.opt.discrete_time:
             return start, np.zeros(self.n)
         seg, _, error = _segment(self.flows[mode], start, h)
-        return seg.intersect_halfspaces(*self.invariants[mode]), error
+        Hi, gi = self.invariants[mode]
+        seg = seg.intersect_halfspaces(Hi, gi)
+        return (_tightened(seg, len(gi)) or seg) if self.flows[mode].drift else seg, error
 
     def _cell(self, mode: str, start: Star, h: float, path: _Path, depth: int, point):
         """Check one cell and launch its successors; bisect when a failure is blamed on it.
@@ -524,7 +553,7 @@ class _Explorer:
             if since >= self.cutoff:
                 return
         seg, error = self._segment(mode, start, h)
-        final = depth >= self.opt.max_refinements or self.opt.discrete_time
+        final = depth >= self.opt.max_refinements or self.opt.discrete_time or self.flows[mode].drift
         block = start.nvars
         try:
             hull = seg.box_bound()
@@ -611,16 +640,29 @@ class _Explorer:
             if jump.H.shape[0] and np.any(-seg.support_bounds(-jump.H) > jump.g):
                 continue
             entered = seg.intersect_halfspaces(jump.H, jump.g)
+            if self.flows[mode].drift:
+                entered = _tightened(entered, len(jump.g))
+                if entered is None or np.any(-entered.support_bounds(-jump.H) > jump.g):
+                    continue
             clock = _Entry(jump.name, jump.window is not None,
-                           float(entered.center[self.clock]), entered.basis[self.clock].copy())
+                           float(entered.center[self.clock]), entered.basis[self.clock].copy(),
+                           jump.window is None or jump.window[0] == self.clock)
             earliest = -entered.support_bounds(-np.eye(self.n)[self.clock])[0]
             successor = entered.affine_map(jump.R, jump.r)
             successor = successor.intersect_halfspaces(*self.invariants[jump.target])
-            # the known point's own chord: (a, lam a, lam, 0) from lam = 0 to 1
+            if self.flows[mode].drift:
+                successor = _tightened(successor, len(self.invariants[jump.target][1]))
+                if successor is None:
+                    continue
+            # the known point's own chord: (a, lam a, lam, 0) from lam = 0 to 1, or its ray
+            # (a, s) from s = 0 to 1 in a constant-flow mode
             m, pad = point.size, successor.nvars - point.size
             guess = np.concatenate([point, np.zeros(pad)])
-            direction = np.concatenate([np.zeros(m), point, [1.0], np.zeros(pad - m - 1)]) \
-                if pad > m else None
+            if self.flows[mode].drift and not self.opt.discrete_time:
+                direction = np.concatenate([np.zeros(m), [1.0]]) if pad == 1 else None
+            else:
+                direction = np.concatenate([np.zeros(m), point, [1.0], np.zeros(pad - m - 1)]) \
+                    if pad > m else None
             self._chain(jump.target, successor, path.descend(clock, block, own_open, earliest),
                         guess, direction)
 
@@ -649,6 +691,8 @@ class _Explorer:
         x0 = self.root.point(witness.alpha[:m0])
         x0 = np.clip(x0, self.model.initial.low, self.model.initial.high)
         windows = [e for e in witness.history if e.window]
+        if len(windows) > 1 or any(not e.global_window for e in windows):
+            return x0, None                  # not one switch at a global time: no switch
         if windows:
             e = windows[-1]
             switch = float(e.offset + e.row @ witness.alpha[:e.row.size])
@@ -659,7 +703,7 @@ class _Explorer:
     def _latest_abort(self, mode: str):
         """Without an abort on the witness's path: the latest abort of its mode's windows
         (the run stays in the mode as long as possible), or None if there is none."""
-        his = [j.window[2] for j in self.jumps[mode] if j.window is not None]
+        his = [j.window[2] for j in self.jumps[mode] if j.window is not None and j.window[0] == self.clock]
         return max(his) if his else None
 
 
@@ -692,12 +736,58 @@ def _segment(flow: AffineFlow, start: Star, h: float):
     ``|x''|`` on the cell from the sub-samples of :meth:`AffineFlow.curvature`.
     """
     end = start.affine_map(*flow.step(h))
+    if flow.drift:
+        return _drift_segment(start, flow.b, h), end, np.zeros(flow.n)
     D, d, F, _ = flow.curvature(h)
     n = flow.n
     upper = start.support_bounds(np.concatenate([D, -D]).reshape(-1, n))
     upper = upper.reshape(2, -1) + np.concatenate([d, -d]).reshape(2, -1)
     error = h * h / 8 * (F @ upper.max(axis=0).reshape(-1, n).max(axis=0))
     return chord_hull(start, end.center, end.basis, error), end, error
+
+
+def _tightened(star: Star, rows: int, rounds: int = 3) -> Star | None:
+    """``star`` with its coefficient box shrunk by bound propagation over the predicate rows
+    (None if that proves it empty); the set is unchanged.
+
+    For a row ``sum_j A_ij a_j <= b_i`` with finite activity bounds, every ``a_k`` with
+    ``A_ik > 0`` satisfies ``a_k <= (b_i - sum_{j != k} min(A_ij a_j)) / A_ik`` (and the mirror
+    bound when ``A_ik < 0``), minima over the current box. Each bound is relaxed by a relative
+    ``1e-9`` so rounding never cuts a point of the set. Cheap support bounds then see the
+    guards and invariants that pin a coefficient (a dwell fixed by guard and invariant).
+    Only the last ``rows`` rows (those just added by an intersection) are used: the box is
+    already consistent with the older ones, and scanning them all again costs too much.
+    """
+    A, b = star.predicate.A[-rows:] if rows else star.predicate.A[:0], star.predicate.b[-rows:] if rows else star.predicate.b[:0]
+    lo, hi = star.box.low.copy(), star.box.high.copy()
+    if A.shape[0] == 0 or not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+        return star
+    pos, neg = np.maximum(A, 0.0), np.minimum(A, 0.0)
+    for _ in range(rounds):
+        least = pos * lo + neg * hi                                   # min of A_ij a_j
+        rest = b[:, None] - (least.sum(axis=1)[:, None] - least)      # room left for a_k
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            bound = rest / A
+            slack = 1e-9 * (1.0 + np.abs(bound))
+            upper = np.where(A > 0, bound + slack, np.inf).min(axis=0)
+            lower = np.where(A < 0, bound - slack, -np.inf).max(axis=0)
+        new_lo, new_hi = np.maximum(lo, lower), np.minimum(hi, upper)
+        if np.any(new_lo > new_hi):
+            return None
+        if np.array_equal(new_lo, lo) and np.array_equal(new_hi, hi):
+            break
+        lo, hi = new_lo, new_hi
+    return Star(star.center, star.basis, star.predicate, Box(lo, hi))
+
+
+def _drift_segment(start: Star, b: np.ndarray, h: float) -> Star:
+    """``start + [0, h] b`` exactly: every run of ``x' = b`` from ``start`` over the cell.
+    One new coefficient ``s in [0, 1]`` (column ``h b``); the old ones keep their meaning."""
+    A = start.predicate.A
+    predicate = HPolytope(np.hstack([A, np.zeros((A.shape[0], 1))]), start.predicate.b)
+    box = Box(np.append(start.box.low, 0.0), np.append(start.box.high, 1.0))
+    basis = np.hstack([start.basis, (h * np.asarray(b, dtype=float))[:, None]])
+    return Star(start.center, basis, predicate, box)
 
 
 def flowpipe(A, b, initial: Star, step: float, duration: float) -> list[Star]:
@@ -730,6 +820,39 @@ def _depth(seg: Star, H, g, piece_rows: int):
     hard = H[piece_rows:], g[piece_rows:]
     star = seg.intersect_halfspaces(*hard)
     return star.depth(H[:piece_rows], g[:piece_rows])
+
+
+def _unsubsumed(jumps: list[_Jump], H_inv, g_inv) -> list[_Jump]:
+    """The jumps worth firing: ``j`` is dropped when an earlier kept jump ``k`` has the same
+    target and reset and ``guard_j and invariant`` implies every row of ``guard_k`` (one LP
+    per row over the state space); the successors of ``j`` are then contained in those of
+    ``k``, whatever the segment. A jump whose guard misses the invariant is dropped too."""
+    kept = []
+    for j in jumps:
+        H = np.vstack([j.H, H_inv]) if H_inv.shape[0] else j.H
+        g = np.concatenate([j.g, g_inv])
+        n = j.R.shape[0]
+        free = (np.full(n, -np.inf), np.full(n, np.inf))
+        if H.shape[0] and lp.minimize(np.zeros(n), H, g, bounds=free).infeasible:
+            continue
+        covered = False
+        for k in kept:
+            if k.target != j.target or not (np.array_equal(k.R, j.R) and np.array_equal(k.r, j.r)):
+                continue
+            if not H.shape[0]:
+                continue
+            ok = True
+            for row, bound in zip(k.H, k.g):
+                res = lp.maximize(row, H, g, bounds=free)
+                if not res.optimal or res.value > bound + 1e-9 * (1 + abs(bound)):
+                    ok = False
+                    break
+            if ok:
+                covered = True
+                break
+        if not covered:
+            kept.append(j)
+    return kept
 
 
 def _modes_leading_to(model, targets: set[str]) -> set[str]:

@@ -25,7 +25,7 @@ from reach.model.units import UnitSystem
 class Controller:
     """How a mode's inputs were obtained (kept for reports): kind, gain, design weights."""
 
-    kind: str                                 # "gain" | "lqr" | "law"
+    kind: str                                 # "gain" | "lqr" | "law" | "network"
     gain: np.ndarray | None = None            # u = gain @ s (after any setpoint shift)
     feedback: list[str] = field(default_factory=list)
     Q: np.ndarray | None = None
@@ -179,3 +179,10 @@ class HybridAutomaton:
 
     def outgoing(self, mode: str) -> list[Transition]:
         return [t for t in self.transitions if t.source == mode]
+
+    @cached_property
+    def lints(self) -> list[str]:
+        """Structural findings (not errors), one line each: zero-dwell cycles, see
+        :mod:`reach.model.lint`. Computed on first use."""
+        from reach.model.lint import lint
+        return lint(self)
