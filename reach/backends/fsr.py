@@ -35,6 +35,24 @@ widened downwards by the Boole sum. Verdict for ``probability: {at_least: p}``: 
 lower end is ``>= p``; otherwise UNKNOWN (there is no single counterexample run to give for a
 probability) with ``details["verdict"]`` ``violated`` (upper end ``< p``) or ``undecided``.
 
+Row cap. When more than ``max_rows`` rows survive the dropping, only ``max_rows`` of them,
+evenly spaced in time, are integrated; the others are dropped too and their marginal violation
+probabilities join the Boole sum. The kept event still contains the true one, so the upper end
+stays an upper bound, and the lower end stays rigorous (it may become 0 when the dropped rows are
+likely to fail: then the answer is an upper bound, which is what decides a violated requirement).
+
+Switched models: staying in the initial mode. A model with several modes is accepted when its
+initial mode ``M`` (``x' = A x + b``, invariant ``S = {H x <= g}``) can only be left through urgent
+transitions and ``S`` is *forward invariant with strict inflow* under ``M``'s flow: on every facet
+``h_i x = g_i`` of ``S``, ``h_i (A x + b) < 0`` (checked exactly when ``h_i`` is a left eigenvector of
+``A``, by an LP otherwise), no outgoing guard meets the interior of ``S``, and the initial point is
+interior. Then between kicks a run cannot leave the interior, so it leaves ``M`` only if a
+post-kick state ``x[k] + G w[k]`` is outside the interior. With ``B = sum_k sum_i P(h_i (x[k] + G
+w[k]) >= g_i)`` (Boole, Gaussian marginals of the linear system of ``M``), the model's probability
+lies in ``[P_M - B, P_M + B]`` where ``P_M`` is the probability computed on ``M`` alone: on the event
+"never leaves", the switched runs and the runs of ``M`` coincide. This is the sliding-mode
+boundary layer of the VTXO models (``|s_i| <= phi_i`` decays as ``s_i' = -lam_i s_i`` inside).
+
 Non-Gaussian laws go through :mod:`reach.backends.fsr_fourier`; from a model this is the case
 for a reach property when the initial state is a box (uniformly distributed over it, as the
 Monte Carlo back-end samples it), or on request with ``method: fourier``.
@@ -69,6 +87,7 @@ class Options:
     seed: int = 0
     max_points: int = 2 ** 22        # quasi-Monte Carlo evaluations at most
     max_frequencies: int = fsr_fourier.MAX_FREQUENCIES   # Fourier path: frequency vectors at most
+    max_rows: int = 1000             # reach-avoid: constraint rows integrated at most (row cap)
 
     @classmethod
     def from_dict(cls, options: dict | None) -> "Options":
@@ -136,7 +155,7 @@ def _rows(K: int, target, safe) -> _Rows:
 
 def reach_avoid(problem: GaussianProblem, target, safe, abs_error: float = 1e-3,
                 drop_budget: float | None = None, method: str = "genz", seed: int = 0,
-                max_points: int = 2 ** 22):
+                max_points: int = 2 ** 22, max_rows: int | None = None):
     """``P(H_t x[K] <= g_t and H_s x[k] <= g_s for k < K)`` and a dict describing the work.
 
     ``target`` and ``safe`` are ``(H, g)`` pairs; see the module docstring for the method.
@@ -160,12 +179,22 @@ def reach_avoid(problem: GaussianProblem, target, safe, abs_error: float = 1e-3,
     order = np.argsort(sides, kind="stable")
     dropped = np.zeros(sides.size, bool)
     dropped[order[np.cumsum(sides[order]) <= budget]] = True
-    boole = float(np.sum(sides[dropped]))
     lower = np.where(dropped[:mu.size], -np.inf, rows.lower)
     upper = np.where(dropped[mu.size:], np.inf, rows.upper)
     keep = np.isfinite(lower) | np.isfinite(upper)
+    capped = 0
+    if max_rows is not None and np.count_nonzero(keep) > max_rows:
+        alive = np.flatnonzero(keep)                 # in time order
+        chosen = alive[np.unique(np.round(np.linspace(0, alive.size - 1, max_rows)).astype(int))]
+        cut = np.setdiff1d(alive, chosen)
+        capped = int(cut.size)
+        dropped[cut] |= np.isfinite(rows.lower[cut])
+        dropped[mu.size + cut] |= np.isfinite(rows.upper[cut])
+        lower[cut], upper[cut] = -np.inf, np.inf
+        keep[cut] = False
+    boole = float(min(1.0, np.sum(sides[dropped])))
     kept = _Rows(rows.step[keep], rows.h[keep], lower[keep], upper[keep])
-    info.update(kept=int(keep.sum()), dropped=int(mu.size - keep.sum()), boole=boole)
+    info.update(kept=int(keep.sum()), dropped=int(mu.size - keep.sum()), boole=boole, capped=capped)
     if not np.any(keep):
         p = Probability(1.0, 1.0, 1.0)
     elif method == "genz":
@@ -244,6 +273,84 @@ def _sequential(problem: GaussianProblem, means, covs, rows: _Rows, abs_error, s
     return randomized_qmc(integrand, D - 1, abs_error, max_points, np.random.default_rng(seed))
 
 
+# ------------------------------------------------------------------ staying in the initial mode
+
+def stay_region(model, tol: float = 1e-9):
+    """``((H, g), None)`` if runs of ``model`` can leave the initial mode only through a post-kick
+    state outside the interior of its invariant ``H x <= g`` (module docstring), else ``(None, why)``."""
+    mode = model.modes[model.initial.mode]
+    if mode.linear is None:
+        return None, f"the flow of mode '{mode.name}' is nonlinear"
+    region = mode.invariant_halfspaces
+    if region is None or not mode.invariant:
+        return None, f"mode '{mode.name}' has no polyhedral invariant bounding the stay"
+    H, g = (np.atleast_2d(np.asarray(a, dtype=float)) for a in region)
+    g = g.ravel()
+    norms = np.linalg.norm(H, axis=1)
+    H, g = H / norms[:, None], g / norms
+    A, b = mode.linear
+    for i, (h, bound) in enumerate(zip(H, g)):
+        if _inflow(A, b, H, g, h, bound) >= -tol * (1.0 + abs(bound)):
+            return None, f"the invariant of '{mode.name}' is not entered strictly at its facet {i}"
+    for tr in model.outgoing(mode.name):
+        if not tr.urgent:
+            return None, f"transition '{tr.name}' out of '{mode.name}' is not urgent"
+        guard = model.guard_halfspaces(tr)
+        if guard is None:
+            return None, f"the guard of '{tr.name}' is not a polytope"
+        if not _misses_interior(guard, H, g, tol):
+            return None, f"the guard of '{tr.name}' meets the interior of the invariant of '{mode.name}'"
+    x0 = model.initial.low
+    if np.any(H @ x0 >= g - tol * (1.0 + np.abs(g))):
+        return None, "the initial point is not inside the invariant of the initial mode"
+    return (H, g), None
+
+
+def _inflow(A, b, H, g, h, bound) -> float:
+    """``max h (A x + b)`` over the facet ``h x = bound`` of ``{H x <= g}`` (``h`` unit)."""
+    row = h @ A
+    alpha = float(row @ h)
+    if np.linalg.norm(row - alpha * h) <= 1e-12 * max(1.0, np.linalg.norm(row)):
+        return alpha * bound + float(h @ b)        # h is a left eigenvector: constant on the facet
+    from reach import lp
+    res = lp.maximize(row, H, g, A_eq=h[None, :], b_eq=np.array([bound]))
+    return res.support_value() + float(h @ b)
+
+
+def _misses_interior(guard, H, g, tol) -> bool:
+    """True if the polyhedron ``guard`` has no point with ``H x < g``."""
+    Gm, gm = (np.atleast_2d(np.asarray(a, dtype=float)) for a in guard)
+    gm = gm.ravel()
+    for row, value in zip(Gm, gm):                  # exact test: the guard lies beyond a facet
+        norm = np.linalg.norm(row)
+        if norm == 0:
+            continue
+        u, c = row / norm, value / norm
+        if np.any((np.linalg.norm(H + u, axis=1) <= 1e-12) & (g >= -c - tol * (1.0 + abs(c)))):
+            return True
+    from reach import lp
+    n = H.shape[1]
+    A_ub = np.vstack([np.hstack([Gm, np.zeros((Gm.shape[0], 1))]), np.hstack([H, np.ones((H.shape[0], 1))])])
+    res = lp.maximize(np.append(np.zeros(n), 1.0), A_ub, np.concatenate([gm, g]),
+                      bounds=[(None, None)] * n + [(None, 1.0)])
+    return res.infeasible or (res.optimal and res.value <= tol)
+
+
+def leave_bound(problem: GaussianProblem, H, g) -> float:
+    """``sum_k sum_i P(h_i (x[k] + G w[k]) >= g_i)`` over the kicks: Boole bound on leaving."""
+    means, covs = problem.moments()
+    K = problem.system.steps
+    G = problem.system.G
+    m = means[:K] + G @ problem.w_mean
+    P = covs[:K] + G @ problem.w_cov @ G.T
+    mu = m @ H.T                                                   # (K, rows)
+    var = np.einsum("ri,kij,rj->kr", H, P, H)
+    sd = np.sqrt(np.maximum(var, 0.0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        q = np.where(sd > 0, ndtr((mu - g) / np.where(sd > 0, sd, 1.0)), (mu >= g).astype(float))
+    return float(min(1.0, np.sum(q)))
+
+
 # ------------------------------------------------------------------ the back-end
 
 class FsrBackend:
@@ -256,12 +363,14 @@ class FsrBackend:
         if model.disturbance is None:
             return ("deterministic model (no disturbance): there is no distribution to integrate; "
                     "use the star or taylor back-end")
-        if len(model.modes) != 1 or model.transitions:
-            return "fsr handles one linear mode; this model switches between modes"
         mode = model.modes[model.initial.mode]
         if mode.linear is None:
             return f"the flow of mode '{mode.name}' is nonlinear; fsr needs a linear closed loop"
-        if mode.invariant:
+        if len(model.modes) != 1 or model.transitions:
+            why = stay_region(model)[1]
+            if why is not None:
+                return f"fsr handles one linear mode, or the stay in the initial mode; here {why}"
+        elif mode.invariant:
             return f"mode '{mode.name}' has an invariant, which would truncate the distribution"
         if halfspaces(prop.target, prop.symbols) is None:
             return "the target is not a polytope (nonlinear constraint)"
@@ -270,6 +379,8 @@ class FsrBackend:
         point = np.array_equal(model.initial.low, model.initial.high)
         if not point and isinstance(prop, BoundReachAvoid):
             return "reach-avoid from a distributed (box) initial state is not supported; use a point"
+        if not point and (len(model.modes) != 1 or model.transitions):
+            return "a switched model needs a point initial state (the stay bound is for a point)"
         return None
 
     def check(self, model, prop, options: dict | None = None) -> Result:
@@ -304,9 +415,20 @@ class FsrBackend:
             method = "markov" if opts.method == "markov" else "genz"
             p, info = reach_avoid(problem, target, safe, abs_error=opts.abs_error,
                                   drop_budget=opts.drop_budget, method=method, seed=opts.seed,
-                                  max_points=opts.max_points)
+                                  max_points=opts.max_points, max_rows=opts.max_rows)
             details.update(info)
             details["error"] = "randomised QMC, 3.5 standard errors, plus Boole bound of dropped constraints"
+        if len(model.modes) != 1 or model.transitions:
+            region, _ = stay_region(model)
+            exit_bound = leave_bound(problem, *region)
+            details["stay"] = {
+                "mode": model.initial.mode, "leave_bound": exit_bound,
+                "argument": ("probability computed on the initial mode's linear flow; its invariant is "
+                             "forward invariant with strict inflow and no guard meets its interior, so "
+                             "a run switches only if a post-kick state leaves it; interval widened by "
+                             "the Boole bound on that (both sides)")}
+            p = Probability(p.value, max(0.0, p.low - exit_bound), min(1.0, p.high + exit_bound),
+                            p.dimension, p.points)
         status, verdict = _verdict(p, prop.at_least)
         details["verdict"] = verdict
         details["estimate"] = p.value

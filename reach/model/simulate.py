@@ -12,7 +12,8 @@ together:
   of the group has met an event;
 * an urgent transition is taken at the first instant its guard holds, located by bisection
   inside the grid interval where it first holds (to ``dt * 2**-40``); the window transition
-  is taken exactly at ``tau``; Gaussian kicks (if asked for) are applied at ``k * step``;
+  is taken exactly at ``tau``; Gaussian kicks (if asked for) are applied at ``k * step``, and
+  an urgent transition whose guard holds right after a kick is taken at that instant;
 * a run found outside its mode's invariant at a grid point with no transition taken is
   *blocked* (it has no continuation in the automaton's semantics) and stops there.
 
@@ -90,7 +91,7 @@ class Simulator:
                 M = np.zeros((self.n + 1, self.n + 1))
                 M[:self.n, :self.n], M[:self.n, self.n] = A, b
                 self.generators[name] = M
-                self.powers[name] = _powers(scipy.linalg.expm(M * self.dt), self.steps + 1)
+                self.powers[name] = _Powers(scipy.linalg.expm(M * self.dt), self.steps + 1)
         self.urgent = {m: [] for m in model.modes}
         self.window = {m: None for m in model.modes}
         for tr in model.transitions:
@@ -107,7 +108,13 @@ class Simulator:
         if X.shape[0] == 0:
             return X.copy()
         if mode in self.generators:
-            E = batched_expm(self.generators[mode], h)
+            # runs usually share a few durations (a whole step, the rest of a step): one
+            # exponential per distinct duration, gathered per run
+            durations, which = np.unique(h, return_inverse=True)
+            if durations.size <= max(8, X.shape[0] // 8):
+                E = batched_expm(self.generators[mode], durations)[which.reshape(-1)]
+            else:
+                E = batched_expm(self.generators[mode], h)
             return np.einsum("kij,kj->ki", E[:, :self.n, :self.n], X) + E[:, :self.n, self.n]
         rhs = self.model.modes[mode].rhs
         count = max(1, int(np.ceil(self.substeps * np.max(h) / self.dt)))
@@ -193,6 +200,12 @@ class Simulator:
                         X[sel] += kicks(int(k), sel.size)
                     kick_count[due] += 1
                     next_kick[due] = kick_count[due] * kick_step
+                    before = mode[due].copy()
+                    self._urgent_now(X, mode, due)       # a kick may land a run inside a guard
+                    moved = due[mode[due] != before]
+                    if moved.size:
+                        for f in watchers:
+                            f(t[moved], X[moved], mode[moved], moved)
             for m_index, name in enumerate(self.mode_names):
                 rows = active[mode[active] == m_index]
                 if rows.size:
@@ -212,7 +225,8 @@ class Simulator:
         Phi, phi = E[:self.n, :self.n].T, E[:self.n, self.n]
         rows = np.arange(X.shape[0])
         kick_every = int(round(kick_step / self.dt)) if kicks is not None else 0
-        for k in range(self.steps):
+        steps = int(np.ceil(self.model.horizon / self.dt - 1e-9))    # the horizon may have been cut
+        for k in range(steps):
             if kick_every and k % kick_every == 0:
                 X += kicks(k // kick_every, X.shape[0])
             h = min(self.dt, self.model.horizon - k * self.dt)
@@ -225,7 +239,8 @@ class Simulator:
         """Take urgent transitions whose guard already holds (at the start, or after a jump)."""
         for _ in range(len(self.mode_names) + 1):
             moved = False
-            for m_index, name in enumerate(self.mode_names):
+            for m_index in np.unique(mode[rows]):
+                name = self.mode_names[m_index]
                 for tr, guard in self.urgent[name]:
                     sel = rows[mode[rows] == m_index]
                     if sel.size:
@@ -244,7 +259,9 @@ class Simulator:
     def _segment(self, name, rows, X, mode, t, tau, blocked_at, next_kick, watchers):
         """Advance ``rows`` (all in mode ``name``) to their next event, kick, or the horizon."""
         horizon = self.model.horizon
-        per_run = max(1, CHUNK_VALUES // ((self.steps + 1) * self.n))
+        span = float(np.max(np.minimum(next_kick[rows], horizon) - t[rows], initial=0.0))
+        count = min(self.steps + 1, int(np.ceil(span / self.dt)) + 2)
+        per_run = max(1, CHUNK_VALUES // (count * self.n))
         for start in range(0, rows.size, per_run):
             self._segment_chunk(name, rows[start:start + per_run], X, mode, t, tau, blocked_at,
                                 next_kick, watchers, horizon)
@@ -376,6 +393,32 @@ def _powers(step: np.ndarray, count: int) -> np.ndarray:
     for k in range(1, count):
         out[k] = out[k - 1] @ step
     return out
+
+
+class _Powers:
+    """``[I, step, step^2, ...]`` up to ``limit`` entries, computed as far as they are asked for.
+
+    Segments between disturbance kicks need only a few powers; a model with many modes and a
+    long horizon would otherwise hold ``modes x steps`` matrices.
+    """
+
+    def __init__(self, step: np.ndarray, limit: int):
+        self.step, self.limit = step, limit
+        self.table = _powers(step, min(limit, 64))
+
+    def __getitem__(self, index):
+        stop = index.stop if isinstance(index, slice) else (index[0] if isinstance(index, tuple) else index)
+        if isinstance(stop, slice):
+            stop = stop.stop
+        need = self.limit if stop is None else min(self.limit, int(stop) + 1)
+        if need > self.table.shape[0]:
+            size = min(self.limit, max(need, 2 * self.table.shape[0]))
+            more = np.empty((size,) + self.step.shape)
+            more[:self.table.shape[0]] = self.table
+            for k in range(self.table.shape[0], size):
+                more[k] = more[k - 1] @ self.step
+            self.table = more
+        return self.table[index]
 
 
 def _reset_function(tr, model):
