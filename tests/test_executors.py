@@ -34,3 +34,27 @@ def test_time_limit_stops_a_unit():
     slow = [("models/SRNA01.yaml", "properties/rendezvous.yaml", "montecarlo", {"samples": 5000})]
     ((index, (state, value)),) = list(LocalExecutor(jobs=1).map_unordered(run_unit, slow, time_limit=1.0))
     assert state == "timeout" and value is None
+
+
+def test_taylor_subdomains_on_processes_and_dask_match_one_process():
+    """ADS levels and rigorous sweeps as executor units: same subdomains and bounds."""
+    import dataclasses
+
+    distributed = pytest.importorskip("distributed")
+    from reach.backends.taylor import BACKEND
+    from reach.model.loader import load_model
+    from reach.spec.properties import bind, load_properties
+
+    model = dataclasses.replace(load_model("models/SRNA01.yaml"), horizon=10.0)
+    prop = {p.id: bind(p, model) for p in load_properties("properties/rendezvous_events.yaml")}["thrust_y_min"]
+    base = {"e_tol": 1e-12, "max_splits": 1, "remainder": "rigorous"}
+
+    def essence(result):
+        return [(tuple(r["low"]), tuple(r["high"]), r["bound"]) for r in result.details["subdomains"]]
+
+    serial = essence(BACKEND.check(model, prop, base))
+    local = essence(BACKEND.check(model, prop, {**base, "jobs": 2}))
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster, distributed.Client(cluster) as client:
+        dask = essence(BACKEND.check(model, prop, {**base, "scheduler": client}))
+    assert len(serial) == 2 and serial == local == dask

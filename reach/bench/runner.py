@@ -45,6 +45,24 @@ def plot_models(instances, folder: Path, stream) -> list[str]:
     return written
 
 
+def plot_subdomains(rows, folder: Path) -> list[str]:
+    """The ADS subdomain map of every taylor result split over two variables (one PNG each)."""
+    from reach.bench.plots import plot_subdomain_map
+
+    written = []
+    for r in rows:
+        d = r.get("details") or {}
+        if r.get("backend") != "taylor" or d.get("subdomain_count", 0) < 2 or len(d.get("variables", [])) != 2:
+            continue
+        target = folder / f"{r['instance']}_{r['property']}_subdomains.png"
+        requirement = {"op": d["op"], "value": d["value"], "label": r["property"]}
+        plot_subdomain_map(d["subdomains"], d["variables"], requirement, target,
+                           f"{r['instance']} {r['property']}: {d['subdomain_count']} subdomains, "
+                           f"{100 * d['share_meeting_requirement']:.1f} % safe ({d['remainder']})")
+        written.append(str(target))
+    return written
+
+
 def run_suite(suite_path, backends=None, instances=None, out="results", jobs=None, scheduler=None,
               time_limit=None, stream=sys.stdout) -> int:
     """Run (a filtered part of) a suite; exit code 1 if a cross-check fails, else 0."""
@@ -73,7 +91,7 @@ def run_suite(suite_path, backends=None, instances=None, out="results", jobs=Non
         print(f"  back-end '{b}' is not available in this installation; skipped", file=stream)
     start = time.perf_counter()
     rows = []
-    args = [(str(inst.model), str(inst.properties), b, suite.backends[b]) for inst, b in units]
+    args = [(str(inst.model), str(inst.properties), b, suite.options(inst, b)) for inst, b in units]
     for done, (i, (state, value)) in enumerate(executor.map_unordered(run_unit, args, time_limit), start=1):
         inst, backend = units[i]
         if state == "timeout":
@@ -99,7 +117,7 @@ def run_suite(suite_path, backends=None, instances=None, out="results", jobs=Non
         "executor": executor.name, "wall_seconds": wall, "backends": names,
         "rows": rows, "cross_checks": checks,
     }
-    report["plots"] = plot_models(chosen, out / "plots", stream)
+    report["plots"] = plot_models(chosen, out / "plots", stream) + plot_subdomains(rows, out / "plots")
     (out / "results.json").write_text(json.dumps(report, indent=1))
     (out / "results.md").write_text(markdown_table(report))
     failures = [c for c in checks if c["level"] == "fail"]

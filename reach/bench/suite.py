@@ -12,6 +12,7 @@ and expected verdicts with their source.
         expect: {thrust: safe, los: safe, velocity: safe, collision: safe}
         source: ARCH-COMP AFF (SRA01 is safe)
         backends: [montecarlo, star]  # optional: a subset of the suite's back-ends
+        options: {star: {step: 0.5}}  # optional: per back-end options over the suite's
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ class Instance:
     expect: dict[str, str] = field(default_factory=dict)
     source: str = ""
     backends: list[str] | None = None
+    options: dict[str, dict] = field(default_factory=dict)
 
 
 @dataclass
@@ -41,6 +43,10 @@ class Suite:
     backends: dict[str, dict]
     instances: list[Instance]
     file: str
+
+    def options(self, instance: Instance, backend: str) -> dict:
+        """The back-end's options for one instance: the suite's, updated by the instance's."""
+        return {**self.backends.get(backend, {}), **instance.options.get(backend, {})}
 
 
 def load_suite(path) -> Suite:
@@ -66,7 +72,7 @@ def load_suite(path) -> Suite:
         where = doc.where("instances", i)
         if not isinstance(item, dict) or not {"id", "model", "properties"} <= set(item):
             raise where.error("an instance needs id, model and properties")
-        extra = set(item) - {"id", "model", "properties", "expect", "source", "backends"}
+        extra = set(item) - {"id", "model", "properties", "expect", "source", "backends", "options"}
         if extra:
             raise doc.where("instances", i, sorted(extra)[0]).error(f"unknown field '{sorted(extra)[0]}'")
         if item["id"] in seen:
@@ -78,7 +84,11 @@ def load_suite(path) -> Suite:
         chosen = item.get("backends")
         if chosen is not None and (not isinstance(chosen, list) or set(chosen) - set(backends)):
             raise doc.where("instances", i, "backends").error("expected a list of the suite's back-ends")
+        options = item.get("options", {}) or {}
+        if not isinstance(options, dict) or set(options) - set(backends) or \
+                not all(isinstance(v, dict) for v in options.values()):
+            raise doc.where("instances", i, "options").error("expected {back-end: {option: value}} for the suite's back-ends")
         instances.append(Instance(str(item["id"]), base / item["model"], base / item["properties"],
-                                  dict(expect), str(item.get("source", "")), chosen))
+                                  dict(expect), str(item.get("source", "")), chosen, options))
     return Suite(str(data.get("description", "")), {k: dict(v or {}) for k, v in backends.items()},
                  instances, doc.file)
