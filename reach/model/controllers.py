@@ -6,6 +6,9 @@
   linearisation, solved with python-control's ``lqr`` (section 3.4 of the rendezvous paper).
   ``Q``/``R`` are given as diagonals or full matrices, or by Bryson's rule from the largest
   desired values: ``q_ii = 1/max(x_i)^2``, ``r_ii = 1/max(u_i)^2``.
+* ``network``: a SIREN network (:mod:`reach.model.network`) read from an ``.npz`` file (path
+  relative to the file that names it), ``(u_1..u_m) = net(s)`` over the ``feedback`` states, its
+  outputs taken as the model's inputs in order.
 """
 
 from __future__ import annotations
@@ -13,8 +16,11 @@ from __future__ import annotations
 import numpy as np
 import sympy
 
+from pathlib import Path
+
 from reach.errors import Where
 from reach.model.automaton import Controller
+from reach.model.network import Siren
 
 
 def _matrix(value, size: int, where: Where, what: str) -> np.ndarray:
@@ -75,15 +81,43 @@ def bryson(maxima: dict, names: list[str], where: Where, parse) -> np.ndarray:
     return np.diag(diag)
 
 
-def build_law(spec: dict, flow: list[sympy.Expr], state_symbols: list[sympy.Symbol], state: list[str],
-              input_symbols: list[sympy.Symbol], inputs: list[str], where: Where, parse_number):
-    """Control law ``{input: expr}`` from a ``gain``/``lqr`` spec, and its :class:`Controller`."""
+def _feedback(spec: dict, state: list[str], where: Where) -> list[str]:
+    """The ``feedback`` state names (all states by default), checked."""
     on = spec.get("feedback", list(state))
     if not isinstance(on, list) or not all(isinstance(s, str) for s in on):
         raise where.child("feedback").error("expected a list of state names")
     for s in on:
         if s not in state:
             raise where.child("feedback").error(f"unknown state '{s}'")
+    return on
+
+
+def build_network_law(spec: dict, state_symbols: list[sympy.Symbol], state: list[str],
+                      inputs: list[str], where: Where):
+    """Control law ``{input: siren_k(feedback states)}`` from ``{network: file.npz, feedback: [...]}``."""
+    extra = set(spec) - {"network", "feedback"}
+    if extra:
+        raise where.error(f"unknown field '{sorted(extra)[0]}' in a network control (network, feedback)")
+    on = _feedback(spec, state, where)
+    file = spec["network"]
+    w = where.child("network")
+    if not isinstance(file, str) or not file.strip():
+        raise w.error("expected the path of an .npz weights file")
+    base = Path(where.file).parent if where.file else Path(".")
+    net = Siren.load(base / file.strip(), w)
+    if net.n_inputs != len(on):
+        raise w.error(f"{Path(file).name}: the network takes {net.n_inputs} inputs but 'feedback' lists {len(on)} states")
+    if net.n_outputs != len(inputs):
+        raise w.error(f"{Path(file).name}: the network has {net.n_outputs} outputs but the model has "
+                      f"{len(inputs)} inputs")
+    outputs = net.law([state_symbols[state.index(s)] for s in on])
+    return dict(zip(inputs, outputs)), Controller("network", None, list(on))
+
+
+def build_law(spec: dict, flow: list[sympy.Expr], state_symbols: list[sympy.Symbol], state: list[str],
+              input_symbols: list[sympy.Symbol], inputs: list[str], where: Where, parse_number):
+    """Control law ``{input: expr}`` from a ``gain``/``lqr`` spec, and its :class:`Controller`."""
+    on = _feedback(spec, state, where)
     s_syms = [state_symbols[state.index(s)] for s in on]
     ref = spec.get("setpoint", {})
     if not isinstance(ref, dict):

@@ -12,7 +12,8 @@ Format (all expressions are strings parsed by :mod:`reach.model.expr`)::
     modes:
       approach:
         flow: {x: vx, vx: "3*n**2*x + 2*n*vy + Fx/mc", t: 1, ...}
-        control: {gain: [[...], [...]], feedback: [x, y, vx, vy]}   # or lqr: {...}, or {Fx: expr}
+        control: {gain: [[...], [...]], feedback: [x, y, vx, vy]}   # or lqr: {...}, or {Fx: expr},
+                                                                     # or network: weights/net.npz
         invariant: ["x <= -100"]
     transitions:                            # a list, or a mapping name -> transition
       dock: {from: approach, to: rendezvous, guard: [...], urgent: true}
@@ -36,7 +37,7 @@ import sympy
 from reach.errors import InputError, Where
 from reach.model.automaton import Controller, Disturbance, HybridAutomaton, InitialSet, Mode, Transition
 from reach.model.constraints import affine_coefficients, from_comparisons
-from reach.model.controllers import build_law
+from reach.model.controllers import build_law, build_network_law
 from reach.model.expr import CONSTANTS, FUNCTIONS, parse_comparison, parse_expr
 from reach.model.units import UnitSystem, check_base
 from reach.yamlio import Doc, load, merge
@@ -234,7 +235,12 @@ class _Builder:
                 raise self.where("modes", mname).error(f"input '{name}' is used in the flow but the mode has no 'control'")
             return {u: sympy.Integer(0) for u in self.inputs}, None
         if not isinstance(spec, dict):
-            raise w.error("expected a mapping: {input: expr}, {gain: K, feedback: [...]} or {lqr: {...}, feedback: [...]}")
+            raise w.error("expected a mapping: {input: expr}, {gain: K, feedback: [...]}, {lqr: {...}, feedback: [...]} "
+                          "or {network: file.npz, feedback: [...]}")
+        if "network" in spec:
+            if not self.inputs:
+                raise w.error("a network controller needs 'inputs'")
+            return build_network_law(spec, self.symbols, self.state, self.inputs, w)
         if "gain" in spec or "lqr" in spec:
             if "gain" in spec and "lqr" in spec:
                 raise w.error("give either 'gain' or 'lqr', not both")
