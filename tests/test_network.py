@@ -96,14 +96,16 @@ def test_model_control_law_through_lambdify_is_the_network():
     mode = model.modes["transfer"]
     net = load(WEIGHTS)
     X = np.random.default_rng(3).uniform([445, -650, -0.02, -0.02], [555, -350, 0.02, 0.02], (50, 4))
+    S = np.c_[X, np.zeros(len(X))]                     # the model's state [x, y, vx, vy, t]
     law = sympy.lambdify([model.symbols], [mode.control["ux"], mode.control["uy"]], modules="numpy")
-    assert np.allclose(np.stack(law(X.T), axis=1), np.stack(net.evaluate(*X.T), axis=1), rtol=1e-12)
-    assert np.allclose(mode.inputs(X), np.stack(net.evaluate(*X.T), axis=1), rtol=1e-12)
+    assert np.allclose(np.stack(law(S.T), axis=1), np.stack(net.evaluate(*X.T), axis=1), rtol=1e-12)
+    assert np.allclose(mode.inputs(S), np.stack(net.evaluate(*X.T), axis=1), rtol=1e-12)
     # the closed-loop flow on DA numbers (the taylor back-end's compiler) has the numpy value
     f = compile_expressions(mode.flow, mode.symbols)
     alg = algebra(2, 2)
-    x0 = [DA.var(alg, 0, 500.0, 55.0), DA.var(alg, 1, -500.0, 150.0), DA.const(alg, 0.0), DA.const(alg, 0.0)]
-    assert np.allclose([v.cons for v in f(x0)], mode.rhs(np.array([[500.0, -500.0, 0.0, 0.0]]))[0],
+    x0 = [DA.var(alg, 0, 500.0, 55.0), DA.var(alg, 1, -500.0, 150.0), DA.const(alg, 0.0), DA.const(alg, 0.0),
+          DA.const(alg, 0.0)]
+    assert np.allclose([v.cons for v in f(x0)], mode.rhs(np.array([[500.0, -500.0, 0.0, 0.0, 0.0]]))[0],
                        rtol=1e-12, atol=1e-15)
 
 
