@@ -184,7 +184,8 @@ class TaylorBackend:
                 "and the extremum over the mode's stretch lies in the Taylor-model bound of the quantity "
                 "over all its steps, up to the step where every run is inside the urgent guard")
             details["assumptions"] = [
-                "floating-point rounding is covered by a relative allowance of 1e-12, not by directed rounding",
+                "floating-point rounding is covered only by a relative allowance of 1e-12 on the defect bound, "
+                "not by directed rounding",
                 "the initial set lies in the mode's invariant (runs are not blocked at t = 0)",
             ]
             details["max_error_radius"] = max(r["verified"]["error"] for r in rows)

@@ -216,9 +216,11 @@ class EventProblem:
             if enc is None:
                 return _unbounded(f"no verified enclosure in mode '{mode}'")
             steps, error = steps + len(enc.steps), max(error, float(np.max(enc.error_box)))
-            certified, exit_taken, entry = hop == 0, None, []
+            # the start counts for the inner end only if no run can switch at t = 0
+            start = [TM(at_sigma(x, -1.0)) for x in x0]
+            certified, exit_taken, entry = hop == 0 and code.inside(start, False) is None, None, []
             if code.q is not None and hop > 0:
-                lo, hi = code.q([TM(at_sigma(x, -1.0)) for x in x0]).bound()
+                lo, hi = code.q(start).bound()
                 inner = max(inner, lo if sign > 0 else -hi)
             for k in range(len(enc.steps)):
                 X = enc.tm(k)
