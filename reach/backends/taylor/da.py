@@ -180,16 +180,8 @@ class DA:
 
     def __pow__(self, p):
         if isinstance(p, (int, np.integer)) or (np.ndim(p) == 0 and float(p).is_integer() and p >= 0):
-            p = int(p)
-            if p >= 0:
-                out, base = DA.const(self.alg, np.ones(self.shape)), self
-                while p:
-                    if p & 1:
-                        out = out * base
-                    p >>= 1
-                    if p:
-                        base = base * base
-                return out
+            if int(p) >= 0:
+                return integer_power(self, int(p))
         p = float(p)
         return self._series(lambda a0, k: _binomial(p, k) * a0 ** (p - k))
 
@@ -291,6 +283,18 @@ class DA:
 
 def _rebuild(order: int, nvars: int, c: np.ndarray) -> DA:
     return DA(algebra(order, nvars), c)
+
+
+def integer_power(x, k: int):
+    """``x**k`` for ``k >= 0`` by repeated squaring (any series type with ``*`` and ``const_like``)."""
+    out, base = x.const_like(np.ones(x.shape)), x
+    while k:
+        if k & 1:
+            out = out * base
+        k >>= 1
+        if k:
+            base = base * base
+    return out
 
 
 def _binomial(p: float, k: int) -> float:

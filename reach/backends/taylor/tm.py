@@ -24,7 +24,7 @@ from math import factorial
 import numpy as np
 
 from reach.backends.taylor.bound import polynomial_range
-from reach.backends.taylor.da import DA, stack
+from reach.backends.taylor.da import DA, integer_power, stack
 
 INF = np.inf
 
@@ -141,15 +141,7 @@ class TM:
 
     def __pow__(self, p):
         if np.ndim(p) == 0 and float(p).is_integer() and p >= 0:
-            k = int(p)
-            out, base = self.const_like(np.ones(self.shape)), self
-            while k:
-                if k & 1:
-                    out = out * base
-                k >>= 1
-                if k:
-                    base = base * base
-            return out
+            return integer_power(self, int(p))
         p = float(p)
 
         def derivative_range(k, lo, hi):
