@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import sys
 from pathlib import Path
 
@@ -36,11 +37,20 @@ def _parse_options(pairs: list[str]) -> dict:
             options[key.strip()] = yaml.safe_load(value)
         except yaml.YAMLError:
             raise InputError(f"cannot read the value of '{key}'", field="--option") from None
+        if isinstance(options[key.strip()], str):
+            try:                    # YAML 1.1 reads 1e-4 (no dot) as text
+                options[key.strip()] = float(value)
+            except ValueError:
+                pass
     return options
 
 
 def cmd_check(args) -> int:
     from reach.checking import check_files
+
+    if args.verbose:
+        logging.basicConfig(stream=sys.stderr, format="%(name)s: %(message)s")
+        logging.getLogger("reach").setLevel(logging.INFO)
 
     model_path = find_model(args.model)
     from reach.model import load_model
@@ -220,6 +230,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--property", "-p", action="append", help="check only this property (repeatable)")
     p.add_argument("--option", "-o", action="append", metavar="KEY=VALUE", help="back-end option")
     p.add_argument("--json", action="store_true", help="print results as JSON")
+    p.add_argument("--verbose", "-v", action="store_true", help="print the back-end's progress to stderr")
     p.add_argument("--counterexamples", default="counterexamples", metavar="DIR",
                    help="where UNSAFE counterexamples are written (default: counterexamples/)")
     p.set_defaults(func=cmd_check)

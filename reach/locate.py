@@ -10,10 +10,14 @@ from reach.errors import InputError
 
 
 def find_model(spec: str, search_dirs=("models",)) -> Path:
-    """``spec`` as a path if it exists, else the model file in ``search_dirs`` named ``spec``."""
+    """``spec`` as a path if it exists, else the model file in ``search_dirs`` whose file name
+    (without ``.yaml``) or whose ``name:`` is ``spec``."""
     path = Path(spec)
     if path.exists():
         return path
+    for directory in search_dirs:
+        if (Path(directory) / f"{spec}.yaml").is_file() and not spec.startswith("_"):
+            return Path(directory) / f"{spec}.yaml"
     for directory in search_dirs:
         for candidate in sorted(Path(directory).glob("*.yaml")):
             if candidate.name.startswith("_"):

@@ -149,3 +149,17 @@ def test_random_documents_never_crash_the_loaders(tmp_path, data):
             loader(path)
         except InputError:
             pass
+
+
+def test_models_are_found_by_path_file_name_or_name(tmp_path):
+    from reach.locate import find_model
+
+    (tmp_path / "orbit_a.yaml").write_text("name: Orbit-A\n")
+    (tmp_path / "_private.yaml").write_text("name: Hidden\n")
+    dirs = (str(tmp_path),)
+    assert find_model(str(tmp_path / "orbit_a.yaml"), dirs) == tmp_path / "orbit_a.yaml"
+    assert find_model("orbit_a", dirs) == tmp_path / "orbit_a.yaml"
+    assert find_model("Orbit-A", dirs) == tmp_path / "orbit_a.yaml"
+    for hidden in ("_private", "Hidden"):
+        with pytest.raises(InputError, match="no model named"):
+            find_model(hidden, dirs)

@@ -68,6 +68,7 @@ from scipy.special import ndtr
 
 from reach.backends import fsr_fourier
 from reach.backends.base import unsupported
+from reach.backends.options import option_error, parse_options
 from reach.model.ltv import KickedLinearSystem
 from reach.model.constraints import halfspaces
 from reach.result import Result, Status
@@ -91,13 +92,9 @@ class Options:
 
     @classmethod
     def from_dict(cls, options: dict | None) -> "Options":
-        options = dict(options or {})
-        unknown = set(options) - set(cls.__dataclass_fields__)
-        if unknown:
-            raise ValueError(f"unknown fsr option '{sorted(unknown)[0]}'")
-        opts = cls(**options)
+        opts = cls(**parse_options(cls, options, "fsr"))
         if opts.method not in METHODS:
-            raise ValueError(f"fsr method must be one of {', '.join(METHODS)}")
+            raise option_error("fsr", "method", f"must be one of {', '.join(METHODS)}")
         return opts
 
 

@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from reach.backends.event_sampling import check_events, replay_event
+from reach.backends.options import parse_options
 from reach.model.automaton import HybridAutomaton
 from reach.model.constraints import lambdify_margins
 from reach.model.simulate import Simulator
@@ -50,11 +51,7 @@ class Options:
 
     @classmethod
     def from_dict(cls, options: dict | None) -> "Options":
-        options = dict(options or {})
-        unknown = set(options) - set(cls.__dataclass_fields__)
-        if unknown:
-            raise ValueError(f"unknown montecarlo option '{sorted(unknown)[0]}'")
-        return cls(**options)
+        return cls(**parse_options(cls, options, "montecarlo"))
 
 
 # ------------------------------------------------------------------ the abort window

@@ -67,13 +67,14 @@ from __future__ import annotations
 
 import time
 import weakref
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
 from scipy.linalg import expm
 
 from reach import lp
+from reach.backends.options import parse_options
 from reach.result import Result, Status
 from reach.sets import Box, Star, chord_hull
 from reach.sets.hpolytope import HPolytope
@@ -124,13 +125,7 @@ class StarOptions:
     def from_dict(cls, options: dict | None) -> "StarOptions":
         if isinstance(options, StarOptions):
             return options
-        options = dict(options or {})
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(options) - known)
-        if unknown:
-            raise ValueError(f"unknown star option(s) {', '.join(unknown)}; "
-                             f"known: {', '.join(sorted(known))}")
-        return cls(**options)
+        return cls(**parse_options(cls, options, "star"))
 
 
 # ---------------------------------------------------------------------- dynamics
