@@ -22,29 +22,10 @@ import warnings
 
 import numpy as np
 
-from reach.backends.event_sampling import sample_extrema
+from reach.backends.event_sampling import outside_bounds, sample_extrema
 from reach.backends.taylor import BACKEND
 from reach.model.loader import load_model
 from reach.spec.properties import bind, load_properties
-
-
-def outside(rows, x0, values, uncertain, sense, slack):
-    """Runs whose sampled extremum lies outside their subdomain's bound."""
-    count = 0
-    covered = np.zeros(len(x0), dtype=bool)
-    for row in rows:
-        inside = np.all((x0[:, uncertain] >= row["low"]) & (x0[:, uncertain] <= row["high"]), axis=1)
-        covered |= inside
-        lo, hi = row["bound"]
-        v = values[inside]
-        tol = 1e-9 * max(1.0, abs(lo), abs(hi))
-        if sense == "max":
-            bad = (v > hi + tol) | (v < lo - tol - slack)
-        else:
-            bad = (v < lo - tol) | (v > hi + tol + slack)
-        count += int(bad.sum())
-    assert covered.all(), "the subdomains must cover every sampled initial state"
-    return count
 
 
 def main(argv=None) -> int:
@@ -90,8 +71,8 @@ def main(argv=None) -> int:
             "grid_slack": monitor.slack,
             "sampled_range": [float(np.min(values)), float(np.max(values))],
             "estimated_bound": est.bound, "rigorous_bound": rig.bound, "rigorous_status": rig.status.value,
-            "outside_estimated": outside(subs_e, x0, values, uncertain, prop.sense, monitor.slack),
-            "outside_rigorous": outside(subs_r, x0, values, uncertain, prop.sense, monitor.slack),
+            "outside_estimated": outside_bounds(subs_e, x0, values, uncertain, prop.sense, monitor.slack),
+            "outside_rigorous": outside_bounds(subs_r, x0, values, uncertain, prop.sense, monitor.slack),
             "width_ratio_median": float(np.median(width_r / np.maximum(width_e, 1e-300))),
             "width_ratio_max": float(np.max(width_r / np.maximum(width_e, 1e-300))),
             "seconds": {"estimated": t_est, "rigorous": t_rig, "montecarlo": t_mc},

@@ -4,7 +4,7 @@ form: on SRA01 the largest Fx in approach is reached at t = 0, at a corner of th
 import numpy as np
 import pytest
 
-from reach.backends.event_sampling import check_events, replay_event, sample_extrema
+from reach.backends.event_sampling import check_events, outside_bounds, replay_event, sample_extrema
 from reach.backends.montecarlo import structured_plan
 from reach.model.loader import load_model
 from reach.result import Status
@@ -63,3 +63,17 @@ def test_monitor_keeps_the_extremum_per_run_in_the_listed_modes(sra01, tmp_path)
     monitor, _, _ = sample_extrema(sra01, prop, x0)
     assert np.allclose(monitor.extrema(), [K1_X @ x[:2] for x in x0], rtol=1e-12)
     assert np.all(monitor.time == 0.0)
+
+
+def test_outside_bounds_counts_per_subdomain_with_the_slack_on_the_inner_side():
+    rows = [{"low": np.array([0.0]), "high": np.array([0.5]), "bound": (1.0, 2.0)},
+            {"low": np.array([0.5]), "high": np.array([1.0]), "bound": (3.0, 4.0)}]
+    x0 = np.array([[0.1, 9.0], [0.2, 9.0], [0.7, 9.0], [0.9, 9.0]])      # second state is certain
+    # a maximum: above the upper end is outside; below the lower end is tolerated by the slack
+    values = np.array([1.5, 0.95, 3.5, 4.2])
+    assert outside_bounds(rows, x0, values, [0], "max", slack=0.1) == 1
+    assert outside_bounds(rows, x0, values, [0], "max", slack=0.0) == 2
+    # a minimum: below the lower end is outside; the slack tolerates above the upper end
+    assert outside_bounds(rows, x0, np.array([1.5, 2.05, 2.9, 3.0]), [0], "min", slack=0.1) == 1
+    with pytest.raises(ValueError, match="cover"):
+        outside_bounds(rows[:1], x0, values, [0], "max", slack=0.0)

@@ -180,3 +180,34 @@ def test_pickled_arrays_are_refused(tmp_path):
     arrays["W1"] = np.array([None] * 24, dtype=object).reshape(6, 4)
     with pytest.raises(InputError, match=r"net\.npz: not a readable \.npz of plain arrays"):
         load_model(write_model(tmp_path, arrays))
+
+
+def test_network_models_pickle_and_run_on_worker_processes(tmp_path):
+    """A network model is sent to workers whole (arrays, not the evaluation cache): the copy has
+    the same law, and taylor ADS levels on 2 processes give the subdomains and bounds of 1."""
+    import pickle
+
+    from reach.backends.taylor import BACKEND
+    from reach.backends.taylor.keys import picklable
+    from reach.spec.properties import bind, load_properties
+
+    arrays = random_arrays(np.random.default_rng(8))
+    path = write_model(tmp_path, arrays)
+    path.write_text(path.read_text().replace("box: {x: 0,", "box: {x: [-0.2, 0.2],"))
+    model = load_model(path)
+    copy = pickle.loads(pickle.dumps(model))
+    S = np.random.default_rng(9).uniform(-1, 1, (20, 4))
+    assert np.array_equal(copy.modes["m"].inputs(S), model.modes["m"].inputs(S))
+    assert np.allclose(copy.modes["m"].inputs(S), np.stack(load(tmp_path / "net.npz").evaluate(*S.T), axis=1),
+                       rtol=1e-12)
+    (tmp_path / "p.yaml").write_text(
+        "properties:\n  - {id: reach_x, kind: event, modes: [m], maximize: 'x', require: '<= 100'}\n")
+    prop = bind(load_properties(tmp_path / "p.yaml")[0], model)
+    assert picklable(model, prop)
+    options = {"e_tol": 1e-12, "max_splits": 2}
+
+    def essence(result):
+        return [(tuple(r["low"]), tuple(r["high"]), r["bound"]) for r in result.details["subdomains"]]
+
+    serial = essence(BACKEND.check(model, prop, options))
+    assert len(serial) == 4 and serial == essence(BACKEND.check(model, prop, {**options, "jobs": 2}))

@@ -9,12 +9,12 @@ import scipy.linalg
 import sympy
 from scipy.integrate import solve_ivp
 
+from reach.backends.event_sampling import outside_bounds, sample_extrema
 from reach.backends.taylor import BACKEND
 from reach.backends.taylor.da import DA, algebra
 from reach.backends.taylor.event import event_map, initial_state, refine_time
 from reach.backends.taylor.flow import compile_expressions, compile_numeric, flow_map, nominal
 from reach.model.loader import load_model
-from reach.model.simulate import Simulator
 from reach.result import Status
 from reach.spec.properties import bind, load_properties
 
@@ -104,6 +104,35 @@ def test_event_time_and_map_match_a_dense_solve_ivp_event(srna):
         np.testing.assert_allclose(got, ref.y_events[0][0], rtol=1e-9, atol=1e-7)
 
 
+def test_nominal_run_stops_one_step_past_the_urgent_guard(srna, monkeypatch):
+    """The nominal run ends one accepted step after the first guard crossing; the crossing time
+    and every candidate map are those of the run integrated to the horizon."""
+    from reach.backends.taylor.problem import EventProblem, ModeCode
+
+    problem = EventProblem(srna, events(srna)["thrust_x_min"])
+    code = problem.code("approach")
+    center = np.array([-900.0, -400.0, 0.0, 0.0, 0.0])
+    half = np.array([20.0, 20.0, 0.0, 0.0, 0.0])
+    short = nominal(code.f_numeric, center, srna.horizon, stop=code.stop(center))
+    full = nominal(code.f_numeric, center, srna.horizon)
+    assert short.nodes[-1] < 0.5 * full.nodes[-1]
+    k_short, k_full = code.exit(short.grid())[0], code.exit(full.grid())[0]
+    assert k_short >= len(short.nodes) - 3          # the crossing is in the last step
+    def crossing(run, k):
+        times = np.linspace(run.nodes[k - 1], run.nodes[k], 4097)
+        inside = np.all(code.exits[0].margins(run.solution(times).T) <= 0, axis=1)
+        return times[int(np.argmax(inside))]
+
+    assert crossing(short, k_short) == pytest.approx(crossing(full, k_full), abs=1e-2)
+    stopped = problem.candidates(center, half, 4, 1e-9)
+    monkeypatch.setattr(ModeCode, "stop", lambda self, x0: None)
+    unstopped = problem.candidates(center, half, 4, 1e-9)
+    assert set(stopped) == set(unstopped)
+    for name in stopped:
+        scale = np.max(np.abs(unstopped[name].c))
+        np.testing.assert_allclose(stopped[name].c, unstopped[name].c, rtol=0, atol=1e-8 * scale)
+
+
 def test_supports_names_what_it_cannot_do(srna):
     props = {p.id: bind(p, srna) for p in load_properties("properties/rendezvous.yaml")}
     assert "event properties" in BACKEND.supports(srna, props["thrust"])
@@ -134,27 +163,13 @@ def test_monte_carlo_events_lie_in_their_subdomain_bounds(srna):
     prop = events(model)["thrust_x_min"]
     results = {r: BACKEND.check(model, prop, {"e_tol": 1e-12, "max_splits": 2, "remainder": r})
                for r in ("estimated", "next-order")}
-    quantity = sympy.lambdify([model.symbols], prop.quantity["approach"])
     rng = np.random.default_rng(7)
-    N = 1000
-    x0 = model.initial.low + rng.random((N, model.n)) * (model.initial.high - model.initial.low)
-    lowest = np.full(N, np.inf)
-
-    def observe(t, X, mode, rows):
-        np.minimum.at(lowest, rows, np.asarray(quantity(X.T)) * np.ones(len(rows)))
-
-    Simulator(model, dt=0.01).run(x0, observers=[observe])
-    slack = 0.05            # grid minimum vs true minimum: |Fx''| dt^2 / 8 is far below this
+    x0 = model.initial.low + rng.random((1000, model.n)) * (model.initial.high - model.initial.low)
+    monitor, _, _ = sample_extrema(model, prop, x0, 0.01)
     for remainder, result in results.items():
         rows = result.details["subdomains"]
         assert len(rows) == 4 and result.status is Status.UNKNOWN
-        counted = 0
-        for row in rows:
-            inside = np.all((x0[:, :2] >= row["low"]) & (x0[:, :2] <= row["high"]), axis=1)
-            counted += inside.sum()
-            lo, hi = row["bound"]
-            assert np.all(lowest[inside] >= lo) and np.all(lowest[inside] <= hi + slack), remainder
-        assert counted == N
+        assert outside_bounds(rows, x0, monitor.extrema(), [0, 1], prop.sense, monitor.slack) == 0, remainder
     for est, nxt in zip(results["estimated"].details["subdomains"],
                         results["next-order"].details["subdomains"]):
         for name, (lo, hi, R) in est["candidates"].items():

@@ -6,7 +6,7 @@ import pytest
 import sympy
 
 from reach.backends.taylor.ads import split_domain
-from reach.backends.taylor.bound import estimated_remainder, next_order_remainder, polynomial_range, truncate
+from reach.backends.taylor.bound import contenders, estimated_remainder, next_order_remainder, polynomial_range, truncate
 from reach.backends.taylor.da import DA, algebra, invert
 
 X, Y = sympy.symbols("X Y")
@@ -95,11 +95,14 @@ def _runge(alg):
     return lambda c, w: 1 / (1 + 25 * DA.var(alg, 0, c[0], w[0]) ** 2)
 
 
-def test_ads_splits_where_the_radius_of_convergence_is_small():
+def test_ads_splits_where_the_radius_of_convergence_is_small(caplog):
     """1/(1 + 25 x^2) has poles at +-0.2i: the radius at c is sqrt(c^2 + 0.04)."""
     alg = algebra(4, 1)
-    subs = split_domain(_runge(alg), [-1.0], [1.0], 1e-4, 15)
+    with caplog.at_level("INFO", logger="reach"):
+        subs = split_domain(_runge(alg), [-1.0], [1.0], 1e-4, 15)
     assert len(subs) > 4 and all(s.converged for s in subs)
+    levels = [r.getMessage() for r in caplog.records if r.getMessage().startswith("ADS level")]
+    assert levels[0].startswith("ADS level 0: 1 boxes") and levels[-1].endswith(f"{len(subs)} subdomains so far")
     for s in subs:
         radius = np.hypot(s.center[0], 0.2)
         assert s.half_width[0] < radius
@@ -142,3 +145,18 @@ def test_polynomial_bounds_enclose_the_polynomial_and_the_function():
     r_next = next_order_remainder(truncate(f, 5))
     assert np.max(np.abs(exact - values)) <= r_next
     assert lo - r_est <= exact.min() and exact.max() <= hi + r_est
+
+
+def test_contenders_drop_only_candidates_that_cannot_hold_the_extremum():
+    """For a minimum, a candidate whose enclosure starts above another's upper end is dominated;
+    the candidates kept give the same bound as all of them."""
+    alg = algebra(3, 1)
+    x = DA.var(alg, 0, 0.0, 1.0)
+    candidates = {"low": 1.0 + 0.5 * x, "overlapping": 1.2 + 0.5 * x * x, "far": 10.0 + x.sin(),
+                  "touching": 1.5 + 0.0 * x}
+    kept = contenders(candidates, "min")
+    assert set(kept) == {"low", "overlapping", "touching"}
+    assert set(contenders(candidates, "max")) == {"far"}
+    ends = lambda cands: (min(polynomial_range(p)[0] for p in cands.values()),
+                          min(polynomial_range(p)[1] for p in cands.values()))
+    assert ends(kept) == ends(candidates)

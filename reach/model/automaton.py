@@ -44,6 +44,10 @@ class Mode:
     controller: Controller | None = None
     where: Where | None = None
 
+    def __getstate__(self):
+        """Pickled without the compiled functions (each is rebuilt on first use)."""
+        return {k: v for k, v in self.__dict__.items() if k not in ("rhs", "inputs", "invariant_margins")}
+
     @cached_property
     def linear(self) -> tuple[np.ndarray, np.ndarray] | None:
         """``(A, b)`` with ``x' = A x + b`` if the closed-loop flow is affine, else None."""

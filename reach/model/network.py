@@ -16,9 +16,11 @@ with an ``affine`` method is a DA, and the layers become ``stack -> affine -> si
 -> unstack`` on the DA's own type, so this module does not depend on any back-end.
 
 For the model, each output is a sympy implemented function (``siren_<tag>_k(s...)``) whose
-``_imp_`` calls the network; ``sympy.lambdify`` and the Taylor back-end's expression compiler
-both call ``_imp_``. One evaluation serves all outputs: the outputs of the last call are kept
-and reused while the arguments are the same objects (and, for arrays, unchanged).
+``_imp_`` (a :class:`SirenOutput`) calls the network; ``sympy.lambdify`` and the Taylor back-end's
+expression compiler both call ``_imp_``. One evaluation serves all outputs: the outputs of the last
+call are kept and reused while the arguments are the same objects (and, for arrays, unchanged).
+Networks, their outputs and so the models that use them pickle (the arrays, not the cache), so
+such models can be sent to worker processes.
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ from pathlib import Path
 
 import numpy as np
 import sympy
-from sympy.utilities.lambdify import implemented_function
+from sympy.core.function import UndefinedFunction
 
 from reach.errors import Where
 
@@ -54,6 +56,11 @@ class Siren:
         self._hidden, self._output = layers[:-1], layers[-1]
         self._last = None
         self._functions = None
+
+    def __getstate__(self):
+        state = dict(self.__dict__)
+        state["_last"] = state["_functions"] = None
+        return state
 
     # ------------------------------------------------------------ loading
     @classmethod
@@ -157,18 +164,29 @@ class Siren:
     def functions(self) -> list:
         """One sympy implemented function per output, named ``siren_<tag>_<k>``."""
         if self._functions is None:
-            self._functions = [implemented_function(sympy.Function(f"siren_{self.tag}_{k}"),
-                                                    self._output_function(k))
+            self._functions = [UndefinedFunction(f"siren_{self.tag}_{k}", _imp_=SirenOutput(self, k))
                                for k in range(self.n_outputs)]
         return self._functions
-
-    def _output_function(self, k: int):
-        def output(*inputs):
-            return self(*inputs)[k]
-
-        output.__name__ = f"siren_{self.tag}_{k}"
-        return output
 
     def law(self, symbols: list[sympy.Symbol]) -> list[sympy.Expr]:
         """The outputs as sympy expressions of the feedback state symbols."""
         return [f(*symbols) for f in self.functions()]
+
+
+class SirenOutput:
+    """Output ``k`` of a network as a picklable callable (the ``_imp_`` of its sympy function).
+    Two are equal when they name the same output of the same weights file (its digest is in the
+    tag), as sympy compares functions by these attributes."""
+
+    def __init__(self, net: Siren, k: int):
+        self.net, self.k = net, k
+        self.__name__ = f"siren_{net.tag}_{k}"
+
+    def __call__(self, *inputs):
+        return self.net(*inputs)[self.k]
+
+    def __eq__(self, other):
+        return isinstance(other, SirenOutput) and (self.net.tag, self.k) == (other.net.tag, other.k)
+
+    def __hash__(self):
+        return hash((self.net.tag, self.k))

@@ -7,7 +7,8 @@ covered by ADS subdomains (:mod:`.ads`). On each, the run is followed from the i
 through its urgent switches (:mod:`.problem`) and the candidates for the extremum — ``q`` on
 entering a mode, at every interior local extremum (the event ``dq/dt = 0``, :mod:`.event`,
 eqs. 5-14), and on leaving (guard crossing or horizon) — are expanded as Taylor maps of the scaled
-initial deviations. The ADS splitting criterion is the truncation estimate of these maps.
+initial deviations. The ADS splitting criterion is the truncation estimate of those maps that
+can hold the extremum (:func:`.bound.contenders`).
 
 Bounds, by the ``remainder`` option:
 
@@ -24,13 +25,15 @@ Bounds, by the ``remainder`` option:
 
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+import logging
+import time
+from dataclasses import dataclass
 
 import numpy as np
-import sympy
 
+from reach.backends.options import option_error, parse_options
 from reach.backends.taylor.ads import Subdomain, split_domain, truncation_estimate
-from reach.backends.taylor.bound import enclose, estimated_remainder, next_order_remainder
+from reach.backends.taylor.bound import contenders, enclose, estimated_remainder, next_order_remainder
 from reach.backends.taylor.da import stack
 from reach.backends.taylor.flow import Unsmooth
 from reach.backends.taylor.keys import picklable
@@ -39,6 +42,9 @@ from reach.backends.taylor.problem import EventProblem, global_clock
 from reach.backends.taylor.units import expand_box, sweep_box
 from reach.result import Result, Status
 from reach.spec.properties import BoundEvent
+
+
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -55,14 +61,9 @@ class Options:
 
     @classmethod
     def from_dict(cls, options: dict | None) -> "Options":
-        options = dict(options or {})
-        names = {f.name for f in fields(cls)}
-        unknown = set(options) - names
-        if unknown:
-            raise ValueError(f"unknown taylor option(s): {', '.join(sorted(unknown))}")
-        out = cls(**options)
+        out = cls(**parse_options(cls, options, "taylor"))
         if out.remainder not in ("estimated", "next-order", "rigorous"):
-            raise ValueError("remainder must be 'estimated', 'next-order' or 'rigorous'")
+            raise option_error("taylor", "remainder", "must be 'estimated', 'next-order' or 'rigorous'")
         return out
 
 
@@ -106,16 +107,22 @@ class TaylorBackend:
             return run_units(expand_box, [(model, prop, opts.order, expand_order, opts.integration_tol,
                                            *full_box(c, h)) for c, h in boxes])
 
+        def measure(result):
+            """The ADS measure of a box: its candidates that can hold the extremum, stacked."""
+            return stack(list(contenders(result[0], prop.sense).values()))
+
         subdomains = split_domain(None, problem.low[u], problem.high[u], e_tol, opts.max_splits,
-                                  measure=lambda result: stack(list(result[0].values())),
-                                  map_boxes=expand_level)
+                                  measure=measure, map_boxes=expand_level)
         pick = max if prop.sense == "max" else min
 
         def evaluate(subs) -> list[dict]:
             """A row per subdomain: candidate bounds, the estimated bound and (rigorous) the sweep."""
-            sweeps = run_units(sweep_box, [(model, prop, opts.order, opts.step_tol, opts.integration_tol,
-                                            *full_box(sub.center, sub.half_width)) for sub in subs]) \
-                if rigorous else [None] * len(subs)
+            sweeps = [None] * len(subs)
+            if rigorous:
+                started = time.perf_counter()
+                sweeps = run_units(sweep_box, [(model, prop, opts.order, opts.step_tol, opts.integration_tol,
+                                                *full_box(sub.center, sub.half_width)) for sub in subs])
+                log.info("rigorous sweeps of %d subdomains in %.1f s", len(subs), time.perf_counter() - started)
             out = []
             for sub, sweep in zip(subs, sweeps):
                 polys, full = sub.poly
@@ -143,6 +150,7 @@ class TaylorBackend:
             open_rows = [r for r in rows if not decided(r)]
             if not open_rows:
                 break
+            log.info("refining %d undecided subdomains", len(open_rows))
             halves = []
             for r in open_rows:
                 width = (r["high"] - r["low"]) / (problem.high[u] - problem.low[u])
@@ -154,7 +162,7 @@ class TaylorBackend:
             results = expand_level([(0.5 * (lo + hi), 0.5 * (hi - lo)) for lo, hi, _ in halves])
             children = []
             for (lo, hi, depth), result in zip(halves, results):
-                error, _ = truncation_estimate(stack(list(result[0].values())))
+                error, _ = truncation_estimate(measure(result))
                 children.append(Subdomain(lo, hi, result, error, depth, error <= e_tol))
             rows = [r for r in rows if decided(r)] + evaluate(children)
         rows.sort(key=lambda r: tuple(r["low"]))

@@ -11,12 +11,15 @@ exceeds ``e_tol``, at most ``max_splits`` times on the way to any one subdomain.
 
 from __future__ import annotations
 
+import logging
+import time
 from dataclasses import dataclass
 
 import numpy as np
 
 from reach.backends.taylor.da import DA
 
+log = logging.getLogger(__name__)
 NEGLIGIBLE = 1e-14      # sizes below this fraction of the largest are treated as zero
 
 
@@ -81,7 +84,9 @@ def split_domain(expand, low, high, e_tol: float, max_splits: int, measure=None,
     map_boxes = map_boxes or (lambda boxes: [expand(c, h) for c, h in boxes])
     frontier = [(np.asarray(low, dtype=float), np.asarray(high, dtype=float), 0)]
     done = []
+    level = 0
     while frontier:
+        started = time.perf_counter()
         results = map_boxes([(0.5 * (lo + hi), 0.5 * (hi - lo)) for lo, hi, _ in frontier])
         deeper = []
         for (lo, hi, depth), result in zip(frontier, results):
@@ -93,6 +98,8 @@ def split_domain(expand, low, high, e_tol: float, max_splits: int, measure=None,
                 deeper += [(lo, left_hi, depth + 1), (right_lo, hi, depth + 1)]
             else:
                 done.append(Subdomain(lo, hi, result, error, depth, error <= e_tol))
-        frontier = deeper
+        log.info("ADS level %d: %d boxes expanded in %.1f s, %d split, %d subdomains so far",
+                 level, len(frontier), time.perf_counter() - started, len(deeper) // 2, len(done))
+        frontier, level = deeper, level + 1
     done.sort(key=lambda sub: tuple(sub.low))
     return done

@@ -92,3 +92,16 @@ def enclose(poly: DA, remainder: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``I_P + [-R, R]`` (eq. 28)."""
     lo, hi = polynomial_range(poly)
     return lo - remainder, hi + remainder
+
+
+def contenders(candidates: dict, sense: str) -> dict:
+    """The candidates that can hold the extremum: for a maximum, those whose enclosure (eq. 27
+    with the eq. 28 remainder) reaches above the largest lower end (below the smallest upper end
+    for a minimum). A dominated candidate changes neither end of the bound, so its truncation
+    error need not drive the splitting."""
+    sign = 1.0 if sense == "max" else -1.0
+    ends = {name: enclose(p, estimated_remainder(p)) for name, p in candidates.items()}
+    ends = {name: (float(lo), float(hi)) if sign > 0 else (-float(hi), -float(lo))
+            for name, (lo, hi) in ends.items()}
+    floor = max(lo for lo, _ in ends.values())
+    return {name: candidates[name] for name, (_, hi) in ends.items() if hi >= floor}

@@ -211,20 +211,38 @@ class Nominal:
         return float(times[int(np.argmax(score(self.solution(times))))])
 
 
-def nominal(f_numeric, x0: np.ndarray, T: float, tol: float = 1e-9, refine: int = 2) -> Nominal:
+def nominal(f_numeric, x0: np.ndarray, T: float, tol: float = 1e-9, refine: int = 2,
+            stop=None) -> Nominal:
     """Nominal run: the accepted steps of an adaptive DOP853 (``rtol = tol``), each cut into
     ``refine`` equal steps, are the DA step nodes; a dense DOP853 solution at 1e-12 is the
-    nominal state for detection and refinement."""
+    nominal state for detection and refinement.
+
+    ``stop(x) -> float``, if given, is positive until the run should end (an urgent guard's
+    largest margin): the run ends one accepted step after ``stop`` first crosses zero from above,
+    or at ``T``, so the nodes bracket the crossing and no work is spent past it.
+    """
     def fun(_, x):
         return np.array(f_numeric(list(x)), dtype=float)
 
     scale = np.maximum(1.0, np.abs(np.asarray(x0, dtype=float)))
-    coarse = solve_ivp(fun, (0.0, T), x0, method="DOP853", rtol=tol, atol=tol * scale)
-    dense = solve_ivp(fun, (0.0, T), x0, method="DOP853", rtol=1e-12, atol=1e-12 * scale,
+    events = None
+    if stop is not None:
+        def events(_, x):
+            return stop(x)
+        events.terminal, events.direction = True, -1
+    coarse = solve_ivp(fun, (0.0, T), x0, method="DOP853", rtol=tol, atol=tol * scale, events=events)
+    t, end = coarse.t, T
+    if coarse.status == 1:                       # stopped at the crossing: one step further
+        last_step = t[-1] - t[-2] if len(t) > 1 else T
+        end = min(T, t[-1] + last_step)
+        if end > t[-1]:
+            rest = solve_ivp(fun, (t[-1], end), coarse.y[:, -1], method="DOP853", rtol=tol,
+                             atol=tol * scale, first_step=last_step)
+            t = np.concatenate([t, rest.t[1:]])
+    dense = solve_ivp(fun, (0.0, end), x0, method="DOP853", rtol=1e-12, atol=1e-12 * scale,
                       dense_output=True)
     if not (coarse.success and dense.success):
         raise RuntimeError(f"nominal run failed: {dense.message}")
-    t = coarse.t
     nodes = np.concatenate([np.linspace(a, b, refine + 1)[:-1] for a, b in zip(t[:-1], t[1:])] + [t[-1:]])
     return Nominal(dense.sol, nodes)
 

@@ -7,9 +7,9 @@ import pickle
 
 
 def fingerprint(*objects) -> str:
-    """A digest of picklable objects; objects that cannot be pickled (a model whose controller is a
-    network implemented in Python) are identified by their identity in this process, so a cache
-    entry keyed by one must keep the object alive."""
+    """A digest of picklable objects; an object that cannot be pickled (a model built in Python with
+    a control law implemented by a local function) is identified by its identity in this process,
+    so a cache entry keyed by one must keep the object alive."""
     digest = hashlib.sha1()
     for obj in objects:
         try:

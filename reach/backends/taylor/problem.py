@@ -82,6 +82,18 @@ class ModeCode:
                 best = (k, ex, ex.faces[face])
         return best
 
+    def stop(self, x0: np.ndarray):
+        """The nominal run's stop function (:func:`.flow.nominal`): the smallest over the urgent
+        exits of the guard's largest margin, or None when the mode has no urgent exit or the start
+        already lies in a guard (:meth:`exit` ignores guards held at the start)."""
+        if not self.exits:
+            return None
+
+        def margin(x):
+            return min(float(np.max(ex.margins(np.asarray(x)[None, :])[0])) for ex in self.exits)
+
+        return margin if margin(x0) > 0 else None
+
     def inside(self, X, certainly: bool) -> Exit | None:
         """An exit whose guard holds for the Taylor models ``X``: for every deviation
         (``certainly``) or possibly for some."""
@@ -133,9 +145,14 @@ class EventProblem:
         sign = 1.0 if self.prop.sense == "max" else -1.0
         for hop in range(MAX_SWITCHES + 1):
             code = self.code(mode)
-            run = nominal(code.f_numeric, np.array([x.cons for x in X]), T - t0, tol)
+            x_nominal = np.array([x.cons for x in X])
+            run = nominal(code.f_numeric, x_nominal, T - t0, tol, stop=code.stop(x_nominal))
             grid = run.grid()
             leave = code.exit(grid)
+            if leave is None and run.nodes[-1] < T - t0:     # grazed the guard: run to the horizon
+                run = nominal(code.f_numeric, x_nominal, T - t0, tol)
+                grid = run.grid()
+                leave = code.exit(grid)
             last = len(run.nodes) - 1 if leave is None else leave[0]
             if code.q is not None:
                 out[f"{mode}:entry" if hop else "start"] = code.q(X)
@@ -178,9 +195,12 @@ class EventProblem:
         if key in _ENCLOSURES:
             _ENCLOSURES.move_to_end(key)
             return _ENCLOSURES[key][0]
-        run = nominal(code.f_numeric, np.array([x.cons for x in x0]), duration, tol)
+        start = np.array([x.cons for x in x0])
+        run = nominal(code.f_numeric, start, duration, tol, stop=code.stop(start))
         stop = lambda step: code.inside([TM(at_sigma(p, 1.0)) for p in step.poly], True) is not None
-        enc = enclose_stretch(code.f, x0, run.nodes, stop, rel_tol)
+        # the sweep takes its first step from the nominal run and runs on (past the nominal
+        # crossing) until every run is inside the guard, or to the horizon
+        enc = enclose_stretch(code.f, x0, np.r_[run.nodes[:2], duration], stop, rel_tol)
         _ENCLOSURES[key] = (enc, self.model)      # the model stays alive with its entry
         while len(_ENCLOSURES) > KEEP_ENCLOSURES:
             _ENCLOSURES.popitem(last=False)
