@@ -88,25 +88,29 @@ def violates(prop: BoundEvent, value) -> np.ndarray:
     return bad & np.isfinite(value)
 
 
+def within_bound(values, lo: float, hi: float, sense: str, slack: float) -> np.ndarray:
+    """Whether sampled extrema agree with a bound ``[lo, hi]`` of the true extremum. A sampled
+    extremum is a value of ``q`` at a real state, so it lies inside on the outer side (below a
+    maximum's upper end, above a minimum's lower end; up to 1e-9 relative rounding); on the inner
+    side it may miss the true extremum by the grid ``slack``."""
+    v = np.asarray(values, dtype=float)
+    tol = 1e-9 * max(1.0, abs(lo), abs(hi))
+    if sense == "max":
+        return (v <= hi + tol) & (v >= lo - tol - slack)
+    return (v >= lo - tol) & (v <= hi + tol + slack)
+
+
 def outside_bounds(subdomains, x0: np.ndarray, values: np.ndarray, uncertain, sense: str, slack: float) -> int:
-    """How many sampled runs have an extremum outside the bound of the subdomain holding their
-    initial state (rows with ``low``, ``high``, ``bound`` over the ``uncertain`` states, as the
-    taylor back-end reports them). The sampled extremum is a value of a real state, so it lies
-    inside on the outer side (up to 1e-9 relative rounding); on the inner side it may miss the
-    true extremum by the grid ``slack``. Every run must start in some subdomain."""
+    """How many sampled runs have an extremum outside (:func:`within_bound`) the bound of the
+    subdomain holding their initial state (rows with ``low``, ``high``, ``bound`` over the
+    ``uncertain`` states, as the taylor back-end reports them). Every run must start in some
+    subdomain."""
     count = 0
     covered = np.zeros(len(x0), dtype=bool)
     for row in subdomains:
         inside = np.all((x0[:, uncertain] >= row["low"]) & (x0[:, uncertain] <= row["high"]), axis=1)
         covered |= inside
-        lo, hi = row["bound"]
-        v = values[inside]
-        tol = 1e-9 * max(1.0, abs(lo), abs(hi))
-        if sense == "max":
-            bad = (v > hi + tol) | (v < lo - tol - slack)
-        else:
-            bad = (v < lo - tol) | (v > hi + tol + slack)
-        count += int(bad.sum())
+        count += int(np.sum(~within_bound(values[inside], *row["bound"], sense, slack)))
     if not covered.all():
         raise ValueError("the subdomains do not cover every sampled initial state")
     return count

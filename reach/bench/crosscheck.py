@@ -14,6 +14,8 @@ from __future__ import annotations
 
 from collections import defaultdict
 
+from reach.backends.event_sampling import within_bound
+
 
 def _replays(row) -> bool:
     from reach.backends.montecarlo import replay
@@ -66,21 +68,15 @@ def cross_check(rows: list[dict]) -> list[dict]:
                 if ahi < blo - 1e-9 or bhi < alo - 1e-9:       # touching intervals overlap
                     add("fail", f"{inst}/{prop}: probability intervals of {a} [{alo:.4f}, {ahi:.4f}] and "
                                 f"{b} [{blo:.4f}, {bhi:.4f}] do not overlap")
-        # A sampled extremum is a value at a real state: it cannot lie beyond the outer end of a
-        # sound bound (above a maximum's, below a minimum's); on the inner side the grid may
-        # miss the true extremum by up to the sampler's grid slack.
+        # sampled extrema against every sound bound of the same event (within_bound: strict on
+        # the outer side, the sampler's grid slack on the inner side)
         samples = [r["details"] for r in group if r["details"].get("sampled_range")]
         for r in group:
             if r.get("bound") and samples:
                 lo, hi = r["bound"]
                 for d in samples:
                     s_lo, s_hi = d["sampled_range"]
-                    slack = d.get("grid_slack", 0.0)
-                    tol = 1e-9 * max(1.0, abs(lo), abs(hi))
-                    maximum = d.get("sense", "max") == "max"
-                    low_ok = s_lo >= lo - tol - (slack if maximum else 0.0)
-                    high_ok = s_hi <= hi + tol + (0.0 if maximum else slack)
-                    if not (low_ok and high_ok):
+                    if not within_bound([s_lo, s_hi], lo, hi, d.get("sense", "max"), d.get("grid_slack", 0.0)).all():
                         add("fail", f"{inst}/{prop}: {r['backend']} bound [{lo:.6g}, {hi:.6g}] excludes sampled "
                                     f"values in [{s_lo:.6g}, {s_hi:.6g}]")
     return checks
