@@ -822,30 +822,21 @@ def _unsubsumed(jumps: list[_Jump], H_inv, g_inv) -> list[_Jump]:
     target and reset and ``guard_j and invariant`` implies every row of ``guard_k`` (one LP
     per row over the state space); the successors of ``j`` are then contained in those of
     ``k``, whatever the segment. A jump whose guard misses the invariant is dropped too."""
+    def implies(region: HPolytope, k: _Jump) -> bool:
+        return all((res := region.maximize(row)).optimal and res.value <= bound + 1e-9 * (1 + abs(bound))
+                   for row, bound in zip(k.H, k.g))
+
     kept = []
     for j in jumps:
         H = np.vstack([j.H, H_inv]) if H_inv.shape[0] else j.H
-        g = np.concatenate([j.g, g_inv])
-        n = j.R.shape[0]
-        free = (np.full(n, -np.inf), np.full(n, np.inf))
-        if H.shape[0] and lp.minimize(np.zeros(n), H, g, bounds=free).infeasible:
+        if not H.shape[0]:                       # no guard, no invariant: nothing to compare
+            kept.append(j)
             continue
-        covered = False
-        for k in kept:
-            if k.target != j.target or not (np.array_equal(k.R, j.R) and np.array_equal(k.r, j.r)):
-                continue
-            if not H.shape[0]:
-                continue
-            ok = True
-            for row, bound in zip(k.H, k.g):
-                res = lp.maximize(row, H, g, bounds=free)
-                if not res.optimal or res.value > bound + 1e-9 * (1 + abs(bound)):
-                    ok = False
-                    break
-            if ok:
-                covered = True
-                break
-        if not covered:
+        region = HPolytope(H, np.concatenate([j.g, g_inv]))
+        if region.maximize(np.zeros(region.dim)).infeasible:     # only a proved emptiness drops it
+            continue
+        if not any(k.target == j.target and np.array_equal(k.R, j.R) and np.array_equal(k.r, j.r)
+                   and implies(region, k) for k in kept):
             kept.append(j)
     return kept
 
