@@ -25,11 +25,9 @@ def parse_options(cls, options: dict | None, backend: str) -> dict:
         if len(allowed) != len(annotation.split("|")):
             continue
         value = options[name]
-        if isinstance(value, bool) and bool not in allowed:
-            pass
-        elif int in allowed and isinstance(value, float) and value.is_integer():
+        if int in allowed and type(value) is float and value.is_integer():
             options[name] = int(value)
-        elif float in allowed and isinstance(value, int) and not isinstance(value, bool):
+        elif float in allowed and type(value) is int:        # not a bool
             options[name] = float(value)
         if not any(type(options[name]) is t for t in allowed):
             names = " or ".join("null" if t is type(None) else t.__name__ for t in allowed)
