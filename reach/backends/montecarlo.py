@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from reach.backends.event_sampling import check_events, replay_event
-from reach.backends.options import parse_options
+from reach.backends.options import parse_options, ranged
 from reach.model.automaton import HybridAutomaton
 from reach.model.constraints import lambdify_margins
 from reach.model.simulate import Simulator
@@ -42,12 +42,12 @@ NAME = "montecarlo"
 
 @dataclass
 class Options:
-    samples: int = 1000            # i.i.d. runs (safety) or runs (stochastic reach)
-    search_rounds: int = 3         # cross-entropy generations after the i.i.d. round
-    search_size: int = 200         # runs per generation
+    samples: int = ranged(1000, 1, 10_000_000)           # i.i.d. runs (safety) or runs (stochastic reach)
+    search_rounds: int = ranged(3, 0, 1000)        # cross-entropy generations after the i.i.d. round
+    search_size: int = ranged(200, 1, 1_000_000)        # runs per generation
     seed: int = 0
     dt: float | None = None        # simulator grid step (model default if None)
-    batch: int = 20000             # runs per numpy batch for stochastic estimates
+    batch: int = ranged(20000, 1, 1_000_000)            # runs per numpy batch for stochastic estimates
 
     @classmethod
     def from_dict(cls, options: dict | None) -> "Options":

@@ -48,10 +48,10 @@ from reach.yamlio import Doc, load
 
 KINDS = ("safety", "reach", "reach_avoid", "event")
 _FIELDS = {
-    "safety": {"id", "kind", "description", "modes", "require", "avoid"},
+    "safety": {"id", "kind", "description", "modes", "optional", "require", "avoid"},
     "reach": {"id", "kind", "description", "at", "target", "probability"},
     "reach_avoid": {"id", "kind", "description", "at", "target", "safe", "probability"},
-    "event": {"id", "kind", "description", "modes", "minimize", "maximize", "require"},
+    "event": {"id", "kind", "description", "modes", "optional", "minimize", "maximize", "require"},
 }
 
 
