@@ -23,6 +23,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from reach.model.constraints import NUMERICAL_TOLERANCE
 from reach.result import Status, _plain
 
@@ -103,6 +105,9 @@ def figures(result, prop, model) -> dict:
             out["unit_note"] = "requirements of different dimensions: margins in model units"
         if "closest_depth" in d:
             out["closest_margin"] = _in(unit, d["closest_depth"])
+        depth = _depth_at_violation(result.counterexample, prop)
+        if depth is not None:
+            out["violation_margin"] = _in(unit, depth)
     if result.probability is not None:
         out["probability"] = list(result.probability)
         if getattr(prop, "at_least", None) is not None:
@@ -113,6 +118,17 @@ def figures(result, prop, model) -> dict:
     if result.counterexample is not None:
         out["time_unit"] = model.units.time
     return out
+
+
+def _depth_at_violation(cex, prop) -> float | None:
+    """The margin (negative: how far past) of the counterexample's violating state."""
+    if cex is None or cex.violation_mode not in prop.pieces or len(cex.violation_state) != len(prop.symbols):
+        return None
+    test = prop.violation(cex.violation_mode)
+    if test is None:
+        return None
+    _, depth = test(np.asarray(cex.violation_state, dtype=float).reshape(1, -1))
+    return float(depth[0]) if np.isfinite(depth[0]) else None
 
 
 def _margin_note(result, kind: str, out: dict) -> str | None:
@@ -165,8 +181,12 @@ def line(result, prop, model) -> str:
             text += f": closest margin {_with_unit(number(f['closest_margin']), unit)}"
             if unit is None:
                 text += " (model units)"
-        if result.counterexample is None:
-            parts.append(text)
+        if "violation_margin" in f:
+            unit = prop.margin_unit()
+            text += f": margin {_with_unit(number(f['violation_margin']), unit)} at the violation"
+            if unit is None:
+                text += " (model units)"
+        parts.append(text)
     if result.probability is not None:
         p = f"P in {interval(*result.probability)}"
         if "at_least" in f:

@@ -116,3 +116,17 @@ def test_cli_text_and_json_agree_on_the_margin(capsys, tmp_path):
     main(args)
     text = capsys.readouterr().out
     assert f"closest margin {depth / 3600:.4g} N" in text
+
+
+def test_a_star_counterexample_is_measured_against_the_requirement(sra01):
+    """At the corner (-925, -375) at rest the ARCH gain K1 asks Fx = K1[0] . x (kg m/min^2)."""
+    thrust = _prop(sra01, "properties/thrust_7N.yaml", "thrust_7N")
+    corner = [-925.0, -375.0, 0.0, 0.0, 0.0]
+    fx = (-28.82867767694 * -925.0 + 0.1004799482599 * -375.0) / 3600     # N, from the model file
+    cex = Counterexample("SRA01", "thrust_7N", "models/SRA01.yaml", "properties/thrust_7N.yaml",
+                         corner, 120.0, 0.0, "approach", corner, 0.1)
+    result = Result("star", "SRA01", "thrust_7N", Status.UNSAFE, counterexample=cex)
+    f = figures(result, thrust, sra01)
+    assert fx == pytest.approx(7.3969, abs=1e-4)
+    assert f["violation_margin"] == pytest.approx(7.0 - fx, rel=1e-9)
+    assert f"margin {7.0 - fx:.4g} N at the violation" in line(result, thrust, sra01)

@@ -224,10 +224,10 @@ SUITE = yaml.safe_load((Path(__file__).resolve().parent.parent / "suite.yaml").r
 def test_every_shipped_model_loads_with_dimensions(path):
     model = load_model(path)
     assert model.dimensions is not None
-    unknown = [v for v in model.state if model.dimension_of(v) is None]
+    unknown = [v for v in model.state + model.inputs + list(model.constants) if model.dimension_of(v) is None]
     assert unknown == [], f"{path.name}: no dimension for {unknown}"
     for v in model.state:
-        if v in model.state and model.modes and all(m.flow[model.index(v)] == 1 for m in model.modes.values()):
+        if all(m.flow[model.index(v)] == 1 for m in model.modes.values()):
             assert model.dimension_of(v) == dimension(time=1)       # a clock is a time
 
 

@@ -229,7 +229,7 @@ class _Parser:
         form = None
         if lf is not None:
             k = _fraction(right) if right.is_number else None
-            form = lf.times(k) if k is not None else self.pure(node.left, lf, "the base of a non-numeric power")
+            form = lf.times(k) if k is not None else self.pure(node.left, lf, "the base of a power with a non-rational exponent")
         return left ** right, form
 
     def call(self, node: ast.Call, depth: int):

@@ -108,23 +108,23 @@ class _Builder:
         """The names of ``state`` or ``inputs``: a list, or a mapping name -> unit (kept in
         ``self.declared``)."""
         value = self.data.get(key, []) if allow_empty else self.need(key)
-        if isinstance(value, dict):
-            self.declared.update({name: (unit, self.where(key, name)) for name, unit in value.items()})
-            value = list(value)
-        elif not isinstance(value, list) or (not value and not allow_empty):
+        mapping = isinstance(value, dict)
+        if (not mapping and not isinstance(value, list)) or (not value and not allow_empty):
             raise self.where(key).error("expected a list of names, or a mapping name: unit")
-        if not value and not allow_empty:
-            raise self.where(key).error("expected a list of names")
+        names = list(value)
         seen = set()
-        for i, name in enumerate(value):
+        for i, name in enumerate(names):
+            w = self.where(key, name if mapping else i)
             if not isinstance(name, str) or not name.isidentifier() or name.startswith("_"):
-                raise self.where(key, i).error(f"'{name}' is not a valid name")
+                raise w.error(f"'{name}' is not a valid name")
             if name in RESERVED:
-                raise self.where(key, i).error(f"'{name}' is a reserved function or constant name")
+                raise w.error(f"'{name}' is a reserved function or constant name")
             if name in seen:
-                raise self.where(key, i).error(f"duplicate name '{name}'")
+                raise w.error(f"duplicate name '{name}'")
             seen.add(name)
-        return value
+            if mapping:
+                self.declared[name] = (value[name], w)
+        return names
 
     def number(self, value, where: Where, names=None, dimension=None, what: str = "") -> float:
         """A number (constants and units allowed); with ``dimension`` (a :class:`Form`, or a
