@@ -69,7 +69,7 @@ def _context(declared: dict) -> DimensionContext:
 @settings(max_examples=150, deadline=None)
 @given(unit_expressions(), unit_expressions())
 def test_a_bracket_is_compatible_iff_the_exponents_agree(a, b):
-    (ua, da), (ub, db) = a, b
+    (_, da), (ub, db) = a, b
     dims = _context({"q": da})
     text = f"q <= 2[{ub}]"
     if da == db:
@@ -261,3 +261,53 @@ def test_every_property_file_binds_wherever_its_names_exist():
                 except InputError as err:
                     assert "unknown name" in str(err) or "beyond the model horizon" in str(err), str(err)
     assert checked > 100
+
+
+@pytest.mark.parametrize("prop, line", [
+    ({"id": "e", "kind": "event", "modes": ["approach"], "maximize": "Fx", "require": "<= 10[m]"},
+     "properties[0].require: 10[m] compared with Fx [kg*m/min**2]"),
+    ({"id": "b", "kind": "safety", "modes": ["passive"], "avoid": {"box": {"x": ["-1[s]", "1[m]"]}}},
+     "properties[0].avoid.box.x: -1[s] compared with x [m]"),
+    ({"id": "s", "kind": "safety", "require": ["x + 1[m/s] <= 0"]},
+     "properties[0].require[0]: 1[m/s] added to x [m]"),
+    ({"id": "l", "kind": "safety", "require": ["max(x, vx) <= 0"]},
+     "properties[0].require[0]: x [m] compared with (in max()) vx [m/min]"),
+])
+def test_property_mismatches_name_the_field_and_both_sides(tmp_path, prop, line):
+    path = _write(tmp_path, "p.yaml", {"properties": [prop]})
+    with pytest.raises(InputError) as err:
+        bind(load_properties(path)[0], load_model("models/SRA01.yaml"))
+    assert str(err.value).endswith(line)
+
+
+def test_reach_time_and_disturbance_are_checked(tmp_path):
+    path = _write(tmp_path, "p.yaml", {"properties": [
+        {"id": "r", "kind": "reach", "at": "500[m]", "target": {"box": {"x": ["-1[m]", "1[m]"]}}}]})
+    with pytest.raises(InputError, match=r"'at' must be a time \[s\], got 500\[m\]"):
+        bind(load_properties(path)[0], load_model("models/fsr_burn.yaml"))
+    data = yaml.safe_load(Path("models/fsr_burn.yaml").read_text())
+    data["disturbance"]["gaussian"]["cov"] = ["(0.05[m])**2"]
+    with pytest.raises(InputError, match=r"disturbance.gaussian.cov: \(0.05\[m\]\)\*\*2 \[km\*\*2\] given for "
+                                         r"the variance of vy \[km\*\*2/s\*\*2\]"):
+        load_model(_write(tmp_path, "m.yaml", data))
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.tuples(*[st.integers(-2, 2)] * 3), st.integers(1, 4))
+def test_inference_down_a_chain_of_derivatives(base, length):
+    """x0 compared with a constant of dimension D and x_i' = x_(i+1): x_i has dimension
+    D - i*time."""
+    import tempfile
+
+    units = UnitSystem("km", "h", "g")
+    names = [f"x{i}" for i in range(length + 1)]
+    flows = {n: names[i + 1] for i, n in enumerate(names[:-1])}
+    flows[names[-1]] = 0
+    data = {"name": "chain", "units": {"length": "km", "time": "h", "mass": "g"},
+            "constants": {"d0": f"1[{units.name(dimension(*base))}]"}, "state": names,
+            "modes": {"a": {"flow": flows, "invariant": [f"{names[0]} <= d0"]}},
+            "initial": {"mode": "a", "box": {n: 0 for n in names}}, "horizon": 1}
+    with tempfile.TemporaryDirectory() as tmp:
+        model = load_model(_write(Path(tmp), "m.yaml", data))
+    for i, n in enumerate(names):
+        assert model.dimension_of(n) == dimension(base[0], base[1] - i, base[2])

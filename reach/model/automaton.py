@@ -18,7 +18,7 @@ import sympy
 
 from reach.errors import Where
 from reach.model.constraints import Constraint, affine_coefficients, halfspaces, lambdify_margins
-from reach.model.units import DimensionSystem, DisplayUnit, UnitSystem, model_display
+from reach.model.units import DimensionSystem, UnitSystem
 
 
 @dataclass
@@ -158,11 +158,6 @@ class HybridAutomaton:
     def dimension_of(self, name: str):
         """The dimension of a state, input or constant, or None if not known."""
         return None if self.dimensions is None else self.dimensions.of(name)
-
-    def unit_of(self, name: str) -> DisplayUnit | None:
-        """The model unit of a state, input or constant (``m/min``), if its dimension is known."""
-        dim = self.dimension_of(name)
-        return None if dim is None else model_display(self.units, dim)
 
     @cached_property
     def symbols(self) -> list[sympy.Symbol]:

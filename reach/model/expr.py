@@ -77,10 +77,8 @@ class DimensionContext:
     names: frozenset
     brackets: list = field(default_factory=list)      # (text, SI value, dimension) seen
 
-    def show(self, form: Form | None) -> str:
-        """``[m/min]`` for a known dimension, ``[unknown]`` otherwise."""
-        if form is None:
-            return "[number]"
+    def show(self, form: Form) -> str:
+        """``[m/min]`` for a known dimension, ``[dimension unknown]`` otherwise."""
         value = self.system.value(form)
         return f"[{self.units.name(value)}]" if value is not None else "[dimension unknown]"
 

@@ -49,7 +49,7 @@ from reach.errors import InputError, Where
 from reach.model.automaton import Controller, Disturbance, HybridAutomaton, InitialSet, Mode, Transition
 from reach.model.constraints import affine_coefficients, from_comparisons
 from reach.model.controllers import build_law, build_network_law
-from reach.model.expr import (CONSTANTS, FUNCTIONS, DimensionContext, parse_comparison, parse_expr,
+from reach.model.expr import (CONSTANTS, FUNCTIONS, DimensionContext, parse_comparison,
                                parse_quantity, parse_unit, side_text)
 from reach.model.units import TIME, DimensionSystem, Form, UnitSystem, check_base
 from reach.yamlio import Doc, load, merge
@@ -278,21 +278,19 @@ class _Builder:
                               lambda got, want: f"{side_text(text, got)} given for {var} {want}")
         return expr
 
-    def check_control_dims(self, spec: dict, w: Where) -> None:
+    def check_control_dims(self, mname: str, spec: dict) -> None:
         """Set-points and Bryson maxima have the dimension of their state or input."""
-        groups = [("setpoint", spec.get("setpoint"))]
+        groups = [(("setpoint",), spec.get("setpoint"))]
         lqr = spec.get("lqr")
         if isinstance(lqr, dict) and isinstance(lqr.get("bryson"), dict):
-            groups += [(f"lqr.bryson.{k}", lqr["bryson"].get(k)) for k in ("state", "input")]
+            groups += [(("lqr", "bryson", k), lqr["bryson"].get(k)) for k in ("state", "input")]
         for path, values in groups:
             if not isinstance(values, dict):
                 continue
             for name, value in values.items():
                 if name in self.state or name in self.inputs:
-                    where = w
-                    for key in path.split(".") + [name]:
-                        where = where.child(key)
-                    self.number(value, where, dimension=Form.name(name), what=name)
+                    self.number(value, self.where("modes", mname, "control", *path, name),
+                                dimension=Form.name(name), what=name)
 
     def text_list(self, value, path) -> list[str]:
         if isinstance(value, str):
@@ -321,7 +319,7 @@ class _Builder:
                 raise w.error("give either 'gain' or 'lqr', not both")
             if not self.inputs:
                 raise w.error("a gain or LQR controller needs 'inputs'")
-            self.check_control_dims(spec, w)
+            self.check_control_dims(mname, spec)
             return build_law(spec, open_flow, self.symbols, self.state, self.input_symbols, self.inputs, w,
                              lambda value, where: self.number(value, where))
         for u in spec:

@@ -48,7 +48,7 @@ import sympy
 
 from reach.errors import InputError, Where
 from reach.model.constraints import Constraint, from_comparisons, halfspaces, violation_test
-from reach.model.expr import DimensionContext, parse_comparison, parse_expr, parse_quantity, side_text
+from reach.model.expr import DimensionContext, parse_comparison, parse_quantity, side_text
 from reach.model.units import TIME, DisplayUnit, Form
 from reach.yamlio import Doc, load
 
