@@ -311,3 +311,9 @@ def test_inference_down_a_chain_of_derivatives(base, length):
         model = load_model(_write(Path(tmp), "m.yaml", data))
     for i, n in enumerate(names):
         assert model.dimension_of(n) == dimension(base[0], base[1] - i, base[2])
+
+
+@pytest.mark.parametrize("text", ["x**sqrt(-1)", "x**log(-1)", "x**log(0)"])
+def test_a_complex_exponent_is_bad_input(text):
+    with pytest.raises(InputError, match="is not a real number"):
+        parse_expr(text, {"x": parse_expr("1", {}, W)}, W)

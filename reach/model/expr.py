@@ -219,6 +219,8 @@ class _Parser:
             if right == 0:
                 self.fail("division by zero")
             return left / right, (lf if rf is None else rf.times(Fraction(-1)) if lf is None else lf.minus(rf))
+        if right.is_number and not right.is_real:
+            self.fail(f"exponent '{self.text(node.right)}' is not a real number")
         if right.is_number and abs(float(right)) > MAX_EXPONENT:
             self.fail(f"exponent {float(right):g} is too large (at most {MAX_EXPONENT})")
         if left == 0 and right.is_number and float(right) < 0:
