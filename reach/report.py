@@ -61,16 +61,12 @@ def requirement(prop) -> str:
     if kind == "event":
         return f"{prop.sense} {prop.text or 'quantity'} {prop.op} {_bound_value(prop)}"
     if kind == "safety":
-        texts = []
-        for pieces in prop.pieces.values():
-            for piece in pieces:
-                for con in piece:
-                    text = con.text[5:-1] if con.text.startswith("not (") else con.text
-                    if text not in texts:
-                        texts.append(text)
-        if len(texts) == 1 or all(len(p) == 1 for ps in prop.pieces.values() for p in ps):
-            return ", ".join(texts)
-        return "avoid " + " and ".join(texts)
+        # a required constraint c is stored as its negation, the unsafe piece "not (c)"
+        texts = list(dict.fromkeys(con.text for pieces in prop.pieces.values()
+                                   for piece in pieces for con in piece))
+        if texts and all(t.startswith("not (") and t.endswith(")") for t in texts):
+            return ", ".join(t[len("not ("):-1] for t in texts)
+        return "avoid " + " and ".join(texts) if texts else ""
     if kind in ("reach", "reach_avoid") and prop.at_least is not None:
         return f"P >= {number(prop.at_least)}"
     return ""
@@ -200,7 +196,7 @@ def line(result, prop, model) -> str:
         parts.append(str(d["method"]))
     if "remainder" in d:
         parts.append(f"remainder {d['remainder']}")
-    return ", ".join(parts)
+    return "; ".join(parts)
 
 
 def json_row(result, prop, model, counterexample_file: str | None = None) -> dict:

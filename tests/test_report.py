@@ -130,3 +130,12 @@ def test_a_star_counterexample_is_measured_against_the_requirement(sra01):
     assert fx == pytest.approx(7.3969, abs=1e-4)
     assert f["violation_margin"] == pytest.approx(7.0 - fx, rel=1e-9)
     assert f"margin {7.0 - fx:.4g} N at the violation" in line(result, thrust, sra01)
+
+
+def test_an_avoided_set_reads_as_avoid(tmp_path, sra01):
+    path = tmp_path / "p.yaml"
+    path.write_text("properties:\n  - id: wall\n    kind: safety\n    modes: [passive]\n"
+                    "    avoid: ['x >= 5[m]']\n")
+    wall = bind(load_properties(path)[0], sra01)
+    result = Result("montecarlo", "SRA01", "wall", Status.UNKNOWN, details={"closest_depth": 60.0})
+    assert line(result, wall, sra01).startswith("avoid x >= 5[m]: closest margin 60 m")
