@@ -36,7 +36,6 @@ import yaml
 from reach.errors import InputError
 from reach.locate import find_model
 from reach.paths import printable, safe_name
-from reach.result import Status
 
 EXIT_CODES = """exit codes: 0 every property SAFE; 1 a violation (UNSAFE with a replayed counterexample, a
 probability below its threshold; bench: a failed cross-check); 2 bad input or options (one line
@@ -65,20 +64,22 @@ def _parse_options(pairs: list[str]) -> dict:
 
 
 def cmd_check(args) -> int:
-    from reach.checking import check_files
+    from reach.checking import check_files, exit_code
+    from reach.model import load_model
+    from reach.report import json_row
+    from reach.spec import bind, load_properties
 
     if args.verbose:
         logging.basicConfig(stream=sys.stderr, format="%(name)s: %(message)s")
         logging.getLogger("reach").setLevel(logging.INFO)
-
-    from reach.checking import exit_code
-
     model_path = find_model(args.model)
-    from reach.model import load_model
-    for finding in load_model(model_path).lints:
+    model = load_model(model_path)
+    for finding in model.lints:
         print(printable(f"warning: {finding}"), file=sys.stderr)
     results = check_files(model_path, args.properties, args.backend, _parse_options(args.option),
                           args.property)
+    bound = {p.id: bind(p, model) for p in load_properties(args.properties)
+             if not args.property or p.id in args.property}
     saved = {}
     if args.counterexamples:
         out = Path(args.counterexamples)
@@ -89,18 +90,13 @@ def cmd_check(args) -> int:
                 r.counterexample.save(path)
                 saved[r.property] = str(path)
     if args.json:
-        rows = []
-        for r in results:
-            row = {"property": r.property, "status": r.status.value.lower(), "seconds": r.seconds}
-            row.update(r.to_dict())
-            if r.property in saved:
-                row["counterexample_file"] = saved[r.property]
-            rows.append(row)
+        rows = [json_row(r, bound.get(r.property), model, saved.get(r.property)) for r in results]
         print(json.dumps(rows, indent=1))
         return exit_code(results)
     print(printable(f"{results[0].model if results else args.model} with {args.backend}:"))
     for r in results:
-        print(printable(f"  {r.property:<16} {r.status.value:<11} {r.seconds:8.2f} s  {summary(r)}"))
+        print(printable(f"  {r.property:<16} {r.status.value:<11} {r.seconds:8.2f} s  "
+                        f"{summary(r, bound.get(r.property), model)}"))
         if r.property in saved:
             print(printable(f"  {'':<16} counterexample: {saved[r.property]}  (reach replay {saved[r.property]})"))
     return exit_code(results)
@@ -116,29 +112,12 @@ def _writable(path: Path, option: str) -> None:
         raise InputError(f"cannot write {path}", field=option)
 
 
-def summary(result) -> str:
-    """One line of the most telling details of a result."""
-    d = result.details
-    if result.status == Status.UNSUPPORTED:
-        return d.get("reason", "")
-    if result.counterexample is not None:
-        c = result.counterexample
-        abort = "" if c.switch_time is None else f", switch at t={c.switch_time:g}"
-        return f"violated at t={c.violation_time:.4g} in {c.violation_mode}{abort}"
-    parts = []
-    if result.probability is not None:
-        parts.append(f"P in [{result.probability[0]:.4f}, {result.probability[1]:.4f}]")
-    if result.bound is not None:
-        parts.append(f"bound [{result.bound[0]:.4g}, {result.bound[1]:.4g}]")
-    if "closest_depth" in d:
-        parts.append(f"closest margin {d['closest_depth']:.4g}")
-    if "violation_probability_upper_95" in d:
-        parts.append(f"P(violation) <= {d['violation_probability_upper_95']:.2g} (95 %)")
-    if "method" in d:
-        parts.append(str(d["method"]))
-    if "remainder" in d:
-        parts.append(f"remainder {d['remainder']}")
-    return ", ".join(parts)
+def summary(result, prop, model) -> str:
+    """One line of the most telling details of a result, in the requirement's units
+    (:func:`reach.report.line`)."""
+    from reach.report import line
+
+    return line(result, prop, model)
 
 
 def cmd_lint(args) -> int:

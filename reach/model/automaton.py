@@ -18,7 +18,7 @@ import sympy
 
 from reach.errors import Where
 from reach.model.constraints import Constraint, affine_coefficients, halfspaces, lambdify_margins
-from reach.model.units import UnitSystem
+from reach.model.units import DimensionSystem, UnitSystem
 
 
 @dataclass
@@ -153,6 +153,11 @@ class HybridAutomaton:
     horizon: float
     disturbance: Disturbance | None = None
     clocks: list[int] = field(default_factory=list)   # states with rate 1 in every mode
+    dimensions: DimensionSystem | None = None          # None: the model declares no units
+
+    def dimension_of(self, name: str):
+        """The dimension of a state, input or constant, or None if not known."""
+        return None if self.dimensions is None else self.dimensions.of(name)
 
     @cached_property
     def symbols(self) -> list[sympy.Symbol]:
