@@ -267,7 +267,9 @@ class _Builder:
         expr, form = parse_quantity(text, self.names, where, self.units, self.dims)
         if self.dims is not None:
             self.dims.require(form, Form.name(var).minus(Form(const=TIME)), where,
-                              lambda got, want: f"{side_text(text, got)} is not a rate of {var}: expected {want}")
+                              lambda got, want: f"{side_text(text, got)} is not a rate of {var}: expected {want} "
+                              f"(a plain number is a pure number: write a rate constant with its unit, e.g. "
+                              f"0.1[1/{self.units.time}])")
         return expr
 
     def assigned(self, text, var: str, names, where: Where) -> sympy.Expr:
