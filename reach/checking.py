@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import difflib
 
-from reach.backends import registry
+from reach.backends import registry, validate_options
 from reach.backends.base import run, unsupported
 from reach.errors import InputError
 from reach.model import load_model
@@ -34,6 +34,7 @@ def check_files(model_path, property_path, backend_name: str, options: dict | No
                 only: list[str] | None = None) -> list[Result]:
     """Load, bind and check every property (or those in ``only``); one Result per property."""
     backend = resolve_backend(backend_name)
+    validate_options(backend_name, options)
     model = load_model(model_path)
     props = load_properties(property_path)
     if only:

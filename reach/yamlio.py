@@ -35,6 +35,9 @@ class Doc:
 
 def _convert(node, loader, path, lines, file, budget):
     budget[0] += 1
+    if not node.tag.startswith("tag:yaml.org,2002:") or "python" in node.tag:
+        raise InputError(f"YAML tag '{printable(node.tag)}' is not allowed (plain data only)", file,
+                         _field(path), node.start_mark.line + 1)
     if budget[0] > MAX_NODES:
         raise InputError(f"more than {MAX_NODES} YAML nodes (aliases expanding?)", file)
     lines.setdefault(path, (file, node.start_mark.line + 1))

@@ -13,6 +13,16 @@ BACKENDS = {
 }
 
 
+# name -> the options dataclass of its module (``from_dict`` checks names, types and ranges)
+OPTIONS = {"montecarlo": "Options", "star": "StarOptions", "fsr": "Options", "taylor": "Options"}
+
+
+def validate_options(name: str, options: dict | None) -> None:
+    """Raise the InputError of the first bad option for back-end ``name``, before any work, so a
+    typo is reported even when no property reaches the back-end."""
+    getattr(importlib.import_module(BACKENDS[name]), OPTIONS[name]).from_dict(options or {})
+
+
 def available() -> list[str]:
     """Names of the back-ends whose module exists in this installation."""
     names = []

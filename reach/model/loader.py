@@ -143,9 +143,13 @@ class _Builder:
         return result.real
 
     def make_dims(self, constants: list[str]) -> DimensionContext | None:
-        """The dimension equations, starting from the declarations; None if the model gives
-        neither ``units`` nor any declaration (then nothing is checked)."""
-        if "units" not in self.data and not self.declared:
+        """The dimension equations, starting from the declarations; None if the model declares no
+        dimension anywhere: no unit for a state or input and no bracketed constant (then nothing is
+        checked: a model written without units, such as a thermostat ``T' = -0.1 (T - 10)``, is not
+        refused for its plain rate constant)."""
+        raw = self.data.get("constants")
+        bracketed = isinstance(raw, dict) and any(isinstance(v, str) and "[" in v for v in raw.values())
+        if not self.declared and not bracketed:
             return None
         dims = DimensionContext(DimensionSystem(), self.units, frozenset(self.state + self.inputs + constants))
         for name, (unit, where) in self.declared.items():
@@ -357,7 +361,7 @@ class _Builder:
                     raise w.error(f"missing '{k}'")
             sources = spec["from"] if isinstance(spec["from"], list) else [spec["from"]]
             for s in sources + [spec["to"]]:
-                if s not in modes:
+                if not isinstance(s, str) or s not in modes:
                     field = "from" if s in sources else "to"
                     raise self.where(*path, field).error(f"unknown mode '{s}'")
             urgent = spec.get("urgent", False)
@@ -418,7 +422,7 @@ class _Builder:
         extra = set(raw) - {"mode", "box"}
         if extra:
             raise self.where("initial", sorted(extra)[0]).error(f"unknown field '{sorted(extra)[0]}'")
-        if raw["mode"] not in modes:
+        if not isinstance(raw["mode"], str) or raw["mode"] not in modes:
             raise self.where("initial", "mode").error(f"unknown mode '{raw['mode']}'")
         box = raw["box"]
         if not isinstance(box, dict):

@@ -1,0 +1,220 @@
+"""The command-line contract (DESIGN.md): exit 0 every property SAFE, 1 a violation, 2 bad input
+as one line ``file:line: field: message``, 3 undecided; never a traceback, a hang, code execution
+or a file written outside its folder.
+
+* ``tests/data/cli_cases.yaml``: the table of cases (what is wrong, the command line, the exit
+  code, the first line of stderr), each run in-process from a fresh working directory.
+* Property-based: command lines assembled from pools of good and bad parts, and model files
+  with random fields replaced, must end in a code of the contract with no traceback and write
+  nothing outside the working directory.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import copy
+import io
+import math
+import os
+import re
+from pathlib import Path
+
+import pytest
+import yaml
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from reach.cli import main
+
+REPO = Path(__file__).resolve().parents[1]
+DATA = REPO / "tests" / "data"
+CASES = yaml.safe_load((DATA / "cli_cases.yaml").read_text())["cases"]
+CONTRACT = {0, 1, 2, 3}
+
+
+def _fill(value, tmp: Path):
+    if isinstance(value, str):
+        return value.replace("{repo}", str(REPO)).replace("{tmp}", str(tmp))
+    if isinstance(value, list):
+        return [_fill(v, tmp) for v in value]
+    if isinstance(value, dict):
+        return {k: _fill(v, tmp) for k, v in value.items()}
+    return value
+
+
+def _special(value):
+    """``.nan`` / ``.inf`` in the table stand for the floats."""
+    if isinstance(value, str) and value in (".nan", ".inf", "-.inf"):
+        return {".nan": math.nan, ".inf": math.inf, "-.inf": -math.inf}[value]
+    if isinstance(value, list):
+        return [_special(v) for v in value]
+    return value
+
+
+def patched_model(case: dict) -> str:
+    """tests/data/tank.yaml with the case's ``set`` and ``drop`` applied, as YAML text."""
+    doc = copy.deepcopy(yaml.safe_load((DATA / "tank.yaml").read_text()))
+    for path, value in (case.get("set") or {}).items():
+        *parents, last = path.split(".")
+        node = doc
+        for key in parents:
+            node = node.setdefault(key, {})
+        node[last] = _special(value)
+    for path in case.get("drop") or []:
+        *parents, last = path.split(".")
+        node = doc
+        for key in parents:
+            node = node[key]
+        del node[last]
+    return yaml.safe_dump(doc, allow_unicode=False)
+
+
+def run(argv: list[str], cwd: Path) -> tuple[int, str, str]:
+    """``reach ARGV`` in-process from ``cwd``: (exit code, stdout, stderr)."""
+    out, err = io.StringIO(), io.StringIO()
+    before = os.getcwd()
+    os.chdir(cwd)
+    try:
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+            try:
+                code = main(argv)
+            except SystemExit as exc:
+                code = exc.code if isinstance(exc.code, int) else 2
+    finally:
+        os.chdir(before)
+    return code, out.getvalue(), err.getvalue()
+
+
+def prepare(case: dict, tmp: Path) -> list[str]:
+    """Write the case's files into ``tmp``; its command line."""
+    if "set" in case or "drop" in case:
+        (tmp / "model.yaml").write_text(patched_model(case))
+    if "model_text" in case:
+        (tmp / "model.yaml").write_text(case["model_text"])
+    if "model_padding" in case:                    # a comment line of that many bytes
+        (tmp / "model.yaml").write_text("name: tank\n#" + "x" * case["model_padding"] + "\n")
+    if "model_bytes" in case:
+        (tmp / "model.yaml").write_bytes(bytes.fromhex(case["model_bytes"]))
+    if "props_text" in case:
+        (tmp / "props.yaml").write_text(case["props_text"])
+    for name, text in (case.get("files") or {}).items():
+        (tmp / name).write_text(_fill(text, tmp))
+    for name, target in (case.get("links") or {}).items():
+        os.symlink(target, tmp / name)
+    return _fill(case["argv"], tmp)
+
+
+def _snapshot(folder: Path) -> set:
+    return {p.name for p in folder.iterdir()}
+
+
+def test_the_table_has_at_least_100_cases_and_unique_names():
+    names = [c["case"] for c in CASES]
+    assert len(names) >= 100 and len(set(names)) == len(names)
+    assert {c["exit"] for c in CASES} == CONTRACT
+
+
+@pytest.mark.parametrize("case", CASES, ids=[c["case"] for c in CASES])
+def test_case(case, tmp_path):
+    work = tmp_path / "work"
+    work.mkdir()
+    argv = prepare(case, work)
+    outside = _snapshot(tmp_path), _snapshot(REPO)
+    code, out, err = run(argv, work)
+    assert "Traceback" not in err and "Traceback" not in out
+    assert code == case["exit"], f"exit {code}, stderr: {err!r}"
+    first = err.splitlines()[0] if err else ""
+    assert re.search(case["first_line"], first), f"first line {first!r}"
+    if code == 2:
+        assert err.count("\n") == 1, f"bad input is one line: {err!r}"
+        assert "\x1b" not in err                       # control characters are escaped
+    assert (_snapshot(tmp_path), _snapshot(REPO)) == outside, "wrote outside the working directory"
+    assert not (work / "pwned").exists()
+
+
+# ------------------------------------------------------------------ generated command lines
+
+GOOD_MODEL = str(DATA / "tank.yaml")
+GOOD_PROPS = str(DATA / "tank_level.yaml")
+TEXT = st.text(alphabet=st.characters(blacklist_categories=("Cs",)), max_size=12)
+NUMBERS = st.sampled_from(["0", "-1", "1e12", "nan", "inf", "-inf", "1e-300", "3", "0.5", "true", "[]", "{", "x"])
+OPTIONS = st.builds(lambda k, v: f"{k}={v}", st.sampled_from(
+    ["samples", "dt", "seed", "search_rounds", "step", "max_refinements", "order", "e_tol", "method", "bogus"]), NUMBERS)
+PATHS = st.sampled_from([GOOD_MODEL, GOOD_PROPS, "/dev/zero", "/dev/null", "/etc/passwd", "/", "nope.yaml",
+                         "../outside.yaml", str(REPO / "suite.yaml"), "-"]) | TEXT
+
+
+@st.composite
+def command_lines(draw):
+    command = draw(st.sampled_from(["check", "replay", "compare", "lint", "plot", "sweep", "bench", "bogus"]))
+    if command == "check":
+        argv = ["check", draw(PATHS | st.just(GOOD_MODEL)), draw(PATHS | st.just(GOOD_PROPS))]
+        argv += ["-b", draw(st.sampled_from(["montecarlo", "star", "fsr", "taylor", "nope"]))]
+        for option in draw(st.lists(OPTIONS, max_size=3)):
+            argv += ["-o", option]
+        argv += ["-o", "samples=10", "-o", "search_rounds=0"] if argv[4] == "montecarlo" and draw(st.booleans()) else []
+        return argv
+    if command in ("replay", "lint"):
+        return [command, draw(PATHS)]
+    if command == "compare":
+        return [command, draw(PATHS), draw(PATHS)]
+    if command == "plot":
+        return [command, draw(PATHS), "--runs", draw(NUMBERS), "--out", draw(st.sampled_from(["a.png", "a.xyz", "/proc/x.png", "a"]))]
+    if command == "sweep":
+        return [command, draw(PATHS), draw(PATHS), "--radius", draw(NUMBERS), "--cells", draw(NUMBERS)]
+    if command == "bench":
+        return [command, "--suite", draw(PATHS), "--time-limit", draw(NUMBERS), "--instance", "NOPE"]
+    return [command] + draw(st.lists(TEXT, max_size=3))
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(argv=command_lines())
+def test_generated_command_lines_keep_the_contract(argv, tmp_path_factory):
+    work = tmp_path_factory.mktemp("argv")
+    outside = _snapshot(work.parent), _snapshot(REPO)
+    code, out, err = run(argv, work)
+    assert code in CONTRACT, (argv, code, err)
+    assert "Traceback" not in err and "internal error" not in err, (argv, err)
+    if code == 2:
+        assert err.count("\n") == 1, (argv, err)
+    assert (_snapshot(work.parent), _snapshot(REPO)) == outside
+
+
+# ------------------------------------------------------------------ generated model files
+
+FIELDS = ["name", "state", "state.h", "units", "units.time", "modes", "modes.fill", "modes.fill.flow",
+          "modes.fill.flow.h", "modes.fill.invariant", "modes.drain.control", "transitions", "initial",
+          "initial.mode", "initial.box", "initial.box.h", "horizon", "constants", "constants.k", "extends",
+          "description", "disturbance", "inputs"]
+VALUES = st.one_of(st.none(), st.booleans(), st.integers(-10**6, 10**6),
+                   st.floats(allow_nan=True, allow_infinity=True), TEXT,
+                   st.lists(st.integers(-5, 5) | TEXT, max_size=3),
+                   st.dictionaries(TEXT, st.integers(0, 3) | TEXT, max_size=2),
+                   st.sampled_from(["h**2", "h <= 1", "1[m]", "1[N]", "__import__('os')", "h.real", "x" * 300,
+                                    "/dev/zero", "../../etc/passwd", "on", "[1, 2]", "(" * 200]))
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(changes=st.dictionaries(st.sampled_from(FIELDS), VALUES, min_size=1, max_size=3),
+       backend=st.sampled_from(["star", "montecarlo"]))
+def test_generated_models_keep_the_contract(changes, backend, tmp_path_factory):
+    work = tmp_path_factory.mktemp("model")
+    doc = yaml.safe_load((DATA / "tank.yaml").read_text())
+    for path, value in changes.items():
+        *parents, last = path.split(".")
+        node = doc
+        for key in parents:
+            if not isinstance(node.get(key), dict):
+                node[key] = {}
+            node = node[key]
+        node[last] = value
+    (work / "model.yaml").write_text(yaml.safe_dump(doc))
+    outside = _snapshot(work.parent), _snapshot(REPO)
+    code, out, err = run(["check", "model.yaml", GOOD_PROPS, "-b", backend, "-o", "samples=10",
+                          "-o", "search_rounds=0"] if backend == "montecarlo" else
+                         ["check", "model.yaml", GOOD_PROPS, "-b", backend], work)
+    assert code in CONTRACT, (changes, code, err)
+    assert "Traceback" not in err and "internal error" not in err, (changes, err)
+    if code == 2:
+        assert err.count("\n") == 1, (changes, err)
+    assert (_snapshot(work.parent), _snapshot(REPO)) == outside
