@@ -35,7 +35,7 @@ import yaml
 
 from reach.errors import InputError
 from reach.locate import find_model
-from reach.paths import printable, safe_name
+from reach.paths import printable, safe_name, writable_folder
 
 EXIT_CODES = """exit codes: 0 every property SAFE; 1 a violation (UNSAFE with a replayed counterexample, a
 probability below its threshold; bench: a failed cross-check); 2 bad input or options (one line
@@ -103,13 +103,10 @@ def cmd_check(args) -> int:
 
 
 def _writable(path: Path, option: str) -> None:
-    """Create ``path``'s folder; a folder that cannot be made or written is bad input."""
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InputError(f"cannot create the folder {path.parent} ({exc.__class__.__name__})", field=option) from None
-    if not os.access(path.parent, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
-        raise InputError(f"cannot write {path}", field=option)
+    """``path`` can be written: its folder exists or is made, and it is not a read-only file."""
+    writable_folder(path.parent, option)
+    if path.exists() and not os.access(path, os.W_OK):
+        raise InputError(f"cannot write {printable(path)}", field=option)
 
 
 def summary(result, prop, model) -> str:

@@ -70,3 +70,17 @@ _CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f]")
 def printable(text) -> str:
     """``text`` with control characters shown as escapes (``\\x1b``), for one-line messages."""
     return _CONTROL.sub(lambda m: m.group().encode("unicode_escape").decode("ascii"), str(text))
+
+
+def writable_folder(folder, option: str) -> Path:
+    """``folder``, created if needed; one that cannot be made or written is bad input (``option``
+    names the command-line option it came from)."""
+    folder = Path(folder)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"cannot create the folder {printable(folder)} ({exc.__class__.__name__})",
+                         field=option) from None
+    if not os.access(folder, os.W_OK):
+        raise InputError(f"cannot write in {printable(folder)}", field=option)
+    return folder

@@ -14,6 +14,7 @@ from reach.executors import make_executor
 from reach.bench.suite import load_suite
 from reach.bench.tables import markdown_table
 from reach.errors import InputError
+from reach.paths import writable_folder
 
 
 def run_unit(model_path: str, property_path: str, backend: str, options: dict) -> list[dict]:
@@ -108,6 +109,7 @@ def run_suite(suite_path, backends=None, instances=None, out="results", jobs=Non
     ``results.json`` of the same suite and keeps the others; every row says which run it came
     from (``run``), and the report lists the runs."""
     suite = load_suite(suite_path)
+    writable_folder(Path(out) / "plots", "--out")
     from reach.backends import available
     names = list(suite.backends)
     if backends:

@@ -18,16 +18,27 @@ an origin-preserving map by the fixed point ``G = L^-1 (Id - N o G)``, one order
 from __future__ import annotations
 
 from functools import lru_cache
+import math
 from itertools import combinations_with_replacement
 from math import factorial
 
 import numpy as np
 
 
+MAX_PRODUCT_PAIRS = 3_000_000
+
+
 class Algebra:
     """Monomial tables of the truncated power series of order ``order`` in ``nvars`` variables."""
 
     def __init__(self, order: int, nvars: int):
+        # products of monomials of total degree <= order: C(order + 2 nvars, 2 nvars) pairs
+        pairs = math.comb(order + 2 * nvars, 2 * nvars)
+        if pairs > MAX_PRODUCT_PAIRS:
+            from reach.errors import InputError
+            raise InputError(f"order {order} in {nvars} variables needs {pairs:.3g} monomial products per "
+                             f"multiplication; at most {MAX_PRODUCT_PAIRS:.0e} (lower the order)",
+                             field="options.taylor.order")
         self.order, self.nvars = order, nvars
         exps = [np.zeros(nvars, dtype=int)]
         for deg in range(1, order + 1):
