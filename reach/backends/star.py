@@ -86,6 +86,10 @@ NAME = "star"
 #: of the state's magnitude (fast transients, e.g. right after a controller switch)
 ERROR_RATIO = 0.25
 
+#: primal feasibility tolerance of the depth LPs (HiGHS's default is 1e-7): a depth is
+#: then exact to well below the touch tolerance of :class:`StarOptions`
+DEPTH_LP_TOLERANCE = 1e-10
+
 #: a witness is replayed at once when the spread refinement could still remove is below
 #: this fraction of the unsafe piece's inradius: the over-approximation is already tight
 TIGHT_RATIO = 0.1
@@ -105,8 +109,11 @@ class StarOptions:
     max_lps: LP budget; when exhausted the answer is UNKNOWN.
     max_jumps: bound on discrete jumps along a path (cyclic automata); UNKNOWN beyond.
         None (default): unbounded if the model has no zero-dwell cycle, else 10.
-    touch_tolerance: a set that reaches a piece made only of strict inequalities by at
-        most this much (after row normalisation) only touches its boundary: no violation.
+    touch_tolerance: relative LP tolerance. With piece rows of unit norm, the depth LP's
+        answer counts as exact up to ``tol = touch_tolerance * max(1, |g_r|, |h_r . c|)``
+        (largest over the piece's rows ``h_r x <= g_r``, ``c`` the segment's centre): a
+        piece made only of strict inequalities is entered when the depth exceeds ``tol``;
+        a piece with a non-strict row is met when the depth is at least ``-tol``.
     replay_dt: simulator step for replays (None: the simulator's default).
     """
 
@@ -118,7 +125,7 @@ class StarOptions:
     max_unresolved: int = 8
     max_lps: int = 50_000
     max_jumps: int | None = None
-    touch_tolerance: float = 1e-6
+    touch_tolerance: float = 1e-9
     replay_dt: float | None = None
 
     @classmethod
@@ -318,38 +325,69 @@ def _unsafe_pieces(prop) -> dict[str, list[_Piece] | None]:
 class _LinearModel:
     """The matrices of a linear hybrid automaton, extracted once per model object (the
     symbolic extraction costs more than a small check): flows, normalised invariants,
-    outgoing jumps, and whether the model is linear at all."""
+    outgoing jumps, and whether the model is linear at all.
+
+    The exploration needs a global clock (it bounds the horizon and dates the switches).
+    A model without one (no state of rate 1 in every mode) gets its own: state ``n`` with
+    rate 1 everywhere, 0 initially, never reset and absent from every guard, invariant
+    and property, so the reachable states of the model are the projections of the
+    extended ones (``n`` is then ``model.n + 1`` and ``added_clock`` is True)."""
 
     def __init__(self, model):
+        self.added_clock = not model.clocks
+        self.n = model.n + self.added_clock
+        self.clock = model.clocks[0] if model.clocks else model.n
         self.jumps = {name: [self._jump(model, tr) for tr in model.outgoing(name)]
                       for name in model.modes}
         self.linear = (all(m.linear is not None and m.invariant_halfspaces is not None
                            for m in model.modes.values())
                        and all(j is not None for js in self.jumps.values() for j in js))
         if self.linear:
-            self.flows = {name: AffineFlow(*mode.linear) for name, mode in model.modes.items()}
-            self.invariants = {name: _normalised(*mode.invariant_halfspaces)
+            self.flows = {name: AffineFlow(*self._with_clock(*mode.linear))
+                          for name, mode in model.modes.items()}
+            self.invariants = {name: _normalised(*self.widen(*mode.invariant_halfspaces))
                                for name, mode in model.modes.items()}
             self.fired = {name: _unsubsumed(js, *self.invariants[name])
                           for name, js in self.jumps.items()}
+
+    def widen(self, H, g):
+        """Rows over the model's states as rows over the explored ones (a zero clock column)."""
+        g = np.atleast_1d(np.asarray(g, dtype=float))
+        H = np.asarray(H, dtype=float).reshape(g.size, self.n - self.added_clock)
+        if self.added_clock:
+            H = np.hstack([H, np.zeros((g.size, 1))])
+        return H, g
+
+    def _with_clock(self, A, b):
+        if not self.added_clock:
+            return A, b
+        n = self.n
+        A2 = np.zeros((n, n))
+        A2[:n - 1, :n - 1] = A
+        return A2, np.append(b, 1.0)
+
+    def initial_box(self, low, high) -> Box:
+        """The initial box over the explored states (the added clock starts at 0)."""
+        if self.added_clock:
+            low, high = np.append(low, 0.0), np.append(high, 0.0)
+        return Box(low, high)
 
     @classmethod
     def of(cls, model) -> "_LinearModel":
         return _cached(model, cls)
 
-    @staticmethod
-    def _jump(model, tr) -> _Jump | None:
+    def _jump(self, model, tr) -> _Jump | None:
         """The transition as matrices, or None if its guard or reset is nonlinear."""
         guard = model.guard_halfspaces(tr)
         if guard is None:
             return None
-        R, r = np.eye(model.n), np.zeros(model.n)
+        R, r = np.eye(self.n), np.zeros(self.n)
         for index, expr in tr.reset.items():
             coeffs = affine_coefficients(expr, model.symbols)
             if coeffs is None:
                 return None
-            R[index], r[index] = coeffs
-        return _Jump(tr.name, tr.target, *_normalised(*guard), R, r, tr.window)
+            R[index, :model.n], r[index] = coeffs
+        return _Jump(tr.name, tr.target, *_normalised(*self.widen(*guard)), R, r, tr.window)
 
 
 # ---------------------------------------------------------------------- the explorer
@@ -362,6 +400,7 @@ class _Stats:
     deepest: int = 0
     lps: int = 0
     replays: int = 0
+    tolerance: float = 0.0          # the largest depth tolerance used (model units)
 
 
 class _Explorer:
@@ -375,23 +414,25 @@ class _Explorer:
         self.model, self.prop, self.opt = model, prop, options
         self.sweep = cutoff is not None
         self.cutoff = np.inf if cutoff is None else float(cutoff)
-        self.n = model.n
-        self.clock = model.clocks[0]
+        data = _LinearModel.of(model)
+        self.data = data
+        self.n, self.clock = data.n, data.clock
         self.horizon = float(model.horizon)
         self.h = float(options.step) if options.step else self.horizon / 60.0
-        data = _LinearModel.of(model)
         self.flows, self.invariants, self.jumps = data.flows, data.invariants, data.fired
         self.max_jumps = options.max_jumps
         if self.max_jumps is None:
             from reach.model.lint import zero_dwell_cycles
             self.max_jumps = np.inf if not zero_dwell_cycles(model)[0] else 10
-        self.pieces = _unsafe_pieces(prop)
+        self.pieces = {mode: [_Piece(data.widen(p.H, p.g)[0], p.g, p.strict, p.label) for p in pieces]
+                       for mode, pieces in _unsafe_pieces(prop).items()} if data.added_clock \
+            else _unsafe_pieces(prop)
         self.relevant = _modes_leading_to(model, set(self.pieces))
         self.stats = _Stats()
         self.unresolved: list[_Witness] = []
         self.replayed: list = []
-        box = Box(model.initial.low, model.initial.high)
-        self.root = initial if initial is not None else Star.from_box(box)
+        self.root = initial if initial is not None else \
+            Star.from_box(data.initial_box(model.initial.low, model.initial.high))
         self.root_mode = model.initial.mode
 
     # ---- LPs
@@ -594,7 +635,10 @@ class _Explorer:
             H = np.vstack([piece.H, horizon_row])
             g = np.append(piece.g, self.horizon)
             depth, alpha = _depth(seg, H, g, len(piece.g))
-            if depth < 0 or (piece.strict and depth <= self.opt.touch_tolerance):
+            tol = self.opt.touch_tolerance * max(1.0, np.abs(piece.g).max(initial=0.0),
+                                                 np.abs(piece.H @ seg.center).max(initial=0.0))
+            self.stats.tolerance = max(self.stats.tolerance, tol)
+            if depth <= tol if piece.strict else depth < -tol:
                 continue
             witness = _Witness(mode, piece.label, depth, alpha, seg.point(alpha), path.entries)
             row = int(np.argmax(lower - piece.g))
@@ -683,7 +727,7 @@ class _Explorer:
     def initial_point(self, witness: _Witness):
         """Initial state and abort time of a witness, read off its coefficients."""
         m0 = self.root.nvars
-        x0 = self.root.point(witness.alpha[:m0])
+        x0 = self.root.point(witness.alpha[:m0])[:self.model.n]
         x0 = np.clip(x0, self.model.initial.low, self.model.initial.high)
         windows = [e for e in witness.history if e.window]
         if len(windows) > 1 or any(not e.global_window for e in windows):
@@ -814,7 +858,7 @@ def _depth(seg: Star, H, g, piece_rows: int):
     """``Star.depth`` on the piece rows, with further rows (the horizon) as hard limits."""
     hard = H[piece_rows:], g[piece_rows:]
     star = seg.intersect_halfspaces(*hard)
-    return star.depth(H[:piece_rows], g[:piece_rows])
+    return star.depth(H[:piece_rows], g[:piece_rows], tolerance=DEPTH_LP_TOLERANCE)
 
 
 def _unsubsumed(jumps: list[_Jump], H_inv, g_inv) -> list[_Jump]:
@@ -861,9 +905,11 @@ _SOUNDNESS = (
     "stars (shared predicate) plus the interpolation error lam(1-lam) h^2/2 M, "
     "M >= sup|x''| from {q} sub-samples per cell and the closure (I - delta^2/8 |A^2|)^-1; "
     "transitions (urgent and window) fire from segment-and-guard sets, so every switching "
-    "instant is covered; invariants and guards are exact LP rows; strict unsafe pieces touched "
-    "within {tol:g} count as not entered; LPs by HiGHS (feasibility tolerance ~1e-7) and "
-    "matrix exponentials in floating point (rounding not enclosed)")
+    "instant is covered; invariants and guards are exact LP rows; depth LPs by HiGHS with primal "
+    "feasibility tolerance {lp_tol:g} (other LPs ~1e-7); a piece of strict inequalities counts as "
+    "entered at a depth above {rel:g} x max(1, |g|, |h.c|) (largest used: {tol:g}), a piece with a "
+    "non-strict row as met at a depth of at least minus that; matrix exponentials in floating "
+    "point (rounding not enclosed)")
 
 _DISCRETE = ("discrete time: states checked and switched at grid points t = k*h only "
              "(Hylaa's semantics); behaviour between grid points is not covered")
@@ -880,8 +926,6 @@ class StarBackend:
                     "affine flows (the taylor back-end covers nonlinear models)")
         if model.disturbance is not None:
             return "stochastic disturbance: the star back-end is deterministic (use fsr or montecarlo)"
-        if not model.clocks:
-            return "no global clock (a state with rate 1 in every mode) to bound the horizon"
         for mode in prop.modes:
             if _unsafe_pieces(prop).get(mode) is None:
                 return f"nonlinear unsafe set in mode '{mode}': needs a polygonal approximation"
@@ -902,11 +946,17 @@ class StarBackend:
                 raise _Stop(Status.UNKNOWN, f"{len(explorer.unresolved)} cell(s) still meet an unsafe "
                                             f"piece after refinement; no witness replayed",
                             witness=explorer.unresolved[0])
+            if opt.discrete_time:
+                raise _Stop(Status.UNKNOWN, "no violation at the grid points (discrete time: "
+                                            "behaviour between grid points is not checked)")
         except _Stop as stop:
             status, counterexample = stop.status, stop.counterexample
             details["reason"] = stop.reason
             if stop.witness is not None:
                 details["witness"] = _witness_details(explorer, stop.witness)
+        except lp.LPError as failure:
+            status = Status.UNKNOWN
+            details["reason"] = f"LP solver failure, nothing concluded: {failure}"
         details.update(_run_details(explorer))
         return Result(NAME, model.name, prop.id, status, time.perf_counter() - start,
                       counterexample=counterexample, details=details)
@@ -916,15 +966,17 @@ def _run_details(explorer: _Explorer) -> dict:
     s, opt = explorer.stats, explorer.opt
     substeps = {m: f.curvature(explorer.h)[3] for m, f in explorer.flows.items()}
     soundness = _DISCRETE if opt.discrete_time else _SOUNDNESS.format(
-        q=", ".join(f"{m}: {q + 1}" for m, q in substeps.items()), tol=opt.touch_tolerance)
+        q=", ".join(f"{m}: {q + 1}" for m, q in substeps.items()), lp_tol=DEPTH_LP_TOLERANCE,
+        rel=opt.touch_tolerance, tol=s.tolerance)
     return {"method": "generalized star sets", "semantics": soundness, "step": explorer.h,
+            "touch_tolerance": {"relative": opt.touch_tolerance, "largest": s.tolerance},
             "stars": s.chains, "cells": s.cells, "refined_cells": s.refined,
             "deepest_refinement": s.deepest, "lps": s.lps, "replays": explorer.replayed}
 
 
 def _witness_details(explorer: _Explorer, w: _Witness) -> dict:
     x0, switch = explorer.initial_point(w)
-    return {"mode": w.mode, "piece": w.piece, "depth": w.depth, "state": w.state.tolist(),
+    return {"mode": w.mode, "piece": w.piece, "depth": w.depth, "state": w.state[:explorer.model.n].tolist(),
             "initial_state": x0.tolist(), "switch_time": switch}
 
 
