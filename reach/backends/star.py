@@ -65,6 +65,7 @@ time up to which every abort is proven safe (Fig. 5 of the rendezvous benchmark)
 
 from __future__ import annotations
 
+import logging
 import time
 import weakref
 from dataclasses import dataclass
@@ -82,6 +83,8 @@ from reach.model.constraints import affine_coefficients
 
 NAME = "star"
 
+LOG = logging.getLogger("reach.star")
+
 #: a cell is bisected before any check while its interpolation error exceeds this fraction
 #: of the state's magnitude (fast transients, e.g. right after a controller switch)
 ERROR_RATIO = 0.25
@@ -89,6 +92,16 @@ ERROR_RATIO = 0.25
 #: primal feasibility tolerance of the depth LPs (HiGHS's default is 1e-7): a depth is
 #: then exact to well below the touch tolerance of :class:`StarOptions`
 DEPTH_LP_TOLERANCE = 1e-10
+
+#: in a model that may have a zero-dwell cycle, this many jumps in a row without the
+#: earliest clock advancing end the check (UNKNOWN)
+STALL_JUMPS = 10
+
+#: the grid stacks of one chain may take at most this many bytes (memory guard)
+MAX_CHAIN_BYTES = 1 << 30
+
+#: seconds between two progress lines (logger ``reach.star``, shown under ``-v``)
+PROGRESS_SECONDS = 1.0
 
 #: a witness is replayed at once when the spread refinement could still remove is below
 #: this fraction of the unsafe piece's inradius: the over-approximation is already tight
@@ -107,8 +120,19 @@ class StarOptions:
     max_replays: at most this many replays per check.
     max_unresolved: stop (UNKNOWN) after this many cells that refinement cannot clear.
     max_lps: LP budget; when exhausted the answer is UNKNOWN.
-    max_jumps: bound on discrete jumps along a path (cyclic automata); UNKNOWN beyond.
-        None (default): unbounded if the model has no zero-dwell cycle, else 10.
+    max_jumps: bound on discrete jumps along a path; UNKNOWN beyond. None (default): no
+        bound, but at most ``STALL_JUMPS`` jumps in a row without time passing when the
+        model may have a zero-dwell cycle (:mod:`reach.model.lint`).
+    aggregate_after: successors of the jumps after the first ``aggregate_after`` ones on a
+        path, out of a mode whose flow is not constant, are aggregated: the stars one chain
+        sends through one transition become one star, their interval hull (see
+        :meth:`_Explorer._aggregate`); refined back into the members when a check under it
+        fails. None: never aggregate.
+    max_stars: UNKNOWN once this many stars (chains) have been explored.
+    max_coefficients: UNKNOWN when a segment needs more coefficients than this (each
+        segment of a non-constant flow doubles them: LPs and grid stacks would grow without
+        bound; aggregation keeps the count down).
+    max_deaggregations: at most this many aggregates are refined back into their members.
     touch_tolerance: relative LP tolerance. With piece rows of unit norm, the depth LP's
         answer counts as exact up to ``tol = touch_tolerance * max(1, |g_r|, |h_r . c|)``
         (largest over the piece's rows ``h_r x <= g_r``, ``c`` the segment's centre): a
@@ -125,6 +149,10 @@ class StarOptions:
     max_unresolved: int = 8
     max_lps: int = 50_000
     max_jumps: int | None = None
+    aggregate_after: int | None = 2
+    max_stars: int = 20_000
+    max_coefficients: int = 2_000
+    max_deaggregations: int = 50
     touch_tolerance: float = 1e-9
     replay_dt: float | None = None
 
@@ -256,17 +284,42 @@ class _Entry:
 
 @dataclass(frozen=True)
 class _Path:
-    """The discrete history of a star: entries, and for each ancestor cell the first
-    coefficient of its segment block and whether that cell may still be bisected."""
+    """The discrete history of a star since its origin (the initial star, or the aggregate
+    it descends from): entries, and for each ancestor cell the first coefficient of its
+    segment block and whether that cell may still be bisected; ``jumps`` counts every jump
+    since the initial star, ``stalled`` the last jumps in a row that took no time."""
 
     entries: tuple[_Entry, ...] = ()
     blocks: tuple[int, ...] = ()
     open: tuple[bool, ...] = ()
     abort: float = np.inf          # earliest clock of the first window switch on the path
+    jumps: int = 0
+    stalled: int = 0
+    origin: "_Aggregate | None" = None
+    since: float = 0.0             # earliest clock of the star this path leads to
 
     def descend(self, entry: _Entry, block: int, can_refine: bool, clock: float) -> "_Path":
         abort = min(self.abort, clock) if entry.window and self.abort == np.inf else self.abort
-        return _Path(self.entries + (entry,), self.blocks + (block,), self.open + (can_refine,), abort)
+        stalled = self.stalled + 1 if clock <= self.since else 0
+        return _Path(self.entries + (entry,), self.blocks + (block,), self.open + (can_refine,), abort,
+                     self.jumps + 1, stalled, self.origin, clock)
+
+    def closed(self) -> "_Path":
+        """The same history with no cell left to bisect."""
+        return _Path(self.entries, self.blocks, (False,) * len(self.open), self.abort, self.jumps,
+                     self.stalled, self.origin, self.since)
+
+
+@dataclass
+class _Aggregate:
+    """One star standing for ``members`` (successor stars with their paths), all entering
+    ``mode``; ``star`` contains every member. Explored in their place until a check under it
+    fails; then the members are explored instead (``refined``)."""
+
+    mode: str
+    star: Star
+    members: list[tuple[Star, "_Path"]]
+    refined: bool = False
 
 
 @dataclass
@@ -278,7 +331,11 @@ class _Witness:
     depth: float
     alpha: np.ndarray
     state: np.ndarray
-    history: tuple[_Entry, ...]
+    path: _Path
+
+    @property
+    def history(self) -> tuple[_Entry, ...]:
+        return self.path.entries
 
 
 class _Stop(Exception):
@@ -401,6 +458,11 @@ class _Stats:
     lps: int = 0
     replays: int = 0
     tolerance: float = 0.0          # the largest depth tolerance used (model units)
+    jumps: int = 0                  # the most jumps on one path
+    reached: float = 0.0            # the latest clock a chain has started from
+    aggregated: int = 0             # aggregates formed
+    members: int = 0                # successor stars they stand for
+    deaggregated: int = 0           # aggregates refined back into their members
 
 
 class _Explorer:
@@ -420,10 +482,11 @@ class _Explorer:
         self.horizon = float(model.horizon)
         self.h = float(options.step) if options.step else self.horizon / 60.0
         self.flows, self.invariants, self.jumps = data.flows, data.invariants, data.fired
-        self.max_jumps = options.max_jumps
-        if self.max_jumps is None:
-            from reach.model.lint import zero_dwell_cycles
-            self.max_jumps = np.inf if not zero_dwell_cycles(model)[0] else 10
+        self.max_jumps = np.inf if options.max_jumps is None else options.max_jumps
+        from reach.model.lint import zero_dwell_cycles
+        self.stall_limit = STALL_JUMPS if zero_dwell_cycles(model)[0] else np.inf
+        self.aggregate_after = None if self.sweep else options.aggregate_after
+        self.last_progress = time.perf_counter()
         self.pieces = {mode: [_Piece(data.widen(p.H, p.g)[0], p.g, p.strict, p.label) for p in pieces]
                        for mode, pieces in _unsafe_pieces(prop).items()} if data.added_clock \
             else _unsafe_pieces(prop)
@@ -480,12 +543,28 @@ class _Explorer:
         point = self._point(star, guess, direction)
         if point is None:
             return
-        if len(path.entries) > self.max_jumps:
+        if path.jumps > self.max_jumps:
             raise _Stop(Status.UNKNOWN, f"more than {self.max_jumps} discrete jumps on a path")
+        if path.stalled > self.stall_limit:
+            raise _Stop(Status.UNKNOWN, f"{path.stalled} jumps in a row without time passing "
+                                        f"(possible zero-dwell cycle)")
         self.stats.chains += 1
+        if self.stats.chains > self.opt.max_stars:
+            raise _Stop(Status.UNKNOWN, f"star budget of {self.opt.max_stars} exhausted "
+                                        f"(option max_stars)")
         flow, h = self.flows[mode], self.h
         t0 = -star.support_bounds(-np.eye(self.n)[self.clock])[0]
         count = max(1, int(np.ceil((self.horizon - t0) / h - 1e-9)))
+        segment_vars = star.nvars if flow.drift else 2 * star.nvars + 1 + self.n
+        if segment_vars > self.opt.max_coefficients or \
+                8 * 3 * (count + 1) * self.n * (star.nvars + 1) > MAX_CHAIN_BYTES:
+            raise _Stop(Status.UNKNOWN, f"a segment in mode '{mode}' needs {segment_vars} coefficients "
+                                        f"over {count} steps (limits: option max_coefficients = "
+                                        f"{self.opt.max_coefficients}, {MAX_CHAIN_BYTES >> 20} MiB per "
+                                        f"chain); aggregate sooner (option aggregate_after)")
+        self.stats.jumps = max(self.stats.jumps, path.jumps)
+        self.stats.reached = max(self.stats.reached, t0)
+        self._progress()
         Phis, psis = flow.powers(h, count)
         centers = star.center @ np.swapaxes(Phis, 1, 2) + psis
         bases = np.einsum("jab,bm->jam", Phis, star.basis)
@@ -549,8 +628,78 @@ class _Explorer:
             if jump.target in self.relevant:
                 candidates |= self._screen(centers, bases, box, error, jump.H, jump.g, cells)
 
+        aggregate = (self.aggregate_after is not None and not flow.drift
+                     and path.jumps >= self.aggregate_after)
+        pending: dict[int, list] | None = {} if aggregate else None
         for j in sorted(candidates):
-            self._cell(mode, grid_star(j), h, path, 0, point)
+            self._cell(mode, grid_star(j), h, path, 0, point, pending)
+        for index, members in (pending or {}).items():
+            self._aggregate(self.jumps[mode][index].target, members)
+
+    def _progress(self):
+        now = time.perf_counter()
+        if now - self.last_progress >= PROGRESS_SECONDS:
+            self.last_progress = now
+            s = self.stats
+            LOG.info("%d stars, %d cells, %d LPs, up to %d jumps on a path, time %.6g of %.6g, "
+                     "%d aggregates of %d stars (%d refined)", s.chains, s.cells, s.lps, s.jumps,
+                     s.reached, self.horizon, s.aggregated, s.members, s.deaggregated)
+
+    def _aggregate(self, mode: str, members: list[tuple[Star, _Path]]):
+        """Explore the successor stars ``members`` entering ``mode`` as one star.
+
+        The aggregate is the interval hull of the members (``2 n`` LPs each, each bound pushed
+        out by a relative 1e-9) intersected with the invariant of ``mode``: it contains every
+        member, so everything reachable from the members is reachable from it -- a SAFE
+        under it covers them. It has fresh coefficients (a box), so its LPs stay small however
+        many jumps came before. When a check under it fails and its witness does not replay,
+        the members are explored instead, each with its own exact history (no cell before the
+        aggregation is bisected again).
+        """
+        bounds = []
+        kept = []
+        eye = np.eye(self.n)
+        for star, path in members:
+            self.stats.lps += 2 * self.n
+            if self.stats.lps > self.opt.max_lps:
+                raise _Stop(Status.UNKNOWN, f"LP budget of {self.opt.max_lps} exhausted")
+            high = np.array([star.support(e) for e in eye])
+            if not np.all(np.isfinite(high)):
+                if np.any(high == -np.inf):
+                    continue                                   # an empty member
+                bounds = None
+            low = np.array([-star.support(-e) for e in eye])
+            kept.append((star, path))
+            if bounds is not None:
+                bounds.append((low, high))
+        if not kept:
+            return
+        if bounds is None:                                     # unbounded: explore the members
+            for star, path in kept:
+                self._chain(mode, star, path)
+            return
+        low = np.min([b[0] for b in bounds], axis=0)
+        high = np.max([b[1] for b in bounds], axis=0)
+        pad = 1e-9 * (1.0 + np.maximum(np.abs(low), np.abs(high)))
+        hull = Star.from_box(Box(low - pad, high + pad)).intersect_halfspaces(*self.invariants[mode])
+        agg = _Aggregate(mode, hull, kept)
+        self.stats.aggregated += 1
+        self.stats.members += len(kept)
+        start = min(path.since for _, path in kept)
+        jumps = max(path.jumps for _, path in kept)
+        stalled = min(path.stalled for _, path in kept)
+        try:
+            self._chain(mode, hull, _Path(jumps=jumps, stalled=stalled, origin=agg, since=start),
+                        hull.box.center)
+        except _Deaggregate as failure:
+            if failure.target is not agg:
+                raise
+            agg.refined = True
+            self.stats.deaggregated += 1
+            LOG.info("aggregate of %d stars entering '%s' refined into its members (%s)",
+                     len(kept), mode, failure.witness.piece)
+            for star, path in kept:
+                self._chain(mode, star, path.closed())
 
     def _screen(self, centers, bases, box, error, H, g, cells) -> set[int]:
         """Cells whose segment may meet ``{H x <= g}`` by support bounds (cheap)."""
@@ -575,13 +724,14 @@ class _Explorer:
         seg = seg.intersect_halfspaces(Hi, gi)
         return (_tightened(seg, len(gi)) or seg) if self.flows[mode].drift else seg, error
 
-    def _cell(self, mode: str, start: Star, h: float, path: _Path, depth: int, point):
+    def _cell(self, mode: str, start: Star, h: float, path: _Path, depth: int, point, pending=None):
         """Check one cell and launch its successors; bisect when a failure is blamed on it.
 
         The segment's own coefficients are the block starting at ``start.nvars``; a failure
         (here or in a successor) names the block that contributes most to it, and only
         the cell owning that block is bisected. ``point``: coefficients of a point of
-        ``start`` (passed on as a guess to successors).
+        ``start`` (passed on as a guess to successors). ``pending``: where successors to be
+        aggregated are collected (per outgoing jump), None to explore them at once.
         """
         if self.sweep:
             since = path.abort if path.abort < np.inf else \
@@ -596,19 +746,19 @@ class _Explorer:
             if not final and np.any(error > ERROR_RATIO * np.maximum(-hull.low, hull.high)):
                 raise _Refine(None, block)          # a fast transient: refine before checking
             self._check_segment(mode, seg, path, block, not final)
-            self._jump_from(mode, seg, path, block, not final, point)
+            self._jump_from(mode, seg, path, block, not final, point, pending)
         except _Refine as failure:
             if final or failure.blame != block:
                 raise
             self.stats.refined += 1
             self.stats.deepest = max(self.stats.deepest, depth + 1)
             half = h / 2
-            self._cell(mode, start, half, path, depth + 1, point)
+            self._cell(mode, start, half, path, depth + 1, point, pending)
             mid = start.affine_map(*self.flows[mode].step(half))
             mid = mid.intersect_halfspaces(*self.invariants[mode])
             mid_point = self._point(mid, point)
             if mid_point is not None:
-                self._cell(mode, mid, half, path, depth + 1, mid_point)
+                self._cell(mode, mid, half, path, depth + 1, mid_point, pending)
 
     def _check_segment(self, mode: str, seg: Star, path: _Path, block: int, own_open: bool):
         """Check every unsafe piece of ``mode`` on a segment.
@@ -640,7 +790,7 @@ class _Explorer:
             self.stats.tolerance = max(self.stats.tolerance, tol)
             if depth <= tol if piece.strict else depth < -tol:
                 continue
-            witness = _Witness(mode, piece.label, depth, alpha, seg.point(alpha), path.entries)
+            witness = _Witness(mode, piece.label, depth, alpha, seg.point(alpha), path)
             row = int(np.argmax(lower - piece.g))
             refinable = np.where(open_, spread[:, row], -np.inf)
             blame = blocks[int(np.argmax(refinable))] if any(open_) else None
@@ -653,6 +803,8 @@ class _Explorer:
             if self.sweep:
                 self.cutoff = min(self.cutoff, self._failure_time(witness, seg))
                 continue
+            if path.origin is not None and self.stats.deaggregated < self.opt.max_deaggregations:
+                raise _Deaggregate(witness, path.origin)
             self.unresolved.append(witness)
             if len(self.unresolved) >= self.opt.max_unresolved:
                 raise _Stop(Status.UNKNOWN, f"{len(self.unresolved)} cells still meet an unsafe "
@@ -669,8 +821,9 @@ class _Explorer:
             return e.offset - box.support(-e.row)
         return -seg.support_bounds(-np.eye(self.n)[self.clock])[0]
 
-    def _jump_from(self, mode: str, seg: Star, path: _Path, block: int, own_open: bool, point):
-        for jump in self.jumps[mode]:
+    def _jump_from(self, mode: str, seg: Star, path: _Path, block: int, own_open: bool, point,
+                   pending=None):
+        for index, jump in enumerate(self.jumps[mode]):
             if jump.target not in self.relevant:
                 continue
             if self.sweep and jump.window is not None and path.abort == np.inf and \
@@ -693,6 +846,10 @@ class _Explorer:
                 successor = _tightened(successor, len(self.invariants[jump.target][1]))
                 if successor is None:
                     continue
+            descended = path.descend(clock, block, own_open, earliest)
+            if pending is not None:
+                pending.setdefault(index, []).append((successor, descended))
+                continue
             # the known point's own chord: (a, lam a, lam, 0) from lam = 0 to 1, or its ray
             # (a, s) from s = 0 to 1 in a constant-flow mode
             m, pad = point.size, successor.nvars - point.size
@@ -702,8 +859,7 @@ class _Explorer:
             else:
                 direction = np.concatenate([np.zeros(m), point, [1.0], np.zeros(pad - m - 1)]) \
                     if pad > m else None
-            self._chain(jump.target, successor, path.descend(clock, block, own_open, earliest),
-                        guess, direction)
+            self._chain(jump.target, successor, descended, guess, direction)
 
     # ---- witnesses
 
@@ -726,24 +882,70 @@ class _Explorer:
 
     def initial_point(self, witness: _Witness):
         """Initial state and abort time of a witness, read off its coefficients."""
+        alpha, entries = self._trace(witness.alpha, witness.path)
         m0 = self.root.nvars
-        x0 = self.root.point(witness.alpha[:m0])[:self.model.n]
+        x0 = self.root.point(alpha[:m0])[:self.model.n]
         x0 = np.clip(x0, self.model.initial.low, self.model.initial.high)
-        windows = [e for e in witness.history if e.window]
-        if len(windows) > 1 or any(not e.global_window for e in windows):
+        windows = [(e, a) for e, a in entries if e.window]
+        if len(windows) > 1 or any(not e.global_window for e, _ in windows):
             return x0, None                  # not one switch at a global time: no switch
         if windows:
-            e = windows[-1]
-            switch = float(e.offset + e.row @ witness.alpha[:e.row.size])
+            e, a = windows[-1]
+            switch = float(e.offset + e.row @ a[:e.row.size])
         else:
             switch = self._latest_abort(witness.mode)
         return x0, switch
+
+    def _trace(self, alpha, path: _Path):
+        """The coefficients of the initial star behind the point ``alpha`` of a star reached
+        along ``path``, and the path's entries, each with the coefficients it reads.
+
+        Through an aggregate the point of the member nearest (max norm, one LP per member) to
+        the aggregate's point stands for it: exact when that point lies in a member, a
+        candidate otherwise (the replay decides; the aggregate is refined if it fails)."""
+        entries = [(e, alpha) for e in path.entries]
+        while path.origin is not None:
+            agg = path.origin
+            target = agg.star.point(alpha[:agg.star.nvars])
+            best = None
+            for star, member_path in agg.members:
+                found = self._nearest(star, target)
+                if found is not None and (best is None or found[0] < best[0]):
+                    best = (found[0], found[1], member_path)
+            if best is None:
+                break
+            _, alpha, path = best
+            entries = [(e, alpha) for e in path.entries] + entries
+        return alpha, entries
+
+    def _nearest(self, star: Star, x):
+        """``(distance, coefficients)`` of the point of ``star`` nearest to ``x`` in the max
+        norm (an LP over ``(a, t)``: ``|c + V a - x| <= t``), or None if ``star`` is empty."""
+        self._lp_budget()
+        m, n = star.nvars, star.dim
+        ones = np.ones((n, 1))
+        A = np.vstack([np.hstack([star.basis, -ones]), np.hstack([-star.basis, -ones]),
+                       np.hstack([star.predicate.A, np.zeros((star.predicate.A.shape[0], 1))])])
+        b = np.concatenate([x - star.center, star.center - x, star.predicate.b])
+        objective = np.zeros(m + 1)
+        objective[-1] = 1.0
+        res = lp.minimize(objective, A, b, bounds=(np.append(star.box.low, 0.0),
+                                                   np.append(star.box.high, np.inf)))
+        return (res.value, res.x[:m]) if res.optimal else None
 
     def _latest_abort(self, mode: str):
         """Without an abort on the witness's path: the latest abort of its mode's windows
         (the run stays in the mode as long as possible), or None if there is none."""
         his = [j.window[2] for j in self.jumps[mode] if j.window is not None and j.window[0] == self.clock]
         return max(his) if his else None
+
+
+class _Deaggregate(Exception):
+    """A check under the aggregate ``target`` failed and its witness did not replay."""
+
+    def __init__(self, witness: _Witness, target: _Aggregate):
+        super().__init__("deaggregate")
+        self.witness, self.target = witness, target
 
 
 class _Refine(Exception):
@@ -971,7 +1173,9 @@ def _run_details(explorer: _Explorer) -> dict:
     return {"method": "generalized star sets", "semantics": soundness, "step": explorer.h,
             "touch_tolerance": {"relative": opt.touch_tolerance, "largest": s.tolerance},
             "stars": s.chains, "cells": s.cells, "refined_cells": s.refined,
-            "deepest_refinement": s.deepest, "lps": s.lps, "replays": explorer.replayed}
+            "deepest_refinement": s.deepest, "lps": s.lps, "replays": explorer.replayed,
+            "jumps": s.jumps, "time_reached": s.reached, "aggregates": s.aggregated,
+            "aggregated_stars": s.members, "refined_aggregates": s.deaggregated}
 
 
 def _witness_details(explorer: _Explorer, w: _Witness) -> dict:
