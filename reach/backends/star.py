@@ -49,15 +49,38 @@ within the source invariant, lies inside the guard of another transition with th
 target and reset is *subsumed* (its successors are contained in the other's) and is not
 fired separately (an urgent time-out at the end of a window, for example).
 
-Jumps. ``max_jumps`` bounds the jumps along a path; by default there is no bound when the
-model has no zero-dwell cycle (:mod:`reach.model.lint`: every cycle of the transition graph
-takes a positive time, so the number of jumps before the horizon is finite) and 10 otherwise.
-A witness whose path takes more than one window switch, or a window on a clock other than
-the global one, is replayed without a switch time (the simulator takes one switch at a
-global time): if that run does not violate, the answer stays UNKNOWN.
+Jumps. ``max_jumps`` bounds the jumps along a path (none by default). When the model may
+have a zero-dwell cycle (:mod:`reach.model.lint`), at most ``STALL_JUMPS`` jumps in a row may
+leave the earliest clock where it was; beyond, UNKNOWN. A witness whose path takes more
+than one window switch, or a window on a clock other than the global one, is replayed
+without a switch time (the simulator takes one switch at a global time): if that run does
+not violate, the answer stays UNKNOWN.
+
+Clock. The horizon and the switch times are read off a global clock (rate 1 everywhere,
+0 initially, never reset). A model without one gets its own, an extra explored state that
+no guard, invariant, reset or property mentions (:class:`_LinearModel`).
+
+Aggregation. Each segment of a non-constant flow doubles a star's coefficients (the chord
+hull keeps ``a`` and ``lam a``), so a path with many jumps -- a thermostat switching every
+few minutes -- would need LPs of exponential size. Past the first ``aggregate_after`` jumps
+of a path, the successors one chain sends through one transition (the stars entering a
+mode in that chain's time window) are replaced by their interval hull, a box star with
+fresh coefficients intersected with the target invariant; it contains every member, so a
+proof under it covers them. When a check under an aggregate fails, its witness is traced
+back through the nearest point of a member (one LP per member, per aggregate level) to an
+initial state and replayed; if that run does not violate, the aggregate is refined into
+its members, explored with their exact histories. Star, coefficient and memory budgets end
+a check in UNKNOWN with the reason, and progress goes to the ``reach.star`` logger.
+
+Strict and non-strict bounds. With piece rows of unit norm, the depth LP (HiGHS, primal
+feasibility 1e-10) is trusted to ``tol = touch_tolerance * max(1, |g|, |h . c|)``: a piece
+of strict inequalities (the negation of ``x >= -100``) counts as entered only above
+``tol`` (a set that meets ``x = -100`` only touches it), a piece with a non-strict row as met
+from ``-tol``; the details state the largest ``tol`` used. An LP failure answers UNKNOWN.
 
 ``discrete_time=True`` checks and switches at grid points only (Hylaa's semantics): no
-segments, no error terms -- not a proof for continuous time.
+segments, no error terms -- not a proof for continuous time, so it answers UNSAFE (replayed)
+or UNKNOWN ("no violation at the grid points"), never SAFE.
 
 :func:`safe_abort_time` / :func:`safe_abort_map` sweep initial cells for the latest abort
 time up to which every abort is proven safe (Fig. 5 of the rendezvous benchmark).
@@ -166,10 +189,23 @@ class StarOptions:
 # ---------------------------------------------------------------------- dynamics
 
 class AffineFlow:
-    """``x' = A x + b`` of one mode: step maps, stacked powers and the curvature data."""
+    """``x' = A x + b + B (u - u_c)`` of one mode: step maps, stacked powers, the curvature
+    data and, with a bounded input ``|u - u_c| <= u_r`` (componentwise, any measurable
+    signal), the bound of its effect.
 
-    def __init__(self, A: np.ndarray, b: np.ndarray):
+    Input effect. Split every run as ``x = x_free + d`` with ``x_free`` the run of
+    ``x' = A x + b`` (``b`` holds ``B u_c``) from the same state and
+    ``d(t) = int_0^t e^{A (t - s)} B (u(s) - u_c) ds``. Then ``|d(t)| <= R(t) =
+    int_0^t |e^{A tau} B| u_r dtau``, non-decreasing in ``t``, and since
+    ``e^{A tau} = Phi^i e^{A sigma}`` with ``|e^{A sigma}| <= e^{|A| sigma}`` entrywise,
+    ``R((j + 1) h) <= sum_{i <= j} |Phi^i| w`` with ``w = h e^{|A| h} |B| u_r``
+    (:meth:`deviation`)."""
+
+    def __init__(self, A: np.ndarray, b: np.ndarray, B: np.ndarray | None = None,
+                 u_radius: np.ndarray | None = None):
         self.A, self.b = A, b
+        self.B, self.u_radius = B, u_radius
+        self.inputs = B is not None and B.size > 0 and bool(np.any(np.abs(B) @ u_radius > 0))
         self.n = A.shape[0]
         self.A2 = A @ A
         self.Ab = A @ b
@@ -178,6 +214,21 @@ class AffineFlow:
         self._steps: dict[float, tuple[np.ndarray, np.ndarray]] = {}
         self._powers: dict[float, tuple[np.ndarray, np.ndarray]] = {}
         self._curvature: dict[float, tuple] = {}
+        self._deviation: dict[float, np.ndarray] = {}
+
+    def deviation(self, h: float, count: int) -> np.ndarray | None:
+        """``R_j >= sup_{t <= j h} |d(t)|`` for ``j = 0..count`` (``(count + 1, n)``), or None
+        without inputs (see the class doc)."""
+        if not self.inputs:
+            return None
+        R = self._deviation.get(h)
+        if R is None or R.shape[0] <= count:
+            Phis, _ = self.powers(h, count)
+            w = h * expm(np.abs(self.A) * h) @ (np.abs(self.B) @ self.u_radius)
+            steps = np.abs(Phis[:count]) @ w                     # |Phi^i| w, i < count
+            R = np.vstack([np.zeros(self.n), np.cumsum(steps, axis=0)])
+            self._deviation[h] = R
+        return R[:count + 1]
 
     def step(self, h: float):
         """``(Phi, psi)`` with ``x(t + h) = Phi x(t) + psi``."""
@@ -391,16 +442,18 @@ class _LinearModel:
     extended ones (``n`` is then ``model.n + 1`` and ``added_clock`` is True)."""
 
     def __init__(self, model):
-        self.added_clock = not model.clocks
+        clock = _global_clock(model)
+        self.added_clock = clock is None
         self.n = model.n + self.added_clock
-        self.clock = model.clocks[0] if model.clocks else model.n
+        self.clock = model.n if clock is None else clock
         self.jumps = {name: [self._jump(model, tr) for tr in model.outgoing(name)]
                       for name in model.modes}
         self.linear = (all(m.linear is not None and m.invariant_halfspaces is not None
                            for m in model.modes.values())
                        and all(j is not None for js in self.jumps.values() for j in js))
+        self.varying = [u for u in getattr(model, "bounded_inputs", []) if u.varying]
         if self.linear:
-            self.flows = {name: AffineFlow(*self._with_clock(*mode.linear))
+            self.flows = {name: self._flow(*self._with_clock(*mode.linear))
                           for name, mode in model.modes.items()}
             self.invariants = {name: _normalised(*self.widen(*mode.invariant_halfspaces))
                                for name, mode in model.modes.items()}
@@ -422,6 +475,32 @@ class _LinearModel:
         A2 = np.zeros((n, n))
         A2[:n - 1, :n - 1] = A
         return A2, np.append(b, 1.0)
+
+    def _flow(self, A, b) -> AffineFlow:
+        """The mode's flow with its time-varying inputs taken out of ``A``: their columns
+        ``B`` act through the input set (centre in ``b``, radius bounded per step); the input
+        coordinates themselves keep their interval for properties that name them."""
+        if not self.varying:
+            return AffineFlow(A, b)
+        cols = [u.index for u in self.varying]
+        low = np.array([u.low for u in self.varying], dtype=float)
+        high = np.array([u.high for u in self.varying], dtype=float)
+        A = A.copy()
+        B = A[:, cols].copy()
+        A[:, cols] = 0.0
+        return AffineFlow(A, b + B @ ((low + high) / 2), B, (high - low) / 2)
+
+    def initial_star(self, initial) -> Star:
+        """The initial set as a star: its bounding box, cut by its polytope if it has one
+        (inequalities ``A x <= b`` and equalities ``E x = f`` as two inequalities)."""
+        star = Star.from_box(self.initial_box(initial.low, initial.high))
+        poly = getattr(initial, "polytope", None)
+        if poly is None:
+            return star
+        E, f = np.atleast_2d(poly.E).reshape(-1, self.n - self.added_clock), np.atleast_1d(poly.f)
+        H = np.vstack([np.atleast_2d(poly.A).reshape(-1, E.shape[1]), E, -E])
+        g = np.concatenate([np.atleast_1d(poly.b), f, -f])
+        return star.intersect_halfspaces(*self.widen(H, g))
 
     def initial_box(self, low, high) -> Box:
         """The initial box over the explored states (the added clock starts at 0)."""
@@ -494,8 +573,7 @@ class _Explorer:
         self.stats = _Stats()
         self.unresolved: list[_Witness] = []
         self.replayed: list = []
-        self.root = initial if initial is not None else \
-            Star.from_box(data.initial_box(model.initial.low, model.initial.high))
+        self.root = initial if initial is not None else data.initial_star(model.initial)
         self.root_mode = model.initial.mode
 
     # ---- LPs
@@ -566,25 +644,29 @@ class _Explorer:
         self.stats.reached = max(self.stats.reached, t0)
         self._progress()
         Phis, psis = flow.powers(h, count)
+        dev = flow.deviation(h, count)          # input effect bound per grid point, or None
         centers = star.center @ np.swapaxes(Phis, 1, 2) + psis
         bases = np.einsum("jab,bm->jam", Phis, star.basis)
         box = star.box
         Hi, gi = self.invariants[mode]
 
         # invariant: the first grid star entirely outside ends the chain; rows that are not
-        # implied by the coefficient box join the predicate exactly, step by step
+        # implied by the coefficient box join the predicate exactly, step by step. With
+        # inputs the grid stars are input-free runs x_free, |x - x_free| <= R_j: the rows are
+        # relaxed to H x_free <= g + |H| R_j (every run inside the invariant satisfies them)
         last = count
         extra = {}
         if Hi.shape[0]:
             upper = _chain_bounds(centers, bases, box, Hi)
             lower = -_chain_bounds(centers, bases, box, -Hi)
-            outside = np.flatnonzero(np.any(lower > gi + 1e-12 * (1 + np.abs(gi)), axis=1))
+            relaxed = np.broadcast_to(gi, upper.shape) + (0.0 if dev is None else dev @ np.abs(Hi).T)
+            outside = np.flatnonzero(np.any(lower > relaxed + 1e-12 * (1 + np.abs(relaxed)), axis=1))
             if outside.size:
                 last = min(last, int(outside[0]))
             for j in range(1, last + 1):
-                active = upper[j] > gi
+                active = upper[j] > relaxed[j]
                 if np.any(active):
-                    extra[j] = (Hi[active], gi[active])
+                    extra[j] = (Hi[active], relaxed[j][active])
         known_empty = last < count              # grid star `last` lies outside the invariant
 
         stars = {}          # grid stars with their accumulated predicate, built lazily
@@ -617,11 +699,13 @@ class _Explorer:
         # cheap screening, vectorised over the chain
         candidates = set()
         if self.opt.discrete_time:
-            error = np.zeros((last + 1, self.n))
+            error = np.zeros((last + 1, self.n)) if dev is None else dev[:last + 1].copy()
         else:
             D, d, F, _ = flow.curvature(h)
             samples = _chain_abs_bounds(centers[:last], bases[:last], box, D, d).max(axis=1)
             error = h * h / 8 * samples @ F.T
+            if dev is not None:
+                error = error + dev[1:last + 1]          # the whole cell, R non-decreasing
         for piece in self.pieces.get(mode, []):
             candidates |= self._screen(centers, bases, box, error, piece.H, piece.g, cells)
         for jump in self.jumps[mode]:
@@ -632,7 +716,8 @@ class _Explorer:
                      and path.jumps >= self.aggregate_after)
         pending: dict[int, list] | None = {} if aggregate else None
         for j in sorted(candidates):
-            self._cell(mode, grid_star(j), h, path, 0, point, pending)
+            spread = None if dev is None else dev[j] if self.opt.discrete_time else dev[j + 1]
+            self._cell(mode, grid_star(j), h, path, 0, point, pending, spread)
         for index, members in (pending or {}).items():
             self._aggregate(self.jumps[mode][index].target, members)
 
@@ -707,7 +792,7 @@ class _Explorer:
             return set(cells)
         lower = -_chain_bounds(centers, bases, box, -H)          # (J, rows)
         if self.opt.discrete_time:
-            seg = lower[:len(cells)]
+            seg = lower[:len(cells)] - error[:len(cells)] @ np.abs(H).T
         else:
             seg = np.minimum(lower[:-1], lower[1:])[:len(cells)] - error[:len(cells)] @ np.abs(H).T
         missed = np.any(seg > g, axis=1)
@@ -715,16 +800,22 @@ class _Explorer:
 
     # ---- one cell
 
-    def _segment(self, mode: str, start: Star, h: float) -> tuple[Star, np.ndarray]:
-        """``(segment, error)`` of the cell of length ``h`` starting at ``start``."""
-        if self.opt.discrete_time:
-            return start, np.zeros(self.n)
-        seg, _, error = _segment(self.flows[mode], start, h)
+    def _segment(self, mode: str, start: Star, h: float, spread=None) -> tuple[Star, np.ndarray]:
+        """``(segment, error)`` of the cell of length ``h`` starting at ``start``; ``spread``:
+        the bound of the input effect on the cell (added as a box, then the invariant)."""
         Hi, gi = self.invariants[mode]
+        if self.opt.discrete_time:
+            if spread is None:
+                return start, np.zeros(self.n)
+            return _plus_box(start, spread).intersect_halfspaces(Hi, gi), np.zeros(self.n)
+        seg, _, error = _segment(self.flows[mode], start, h)
+        if spread is not None:
+            seg = _plus_box(seg, spread)
         seg = seg.intersect_halfspaces(Hi, gi)
         return (_tightened(seg, len(gi)) or seg) if self.flows[mode].drift else seg, error
 
-    def _cell(self, mode: str, start: Star, h: float, path: _Path, depth: int, point, pending=None):
+    def _cell(self, mode: str, start: Star, h: float, path: _Path, depth: int, point, pending=None,
+              spread=None):
         """Check one cell and launch its successors; bisect when a failure is blamed on it.
 
         The segment's own coefficients are the block starting at ``start.nvars``; a failure
@@ -732,13 +823,15 @@ class _Explorer:
         the cell owning that block is bisected. ``point``: coefficients of a point of
         ``start`` (passed on as a guess to successors). ``pending``: where successors to be
         aggregated are collected (per outgoing jump), None to explore them at once.
+        ``spread``: bound of the input effect on the cell (None without inputs); halves keep
+        it (it only grows with time).
         """
         if self.sweep:
             since = path.abort if path.abort < np.inf else \
                 -start.support_bounds(-np.eye(self.n)[self.clock])[0]
             if since >= self.cutoff:
                 return
-        seg, error = self._segment(mode, start, h)
+        seg, error = self._segment(mode, start, h, spread)
         final = depth >= self.opt.max_refinements or self.opt.discrete_time or self.flows[mode].drift
         block = start.nvars
         try:
@@ -753,12 +846,12 @@ class _Explorer:
             self.stats.refined += 1
             self.stats.deepest = max(self.stats.deepest, depth + 1)
             half = h / 2
-            self._cell(mode, start, half, path, depth + 1, point, pending)
+            self._cell(mode, start, half, path, depth + 1, point, pending, spread)
             mid = start.affine_map(*self.flows[mode].step(half))
             mid = mid.intersect_halfspaces(*self.invariants[mode])
             mid_point = self._point(mid, point)
             if mid_point is not None:
-                self._cell(mode, mid, half, path, depth + 1, mid_point, pending)
+                self._cell(mode, mid, half, path, depth + 1, mid_point, pending, spread)
 
     def _check_segment(self, mode: str, seg: Star, path: _Path, block: int, own_open: bool):
         """Check every unsafe piece of ``mode`` on a segment.
@@ -1021,6 +1114,21 @@ def _tightened(star: Star, rows: int, rounds: int = 3) -> Star | None:
     return Star(star.center, star.basis, star.predicate, Box(lo, hi))
 
 
+def _plus_box(star: Star, radius) -> Star:
+    """``star + [-radius, radius]`` (Minkowski sum): one new coefficient in ``[-1, 1]`` per
+    positive component of ``radius``."""
+    radius = np.asarray(radius, dtype=float)
+    free = np.flatnonzero(radius > 0)
+    if not free.size:
+        return star
+    E = np.zeros((star.dim, free.size))
+    E[free, np.arange(free.size)] = radius[free]
+    A = star.predicate.A
+    predicate = HPolytope(np.hstack([A, np.zeros((A.shape[0], free.size))]), star.predicate.b)
+    box = Box(np.append(star.box.low, -np.ones(free.size)), np.append(star.box.high, np.ones(free.size)))
+    return Star(star.center, np.hstack([star.basis, E]), predicate, box)
+
+
 def _drift_segment(start: Star, b: np.ndarray, h: float) -> Star:
     """``start + [0, h] b`` exactly: every run of ``x' = b`` from ``start`` over the cell.
     One new coefficient ``s in [0, 1]`` (column ``h b``); the old ones keep their meaning."""
@@ -1031,14 +1139,23 @@ def _drift_segment(start: Star, b: np.ndarray, h: float) -> Star:
     return Star(start.center, basis, predicate, box)
 
 
-def flowpipe(A, b, initial: Star, step: float, duration: float) -> list[Star]:
-    """Segments covering every trajectory of ``x' = A x + b`` from ``initial`` over
-    ``[0, duration]`` in continuous time (one star per cell of length ``step``)."""
-    flow = AffineFlow(np.asarray(A, dtype=float), np.asarray(b, dtype=float))
+def flowpipe(A, b, initial: Star, step: float, duration: float, B=None, u_low=None,
+             u_high=None) -> list[Star]:
+    """Segments covering every trajectory of ``x' = A x + b + B u`` from ``initial`` over
+    ``[0, duration]`` in continuous time (one star per cell of length ``step``), for every
+    input signal with values in ``[u_low, u_high]`` (no input if ``B`` is None)."""
+    A, b = np.asarray(A, dtype=float), np.asarray(b, dtype=float)
+    if B is None:
+        flow = AffineFlow(A, b)
+    else:
+        B, lo, hi = np.atleast_2d(np.asarray(B, dtype=float)), np.asarray(u_low, float), np.asarray(u_high, float)
+        flow = AffineFlow(A, b + B @ ((lo + hi) / 2), B, (hi - lo) / 2)
+    count = max(1, int(np.ceil(duration / step - 1e-9)))
+    dev = flow.deviation(step, count)
     segments, star = [], initial
-    for _ in range(max(1, int(np.ceil(duration / step - 1e-9)))):
+    for j in range(count):
         seg, star, _ = _segment(flow, star, step)
-        segments.append(seg)
+        segments.append(seg if dev is None else _plus_box(seg, dev[j + 1]))
     return segments
 
 
@@ -1087,6 +1204,15 @@ def _unsubsumed(jumps: list[_Jump], H_inv, g_inv) -> list[_Jump]:
     return kept
 
 
+def _global_clock(model) -> int | None:
+    """A state that measures elapsed time: rate 1 in every mode, 0 initially, never reset."""
+    for i in model.clocks:
+        if model.initial.low[i] == 0 == model.initial.high[i] and \
+                not any(i in tr.reset for tr in model.transitions):
+            return i
+    return None
+
+
 def _modes_leading_to(model, targets: set[str]) -> set[str]:
     """Modes from which some mode in ``targets`` can be reached (targets included)."""
     reach = set(targets)
@@ -1119,6 +1245,7 @@ _DISCRETE = ("discrete time: states checked and switched at grid points t = k*h 
 
 class StarBackend:
     name = NAME
+    varying_inputs = True           # time-varying bounded inputs: the input set per step
 
     def supports(self, model, prop) -> str | None:
         if getattr(prop, "kind", None) != "safety":
@@ -1160,6 +1287,9 @@ class StarBackend:
             status = Status.UNKNOWN
             details["reason"] = f"LP solver failure, nothing concluded: {failure}"
         details.update(_run_details(explorer))
+        LOG.info("%s / %s: %s after %d stars, %d cells, %d LPs, %d aggregates", model.name, prop.id,
+                 status.value if hasattr(status, "value") else status, explorer.stats.chains,
+                 explorer.stats.cells, explorer.stats.lps, explorer.stats.aggregated)
         return Result(NAME, model.name, prop.id, status, time.perf_counter() - start,
                       counterexample=counterexample, details=details)
 
@@ -1203,7 +1333,7 @@ def safe_abort_time(model, props, low, high, options=None) -> float:
     if not windows:
         raise ValueError(f"model '{model.name}' has no abort window to sweep")
     opt = StarOptions.from_dict({**dict(options or {}), "replay": False})
-    initial = Star.from_box(Box(low, high))
+    initial = Star.from_box(_LinearModel.of(model).initial_box(low, high))
     latest = max(w[2] for w in windows)
     for prop in props:
         reason = BACKEND.supports(model, prop)
