@@ -104,6 +104,39 @@ def test_thermostat_violation_replays(thermostat):
     assert run.violated and run.state[0] > 20.5
 
 
+COUNTING = THERMOSTAT.replace("state: [T]", "state: [T, c]").replace(
+    '"-0.1*(T - 10) + 3"}', '"-0.1*(T - 10) + 3", c: 0}').replace('"-0.1*(T - 10)"}', '"-0.1*(T - 10)", c: 0}').replace(
+    'guard: ["T <= 19"], urgent: true}', 'guard: ["T <= 19"], urgent: true, reset: {c: "c + 1"}}').replace(
+    "box: {T: [19.5, 20]}", "box: {T: [19.5, 20], c: 0}")
+
+
+def test_switch_count_is_exact_through_twenty_aggregations(tmp_path):
+    """``c`` counts the heating restarts. Closed form: the k-th restart happens at
+    heat(T0, 21) + cool(21, 19) + (k - 1) * period; the most restarts within the horizon over
+    the initial interval is the reference. One more is SAFE; one fewer is violated only by the
+    late switches, deep under aggregates, and must replay."""
+    (tmp_path / "m.yaml").write_text(COUNTING)
+    model = load_model(tmp_path / "m.yaml")
+    period = heating_time(19, 21) + cooling_time(21, 19)
+    restarts = max(int(np.floor((60 - heating_time(t0, 21) - cooling_time(21, 19)) / period)) + 1
+                   for t0 in (19.5, 20))
+    (tmp_path / "p.yaml").write_text(f"""
+properties:
+  - {{id: most, kind: safety, modes: [heating, "off"], require: ["c <= {restarts + 0.5}"]}}
+  - {{id: fewer, kind: safety, modes: [heating, "off"], require: ["c <= {restarts - 0.5}"]}}
+""")
+    props = {p.id: bind(p, model) for p in load_properties(tmp_path / "p.yaml")}
+    assert restarts > 10
+    safe = BACKEND.check(model, props["most"])
+    assert safe.status is Status.SAFE, safe.details
+    assert safe.details["aggregates"] > 10
+    violated = BACKEND.check(model, props["fewer"])
+    assert violated.status is Status.UNSAFE, violated.details
+    cex = violated.counterexample
+    run = replay(model, props["fewer"], np.array(cex.initial_state), cex.switch_time)
+    assert run.violated and run.state[1] == restarts
+
+
 def test_star_budget_ends_in_unknown(thermostat):
     model, props = thermostat
     result = BACKEND.check(model, props["band"], {"max_stars": 5})
