@@ -208,3 +208,28 @@ def test_aggregation_keeps_the_verdict_of_the_exact_exploration():
         exact = BACKEND.check(diagonal(slope), prop, {"aggregate_after": None, "step": 0.5})
         merged = BACKEND.check(diagonal(slope), prop, {"aggregate_after": 0, "step": 0.5})
         assert exact.status is merged.status, (slope, limit, exact.details, merged.details)
+
+
+def test_a_zero_dwell_cycle_ends_in_unknown(tmp_path):
+    """Two urgent transitions that always hold: infinitely many jumps at t = 0 (Zeno)."""
+    (tmp_path / "m.yaml").write_text("""
+name: pingpong
+state: [x]
+modes:
+  a: {flow: {x: 1}}
+  b: {flow: {x: 1}}
+transitions:
+  - {from: a, to: b, guard: ["x >= 0"], urgent: true}
+  - {from: b, to: a, guard: ["x >= 0"], urgent: true}
+initial: {mode: a, box: {x: 0}}
+horizon: 1
+""")
+    (tmp_path / "p.yaml").write_text("""
+properties:
+  - {id: small, kind: safety, modes: [a, b], require: ["x <= 10"]}
+""")
+    model = load_model(tmp_path / "m.yaml")
+    prop = bind(load_properties(tmp_path / "p.yaml")[0], model)
+    result = BACKEND.check(model, prop)
+    assert result.status is Status.UNKNOWN
+    assert "jumps within one time step" in result.details["reason"]

@@ -50,8 +50,10 @@ target and reset is *subsumed* (its successors are contained in the other's) and
 fired separately (an urgent time-out at the end of a window, for example).
 
 Jumps. ``max_jumps`` bounds the jumps along a path (none by default). When the model may
-have a zero-dwell cycle (:mod:`reach.model.lint`), at most ``STALL_JUMPS`` jumps in a row may
-leave the earliest clock where it was; beyond, UNKNOWN. A witness whose path takes more
+have a zero-dwell cycle (:mod:`reach.model.lint`), a path may take at most ``STALL_JUMPS``
+jumps while its earliest clock advances by less than one time step; beyond, UNKNOWN (a
+Zeno-like run cannot be followed to the horizon). Paths too deep for the recursion end
+in UNKNOWN too. A witness whose path takes more
 than one window switch, or a window on a clock other than the global one, is replayed
 without a switch time (the simulator takes one switch at a global time): if that run does
 not violate, the answer stays UNKNOWN.
@@ -175,6 +177,10 @@ class StarBackend:
         except lp.LPError as failure:
             status = Status.UNKNOWN
             details["reason"] = f"LP solver failure, nothing concluded: {failure}"
+        except RecursionError:
+            status = Status.UNKNOWN
+            details["reason"] = (f"a path of more than {explorer.stats.jumps} jumps is too deep to "
+                                 f"follow (set max_jumps to bound it)")
         details.update(_run_details(explorer))
         LOG.info("%s / %s: %s after %d stars, %d cells, %d LPs, %d aggregates", model.name, prop.id,
                  status.value if hasattr(status, "value") else status, explorer.stats.chains,

@@ -41,7 +41,8 @@ class _Path:
     """The discrete history of a star since its origin (the initial star, or the aggregate
     it descends from): entries, and for each ancestor cell the first coefficient of its
     segment block and whether that cell may still be bisected; ``jumps`` counts every jump
-    since the initial star, ``stalled`` the last jumps in a row that took no time."""
+    since the initial star; ``stalled`` the jumps since the earliest clock last moved on by a
+    time step or more (from ``since``)."""
 
     entries: tuple[_Entry, ...] = ()
     blocks: tuple[int, ...] = ()
@@ -50,13 +51,16 @@ class _Path:
     jumps: int = 0
     stalled: int = 0
     origin: _Aggregate | None = None
-    since: float = 0.0             # earliest clock of the star this path leads to
+    since: float = 0.0             # earliest clock when ``stalled`` was last reset
 
-    def descend(self, entry: _Entry, block: int, can_refine: bool, clock: float) -> "_Path":
+    def descend(self, entry: _Entry, block: int, can_refine: bool, clock: float,
+                step: float) -> "_Path":
+        """The path one jump further, entering at earliest clock ``clock``."""
         abort = min(self.abort, clock) if entry.window and self.abort == np.inf else self.abort
-        stalled = self.stalled + 1 if clock <= self.since else 0
+        moved = clock >= self.since + step
         return _Path(self.entries + (entry,), self.blocks + (block,), self.open + (can_refine,), abort,
-                     self.jumps + 1, stalled, self.origin, clock)
+                     self.jumps + 1, 0 if moved else self.stalled + 1, self.origin,
+                     clock if moved else self.since)
 
     def closed(self) -> "_Path":
         """The same history with no cell left to bisect."""
@@ -172,7 +176,7 @@ class _Explorer:
         if path.jumps > self.max_jumps:
             raise _Stop(Status.UNKNOWN, f"more than {self.max_jumps} discrete jumps on a path")
         if path.stalled > self.stall_limit:
-            raise _Stop(Status.UNKNOWN, f"{path.stalled} jumps in a row without time passing "
+            raise _Stop(Status.UNKNOWN, f"{path.stalled} jumps within one time step "
                                         f"(possible zero-dwell cycle)")
         self.stats.chains += 1
         if self.stats.chains > self.opt.max_stars:
@@ -465,7 +469,7 @@ class _Explorer:
                 successor = _tightened(successor, len(self.invariants[jump.target][1]))
                 if successor is None:
                     continue
-            descended = path.descend(clock, block, own_open, earliest)
+            descended = path.descend(clock, block, own_open, earliest, self.h)
             if pending is not None:
                 pending.setdefault(index, []).append((successor, descended))
                 continue

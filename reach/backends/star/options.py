@@ -20,8 +20,8 @@ ERROR_RATIO = 0.25
 DEPTH_LP_TOLERANCE = 1e-10
 
 
-#: in a model that may have a zero-dwell cycle, this many jumps in a row without the
-#: earliest clock advancing end the check (UNKNOWN)
+#: in a model that may have a zero-dwell cycle, this many jumps on a path while its
+#: earliest clock advances by less than one time step end the check (UNKNOWN)
 STALL_JUMPS = 10
 
 
@@ -51,8 +51,8 @@ class StarOptions:
     max_unresolved: stop (UNKNOWN) after this many cells that refinement cannot clear.
     max_lps: LP budget; when exhausted the answer is UNKNOWN.
     max_jumps: bound on discrete jumps along a path; UNKNOWN beyond. None (default): no
-        bound, but at most ``STALL_JUMPS`` jumps in a row without time passing when the
-        model may have a zero-dwell cycle (:mod:`reach.model.lint`).
+        bound, but at most ``STALL_JUMPS`` jumps within one time step when the model may
+        have a zero-dwell cycle (:mod:`reach.model.lint`).
     aggregate_after: successors of the jumps after the first ``aggregate_after`` ones on a
         path, out of a mode whose flow is not constant, are aggregated: the stars one chain
         sends through one transition become one star, their interval hull (see
