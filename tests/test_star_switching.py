@@ -47,7 +47,8 @@ PROPERTIES = """
 properties:
   - {id: band, kind: safety, modes: [heating, "off"], require: ["T >= 18", "T <= 22"]}
   - {id: below, kind: safety, modes: [heating, "off"], require: ["T <= 20.5"]}
-  - {id: tight, kind: safety, modes: [heating, "off"], require: ["T >= 18.999", "T <= 21.001"]}
+  - {id: tight, kind: safety, modes: [heating, "off"], require: ["T >= 19", "T <= 21"]}
+  - {id: inside, kind: safety, modes: [heating, "off"], require: ["T <= 20.9999"]}
 """
 
 
@@ -90,9 +91,20 @@ def test_thermostat_band_is_safe(thermostat, caplog):
     assert result.details["jumps"] >= 2 * int((60 - heating_time(20, 21)) / period)
 
 
-def test_thermostat_tight_band_is_safe(thermostat):
+def test_thermostat_band_met_with_equality_at_every_switch_is_safe(thermostat):
+    """The guards pin T = 21 and T = 19 on every switch: aggregates must keep that."""
     model, props = thermostat
-    assert BACKEND.check(model, props["tight"]).status is Status.SAFE
+    result = BACKEND.check(model, props["tight"])
+    assert result.status is Status.SAFE, result.details
+    assert result.details["aggregates"] > 10
+
+
+def test_thermostat_bound_just_inside_the_switch_point_is_not_safe(thermostat):
+    model, props = thermostat
+    result = BACKEND.check(model, props["inside"])
+    assert result.status is Status.UNSAFE, result.details
+    cex = result.counterexample
+    assert replay(model, props["inside"], np.array(cex.initial_state), cex.switch_time).violated
 
 
 def test_thermostat_violation_replays(thermostat):

@@ -124,8 +124,9 @@ _SOUNDNESS = (
     "M >= sup|x''| from {q} sub-samples per cell and the closure (I - delta^2/8 |A^2|)^-1; "
     "transitions (urgent and window) fire from segment-and-guard sets, so every switching "
     "instant is covered; invariants and guards are exact LP rows; depth LPs by HiGHS with primal "
-    "feasibility tolerance {lp_tol:g} (other LPs ~1e-7); a piece of strict inequalities counts as "
-    "entered at a depth above {rel:g} x max(1, |g|, |h.c|) (largest used: {tol:g}), a piece with a "
+    "feasibility tolerance {lp_tol:g} (100 times that, then HiGHS's default 1e-7, where it fails; "
+    "other LPs ~1e-7); a piece of strict inequalities counts as entered at a depth above "
+    "max({rel:g}, 10 x the LP's tolerance) x max(1, |g|, |h.c|) (largest used: {tol:g}), a piece with a "
     "non-strict row as met at a depth of at least minus that; matrix exponentials in floating "
     "point (rounding not enclosed)")
 

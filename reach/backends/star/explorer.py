@@ -15,7 +15,7 @@ from reach.backends.star.flowpipe import (_block_spreads, _chain_abs_bounds, _ch
 from reach.backends.star.options import (ERROR_RATIO, MAX_CHAIN_BYTES, NAME, PROGRESS_SECONDS,
                                          STALL_JUMPS, TIGHT_RATIO, StarOptions)
 from reach.backends.star.transitions import (_LinearModel, _modes_leading_to, _Piece,
-                                             _unsafe_pieces)
+                                             _unsafe_pieces, kept_rows)
 from reach.backends.star.witnesses import _Witness, trace, nearest_point
 from reach.result import Status
 from reach.sets import Box, Star
@@ -271,7 +271,8 @@ class _Explorer:
             spread = None if dev is None else dev[j] if self.opt.discrete_time else dev[j + 1]
             self._cell(mode, grid_star(j), h, path, 0, point, pending, spread)
         for index, members in (pending or {}).items():
-            self._aggregate(self.jumps[mode][index].target, members)
+            jump = self.jumps[mode][index]
+            self._aggregate(jump.target, members, kept_rows(jump, Hi, gi))
 
     def _progress(self):
         now = time.perf_counter()
@@ -282,15 +283,19 @@ class _Explorer:
                      "%d aggregates of %d stars (%d refined)", s.chains, s.cells, s.lps, s.jumps,
                      s.reached, self.horizon, s.aggregated, s.members, s.deaggregated)
 
-    def _aggregate(self, mode: str, members: list[tuple[Star, _Path]]):
+    def _aggregate(self, mode: str, members: list[tuple[Star, _Path]], rows):
         """Explore the successor stars ``members`` entering ``mode`` as one star.
 
-        The aggregate (:func:`.aggregation.interval_hull`) contains every member, so a SAFE
+        ``rows``: constraints every member satisfies besides the invariant of ``mode``
+        (:func:`.transitions.kept_rows`). The aggregate (:func:`.aggregation.interval_hull`,
+        cut by the invariant and ``rows``) contains every member, so a SAFE
         under it covers them. When a check under it fails and its witness does not replay,
         the members are explored instead, each with its own exact history (no cell before the
         aggregation is bisected again).
         """
-        hull, kept = interval_hull(members, self.invariants[mode], self._lp_count)
+        H, g = self.invariants[mode]
+        hull, kept = interval_hull(members, (np.vstack([H, rows[0]]), np.concatenate([g, rows[1]])),
+                                   self._lp_count)
         if not kept:
             return
         if hull is None:                                       # unbounded: explore the members
@@ -407,9 +412,9 @@ class _Explorer:
             self._lp_budget()
             H = np.vstack([piece.H, horizon_row])
             g = np.append(piece.g, self.horizon)
-            depth, alpha = _depth(seg, H, g, len(piece.g))
-            tol = self.opt.touch_tolerance * max(1.0, np.abs(piece.g).max(initial=0.0),
-                                                 np.abs(piece.H @ seg.center).max(initial=0.0))
+            depth, alpha, lp_tol = _depth(seg, H, g, len(piece.g))
+            tol = max(self.opt.touch_tolerance, 10 * lp_tol) * max(
+                1.0, np.abs(piece.g).max(initial=0.0), np.abs(piece.H @ seg.center).max(initial=0.0))
             self.stats.tolerance = max(self.stats.tolerance, tol)
             if depth <= tol if piece.strict else depth < -tol:
                 continue

@@ -7,7 +7,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import expm
 
-from reach.backends.star.options import DEPTH_LP_TOLERANCE
+from reach import lp
+from reach.backends.star.options import DEPTH_LP_TOLERANCE, HIGHS_DEFAULT_TOLERANCE
 from reach.sets import Box, Star, chord_hull
 from reach.sets.hpolytope import HPolytope
 
@@ -224,7 +225,16 @@ def _block_spreads(seg: Star, H: np.ndarray, blocks: tuple[int, ...]):
 
 
 def _depth(seg: Star, H, g, piece_rows: int):
-    """``Star.depth`` on the piece rows, with further rows (the horizon) as hard limits."""
+    """``Star.depth`` on the piece rows, with further rows (the horizon) as hard limits:
+    ``(depth, coefficients, tolerance)``, ``tolerance`` the primal feasibility tolerance the LP
+    was solved to -- ``DEPTH_LP_TOLERANCE``, or where HiGHS fails at it 100 times that, then
+    its default (about 1e-7); an :class:`reach.lp.LPError` if all fail."""
     hard = H[piece_rows:], g[piece_rows:]
     star = seg.intersect_halfspaces(*hard)
-    return star.depth(H[:piece_rows], g[:piece_rows], tolerance=DEPTH_LP_TOLERANCE)
+    for tolerance in (DEPTH_LP_TOLERANCE, 100 * DEPTH_LP_TOLERANCE, None):
+        try:
+            return (*star.depth(H[:piece_rows], g[:piece_rows], tolerance=tolerance),
+                    HIGHS_DEFAULT_TOLERANCE if tolerance is None else tolerance)
+        except lp.LPError:
+            if tolerance is None:
+                raise

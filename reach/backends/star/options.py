@@ -19,6 +19,9 @@ ERROR_RATIO = 0.25
 #: then exact to well below the touch tolerance of :class:`StarOptions`
 DEPTH_LP_TOLERANCE = 1e-10
 
+#: HiGHS's own primal feasibility tolerance (used where it fails at the tighter ones)
+HIGHS_DEFAULT_TOLERANCE = 1e-7
+
 
 #: in a model that may have a zero-dwell cycle, this many jumps on a path while its
 #: earliest clock advances by less than one time step end the check (UNKNOWN)
@@ -65,7 +68,8 @@ class StarOptions:
     max_deaggregations: at most this many aggregates are refined back into their members.
     touch_tolerance: relative LP tolerance. With piece rows of unit norm, the depth LP's
         answer counts as exact up to ``tol = touch_tolerance * max(1, |g_r|, |h_r . c|)``
-        (largest over the piece's rows ``h_r x <= g_r``, ``c`` the segment's centre): a
+        (largest over the piece's rows ``h_r x <= g_r``, ``c`` the segment's centre; at least
+        10 times the feasibility tolerance the LP was solved to, see ``_depth``): a
         piece made only of strict inequalities is entered when the depth exceeds ``tol``;
         a piece with a non-strict row is met when the depth is at least ``-tol``.
     replay_dt: simulator step for replays (None: the simulator's default).

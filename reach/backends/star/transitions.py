@@ -227,3 +227,15 @@ def _modes_leading_to(model, targets: set[str]) -> set[str]:
                 reach.add(tr.source)
                 changed = True
     return reach
+
+
+def kept_rows(jump: _Jump, H_inv, g_inv):
+    """``(H, g)``: the rows of the jump's guard and of the source invariant over states its
+    reset leaves alone (``x_i+ = x_i``): every successor of the jump satisfies them (an
+    aggregate keeps what a guard pins down, e.g. ``T = 21`` from ``T >= 21`` and ``T <= 21``)."""
+    H = np.vstack([jump.H, H_inv]) if H_inv.shape[0] else jump.H
+    g = np.concatenate([jump.g, g_inv])
+    n = jump.R.shape[0]
+    alone = np.all(jump.R == np.eye(n), axis=1) & (jump.r == 0)
+    keep = np.all((H == 0) | alone[None, :], axis=1) if H.shape[0] else np.zeros(0, dtype=bool)
+    return H[keep], g[keep]
