@@ -119,3 +119,21 @@ def test_polytopic_initial_set_is_used_exactly():
     assert result.status is Status.UNSAFE, result.details
     x0 = np.array(result.counterexample.initial_state)
     assert abs(x0[0] + x0[1] - 1) < 1e-6
+
+
+def test_input_driven_runs_that_stay_inside_the_invariant_are_kept():
+    """``x' = -x + u``, ``u in [0, 2]``: with u at its centre the run crosses the invariant
+    ``x <= 0.5`` at t = ln 2 and must leave ``run``, but with u near 0 a run stays in ``run``
+    until the horizon, so ``t <= 1.5`` in ``run`` is violated; cutting the input-free grid
+    stars with the exact invariant would lose those runs and prove it."""
+    run = Mode("run", [X, U, T], [-X + U, sympy.Integer(0), sympy.Integer(1)], {}, [c(X - 0.5)])
+    hold = Mode("hold", [X, U, T], [sympy.Integer(0), sympy.Integer(0), sympy.Integer(1)], {}, [])
+    from reach.model.automaton import Transition
+    leave = Transition("leave", "run", "hold", [c(0.5 - X)], urgent=True)
+    initial = InitialSet("run", np.array([0.0, 0.0, 0.0]), np.array([0.0, 2.0, 0.0]))
+    model = HybridAutomaton("leaky-hold", "x' = -x + u", "(built in test)", SI, {}, ["x", "u", "t"], [],
+                            {"run": run, "hold": hold}, [leave], initial, 3.0, clocks=[2])
+    model.bounded_inputs = [SimpleNamespace(name="u", index=1, low=0.0, high=2.0, varying=True)]
+    prop = BoundSafety("leaves", ["run"], {"run": [[c(1.5 - T, strict=True)]]}, [X, U, T],
+                       file="(built in test)")
+    assert BACKEND.check(model, prop, {"step": 0.1}).status is not Status.SAFE

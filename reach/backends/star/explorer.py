@@ -383,7 +383,8 @@ class _Explorer:
             half = h / 2
             self._cell(mode, start, half, path, depth + 1, point, pending, spread)
             mid = start.affine_map(*self.flows[mode].step(half))
-            mid = mid.intersect_halfspaces(*self.invariants[mode])
+            Hi, gi = self.invariants[mode]       # relaxed by the input effect, as on the grid
+            mid = mid.intersect_halfspaces(Hi, gi if spread is None else gi + np.abs(Hi) @ spread)
             mid_point = self._point(mid, point)
             if mid_point is not None:
                 self._cell(mode, mid, half, path, depth + 1, mid_point, pending, spread)
