@@ -174,7 +174,11 @@ class StarBackend:
             status, counterexample = stop.status, stop.counterexample
             details["reason"] = stop.reason
             if stop.witness is not None:
-                details["witness"] = witness_details(explorer, stop.witness)
+                try:
+                    details["witness"] = witness_details(explorer, stop.witness)
+                except (_Stop, lp.LPError):        # tracing it back needs LPs the budget lacks
+                    w = stop.witness
+                    details["witness"] = {"mode": w.mode, "piece": w.piece, "depth": w.depth}
         except lp.LPError as failure:
             status = Status.UNKNOWN
             details["reason"] = f"LP solver failure, nothing concluded: {failure}"
@@ -184,7 +188,7 @@ class StarBackend:
                                  f"follow (set max_jumps to bound it)")
         details.update(_run_details(explorer))
         LOG.info("%s / %s: %s after %d stars, %d cells, %d LPs, %d aggregates", model.name, prop.id,
-                 status.value if hasattr(status, "value") else status, explorer.stats.chains,
+                 status.value, explorer.stats.chains,
                  explorer.stats.cells, explorer.stats.lps, explorer.stats.aggregated)
         return Result(NAME, model.name, prop.id, status, time.perf_counter() - start,
                       counterexample=counterexample, details=details)
