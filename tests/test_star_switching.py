@@ -14,6 +14,8 @@ import logging
 import numpy as np
 import pytest
 import sympy
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from reach.backends.montecarlo import replay
 from reach.backends.star import BACKEND
@@ -245,3 +247,54 @@ properties:
     result = BACKEND.check(model, prop)
     assert result.status is Status.UNKNOWN
     assert "jumps within one time step" in result.details["reason"]
+
+
+HYSTERESIS = """
+name: hysteresis
+state: [T]
+modes:
+  heating:
+    flow: {{T: "-{a}*(T - {ambient}) + {power}"}}
+    invariant: ["T <= {hi}"]
+  "off":
+    flow: {{T: "-{a}*(T - {ambient})"}}
+    invariant: ["T >= {lo}"]
+transitions:
+  - {{from: heating, to: "off", guard: ["T >= {hi}"], urgent: true}}
+  - {{from: "off", to: heating, guard: ["T <= {lo}"], urgent: true}}
+initial: {{mode: heating, box: {{T: [{t0}, {t1}]}}}}
+horizon: {horizon}
+"""
+
+
+@given(st.floats(0.05, 0.3), st.floats(1.0, 4.0), st.floats(-0.3, 0.3), st.integers(0, 2**32 - 1))
+@settings(max_examples=8, deadline=None)
+def test_hysteresis_verdicts_agree_with_simulated_runs(a, gap, delta, seed):
+    """Random thermostats (heating reaches well above the upper threshold): star's SAFE for
+    ``T <= hi + delta`` must hold on simulated runs from sampled initial states, its UNSAFE
+    must replay, and with a clear margin (``delta >= 0.1``) the bound must be proved."""
+    import tempfile
+    from pathlib import Path
+    rng = np.random.default_rng(seed)
+    lo = 19.0
+    hi = lo + gap
+    ambient, power = 10.0, a * (hi + 5.0 - 10.0)           # heating settles 5 above hi
+    text = HYSTERESIS.format(a=a, ambient=ambient, power=power, lo=lo, hi=hi, t0=lo + 0.2 * gap,
+                             t1=lo + 0.4 * gap, horizon=60)
+    with tempfile.TemporaryDirectory() as folder:
+        (Path(folder) / "m.yaml").write_text(text)
+        (Path(folder) / "p.yaml").write_text(
+            f'properties:\n  - {{id: cap, kind: safety, modes: [heating, "off"], require: ["T <= {hi + delta}"]}}\n')
+        model = load_model(Path(folder) / "m.yaml")
+        prop = bind(load_properties(Path(folder) / "p.yaml")[0], model)
+    result = BACKEND.check(model, prop, {"max_stars": 2000})
+    if result.status is Status.SAFE:
+        for x0 in rng.uniform(model.initial.low, model.initial.high, size=(5, 1)):
+            assert not replay(model, prop, x0, None).violated
+    if result.status is Status.UNSAFE:
+        cex = result.counterexample
+        assert replay(model, prop, np.array(cex.initial_state), cex.switch_time).violated
+    if delta >= 0.1:
+        assert result.status is Status.SAFE, result.details
+    if delta < -0.01:
+        assert result.status is not Status.SAFE, result.details

@@ -178,12 +178,14 @@ class _Explorer:
         if path.stalled > self.stall_limit:
             raise _Stop(Status.UNKNOWN, f"{path.stalled} jumps within one time step "
                                         f"(possible zero-dwell cycle)")
+        t0 = -star.support_bounds(-np.eye(self.n)[self.clock])[0]
+        if t0 > self.horizon:                   # every run of the star is past the horizon
+            return
         self.stats.chains += 1
         if self.stats.chains > self.opt.max_stars:
             raise _Stop(Status.UNKNOWN, f"star budget of {self.opt.max_stars} exhausted "
                                         f"(option max_stars)")
         flow, h = self.flows[mode], self.h
-        t0 = -star.support_bounds(-np.eye(self.n)[self.clock])[0]
         count = max(1, int(np.ceil((self.horizon - t0) / h - 1e-9)))
         segment_vars = star.nvars if flow.drift else 2 * star.nvars + 1 + self.n
         if segment_vars > self.opt.max_coefficients or \
@@ -460,9 +462,12 @@ class _Explorer:
                 continue
             if jump.H.shape[0] and np.any(-seg.support_bounds(-jump.H) > jump.g):
                 continue
-            entered = seg.intersect_halfspaces(jump.H, jump.g)
+            # runs that switch after the horizon do not matter: the clock row cuts them
+            H = np.vstack([jump.H, np.eye(self.n)[self.clock]])
+            g = np.append(jump.g, self.horizon)
+            entered = seg.intersect_halfspaces(H, g)
             if self.flows[mode].drift:
-                entered = _tightened(entered, len(jump.g))
+                entered = _tightened(entered, len(g))
                 if entered is None or np.any(-entered.support_bounds(-jump.H) > jump.g):
                     continue
             clock = _Entry(jump.name, jump.window is not None,
