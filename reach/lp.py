@@ -68,9 +68,11 @@ def _bounds(bounds, n: int):
     return bounds
 
 
-def minimize(c, A_ub=None, b_ub=None, *, A_eq=None, b_eq=None, bounds=None) -> LPResult:
+def minimize(c, A_ub=None, b_ub=None, *, A_eq=None, b_eq=None, bounds=None,
+             tolerance: float | None = None) -> LPResult:
     """Minimize ``c^T x`` over the polyhedron; ``bounds`` is None (all free), a list of
-    ``(lo, hi)`` pairs (None for infinite) or a pair of arrays ``(lo, hi)``."""
+    ``(lo, hi)`` pairs (None for infinite) or a pair of arrays ``(lo, hi)``. ``tolerance``:
+    HiGHS's primal and dual feasibility tolerance (None: its default, about 1e-7)."""
     c = np.asarray(c, dtype=float)
     n = c.size
     if n == 0:                  # no variables: the constraints are plain inequalities
@@ -81,8 +83,10 @@ def minimize(c, A_ub=None, b_ub=None, *, A_eq=None, b_eq=None, bounds=None) -> L
         A_ub, b_ub = None, None
     if A_eq is not None and np.size(A_eq) == 0:
         A_eq, b_eq = None, None
+    options = {} if tolerance is None else {"primal_feasibility_tolerance": tolerance,
+                                            "dual_feasibility_tolerance": tolerance}
     res = linprog(c, A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=b_eq, bounds=_bounds(bounds, n),
-                  method="highs")
+                  method="highs", options=options)
     if res.status == 0:
         return LPResult(OPTIMAL, float(res.fun), np.asarray(res.x, dtype=float))
     if res.status == 2:
@@ -92,9 +96,11 @@ def minimize(c, A_ub=None, b_ub=None, *, A_eq=None, b_eq=None, bounds=None) -> L
     raise LPError(f"LP solver stopped without a verdict: {res.message}")
 
 
-def maximize(c, A_ub=None, b_ub=None, *, A_eq=None, b_eq=None, bounds=None) -> LPResult:
+def maximize(c, A_ub=None, b_ub=None, *, A_eq=None, b_eq=None, bounds=None,
+             tolerance: float | None = None) -> LPResult:
     """Maximize ``c^T x``; ``value`` is the maximum."""
-    res = minimize(-np.asarray(c, dtype=float), A_ub, b_ub, A_eq=A_eq, b_eq=b_eq, bounds=bounds)
+    res = minimize(-np.asarray(c, dtype=float), A_ub, b_ub, A_eq=A_eq, b_eq=b_eq, bounds=bounds,
+                   tolerance=tolerance)
     if res.optimal:
         res.value = -res.value
     return res

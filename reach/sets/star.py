@@ -125,7 +125,7 @@ class Star:
                                   b_eq=x - self.center, bounds=self._lp_bounds(), n=self.nvars)
         return alpha is not None
 
-    def depth(self, H, g, cap: float = np.inf) -> tuple[float, np.ndarray | None]:
+    def depth(self, H, g, cap: float = np.inf, tolerance: float | None = None) -> tuple[float, np.ndarray | None]:
         """How far ``S`` reaches into ``Q = {x : H x <= g}`` (rows of ``H`` normalised).
 
         Solves ``max s  s.t.  x in S,  H_r x + s ||H_r|| <= g_r,  s <= cap``. The value is
@@ -133,7 +133,8 @@ class Star:
         of their Chebyshev-like separation), zero when they only touch, and positive when
         ``S`` enters the interior of ``Q``. Returns ``(-inf, None)`` for an empty ``S``,
         ``(inf, None)`` if the depth is unbounded (an unbounded ``S`` and no cap), otherwise
-        the optimal value and the coefficients ``a`` of the deepest point.
+        the optimal value and the coefficients ``a`` of the deepest point. ``tolerance``: the
+        LP's primal feasibility tolerance (None: the solver's default).
         """
         H = np.atleast_2d(np.asarray(H, dtype=float))
         g = np.atleast_1d(np.asarray(g, dtype=float))
@@ -146,7 +147,7 @@ class Star:
         bounds = (np.append(self.box.low, -np.inf), np.append(self.box.high, cap))
         objective = np.zeros(m + 1)
         objective[-1] = 1.0
-        res = lp.maximize(objective, A, b, bounds=bounds)
+        res = lp.maximize(objective, A, b, bounds=bounds, tolerance=tolerance)
         if res.infeasible:
             return -np.inf, None
         if res.unbounded:

@@ -1,0 +1,291 @@
+"""The ``star`` back-end: generalized-star-set reachability of linear hybrid automata.
+
+Method
+------
+Each mode has affine dynamics ``x' = A x + b``. A star ``S`` advances by one step ``h`` as
+``e^{Ah} S + psi(h)`` (``[Phi psi; 0 1] = expm([A b; 0 0] h)``: the affine term by state
+augmentation), so a whole chain of grid stars ``Y_0, Y_1, ...`` is a stack of matrix
+products. Between grid points every run is covered by the **segment** of its cell
+``[t_j, t_j + h]``: the exact convex hull of ``Y_j`` and ``Y_{j+1}`` with a shared
+predicate (:func:`reach.sets.star.chord_hull`) plus the linear-interpolation error
+
+    |x_i(t_j + lam h) - chord_i(lam)| <= lam (1 - lam) h^2 / 2 * M_i,   M_i >= sup |x_i''|
+
+on the cell. ``x'' = A^2 x + A b`` is an affine function of the state; ``M`` comes from
+``q + 1`` sub-samples at spacing ``delta = h / q`` (support bounds of ``Y_j`` in the
+directions of ``A^2 e^{A s}``) and the closure argument ``y := x''``, ``y'' = A^2 y``:
+
+    sup |y| <= max_samples |y| + delta^2/8 |A^2| sup |y|
+    =>  M = (I - delta^2/8 |A^2|)^{-1} max_samples |y|,
+
+valid because ``q`` is chosen so that the spectral radius of ``delta^2/8 |A^2|`` is at
+most 1/4 (the inverse is then a non-negative Neumann series).
+
+Transitions -- urgent ones (the octagon entry) and may-transitions over a clock window
+(the abort) alike -- fire from a segment intersected with the guard and the source
+invariant: that set contains the state at every switching instant inside the cell, so the
+continuum of switching times is covered without aggregation; each such set starts a
+successor star that carries the global clock, so no alignment of time grids is assumed.
+Invariants are intersected exactly (predicate rows). Every unsafe convex piece of the
+property is checked per segment: cheap support bounds first (vectorised over the chain),
+an LP on the segment only where they do not exclude the piece.
+
+Refinement. Each cell's segment adds a block of coefficients (hull weights, chord weight,
+error terms) to its star, and successors keep their ancestors' blocks. When a piece is
+met, the block with the largest spread along the piece is blamed and only the cell that
+owns it is bisected (halved step, a quarter of the error), with everything downstream of
+it; up to ``max_refinements`` times per cell. A witness -- an LP point of a segment inside a
+piece -- maps back through the coefficients (the original ones are kept in every derived
+star) to an initial state and abort time; it is replayed with the Monte Carlo simulator
+when nothing is left to refine or when it lies deeper in the piece than all refinable
+spread. UNSAFE only if the replay violates; otherwise UNKNOWN.
+
+Timed modes. In a mode whose flow is a constant (``A = 0``: clocks, counters, stopwatches
+of a timed or linear hybrid automaton) every run is the ray ``x + s b``; the cell
+``[0, h]`` from ``S`` is then exactly ``S + [0, h] b`` -- one new coefficient ``s in [0, 1]``
+instead of a chord hull, no interpolation error, nothing to refine -- so coefficient counts
+grow by one per mode visit and hundreds of jumps stay cheap. A transition whose guard,
+within the source invariant, lies inside the guard of another transition with the same
+target and reset is *subsumed* (its successors are contained in the other's) and is not
+fired separately (an urgent time-out at the end of a window, for example).
+
+Jumps. ``max_jumps`` bounds the jumps along a path (none by default). When the model may
+have a zero-dwell cycle (:mod:`reach.model.lint`), a path may take at most ``STALL_JUMPS``
+jumps while its earliest clock advances by less than one time step; beyond, UNKNOWN (a
+Zeno-like run cannot be followed to the horizon). Paths too deep for the recursion end
+in UNKNOWN too. A witness whose path takes more
+than one window switch, or a window on a clock other than the global one, is replayed
+without a switch time (the simulator takes one switch at a global time): if that run does
+not violate, the answer stays UNKNOWN.
+
+Clock. The horizon and the switch times are read off a global clock (rate 1 everywhere,
+0 initially, never reset). A model without one gets its own, an extra explored state that
+no guard, invariant, reset or property mentions (:class:`_LinearModel`).
+
+Aggregation. Each segment of a non-constant flow doubles a star's coefficients (the chord
+hull keeps ``a`` and ``lam a``), so a path with many jumps -- a thermostat switching every
+few minutes -- would need LPs of exponential size. Past the first ``aggregate_after`` jumps
+of a path, the successors one chain sends through one transition (the stars entering a
+mode in that chain's time window) are replaced by their interval hull, a box star with
+fresh coefficients intersected with the target invariant; it contains every member, so a
+proof under it covers them. When a check under an aggregate fails, its witness is traced
+back through the nearest point of a member (one LP per member, per aggregate level) to an
+initial state and replayed; if that run does not violate, the aggregate is refined into
+its members, explored with their exact histories. Star, coefficient and memory budgets end
+a check in UNKNOWN with the reason, and progress goes to the ``reach.star`` logger.
+
+Strict and non-strict bounds. With piece rows of unit norm, the depth LP (HiGHS, primal
+feasibility 1e-10) is trusted to ``tol = touch_tolerance * max(1, |g|, |h . c|)``: a piece
+of strict inequalities (the negation of ``x >= -100``) counts as entered only above
+``tol`` (a set that meets ``x = -100`` only touches it), a piece with a non-strict row as met
+from ``-tol``; the details state the largest ``tol`` used. An LP failure answers UNKNOWN.
+
+Inputs. A time-varying bounded input (``model.bounded_inputs`` with ``varying``) is taken out
+of the flow: the run is the input-free run (input at the box centre) plus a deviation bounded
+per cell by a box (:class:`.flowpipe.AffineFlow`), added to every segment; invariants are
+relaxed by it on the input-free grid stars and applied exactly to the segments. A polytopic
+initial set (``initial.polytope``) cuts the initial star.
+
+Layout: :mod:`.options` (settings, constants), :mod:`.flowpipe` (flows, segments, bounds),
+:mod:`.transitions` (the automaton as matrices), :mod:`.explorer` (the exploration),
+:mod:`.aggregation`, :mod:`.witnesses` (witnesses back to initial states), this module (the
+back-end, its Result and the safe-abort sweep).
+
+``discrete_time=True`` checks and switches at grid points only (Hylaa's semantics): no
+segments, no error terms -- not a proof for continuous time, so it answers UNSAFE (replayed)
+or UNKNOWN ("no violation at the grid points"), never SAFE.
+
+:func:`safe_abort_time` / :func:`safe_abort_map` sweep initial cells for the latest abort
+time up to which every abort is proven safe (Fig. 5 of the rendezvous benchmark).
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from reach import lp
+from reach.backends.star.explorer import LOG, _Explorer, _Stop
+from reach.backends.star.flowpipe import AffineFlow, flowpipe
+from reach.backends.star.options import DEPTH_LP_TOLERANCE, NAME, StarOptions
+from reach.backends.star.transitions import _LinearModel, _unsafe_pieces
+from reach.backends.star.witnesses import witness_details
+from reach.result import Result, Status
+from reach.sets import Star
+
+__all__ = ["AffineFlow", "BACKEND", "StarBackend", "StarOptions", "arc_cells", "flowpipe",
+           "safe_abort_map", "safe_abort_time"]
+
+
+_SOUNDNESS = (
+    "continuous time: each cell [t, t+h] is covered by the exact convex hull of its two grid "
+    "stars (shared predicate) plus the interpolation error lam(1-lam) h^2/2 M, "
+    "M >= sup|x''| from {q} sub-samples per cell and the closure (I - delta^2/8 |A^2|)^-1; "
+    "transitions (urgent and window) fire from segment-and-guard sets, so every switching "
+    "instant is covered; invariants and guards are exact LP rows; depth LPs by HiGHS with primal "
+    "feasibility tolerance {lp_tol:g} (100 times that, then HiGHS's default 1e-7, where it fails; "
+    "other LPs ~1e-7); a piece of strict inequalities counts as entered at a depth above "
+    "max({rel:g}, 10 x the LP's tolerance) x max(1, |g|, |h.c|) (largest used: {tol:g}), a piece with a "
+    "non-strict row as met at a depth of at least minus that; matrix exponentials in floating "
+    "point (rounding not enclosed)")
+
+
+_DISCRETE = ("discrete time: states checked and switched at grid points t = k*h only "
+             "(Hylaa's semantics); behaviour between grid points is not covered")
+
+
+class StarBackend:
+    name = NAME
+    varying_inputs = True           # time-varying bounded inputs: the input set per step
+
+    def supports(self, model, prop) -> str | None:
+        if getattr(prop, "kind", None) != "safety":
+            return f"the star back-end checks safety properties only (got '{getattr(prop, 'kind', '?')}')"
+        if not _LinearModel.of(model).linear:
+            return ("nonlinear dynamics, invariants, guards or resets: generalized star sets need "
+                    "affine flows (the taylor back-end covers nonlinear models)")
+        if model.disturbance is not None:
+            return "stochastic disturbance: the star back-end is deterministic (use fsr or montecarlo)"
+        for mode in prop.modes:
+            if _unsafe_pieces(prop).get(mode) is None:
+                return f"nonlinear unsafe set in mode '{mode}': needs a polygonal approximation"
+        return None
+
+    def check(self, model, prop, options=None) -> Result:
+        start = time.perf_counter()
+        reason = self.supports(model, prop)
+        if reason is not None:
+            return Result(NAME, model.name, prop.id, Status.UNSUPPORTED, details={"reason": reason})
+        opt = StarOptions.from_dict(options)
+        explorer = _Explorer(model, prop, opt)
+        status, counterexample = Status.SAFE, None
+        details = {}
+        try:
+            explorer.run()
+            if explorer.unresolved:
+                raise _Stop(Status.UNKNOWN, f"{len(explorer.unresolved)} cell(s) still meet an unsafe "
+                                            f"piece after refinement; no witness replayed",
+                            witness=explorer.unresolved[0])
+            if opt.discrete_time:
+                raise _Stop(Status.UNKNOWN, "no violation at the grid points (discrete time: "
+                                            "behaviour between grid points is not checked)")
+        except _Stop as stop:
+            status, counterexample = stop.status, stop.counterexample
+            details["reason"] = stop.reason
+            if stop.witness is not None:
+                try:
+                    details["witness"] = witness_details(explorer, stop.witness)
+                except (_Stop, lp.LPError):        # tracing it back needs LPs the budget lacks
+                    w = stop.witness
+                    details["witness"] = {"mode": w.mode, "piece": w.piece, "depth": w.depth}
+        except lp.LPError as failure:
+            status = Status.UNKNOWN
+            details["reason"] = f"LP solver failure, nothing concluded: {failure}"
+        except RecursionError:
+            status = Status.UNKNOWN
+            details["reason"] = (f"a path of more than {explorer.stats.jumps} jumps is too deep to "
+                                 f"follow (set max_jumps to bound it)")
+        details.update(_run_details(explorer))
+        LOG.info("%s / %s: %s after %d stars, %d cells, %d LPs, %d aggregates", model.name, prop.id,
+                 status.value, explorer.stats.chains,
+                 explorer.stats.cells, explorer.stats.lps, explorer.stats.aggregated)
+        return Result(NAME, model.name, prop.id, status, time.perf_counter() - start,
+                      counterexample=counterexample, details=details)
+
+
+def _run_details(explorer: _Explorer) -> dict:
+    s, opt = explorer.stats, explorer.opt
+    substeps = {m: f.curvature(explorer.h)[3] for m, f in explorer.flows.items()}
+    soundness = _DISCRETE if opt.discrete_time else _SOUNDNESS.format(
+        q=", ".join(f"{m}: {q + 1}" for m, q in substeps.items()), lp_tol=DEPTH_LP_TOLERANCE,
+        rel=opt.touch_tolerance, tol=s.tolerance)
+    if explorer.data.varying:
+        soundness += ("; time-varying inputs " + ", ".join(u.name for u in explorer.data.varying)
+                      + ": their effect on a cell [t_j, t_j+1] bounded by the box "
+                        "sum_{i<=j} |Phi^i| h e^{|A|h} |B| u_r (any measurable signal in the input box)")
+    if s.aggregated:
+        soundness += (f"; {s.aggregated} aggregates: interval hulls of the successor stars they "
+                      f"replace ({s.deaggregated} refined back into their members)")
+    if explorer.data.added_clock:
+        soundness += "; the model has no global clock: one was added (rate 1, 0 initially, never reset)"
+    return {"method": "generalized star sets", "semantics": soundness, "step": explorer.h,
+            "touch_tolerance": {"relative": opt.touch_tolerance, "largest": s.tolerance},
+            "stars": s.chains, "cells": s.cells, "refined_cells": s.refined,
+            "deepest_refinement": s.deepest, "lps": s.lps, "replays": explorer.replayed,
+            "jumps": s.jumps, "time_reached": s.reached, "aggregates": s.aggregated,
+            "aggregated_stars": s.members, "refined_aggregates": s.deaggregated}
+
+
+BACKEND = StarBackend()
+
+
+def safe_abort_time(model, props, low, high, options=None) -> float:
+    """The latest ``T`` such that, from every initial state in the box ``[low, high]``, every
+    run that aborts in ``[lo, T]`` (``lo, hi`` the model's abort window) is proven to satisfy
+    every property of ``props`` (bound safety properties); ``hi`` if all aborts are safe.
+
+    One exploration per property with the whole window: the first segment that cannot be
+    cleared after refinement bounds ``T`` by its earliest abort time (or, before any abort,
+    by its earliest clock); later aborts are skipped. No replays: a value below ``hi`` means
+    "not proven beyond", not "unsafe".
+    """
+    windows = [tr.window for tr in model.transitions if tr.window is not None]
+    if not windows:
+        raise ValueError(f"model '{model.name}' has no abort window to sweep")
+    opt = StarOptions.from_dict({**dict(options or {}), "replay": False})
+    initial = Star.from_box(_LinearModel.of(model).initial_box(low, high))
+    latest = max(w[2] for w in windows)
+    for prop in props:
+        reason = BACKEND.supports(model, prop)
+        if reason is not None:
+            raise ValueError(f"{prop.id}: {reason}")
+        explorer = _Explorer(model, prop, opt, initial=initial, cutoff=latest)
+        explorer.run()
+        latest = min(latest, explorer.cutoff)
+    return float(latest)
+
+
+def arc_cells(model, radius: float, count: int, start_deg: float = 180.0, end_deg: float = 270.0,
+              x: str = "x", y: str = "y"):
+    """Initial cells along an arc of ``radius`` (angles in degrees, counter-clockwise):
+    ``count`` boxes, each the bounding box of its stretch of arc in ``(x, y)``, the other
+    states as in the model's initial box. Returns ``[(low, high, angle_mid)]``."""
+    ix, iy = model.index(x), model.index(y)
+    edges = np.radians(np.linspace(start_deg, end_deg, count + 1))
+    cells = []
+    for a, b in zip(edges[:-1], edges[1:]):
+        angles = np.concatenate([[a, b], [k * np.pi / 2 for k in range(-4, 9) if a < k * np.pi / 2 < b]])
+        low, high = model.initial.low.copy(), model.initial.high.copy()
+        low[ix], high[ix] = radius * np.cos(angles).min(), radius * np.cos(angles).max()
+        low[iy], high[iy] = radius * np.sin(angles).min(), radius * np.sin(angles).max()
+        cells.append((low, high, float(np.degrees((a + b) / 2))))
+    return cells
+
+
+def _sweep_unit(model_file: str, property_files: tuple[str, ...], property_ids, low, high, options):
+    """One cell of a sweep, loading its inputs itself (picklable for any executor)."""
+    from reach.model.loader import load_model
+    from reach.spec import bind, load_properties
+    model = load_model(model_file)
+    props = [bind(p, model) for f in property_files for p in load_properties(f)
+             if property_ids is None or p.id in property_ids]
+    props = [p for p in props if BACKEND.supports(model, p) is None]
+    return safe_abort_time(model, props, low, high, options)
+
+
+def safe_abort_map(model_file: str, property_files, cells, property_ids=None, options=None,
+                   executor=None) -> list[float]:
+    """:func:`safe_abort_time` for every cell ``(low, high, ...)`` of ``cells`` (e.g. from
+    :func:`arc_cells`), through ``executor`` (``map_unordered(fn, arg_list)`` yielding
+    ``(index, ("ok", value))``, as :mod:`reach.bench.executors`; in-process if None).
+    Properties the back-end does not support are left out. Returns one time per cell."""
+    args = [(str(model_file), tuple(map(str, property_files)), property_ids, cell[0], cell[1], options)
+            for cell in cells]
+    if executor is None:
+        return [_sweep_unit(*a) for a in args]
+    out = [float("nan")] * len(args)
+    for index, (status, value) in executor.map_unordered(_sweep_unit, args):
+        if status == "ok":
+            out[index] = value
+    return out

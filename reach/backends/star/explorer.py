@@ -1,0 +1,562 @@
+"""One check of one safety property: the depth-first exploration of chains, cells, jumps,
+refinement and aggregation (the method is described in :mod:`reach.backends.star`)."""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from reach.backends.star.aggregation import _Aggregate, interval_hull
+from reach.backends.star.flowpipe import (_block_spreads, _chain_abs_bounds, _chain_bounds, _depth,
+                                          _plus_box, _segment, _tightened)
+from reach.backends.star.options import (ERROR_RATIO, MAX_CHAIN_BYTES, NAME, PROGRESS_SECONDS,
+                                         STALL_JUMPS, TIGHT_RATIO, StarOptions)
+from reach.backends.star.transitions import (_LinearModel, _modes_leading_to, _Piece,
+                                             _unsafe_pieces, kept_rows)
+from reach.backends.star.witnesses import _Witness, trace, nearest_point
+from reach.result import Status
+from reach.sets import Box, Star
+
+
+LOG = logging.getLogger("reach.star")
+
+
+@dataclass
+class _Entry:
+    """How a star was entered: the transition and the clock at the switch as an affine
+    function ``offset + row . a[:len(row)]`` of the star's coefficients."""
+
+    transition: str
+    window: bool
+    offset: float
+    row: np.ndarray
+    global_window: bool = True      # a window on the global clock (replayable switch time)
+
+
+@dataclass(frozen=True)
+class _Path:
+    """The discrete history of a star since its origin (the initial star, or the aggregate
+    it descends from): entries, and for each ancestor cell the first coefficient of its
+    segment block and whether that cell may still be bisected; ``jumps`` counts every jump
+    since the initial star; ``stalled`` the jumps since the earliest clock last moved on by a
+    time step or more (from ``since``)."""
+
+    entries: tuple[_Entry, ...] = ()
+    blocks: tuple[int, ...] = ()
+    open: tuple[bool, ...] = ()
+    abort: float = np.inf          # earliest clock of the first window switch on the path
+    jumps: int = 0
+    stalled: int = 0
+    origin: _Aggregate | None = None
+    since: float = 0.0             # earliest clock when ``stalled`` was last reset
+
+    def descend(self, entry: _Entry, block: int, can_refine: bool, clock: float,
+                step: float) -> "_Path":
+        """The path one jump further, entering at earliest clock ``clock``."""
+        abort = min(self.abort, clock) if entry.window and self.abort == np.inf else self.abort
+        moved = clock >= self.since + step
+        return _Path(self.entries + (entry,), self.blocks + (block,), self.open + (can_refine,), abort,
+                     self.jumps + 1, 0 if moved else self.stalled + 1, self.origin,
+                     clock if moved else self.since)
+
+    def closed(self) -> "_Path":
+        """The same history with no cell left to bisect."""
+        return _Path(self.entries, self.blocks, (False,) * len(self.open), self.abort, self.jumps,
+                     self.stalled, self.origin, self.since)
+
+
+class _Stop(Exception):
+    """Abort the exploration: a replayed counterexample, or the LP budget is spent."""
+
+    def __init__(self, status: Status, reason: str, counterexample=None, witness=None):
+        super().__init__(reason)
+        self.status, self.reason = status, reason
+        self.counterexample, self.witness = counterexample, witness
+
+
+@dataclass
+class _Stats:
+    chains: int = 0
+    cells: int = 0
+    refined: int = 0
+    deepest: int = 0
+    lps: int = 0
+    replays: int = 0
+    tolerance: float = 0.0          # the largest depth tolerance used (model units)
+    jumps: int = 0                  # the most jumps on one path
+    reached: float = 0.0            # the latest clock a chain has started from
+    aggregated: int = 0             # aggregates formed
+    members: int = 0                # successor stars they stand for
+    deaggregated: int = 0           # aggregates refined back into their members
+
+
+class _Explorer:
+    """One check of one safety property on one linear hybrid automaton."""
+
+    def __init__(self, model, prop, options: StarOptions, initial: Star | None = None,
+                 cutoff: float | None = None):
+        """``cutoff`` switches to the safe-abort sweep: instead of a verdict, the explorer
+        lowers ``cutoff`` to the earliest time from which a run may violate (an abort at or
+        after it, or a violation before any abort at it) and skips everything later."""
+        self.model, self.prop, self.opt = model, prop, options
+        self.sweep = cutoff is not None
+        self.cutoff = np.inf if cutoff is None else float(cutoff)
+        data = _LinearModel.of(model)
+        self.data = data
+        self.n, self.clock = data.n, data.clock
+        self.horizon = float(model.horizon)
+        self.h = float(options.step) if options.step else self.horizon / 60.0
+        self.flows, self.invariants, self.jumps = data.flows, data.invariants, data.fired
+        self.max_jumps = np.inf if options.max_jumps is None else options.max_jumps
+        from reach.model.lint import zero_dwell_cycles
+        self.stall_limit = STALL_JUMPS if zero_dwell_cycles(model)[0] else np.inf
+        self.aggregate_after = None if self.sweep else options.aggregate_after
+        self.last_progress = time.perf_counter()
+        self.pieces = {mode: [_Piece(data.widen(p.H, p.g)[0], p.g, p.strict, p.label) for p in pieces]
+                       for mode, pieces in _unsafe_pieces(prop).items()} if data.added_clock \
+            else _unsafe_pieces(prop)
+        self.relevant = _modes_leading_to(model, set(self.pieces))
+        self.stats = _Stats()
+        self.unresolved: list[_Witness] = []
+        self.replayed: list = []
+        self.root = initial if initial is not None else data.initial_star(model.initial)
+        self.root_mode = model.initial.mode
+
+    # ---- LPs
+
+    def _lp_budget(self):
+        self._lp_count(1)
+
+    def _lp_count(self, count: int):
+        self.stats.lps += count
+        if self.stats.lps > self.opt.max_lps:
+            raise _Stop(Status.UNKNOWN, f"LP budget of {self.opt.max_lps} exhausted")
+
+    def _feasible(self, star: Star):
+        """Coefficients of a point of ``star`` (an LP), or None if it is empty."""
+        self._lp_budget()
+        return star.feasible_alpha()
+
+    # ---- exploration
+
+    def _point(self, star: Star, guess, direction=None):
+        """Coefficients of a point of ``star`` without an LP if possible: ``guess``, or the
+        middle of the stretch of ``guess + s direction`` (``0 <= s <= 1``) inside the
+        predicate; else an LP's point. None if ``star`` is empty."""
+        if guess is not None:
+            if direction is not None:
+                A, b = star.predicate.A, star.predicate.b
+                slope, room = A @ direction, b - A @ guess
+                lo = max([0.0] + [r / k for r, k in zip(room, slope) if k < 0])
+                hi = min([1.0] + [r / k for r, k in zip(room, slope) if k > 0])
+                guess = guess + (lo + hi) / 2 * direction if lo <= hi else guess
+            if star.box.contains(guess, 1e-12) and star.predicate.contains(guess):
+                return guess
+        return self._feasible(star)
+
+    def run(self):
+        start = self.root.intersect_halfspaces(*self.invariants[self.root_mode])
+        self._chain(self.root_mode, start, _Path(), self.root.box.center)
+
+    def _chain(self, mode: str, star: Star, path: _Path, guess=None, direction=None):
+        """Explore ``star`` in ``mode`` up to the horizon: checks, jumps, refinement.
+
+        ``guess`` (and ``direction``): where a point of ``star`` may be (see :meth:`_point`).
+        The run of a known point proves the chain non-empty for as long as it stays inside
+        the invariant, without LPs.
+        """
+        if mode not in self.relevant:
+            return
+        point = self._point(star, guess, direction)
+        if point is None:
+            return
+        if path.jumps > self.max_jumps:
+            raise _Stop(Status.UNKNOWN, f"more than {self.max_jumps} discrete jumps on a path")
+        if path.stalled > self.stall_limit:
+            raise _Stop(Status.UNKNOWN, f"{path.stalled} jumps within one time step "
+                                        f"(possible zero-dwell cycle)")
+        t0 = -star.support_bounds(-np.eye(self.n)[self.clock])[0]
+        if t0 > self.horizon:                   # every run of the star is past the horizon
+            return
+        self.stats.chains += 1
+        if self.stats.chains > self.opt.max_stars:
+            raise _Stop(Status.UNKNOWN, f"star budget of {self.opt.max_stars} exhausted "
+                                        f"(option max_stars)")
+        flow, h = self.flows[mode], self.h
+        count = max(1, int(np.ceil((self.horizon - t0) / h - 1e-9)))
+        segment_vars = star.nvars if flow.drift else 2 * star.nvars + 1 + self.n
+        if segment_vars > self.opt.max_coefficients or \
+                8 * 3 * (count + 1) * self.n * (star.nvars + 1) > MAX_CHAIN_BYTES:
+            raise _Stop(Status.UNKNOWN, f"a segment in mode '{mode}' needs {segment_vars} coefficients "
+                                        f"over {count} steps (limits: option max_coefficients = "
+                                        f"{self.opt.max_coefficients}, {MAX_CHAIN_BYTES >> 20} MiB per "
+                                        f"chain); aggregate sooner (option aggregate_after)")
+        self.stats.jumps = max(self.stats.jumps, path.jumps)
+        self.stats.reached = max(self.stats.reached, t0)
+        self._progress()
+        Phis, psis = flow.powers(h, count)
+        dev = flow.deviation(h, count)          # input effect bound per grid point, or None
+        centers = star.center @ np.swapaxes(Phis, 1, 2) + psis
+        bases = np.einsum("jab,bm->jam", Phis, star.basis)
+        box = star.box
+        Hi, gi = self.invariants[mode]
+
+        # invariant: the first grid star entirely outside ends the chain; rows that are not
+        # implied by the coefficient box join the predicate exactly, step by step. With
+        # inputs the grid stars are input-free runs x_free, |x - x_free| <= R_j: the rows are
+        # relaxed to H x_free <= g + |H| R_j (every run inside the invariant satisfies them)
+        last = count
+        extra = {}
+        if Hi.shape[0]:
+            upper = _chain_bounds(centers, bases, box, Hi)
+            lower = -_chain_bounds(centers, bases, box, -Hi)
+            relaxed = np.broadcast_to(gi, upper.shape) + (0.0 if dev is None else dev @ np.abs(Hi).T)
+            outside = np.flatnonzero(np.any(lower > relaxed + 1e-12 * (1 + np.abs(relaxed)), axis=1))
+            if outside.size:
+                last = min(last, int(outside[0]))
+            for j in range(1, last + 1):
+                active = upper[j] > relaxed[j]
+                if np.any(active):
+                    extra[j] = (Hi[active], relaxed[j][active])
+        known_empty = last < count              # grid star `last` lies outside the invariant
+
+        stars = {}          # grid stars with their accumulated predicate, built lazily
+
+        def grid_star(j: int) -> Star:
+            if j not in stars:
+                s = Star(centers[j], bases[j], star.predicate, box)
+                for i in sorted(k for k in extra if k <= j):
+                    s = s.intersect_halfspaces(*extra[i])
+                stars[j] = s
+            return stars[j]
+
+        for j in sorted(extra):                  # `point` stays a point of every grid star
+            if j > last or (j == last and known_empty):
+                break
+            H, g = extra[j]
+            if np.all(H @ (centers[j] + bases[j] @ point) <= g):
+                continue
+            found = self._feasible(grid_star(j))
+            if found is None:
+                last = j
+                break
+            point = found
+        ended_inside = last == count            # by the horizon, not by the invariant
+        cells = range(last + 1) if self.opt.discrete_time and ended_inside else range(last)
+        if not len(cells):
+            return
+        self.stats.cells += len(cells)
+
+        # cheap screening, vectorised over the chain
+        candidates = set()
+        if self.opt.discrete_time:
+            error = np.zeros((last + 1, self.n)) if dev is None else dev[:last + 1].copy()
+        else:
+            D, d, F, _ = flow.curvature(h)
+            samples = _chain_abs_bounds(centers[:last], bases[:last], box, D, d).max(axis=1)
+            error = h * h / 8 * samples @ F.T
+            if dev is not None:
+                error = error + dev[1:last + 1]          # the whole cell, R non-decreasing
+        for piece in self.pieces.get(mode, []):
+            candidates |= self._screen(centers, bases, box, error, piece.H, piece.g, cells)
+        for jump in self.jumps[mode]:
+            if jump.target in self.relevant:
+                candidates |= self._screen(centers, bases, box, error, jump.H, jump.g, cells)
+
+        aggregate = (self.aggregate_after is not None and not flow.drift
+                     and path.jumps >= self.aggregate_after)
+        pending: dict[int, list] | None = {} if aggregate else None
+        for j in sorted(candidates):
+            spread = None if dev is None else dev[j] if self.opt.discrete_time else dev[j + 1]
+            self._cell(mode, grid_star(j), h, path, 0, point, pending, spread)
+        for index, members in (pending or {}).items():
+            jump = self.jumps[mode][index]
+            self._aggregate(jump.target, members, kept_rows(jump, Hi, gi))
+
+    def _progress(self):
+        now = time.perf_counter()
+        if now - self.last_progress >= PROGRESS_SECONDS:
+            self.last_progress = now
+            s = self.stats
+            LOG.info("%d stars, %d cells, %d LPs, up to %d jumps on a path, time %.6g of %.6g, "
+                     "%d aggregates of %d stars (%d refined)", s.chains, s.cells, s.lps, s.jumps,
+                     s.reached, self.horizon, s.aggregated, s.members, s.deaggregated)
+
+    def _aggregate(self, mode: str, members: list[tuple[Star, _Path]], rows):
+        """Explore the successor stars ``members`` entering ``mode`` as one star.
+
+        ``rows``: constraints every member satisfies besides the invariant of ``mode``
+        (:func:`.transitions.kept_rows`). The aggregate (:func:`.aggregation.interval_hull`,
+        cut by the invariant and ``rows``) contains every member, so a SAFE
+        under it covers them. When a check under it fails and its witness does not replay,
+        the members are explored instead, each with its own exact history (no cell before the
+        aggregation is bisected again).
+        """
+        H, g = self.invariants[mode]
+        hull, kept = interval_hull(members, (np.vstack([H, rows[0]]), np.concatenate([g, rows[1]])),
+                                   self._lp_count)
+        if not kept:
+            return
+        if hull is None:                                       # unbounded: explore the members
+            for star, path in kept:
+                self._chain(mode, star, path)
+            return
+        agg = _Aggregate(mode, hull, kept)
+        self.stats.aggregated += 1
+        self.stats.members += len(kept)
+        start = min(path.since for _, path in kept)
+        jumps = max(path.jumps for _, path in kept)
+        stalled = min(path.stalled for _, path in kept)
+        try:
+            self._chain(mode, hull, _Path(jumps=jumps, stalled=stalled, origin=agg, since=start),
+                        hull.box.center)
+        except _Deaggregate as failure:
+            if failure.target is not agg:
+                raise
+            agg.refined = True
+            self.stats.deaggregated += 1
+            LOG.info("aggregate of %d stars entering '%s' refined into its members (%s)",
+                     len(kept), mode, failure.witness.piece)
+            for star, path in kept:
+                self._chain(mode, star, path.closed())
+
+    def _screen(self, centers, bases, box, error, H, g, cells) -> set[int]:
+        """Cells whose segment may meet ``{H x <= g}`` by support bounds (cheap)."""
+        if H.shape[0] == 0:
+            return set(cells)
+        lower = -_chain_bounds(centers, bases, box, -H)          # (J, rows)
+        if self.opt.discrete_time:
+            seg = lower[:len(cells)] - error[:len(cells)] @ np.abs(H).T
+        else:
+            seg = np.minimum(lower[:-1], lower[1:])[:len(cells)] - error[:len(cells)] @ np.abs(H).T
+        missed = np.any(seg > g, axis=1)
+        return {j for j in cells if not missed[j]}
+
+    # ---- one cell
+
+    def _segment(self, mode: str, start: Star, h: float, spread=None) -> tuple[Star, np.ndarray]:
+        """``(segment, error)`` of the cell of length ``h`` starting at ``start``; ``spread``:
+        the bound of the input effect on the cell (added as a box, then the invariant)."""
+        Hi, gi = self.invariants[mode]
+        if self.opt.discrete_time:
+            if spread is None:
+                return start, np.zeros(self.n)
+            return _plus_box(start, spread).intersect_halfspaces(Hi, gi), np.zeros(self.n)
+        seg, _, error = _segment(self.flows[mode], start, h)
+        if spread is not None:
+            seg = _plus_box(seg, spread)
+        seg = seg.intersect_halfspaces(Hi, gi)
+        return (_tightened(seg, len(gi)) or seg) if self.flows[mode].drift else seg, error
+
+    def _cell(self, mode: str, start: Star, h: float, path: _Path, depth: int, point, pending=None,
+              spread=None):
+        """Check one cell and launch its successors; bisect when a failure is blamed on it.
+
+        The segment's own coefficients are the block starting at ``start.nvars``; a failure
+        (here or in a successor) names the block that contributes most to it, and only
+        the cell owning that block is bisected. ``point``: coefficients of a point of
+        ``start`` (passed on as a guess to successors). ``pending``: where successors to be
+        aggregated are collected (per outgoing jump), None to explore them at once.
+        ``spread``: bound of the input effect on the cell (None without inputs); halves keep
+        it (it only grows with time).
+        """
+        if self.sweep:
+            since = path.abort if path.abort < np.inf else \
+                -start.support_bounds(-np.eye(self.n)[self.clock])[0]
+            if since >= self.cutoff:
+                return
+        seg, error = self._segment(mode, start, h, spread)
+        final = depth >= self.opt.max_refinements or self.opt.discrete_time or self.flows[mode].drift
+        block = start.nvars
+        try:
+            hull = seg.box_bound()
+            if not final and np.any(error > ERROR_RATIO * np.maximum(-hull.low, hull.high)):
+                raise _Refine(None, block)          # a fast transient: refine before checking
+            self._check_segment(mode, seg, path, block, not final)
+            self._jump_from(mode, seg, path, block, not final, point, pending)
+        except _Refine as failure:
+            if final or failure.blame != block:
+                raise
+            self.stats.refined += 1
+            self.stats.deepest = max(self.stats.deepest, depth + 1)
+            half = h / 2
+            self._cell(mode, start, half, path, depth + 1, point, pending, spread)
+            mid = start.affine_map(*self.flows[mode].step(half))
+            Hi, gi = self.invariants[mode]       # relaxed by the input effect, as on the grid
+            mid = mid.intersect_halfspaces(Hi, gi if spread is None else gi + np.abs(Hi) @ spread)
+            mid_point = self._point(mid, point)
+            if mid_point is not None:
+                self._cell(mode, mid, half, path, depth + 1, mid_point, pending, spread)
+
+    def _check_segment(self, mode: str, seg: Star, path: _Path, block: int, own_open: bool):
+        """Check every unsafe piece of ``mode`` on a segment.
+
+        Cheap support bounds first. When they fail, the interpolation error of each cell
+        along the path (its error coefficients' extent along each piece row) is compared with
+        the row's deficit: an error larger than the deficit cannot be argued away by an LP,
+        so that cell is refined at once. Otherwise an LP decides; on a hit the open block
+        (an ancestor cell or this one) with the largest spread is blamed, and the witness is
+        replayed when nothing can be refined or when it lies deeper in the piece than all
+        refinable spread together.
+        """
+        horizon_row = np.eye(self.n)[self.clock][None]
+        blocks, open_ = path.blocks + (block,), path.open + (own_open,)
+        for piece in self.pieces.get(mode, []):
+            lower = -seg.support_bounds(-piece.H)
+            if np.any(lower > piece.g):
+                continue
+            spread, error = _block_spreads(seg, piece.H, blocks)     # (blocks, rows) each
+            gain = np.where(np.array(open_)[:, None], error - (piece.g - lower), -np.inf)
+            if gain.max(initial=-np.inf) > 0:
+                raise _Refine(None, blocks[int(np.argmax(gain.max(axis=1)))])
+            self._lp_budget()
+            H = np.vstack([piece.H, horizon_row])
+            g = np.append(piece.g, self.horizon)
+            depth, alpha, lp_tol = _depth(seg, H, g, len(piece.g))
+            tol = max(self.opt.touch_tolerance, 10 * lp_tol) * max(
+                1.0, np.abs(piece.g).max(initial=0.0), np.abs(piece.H @ seg.center).max(initial=0.0))
+            self.stats.tolerance = max(self.stats.tolerance, tol)
+            if depth <= tol if piece.strict else depth < -tol:
+                continue
+            witness = _Witness(mode, piece.label, depth, alpha, seg.point(alpha), path)
+            row = int(np.argmax(lower - piece.g))
+            refinable = np.where(open_, spread[:, row], -np.inf)
+            blame = blocks[int(np.argmax(refinable))] if any(open_) else None
+            removable = refinable[np.isfinite(refinable)].sum()
+            tight = np.isfinite(piece.inradius) and removable < TIGHT_RATIO * piece.inradius
+            if blame is None or depth > removable or tight:
+                self._try_replay(witness)
+            if blame is not None:
+                raise _Refine(witness, blame)
+            if self.sweep:
+                self.cutoff = min(self.cutoff, self._failure_time(witness, seg))
+                continue
+            if path.origin is not None and self.stats.deaggregated < self.opt.max_deaggregations:
+                raise _Deaggregate(witness, path.origin)
+            self.unresolved.append(witness)
+            if len(self.unresolved) >= self.opt.max_unresolved:
+                raise _Stop(Status.UNKNOWN, f"{len(self.unresolved)} cells still meet an unsafe "
+                                            f"piece after refinement; no witness replayed",
+                            witness=self.unresolved[0])
+
+    def _failure_time(self, witness: _Witness, seg: Star) -> float:
+        """Earliest time from which the runs behind a failing segment may violate: the
+        earliest abort on its path, or, with no abort, the segment's earliest clock."""
+        windows = [e for e in witness.history if e.window]
+        if windows:
+            e = windows[-1]
+            box = Box(seg.box.low[:e.row.size], seg.box.high[:e.row.size])
+            return e.offset - box.support(-e.row)
+        return -seg.support_bounds(-np.eye(self.n)[self.clock])[0]
+
+    def _jump_from(self, mode: str, seg: Star, path: _Path, block: int, own_open: bool, point,
+                   pending=None):
+        for index, jump in enumerate(self.jumps[mode]):
+            if jump.target not in self.relevant:
+                continue
+            if self.sweep and jump.window is not None and path.abort == np.inf and \
+                    -seg.support_bounds(-np.eye(self.n)[self.clock])[0] >= self.cutoff:
+                continue
+            if jump.H.shape[0] and np.any(-seg.support_bounds(-jump.H) > jump.g):
+                continue
+            # runs that switch after the horizon do not matter: the clock row cuts them
+            H = np.vstack([jump.H, np.eye(self.n)[self.clock]])
+            g = np.append(jump.g, self.horizon)
+            entered = seg.intersect_halfspaces(H, g)
+            if self.flows[mode].drift:
+                entered = _tightened(entered, len(g))
+                if entered is None or np.any(-entered.support_bounds(-jump.H) > jump.g):
+                    continue
+            clock = _Entry(jump.name, jump.window is not None,
+                           float(entered.center[self.clock]), entered.basis[self.clock].copy(),
+                           jump.window is None or jump.window[0] == self.clock)
+            earliest = -entered.support_bounds(-np.eye(self.n)[self.clock])[0]
+            successor = entered.affine_map(jump.R, jump.r)
+            successor = successor.intersect_halfspaces(*self.invariants[jump.target])
+            if self.flows[mode].drift:
+                successor = _tightened(successor, len(self.invariants[jump.target][1]))
+                if successor is None:
+                    continue
+            descended = path.descend(clock, block, own_open, earliest, self.h)
+            if pending is not None:
+                pending.setdefault(index, []).append((successor, descended))
+                continue
+            # the known point's own chord: (a, lam a, lam, 0) from lam = 0 to 1, or its ray
+            # (a, s) from s = 0 to 1 in a constant-flow mode
+            m, pad = point.size, successor.nvars - point.size
+            guess = np.concatenate([point, np.zeros(pad)])
+            if self.flows[mode].drift and not self.opt.discrete_time:
+                direction = np.concatenate([np.zeros(m), [1.0]]) if pad == 1 else None
+            else:
+                direction = np.concatenate([np.zeros(m), point, [1.0], np.zeros(pad - m - 1)]) \
+                    if pad > m else None
+            self._chain(jump.target, successor, descended, guess, direction)
+
+    # ---- witnesses
+
+    def _try_replay(self, witness: _Witness):
+        if not self.opt.replay or self.stats.replays >= self.opt.max_replays:
+            return
+        try:
+            from reach.backends.montecarlo import replay
+        except ImportError:
+            return
+        self.stats.replays += 1
+        x0, switch = self.initial_point(witness)
+        run = replay(self.model, self.prop, x0, switch, self.opt.replay_dt)
+        self.replayed.append({"initial_state": x0.tolist(), "switch_time": switch,
+                              "violated": bool(run.violated)})
+        if run.violated:
+            raise _Stop(Status.UNSAFE, "replayed counterexample",
+                        counterexample=run.counterexample(self.model, self.prop, NAME),
+                        witness=witness)
+
+    def initial_point(self, witness: _Witness):
+        """Initial state and abort time of a witness, read off its coefficients."""
+        alpha, entries = self._trace(witness.alpha, witness.path)
+        m0 = self.root.nvars
+        x0 = self.root.point(alpha[:m0])[:self.model.n]
+        x0 = np.clip(x0, self.model.initial.low, self.model.initial.high)
+        windows = [(e, a) for e, a in entries if e.window]
+        if len(windows) > 1 or any(not e.global_window for e, _ in windows):
+            return x0, None                  # not one switch at a global time: no switch
+        if windows:
+            e, a = windows[-1]
+            switch = float(e.offset + e.row @ a[:e.row.size])
+        else:
+            switch = self._latest_abort(witness.mode)
+        return x0, switch
+
+    def _trace(self, alpha, path: _Path):
+        """:func:`.witnesses.trace`, one LP per member of each aggregate on the way."""
+        def nearest(star, x):
+            self._lp_budget()
+            return nearest_point(star, x)
+        return trace(alpha, path, nearest)
+
+    def _latest_abort(self, mode: str):
+        """Without an abort on the witness's path: the latest abort of its mode's windows
+        (the run stays in the mode as long as possible), or None if there is none."""
+        his = [j.window[2] for j in self.jumps[mode] if j.window is not None and j.window[0] == self.clock]
+        return max(his) if his else None
+
+
+class _Deaggregate(Exception):
+    """A check under the aggregate ``target`` failed and its witness did not replay."""
+
+    def __init__(self, witness: _Witness, target: _Aggregate):
+        super().__init__("deaggregate")
+        self.witness, self.target = witness, target
+
+
+class _Refine(Exception):
+    """A segment (or a successor of it) may meet an unsafe piece. ``blame`` is the first
+    coefficient of the segment block to refine; ``witness`` is None when the cheap bounds
+    alone asked for the refinement."""
+
+    def __init__(self, witness: _Witness | None, blame: int):
+        super().__init__("refine")
+        self.witness, self.blame = witness, blame

@@ -1,0 +1,240 @@
+"""Continuous-time flowpipes of affine flows: step maps, grid chains, segments (chord hull
+plus interpolation error), the input effect, timed (constant-flow) segments and the cheap
+bounds the exploration screens with. See :mod:`reach.backends.star` for the argument."""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.linalg import expm
+
+from reach import lp
+from reach.backends.star.options import DEPTH_LP_TOLERANCE, HIGHS_DEFAULT_TOLERANCE
+from reach.sets import Box, Star, chord_hull
+from reach.sets.hpolytope import HPolytope
+
+
+class AffineFlow:
+    """``x' = A x + b + B (u - u_c)`` of one mode: step maps, stacked powers, the curvature
+    data and, with a bounded input ``|u - u_c| <= u_r`` (componentwise, any measurable
+    signal), the bound of its effect.
+
+    Input effect. Split every run as ``x = x_free + d`` with ``x_free`` the run of
+    ``x' = A x + b`` (``b`` holds ``B u_c``) from the same state and
+    ``d(t) = int_0^t e^{A (t - s)} B (u(s) - u_c) ds``. Then ``|d(t)| <= R(t) =
+    int_0^t |e^{A tau} B| u_r dtau``, non-decreasing in ``t``, and since
+    ``e^{A tau} = Phi^i e^{A sigma}`` with ``|e^{A sigma}| <= e^{|A| sigma}`` entrywise,
+    ``R((j + 1) h) <= sum_{i <= j} |Phi^i| w`` with ``w = h e^{|A| h} |B| u_r``
+    (:meth:`deviation`)."""
+
+    def __init__(self, A: np.ndarray, b: np.ndarray, B: np.ndarray | None = None,
+                 u_radius: np.ndarray | None = None):
+        self.A, self.b = A, b
+        self.B, self.u_radius = B, u_radius
+        self.inputs = B is not None and B.size > 0 and bool(np.any(np.abs(B) @ u_radius > 0))
+        self.n = A.shape[0]
+        self.A2 = A @ A
+        self.Ab = A @ b
+        self.drift = not np.any(A)          # constant flow: exact segments, no refinement
+        self.rho = float(np.max(np.abs(np.linalg.eigvals(np.abs(self.A2))))) if self.n else 0.0
+        self._steps: dict[float, tuple[np.ndarray, np.ndarray]] = {}
+        self._powers: dict[float, tuple[np.ndarray, np.ndarray]] = {}
+        self._curvature: dict[float, tuple] = {}
+        self._deviation: dict[float, np.ndarray] = {}
+
+    def deviation(self, h: float, count: int) -> np.ndarray | None:
+        """``R_j >= sup_{t <= j h} |d(t)|`` for ``j = 0..count`` (``(count + 1, n)``), or None
+        without inputs (see the class doc)."""
+        if not self.inputs:
+            return None
+        R = self._deviation.get(h)
+        if R is None or R.shape[0] <= count:
+            Phis, _ = self.powers(h, count)
+            w = h * expm(np.abs(self.A) * h) @ (np.abs(self.B) @ self.u_radius)
+            steps = np.abs(Phis[:count]) @ w                     # |Phi^i| w, i < count
+            R = np.vstack([np.zeros(self.n), np.cumsum(steps, axis=0)])
+            self._deviation[h] = R
+        return R[:count + 1]
+
+    def step(self, h: float):
+        """``(Phi, psi)`` with ``x(t + h) = Phi x(t) + psi``."""
+        if h not in self._steps:
+            n = self.n
+            aug = np.zeros((n + 1, n + 1))
+            aug[:n, :n], aug[:n, n] = self.A, self.b
+            E = expm(aug * h)
+            self._steps[h] = (E[:n, :n], E[:n, n])
+        return self._steps[h]
+
+    def powers(self, h: float, count: int):
+        """``Phi_j, psi_j`` for ``j = 0..count`` (``x(t + j h) = Phi_j x + psi_j``)."""
+        Phis, psis = self._powers.get(h, (np.eye(self.n)[None], np.zeros((1, self.n))))
+        if Phis.shape[0] <= count:
+            Phi, psi = self.step(h)
+            P, p = list(Phis), list(psis)
+            while len(P) <= count:
+                P.append(Phi @ P[-1])
+                p.append(Phi @ p[-1] + psi)
+            Phis, psis = np.array(P), np.array(p)
+            self._powers[h] = (Phis, psis)
+        return Phis[:count + 1], psis[:count + 1]
+
+    def curvature(self, h: float):
+        """Sub-sample data for ``M >= sup |x''|`` on a cell of length ``h``.
+
+        Returns ``(D, d, F, q)``: ``x''(s_l) = D_l x + d_l`` at ``s_l = l h / q``, the
+        closure factor ``F = (I - delta^2/8 |A^2|)^{-1}`` and ``q``, the least number of
+        sub-steps with spectral radius of ``delta^2/8 |A^2|`` at most 1/4.
+        """
+        if h not in self._curvature:
+            q = 1 if self.rho == 0 else max(1, int(np.ceil(h / np.sqrt(2.0 / self.rho))))
+            delta = h / q
+            Phi, psi = self.step(delta)
+            D, d = [], []
+            P, p = np.eye(self.n), np.zeros(self.n)
+            for _ in range(q + 1):
+                D.append(self.A2 @ P)
+                d.append(self.A2 @ p + self.Ab)
+                P, p = Phi @ P, Phi @ p + psi
+            F = np.linalg.inv(np.eye(self.n) - delta ** 2 / 8 * np.abs(self.A2))
+            self._curvature[h] = (np.array(D), np.array(d), F, q)
+        return self._curvature[h]
+
+
+def _chain_bounds(center, basis, box, W):
+    """Support bounds ``max_{x in Y_j} w^T x`` for every grid star ``j`` and row ``w`` of
+    ``W`` from the coefficient box: ``(J, rows)``; ``center (J, n)``, ``basis (J, n, m)``."""
+    G = np.einsum("rn,jnm->jrm", W, basis)
+    return center @ W.T + G @ box.center + np.abs(G) @ box.radius
+
+
+def _chain_abs_bounds(center, basis, box, D, d):
+    """``max |D_l x + d_l|`` over each ``Y_j``, per sample ``l`` and component: ``(J, L, n)``."""
+    G = np.einsum("lin,jnm->jlim", D, basis)
+    mid = np.einsum("lin,jn->jli", D, center) + d[None] + G @ box.center
+    return np.abs(mid) + np.abs(G) @ box.radius
+
+
+def _segment(flow: AffineFlow, start: Star, h: float):
+    """The segment of the cell ``[0, h]`` from ``start``: ``(segment, end star, error)``.
+
+    ``error_i = h^2/8 M_i`` is the interpolation error at mid-cell; ``M`` bounds
+    ``|x''|`` on the cell from the sub-samples of :meth:`AffineFlow.curvature`.
+    """
+    end = start.affine_map(*flow.step(h))
+    if flow.drift:
+        return _drift_segment(start, flow.b, h), end, np.zeros(flow.n)
+    D, d, F, _ = flow.curvature(h)
+    n = flow.n
+    upper = start.support_bounds(np.concatenate([D, -D]).reshape(-1, n))
+    upper = upper.reshape(2, -1) + np.concatenate([d, -d]).reshape(2, -1)
+    error = h * h / 8 * (F @ upper.max(axis=0).reshape(-1, n).max(axis=0))
+    return chord_hull(start, end.center, end.basis, error), end, error
+
+
+def _tightened(star: Star, rows: int, rounds: int = 3) -> Star | None:
+    """``star`` with its coefficient box shrunk by bound propagation over the predicate rows
+    (None if that proves it empty); the set is unchanged.
+
+    For a row ``sum_j A_ij a_j <= b_i`` with finite activity bounds, every ``a_k`` with
+    ``A_ik > 0`` satisfies ``a_k <= (b_i - sum_{j != k} min(A_ij a_j)) / A_ik`` (and the mirror
+    bound when ``A_ik < 0``), minima over the current box. Each bound is relaxed by a relative
+    ``1e-9`` so rounding never cuts a point of the set. Cheap support bounds then see the
+    guards and invariants that pin a coefficient (a dwell fixed by guard and invariant).
+    Only the last ``rows`` rows (those just added by an intersection) are used: the box is
+    already consistent with the older ones, and scanning them all again costs too much.
+    """
+    A, b = star.predicate.A[-rows:] if rows else star.predicate.A[:0], star.predicate.b[-rows:] if rows else star.predicate.b[:0]
+    lo, hi = star.box.low.copy(), star.box.high.copy()
+    if A.shape[0] == 0 or not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+        return star
+    pos, neg = np.maximum(A, 0.0), np.minimum(A, 0.0)
+    for _ in range(rounds):
+        least = pos * lo + neg * hi                                   # min of A_ij a_j
+        rest = b[:, None] - (least.sum(axis=1)[:, None] - least)      # room left for a_k
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            bound = rest / A
+            slack = 1e-9 * (1.0 + np.abs(bound))
+            upper = np.where(A > 0, bound + slack, np.inf).min(axis=0)
+            lower = np.where(A < 0, bound - slack, -np.inf).max(axis=0)
+        new_lo, new_hi = np.maximum(lo, lower), np.minimum(hi, upper)
+        if np.any(new_lo > new_hi):
+            return None
+        if np.array_equal(new_lo, lo) and np.array_equal(new_hi, hi):
+            break
+        lo, hi = new_lo, new_hi
+    return Star(star.center, star.basis, star.predicate, Box(lo, hi))
+
+
+def _plus_box(star: Star, radius) -> Star:
+    """``star + [-radius, radius]`` (Minkowski sum): one new coefficient in ``[-1, 1]`` per
+    positive component of ``radius``."""
+    radius = np.asarray(radius, dtype=float)
+    free = np.flatnonzero(radius > 0)
+    if not free.size:
+        return star
+    E = np.zeros((star.dim, free.size))
+    E[free, np.arange(free.size)] = radius[free]
+    A = star.predicate.A
+    predicate = HPolytope(np.hstack([A, np.zeros((A.shape[0], free.size))]), star.predicate.b)
+    box = Box(np.append(star.box.low, -np.ones(free.size)), np.append(star.box.high, np.ones(free.size)))
+    return Star(star.center, np.hstack([star.basis, E]), predicate, box)
+
+
+def _drift_segment(start: Star, b: np.ndarray, h: float) -> Star:
+    """``start + [0, h] b`` exactly: every run of ``x' = b`` from ``start`` over the cell.
+    One new coefficient ``s in [0, 1]`` (column ``h b``); the old ones keep their meaning."""
+    A = start.predicate.A
+    predicate = HPolytope(np.hstack([A, np.zeros((A.shape[0], 1))]), start.predicate.b)
+    box = Box(np.append(start.box.low, 0.0), np.append(start.box.high, 1.0))
+    basis = np.hstack([start.basis, (h * np.asarray(b, dtype=float))[:, None]])
+    return Star(start.center, basis, predicate, box)
+
+
+def flowpipe(A, b, initial: Star, step: float, duration: float, B=None, u_low=None,
+             u_high=None) -> list[Star]:
+    """Segments covering every trajectory of ``x' = A x + b + B u`` from ``initial`` over
+    ``[0, duration]`` in continuous time (one star per cell of length ``step``), for every
+    input signal with values in ``[u_low, u_high]`` (no input if ``B`` is None)."""
+    A, b = np.asarray(A, dtype=float), np.asarray(b, dtype=float)
+    if B is None:
+        flow = AffineFlow(A, b)
+    else:
+        B, lo, hi = np.atleast_2d(np.asarray(B, dtype=float)), np.asarray(u_low, float), np.asarray(u_high, float)
+        flow = AffineFlow(A, b + B @ ((lo + hi) / 2), B, (hi - lo) / 2)
+    count = max(1, int(np.ceil(duration / step - 1e-9)))
+    dev = flow.deviation(step, count)
+    segments, star = [], initial
+    for j in range(count):
+        seg, star, _ = _segment(flow, star, step)
+        segments.append(seg if dev is None else _plus_box(seg, dev[j + 1]))
+    return segments
+
+
+def _block_spreads(seg: Star, H: np.ndarray, blocks: tuple[int, ...]):
+    """Per block ``b`` (coefficients from ``blocks[b]`` to the next start) and row ``r``:
+    the spread ``sum |H_r . V_col| * radius_col`` the block is responsible for, and the
+    part of it due to the block's interpolation-error coefficients. A cell block starting
+    at ``s`` holds ``s`` hull coefficients, the chord weight, then the error coefficients
+    (see :func:`reach.sets.star.chord_hull`)."""
+    contribution = np.abs(H @ seg.basis) * seg.box.radius                # (rows, vars)
+    ends = blocks[1:] + (seg.nvars,)
+    spread = np.array([contribution[:, a:b].sum(axis=1) for a, b in zip(blocks, ends)])
+    error = np.array([contribution[:, 2 * a + 1:b].sum(axis=1) if a else np.zeros(len(H))
+                      for a, b in zip(blocks, ends)])
+    return spread, error
+
+
+def _depth(seg: Star, H, g, piece_rows: int):
+    """``Star.depth`` on the piece rows, with further rows (the horizon) as hard limits:
+    ``(depth, coefficients, tolerance)``, ``tolerance`` the primal feasibility tolerance the LP
+    was solved to -- ``DEPTH_LP_TOLERANCE``, or where HiGHS fails at it 100 times that, then
+    its default (about 1e-7); an :class:`reach.lp.LPError` if all fail."""
+    hard = H[piece_rows:], g[piece_rows:]
+    star = seg.intersect_halfspaces(*hard)
+    for tolerance in (DEPTH_LP_TOLERANCE, 100 * DEPTH_LP_TOLERANCE, None):
+        try:
+            return (*star.depth(H[:piece_rows], g[:piece_rows], tolerance=tolerance),
+                    HIGHS_DEFAULT_TOLERANCE if tolerance is None else tolerance)
+        except lp.LPError:
+            if tolerance is None:
+                raise

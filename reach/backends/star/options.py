@@ -1,0 +1,97 @@
+"""Settings of the star back-end and the constants of its method."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from reach.backends.options import parse_options
+
+
+NAME = "star"
+
+
+#: a cell is bisected before any check while its interpolation error exceeds this fraction
+#: of the state's magnitude (fast transients, e.g. right after a controller switch)
+ERROR_RATIO = 0.25
+
+
+#: primal feasibility tolerance of the depth LPs (HiGHS's default is 1e-7): a depth is
+#: then exact to well below the touch tolerance of :class:`StarOptions`
+DEPTH_LP_TOLERANCE = 1e-10
+
+#: HiGHS's own primal feasibility tolerance (used where it fails at the tighter ones)
+HIGHS_DEFAULT_TOLERANCE = 1e-7
+
+
+#: in a model that may have a zero-dwell cycle, this many jumps on a path while its
+#: earliest clock advances by less than one time step end the check (UNKNOWN)
+STALL_JUMPS = 10
+
+
+#: the grid stacks of one chain may take at most this many bytes (memory guard)
+MAX_CHAIN_BYTES = 1 << 30
+
+
+#: seconds between two progress lines (logger ``reach.star``, shown under ``-v``)
+PROGRESS_SECONDS = 1.0
+
+
+#: a witness is replayed at once when the spread refinement could still remove is below
+#: this fraction of the unsafe piece's inradius: the over-approximation is already tight
+TIGHT_RATIO = 0.1
+
+
+@dataclass
+class StarOptions:
+    """Settings of the star back-end (the problem -- model, property -- is separate).
+
+    step: base time step in model time units (default: horizon / 60; cells that need it are
+        bisected).
+    discrete_time: check and switch at grid points only (Hylaa-like; not a proof).
+    max_refinements: how many times a failing cell may be bisected.
+    replay: replay LP witnesses with the Monte Carlo simulator.
+    max_replays: at most this many replays per check.
+    max_unresolved: stop (UNKNOWN) after this many cells that refinement cannot clear.
+    max_lps: LP budget; when exhausted the answer is UNKNOWN.
+    max_jumps: bound on discrete jumps along a path; UNKNOWN beyond. None (default): no
+        bound, but at most ``STALL_JUMPS`` jumps within one time step when the model may
+        have a zero-dwell cycle (:mod:`reach.model.lint`).
+    aggregate_after: successors of the jumps after the first ``aggregate_after`` ones on a
+        path, out of a mode whose flow is not constant, are aggregated: the stars one chain
+        sends through one transition become one star, their interval hull (see
+        :meth:`_Explorer._aggregate`); refined back into the members when a check under it
+        fails. None: never aggregate.
+    max_stars: UNKNOWN once this many stars (chains) have been explored.
+    max_coefficients: UNKNOWN when a segment needs more coefficients than this (each
+        segment of a non-constant flow doubles them: LPs and grid stacks would grow without
+        bound; aggregation keeps the count down).
+    max_deaggregations: at most this many aggregates are refined back into their members.
+    touch_tolerance: relative LP tolerance. With piece rows of unit norm, the depth LP's
+        answer counts as exact up to ``tol = touch_tolerance * max(1, |g_r|, |h_r . c|)``
+        (largest over the piece's rows ``h_r x <= g_r``, ``c`` the segment's centre; at least
+        10 times the feasibility tolerance the LP was solved to, see ``_depth``): a
+        piece made only of strict inequalities is entered when the depth exceeds ``tol``;
+        a piece with a non-strict row is met when the depth is at least ``-tol``.
+    replay_dt: simulator step for replays (None: the simulator's default).
+    """
+
+    step: float | None = None
+    discrete_time: bool = False
+    max_refinements: int = 8
+    replay: bool = True
+    max_replays: int = 20
+    max_unresolved: int = 8
+    max_lps: int = 50_000
+    max_jumps: int | None = None
+    aggregate_after: int | None = 2
+    max_stars: int = 20_000
+    max_coefficients: int = 2_000
+    max_deaggregations: int = 50
+    touch_tolerance: float = 1e-9
+    replay_dt: float | None = None
+
+    @classmethod
+    def from_dict(cls, options: dict | None) -> "StarOptions":
+        if isinstance(options, StarOptions):
+            return options
+        return cls(**parse_options(cls, options, "star"))

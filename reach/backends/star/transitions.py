@@ -1,0 +1,241 @@
+"""The matrices of a linear hybrid automaton as the exploration reads them: flows (with an
+added clock and the time-varying inputs taken apart), normalised invariants, guards and
+resets of the transitions worth firing, the initial star and the unsafe pieces."""
+
+from __future__ import annotations
+
+import weakref
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+from reach import lp
+from reach.backends.star.flowpipe import AffineFlow
+from reach.model.constraints import affine_coefficients
+from reach.sets import Box, Star
+from reach.sets.hpolytope import HPolytope
+
+
+@dataclass
+class _Piece:
+    """One convex unsafe piece ``H x <= g`` (rows normalised); ``strict`` if every row is;
+    ``inradius``: radius of the largest ball inside it (``inf`` if unbounded)."""
+
+    H: np.ndarray
+    g: np.ndarray
+    strict: bool
+    label: str
+
+    @cached_property
+    def inradius(self) -> float:
+        n = self.H.shape[1]
+        res = lp.maximize(np.eye(n + 1)[n], np.hstack([self.H, np.ones((len(self.g), 1))]), self.g)
+        return res.value if res.optimal else (np.inf if res.unbounded else -np.inf)
+
+
+@dataclass
+class _Jump:
+    """An outgoing transition: guard rows, reset ``x+ = R x + r``, window (clock, lo, hi)."""
+
+    name: str
+    target: str
+    H: np.ndarray
+    g: np.ndarray
+    R: np.ndarray
+    r: np.ndarray
+    window: tuple[int, float, float] | None
+
+
+_CACHE: dict[int, tuple[weakref.ref, object]] = {}
+
+
+def _cached(obj, build):
+    """``build(obj)``, computed once per live object (symbolic extraction is slow)."""
+    key = id(obj)
+    ref, value = _CACHE.get(key, (None, None))
+    if ref is None or ref() is not obj:
+        value = build(obj)
+        _CACHE[key] = (weakref.ref(obj, lambda _: _CACHE.pop(key, None)), value)
+    return value
+
+
+def _unsafe_pieces(prop) -> dict[str, list[_Piece] | None]:
+    """The property's unsafe pieces per mode, rows normalised (None for a nonlinear mode)."""
+    def build(prop):
+        out = {}
+        for mode in prop.modes:
+            halfspaces = prop.halfspace_pieces(mode)
+            if halfspaces is None:
+                out[mode] = None
+                continue
+            out[mode] = []
+            for k, ((H, g), constraints) in enumerate(zip(halfspaces, prop.pieces[mode])):
+                label = " and ".join(c.text for c in constraints) or f"piece {k}"
+                out[mode].append(_Piece(*_normalised(H, g), all(c.strict for c in constraints), label))
+        return out
+    return _cached(prop, build)
+
+
+class _LinearModel:
+    """The matrices of a linear hybrid automaton, extracted once per model object (the
+    symbolic extraction costs more than a small check): flows, normalised invariants,
+    outgoing jumps, and whether the model is linear at all.
+
+    The exploration needs a global clock (it bounds the horizon and dates the switches).
+    A model without one (no state of rate 1 in every mode) gets its own: state ``n`` with
+    rate 1 everywhere, 0 initially, never reset and absent from every guard, invariant
+    and property, so the reachable states of the model are the projections of the
+    extended ones (``n`` is then ``model.n + 1`` and ``added_clock`` is True)."""
+
+    def __init__(self, model):
+        clock = _global_clock(model)
+        self.added_clock = clock is None
+        self.n = model.n + self.added_clock
+        self.clock = model.n if clock is None else clock
+        self.jumps = {name: [self._jump(model, tr) for tr in model.outgoing(name)]
+                      for name in model.modes}
+        self.linear = (all(m.linear is not None and m.invariant_halfspaces is not None
+                           for m in model.modes.values())
+                       and all(j is not None for js in self.jumps.values() for j in js))
+        self.varying = [u for u in getattr(model, "bounded_inputs", []) if u.varying]
+        if self.linear:
+            self.flows = {name: self._flow(*self._with_clock(*mode.linear))
+                          for name, mode in model.modes.items()}
+            self.invariants = {name: _normalised(*self.widen(*mode.invariant_halfspaces))
+                               for name, mode in model.modes.items()}
+            self.fired = {name: _unsubsumed(js, *self.invariants[name])
+                          for name, js in self.jumps.items()}
+
+    def widen(self, H, g):
+        """Rows over the model's states as rows over the explored ones (a zero clock column)."""
+        g = np.atleast_1d(np.asarray(g, dtype=float))
+        H = np.asarray(H, dtype=float).reshape(g.size, self.n - self.added_clock)
+        if self.added_clock:
+            H = np.hstack([H, np.zeros((g.size, 1))])
+        return H, g
+
+    def _with_clock(self, A, b):
+        if not self.added_clock:
+            return A, b
+        n = self.n
+        A2 = np.zeros((n, n))
+        A2[:n - 1, :n - 1] = A
+        return A2, np.append(b, 1.0)
+
+    def _flow(self, A, b) -> AffineFlow:
+        """The mode's flow with its time-varying inputs taken out of ``A``: their columns
+        ``B`` act through the input set (centre in ``b``, radius bounded per step); the input
+        coordinates themselves keep their interval for properties that name them."""
+        if not self.varying:
+            return AffineFlow(A, b)
+        cols = [u.index for u in self.varying]
+        low = np.array([u.low for u in self.varying], dtype=float)
+        high = np.array([u.high for u in self.varying], dtype=float)
+        A = A.copy()
+        B = A[:, cols].copy()
+        A[:, cols] = 0.0
+        return AffineFlow(A, b + B @ ((low + high) / 2), B, (high - low) / 2)
+
+    def initial_star(self, initial) -> Star:
+        """The initial set as a star: its bounding box, cut by its polytope if it has one
+        (inequalities ``A x <= b`` and equalities ``E x = f`` as two inequalities)."""
+        star = Star.from_box(self.initial_box(initial.low, initial.high))
+        poly = getattr(initial, "polytope", None)
+        if poly is None:
+            return star
+        E, f = np.atleast_2d(poly.E).reshape(-1, self.n - self.added_clock), np.atleast_1d(poly.f)
+        H = np.vstack([np.atleast_2d(poly.A).reshape(-1, E.shape[1]), E, -E])
+        g = np.concatenate([np.atleast_1d(poly.b), f, -f])
+        return star.intersect_halfspaces(*self.widen(H, g))
+
+    def initial_box(self, low, high) -> Box:
+        """The initial box over the explored states (the added clock starts at 0)."""
+        if self.added_clock:
+            low, high = np.append(low, 0.0), np.append(high, 0.0)
+        return Box(low, high)
+
+    @classmethod
+    def of(cls, model) -> "_LinearModel":
+        return _cached(model, cls)
+
+    def _jump(self, model, tr) -> _Jump | None:
+        """The transition as matrices, or None if its guard or reset is nonlinear."""
+        guard = model.guard_halfspaces(tr)
+        if guard is None:
+            return None
+        R, r = np.eye(self.n), np.zeros(self.n)
+        for index, expr in tr.reset.items():
+            coeffs = affine_coefficients(expr, model.symbols)
+            if coeffs is None:
+                return None
+            R[index, :model.n], r[index] = coeffs
+        return _Jump(tr.name, tr.target, *_normalised(*self.widen(*guard)), R, r, tr.window)
+
+
+def _normalised(H, g):
+    """Rows scaled to unit norm (zero rows dropped if satisfied, kept as 0 <= g if not)."""
+    H = np.atleast_2d(np.asarray(H, dtype=float))
+    g = np.atleast_1d(np.asarray(g, dtype=float))
+    norms = np.linalg.norm(H, axis=1)
+    keep = (norms > 0) | (g < 0)
+    norms = np.where(norms > 0, norms, 1.0)
+    return (H / norms[:, None])[keep], (g / norms)[keep]
+
+
+def _unsubsumed(jumps: list[_Jump], H_inv, g_inv) -> list[_Jump]:
+    """The jumps worth firing: ``j`` is dropped when an earlier kept jump ``k`` has the same
+    target and reset and ``guard_j and invariant`` implies every row of ``guard_k`` (one LP
+    per row over the state space); the successors of ``j`` are then contained in those of
+    ``k``, whatever the segment. A jump whose guard misses the invariant is dropped too."""
+    def implies(region: HPolytope, k: _Jump) -> bool:
+        return all((res := region.maximize(row)).optimal and res.value <= bound + 1e-9 * (1 + abs(bound))
+                   for row, bound in zip(k.H, k.g))
+
+    kept = []
+    for j in jumps:
+        H = np.vstack([j.H, H_inv]) if H_inv.shape[0] else j.H
+        if not H.shape[0]:                       # no guard, no invariant: nothing to compare
+            kept.append(j)
+            continue
+        region = HPolytope(H, np.concatenate([j.g, g_inv]))
+        if region.maximize(np.zeros(region.dim)).infeasible:     # only a proved emptiness drops it
+            continue
+        if not any(k.target == j.target and np.array_equal(k.R, j.R) and np.array_equal(k.r, j.r)
+                   and implies(region, k) for k in kept):
+            kept.append(j)
+    return kept
+
+
+def _global_clock(model) -> int | None:
+    """A state that measures elapsed time: rate 1 in every mode, 0 initially, never reset."""
+    for i in model.clocks:
+        if model.initial.low[i] == 0 == model.initial.high[i] and \
+                not any(i in tr.reset for tr in model.transitions):
+            return i
+    return None
+
+
+def _modes_leading_to(model, targets: set[str]) -> set[str]:
+    """Modes from which some mode in ``targets`` can be reached (targets included)."""
+    reach = set(targets)
+    changed = True
+    while changed:
+        changed = False
+        for tr in model.transitions:
+            if tr.target in reach and tr.source not in reach:
+                reach.add(tr.source)
+                changed = True
+    return reach
+
+
+def kept_rows(jump: _Jump, H_inv, g_inv):
+    """``(H, g)``: the rows of the jump's guard and of the source invariant over states its
+    reset leaves alone (``x_i+ = x_i``): every successor of the jump satisfies them (an
+    aggregate keeps what a guard pins down, e.g. ``T = 21`` from ``T >= 21`` and ``T <= 21``)."""
+    H = np.vstack([jump.H, H_inv]) if H_inv.shape[0] else jump.H
+    g = np.concatenate([jump.g, g_inv])
+    n = jump.R.shape[0]
+    alone = np.all(jump.R == np.eye(n), axis=1) & (jump.r == 0)
+    keep = np.all((H == 0) | alone[None, :], axis=1) if H.shape[0] else np.zeros(0, dtype=bool)
+    return H[keep], g[keep]
