@@ -278,7 +278,7 @@ def safe_abort_map(model_file: str, property_files, cells, property_ids=None, op
                    executor=None) -> list[float]:
     """:func:`safe_abort_time` for every cell ``(low, high, ...)`` of ``cells`` (e.g. from
     :func:`arc_cells`), through ``executor`` (``map_unordered(fn, arg_list)`` yielding
-    ``(index, ("ok", value))``, as :mod:`reach.bench.executors`; in-process if None).
+    ``(index, ("ok", value))``, as :mod:`reach.executors`; in-process if None).
     Properties the back-end does not support are left out. Returns one time per cell."""
     args = [(str(model_file), tuple(map(str, property_files)), property_ids, cell[0], cell[1], options)
             for cell in cells]
