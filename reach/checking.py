@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from reach.backends import registry
-from reach.backends.base import run, unsupported
+from reach.backends.base import input_reason, run, unsupported
 from reach.errors import InputError
 from reach.model import load_model
 from reach.result import Result
@@ -36,7 +36,7 @@ def check_model(backend, model, bound: list, options: dict | None = None) -> lis
     results: dict[int, Result] = {}
     todo = []
     for prop in bound:
-        reason = backend.supports(model, prop)
+        reason = input_reason(backend, model) or backend.supports(model, prop)
         if reason is not None:
             results[id(prop)] = unsupported(backend.name, model, prop, reason)
         else:
@@ -48,3 +48,26 @@ def check_model(backend, model, bound: list, options: dict | None = None) -> lis
         for prop in todo:
             results[id(prop)] = run(backend, model, prop, options)
     return [results[id(p)] for p in bound]
+
+
+def is_spaceex(path) -> bool:
+    return str(path).lower().endswith(".xml")
+
+
+def check_spaceex(xml_path, cfg_path, backend_name: str, options: dict | None = None):
+    """Check a SpaceEx model against its cfg's forbidden set: one property whose id is the cfg's
+    file name and whose unsafe set is the union of the forbidden terms. Returns
+    ``(results, model, documents)`` (no result when the cfg forbids nothing)."""
+    from reach.model.spaceex import load_spaceex
+    from reach.spec.properties import BoundSafety
+
+    backend = resolve_backend(backend_name)
+    model, props, docs = load_spaceex(xml_path, cfg_path)
+    if not props:
+        return [], model, docs
+    bound = [bind(p, model) for p in props]
+    modes = [m for m in model.modes if any(m in b.modes for b in bound)]
+    pieces = {m: [piece for b in bound for piece in b.pieces.get(m, [])] for m in modes}
+    merged = BoundSafety(docs.property_id, modes, pieces, model.symbols, str(cfg_path),
+                         f"forbidden set of {cfg_path}")
+    return check_model(backend, model, [merged], options), model, docs

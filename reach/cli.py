@@ -7,6 +7,8 @@
     reach bench [--suite suite.yaml] [--backend B] [--instance I] [-j N] [--scheduler ADDR]
     reach sweep MODEL PROPS [--radius R] [--cells N]
     reach compare OLD.json NEW.json
+    reach import MODEL.xml [CONFIG.cfg] --out DIR   (SpaceEx -> models/ and properties/ YAML)
+    reach check MODEL.xml CONFIG.cfg ...           (a SpaceEx model against its cfg's forbidden set)
 
 Bad input prints one line ``file:line: field: message`` and exits with 2. ``check`` prints the
 model's lints (structural findings, :mod:`reach.model.lint`) to stderr as ``warning: ...``.
@@ -46,8 +48,10 @@ def _parse_options(pairs: list[str]) -> dict:
 
 
 def cmd_check(args) -> int:
-    from reach.checking import check_files
+    from reach.checking import check_files, is_spaceex
 
+    if is_spaceex(args.model):
+        return cmd_check_spaceex(args)
     if args.verbose:
         logging.basicConfig(stream=sys.stderr, format="%(name)s: %(message)s")
         logging.getLogger("reach").setLevel(logging.INFO)
@@ -82,6 +86,59 @@ def cmd_check(args) -> int:
         print(f"  {r.property:<16} {r.status.value:<11} {r.seconds:8.2f} s  {summary(r)}")
         if r.property in saved:
             print(f"  {'':<16} counterexample: {saved[r.property]}  (reach replay {saved[r.property]})")
+    return 0
+
+
+def cmd_check_spaceex(args) -> int:
+    """``reach check MODEL.xml CONFIG.cfg``: the cfg's forbidden set is the property; a
+    counterexample is saved with the imported YAML beside it, so ``reach replay`` reads it."""
+    from reach.checking import check_spaceex
+    from reach.model.spaceex import write_yaml
+
+    if args.verbose:
+        logging.basicConfig(stream=sys.stderr, format="%(name)s: %(message)s")
+        logging.getLogger("reach").setLevel(logging.INFO)
+    results, model, docs = check_spaceex(args.model, args.properties, args.backend, _parse_options(args.option))
+    for finding in model.lints:
+        print(f"warning: {finding}", file=sys.stderr)
+    print(f"{model.name} with {args.backend}:")
+    if not results:
+        print(f"  {args.properties} forbids nothing: nothing to check")
+    for r in results:
+        print(f"  {r.property:<16} {r.status.value:<11} {r.seconds:8.2f} s  {summary(r)}")
+        if r.counterexample is not None and args.counterexamples:
+            model_file, prop_file = write_yaml(docs, args.counterexamples)
+            cex = r.counterexample
+            cex.model_file, cex.property_file = str(model_file), str(prop_file)
+            # the YAML property file names each forbidden term; replay the one that was hit
+            cex.property = _term_hit(docs, model, cex)
+            path = Path(args.counterexamples) / f"{model_file.stem}_{r.backend}.json"
+            cex.save(path)
+            print(f"  {'':<16} counterexample: {path}  (reach replay {path})")
+    return 0
+
+
+def _term_hit(docs, model, cex) -> str:
+    """The id, in the imported property file, of a forbidden term the violation state is in."""
+    from reach.spec import bind
+    from reach.spec.properties import properties_from_doc
+    from reach.yamlio import Doc
+    import numpy as np
+
+    props = properties_from_doc(Doc(docs.properties, docs.property_lines, cex.property_file))
+    for p in props:
+        b = bind(p, model)
+        test = b.violation(cex.violation_mode) if cex.violation_mode in b.modes else None
+        if test is not None and test(np.array([cex.violation_state]))[0][0]:
+            return p.id
+    return props[0].id
+
+
+def cmd_import(args) -> int:
+    from reach.model.spaceex import documents, write_yaml
+
+    model_file, prop_file = write_yaml(documents(args.model, args.config), args.out)
+    print(f"wrote {model_file}" + (f" and {prop_file}" if prop_file else " (the cfg forbids nothing)"))
     return 0
 
 
@@ -272,6 +329,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("old")
     p.add_argument("new")
     p.set_defaults(func=cmd_compare)
+    p = sub.add_parser("import", help="write a SpaceEx model (.xml + .cfg) as model and property YAML")
+    p.add_argument("model", help="SpaceEx model (.xml)")
+    p.add_argument("config", nargs="?", help="SpaceEx configuration (.cfg; default: MODEL's name with .cfg)")
+    p.add_argument("--out", required=True, metavar="DIR", help="writes DIR/models/NAME.yaml, DIR/properties/NAME.yaml")
+    p.set_defaults(func=cmd_import)
     return parser
 
 

@@ -217,8 +217,8 @@ class MonteCarloBackend:
             switch_window(model)
         except ValueError as exc:
             return str(exc)
-        if any(not tr.urgent and tr.window is None for tr in model.transitions):
-            return "a may-transition whose guard is not a window on a clock cannot be sampled"
+        if not model.initial.is_box:
+            return "sampling a polytopic initial set is not implemented"
         if isinstance(prop, BoundEvent) and switch_window(model) is not None:
             return "sampling an event property with an abort window is not implemented"
         if isinstance(prop, (BoundReach, BoundReachAvoid)) and model.disturbance is None:

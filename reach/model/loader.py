@@ -523,7 +523,8 @@ class _Builder:
         P = LinearSet(np.array(rows, float).reshape(-1, n), np.array(rhs, float),
                       np.array(eq_rows, float).reshape(-1, n), np.array(eq_rhs, float))
         low, high = _bounding_box(P, self.state, self.where("initial"))
-        return InitialSet(raw["mode"], low, high, P)
+        axis_aligned = all(np.count_nonzero(r) <= 1 for r in np.vstack([P.A, P.E]))
+        return InitialSet(raw["mode"], low, high, None if axis_aligned else P)
 
     def check_bounded_inputs(self, model: HybridAutomaton) -> None:
         """No reset of any bounded input; a varying one in no guard or invariant."""

@@ -12,7 +12,9 @@ together:
   of the group has met an event;
 * an urgent transition is taken at the first instant its guard holds, located by bisection
   inside the grid interval where it first holds (to ``dt * 2**-40``); the window transition
-  is taken exactly at ``tau``; Gaussian kicks (if asked for) are applied at ``k * step``, and
+  is taken exactly at ``tau``; a may-transition with a general guard is taken when a run would
+  leave the source invariant, if its guard holds there (the exit instant, by bisection: one
+  of the automaton's runs, the one that stays longest); Gaussian kicks (if asked for) are applied at ``k * step``, and
   an urgent transition whose guard holds right after a kick is taken at that instant;
 * a run found outside its mode's invariant at a grid point with no transition taken is
   *blocked* (it has no continuation in the automaton's semantics) and stops there.
@@ -94,11 +96,14 @@ class Simulator:
                 self.powers[name] = _Powers(scipy.linalg.expm(M * self.dt), self.steps + 1)
         self.urgent = {m: [] for m in model.modes}
         self.window = {m: None for m in model.modes}
+        self.exits = {m: [] for m in model.modes}         # may-transitions taken at invariant exit
         for tr in model.transitions:
             if tr.urgent:
                 self.urgent[tr.source].append((tr, lambdify_margins(tr.guard, model.symbols)))
             elif tr.window is not None:
                 self.window[tr.source] = tr
+            else:
+                self.exits[tr.source].append((tr, lambdify_margins(tr.guard, model.symbols)))
         self.resets = {tr.name: _reset_function(tr, model) for tr in model.transitions if tr.reset}
 
     # --------------------------------------------------------------- propagation
@@ -161,6 +166,20 @@ class Simulator:
             hi = np.where(inside, mid, hi)
             lo = np.where(inside, lo, mid)
         return hi
+
+    def _last_inside(self, mode: str, X: np.ndarray, h: np.ndarray) -> np.ndarray:
+        """Latest time in ``[0, h)`` at which the runs are still inside the invariant
+        (inside at 0, outside at ``h``), by bisection."""
+        inv = self.model.modes[mode].invariant_margins
+        lo, hi = np.zeros_like(h), h.copy()
+        for _ in range(BISECTION_STEPS):
+            mid = 0.5 * (lo + hi)
+            Z = self.propagate(mode, X, mid)
+            tol = INVARIANT_TOLERANCE * (1.0 + np.abs(Z).max(axis=1))
+            inside = np.all(inv(Z) <= tol[:, None], axis=1)
+            lo = np.where(inside, mid, lo)
+            hi = np.where(inside, hi, mid)
+        return lo
 
     # --------------------------------------------------------------- runs
     def run(self, x0: np.ndarray, switch_times: np.ndarray | None = None, record: bool = False,
@@ -321,6 +340,23 @@ class Simulator:
         outside = np.any(M > INVARIANT_TOLERANCE * scale, axis=2) & valid & (grid_t < event_time[:, None])
         blocked = outside.any(axis=1)
         block_j = outside.argmax(axis=1)
+        if self.exits[name] and blocked.any():
+            # a may-transition enabled where the run leaves the invariant is taken there
+            b = np.flatnonzero(blocked)
+            prev_t = np.where(block_j[b] == 0, t0[b], grid_t[b, np.maximum(block_j[b] - 1, 0)])
+            prev_x = np.where((block_j[b] == 0)[:, None], X[rows[b]], Y[b, np.maximum(block_j[b] - 1, 0)])
+            s = self._last_inside(name, prev_x, grid_t[b, block_j[b]] - prev_t)
+            x_exit = self.propagate(name, prev_x, s)
+            tol = INVARIANT_TOLERANCE * (1.0 + np.abs(x_exit).max(axis=1))
+            for j_tr, (tr, guard) in enumerate(self.exits[name]):
+                free = np.flatnonzero(blocked[b])
+                ok = free[np.all(guard(x_exit[free]) <= tol[free, None], axis=1)]
+                if ok.size:
+                    candidates_exit = len(guards) + 1 + j_tr
+                    event_time[b[ok]] = prev_t[ok] + s[ok]
+                    event_tr[b[ok]] = candidates_exit
+                    blocked[b[ok]] = False
+            outside &= blocked[:, None]
         limit = np.where(blocked, grid_t[np.arange(n_rows), block_j], np.minimum(event_time, stop_at))
         seen = valid & (grid_t <= limit[:, None]) & (grid_t < event_time[:, None])
         r_idx, j_idx = np.nonzero(seen)
@@ -334,6 +370,7 @@ class Simulator:
         blocked_at[rows[b]] = limit[b]
         # runs with an event: go to it exactly, jump
         e = np.flatnonzero(~blocked & (event_tr >= 0) & (event_time <= end))
+        candidates += [tr for tr, _ in self.exits[name]]
         if e.size:
             last = np.where(seen[e].any(axis=1), (seen[e] * np.arange(count)).max(axis=1), -1)
             base_t = np.where(last >= 0, grid_t[e, np.maximum(last, 0)], t0[e])

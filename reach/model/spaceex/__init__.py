@@ -73,3 +73,25 @@ def load_spaceex(xml_path, cfg_path=None):
     if docs.properties is not None:
         props = properties_from_doc(Doc(docs.properties, docs.property_lines, str(cfg_path or default_cfg(xml_path))))
     return model, props, docs
+
+
+def write_yaml(docs: Documents, out_dir) -> tuple[Path, Path | None]:
+    """Write ``out_dir/models/NAME.yaml`` and ``out_dir/properties/NAME.yaml`` (if the cfg
+    forbids anything); NAME is the cfg's file name, sanitised."""
+    import re
+
+    import yaml
+
+    safe = re.sub(r"[^A-Za-z0-9_.-]", "_", str(docs.model["name"])).lstrip(".") or "model"
+    out = Path(out_dir)
+    model_path = out / "models" / f"{safe}.yaml"
+    model_path.parent.mkdir(parents=True, exist_ok=True)
+    header = f"# {docs.model['description']}\n"
+    model_path.write_text(header + yaml.safe_dump(docs.model, sort_keys=False, width=120))
+    prop_path = None
+    if docs.properties is not None:
+        prop_path = out / "properties" / f"{safe}.yaml"
+        prop_path.parent.mkdir(parents=True, exist_ok=True)
+        prop_path.write_text(f"# the forbidden set of {docs.model['notes']['config']}\n"
+                             + yaml.safe_dump(docs.properties, sort_keys=False, width=120))
+    return model_path, prop_path

@@ -698,7 +698,8 @@ class DocumentBuilder(Converter):
             if isinstance(a, Relation):
                 texts += self.cfg_relation(a, choice[0][0], "initially") or []
         taken = set(self.transitions_out)
-        for key, _ in choice:
+        # a simulator takes the first enabled urgent jump: locations where time passes first
+        for key, _ in sorted(choice, key=lambda c: c[0] in self.timeless):
             guard = []
             for j, (rel, line) in enumerate(self.invariants[key]):
                 if j not in self.dropped[key]:

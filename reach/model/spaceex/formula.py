@@ -220,6 +220,10 @@ def to_python(tokens: list[Token], rename) -> str:
     """Python text of an expression; ``rename(name)`` gives the text that replaces a name."""
     out = []
     for i, tok in enumerate(tokens):
+        binary = i > 0 and (tokens[i - 1].kind != "op" or tokens[i - 1].text == ")")
+        if tok.text in ("+", "-") and binary:
+            out.append(f" {tok.text} ")
+            continue
         if tok.text == "'":
             raise FormulaError("a derivative x' outside the left side of a flow")
         if tok.kind == "name":
@@ -231,9 +235,11 @@ def to_python(tokens: list[Token], rename) -> str:
                 out.append(rename(tok.text))
         elif tok.text == "^":
             out.append("**")
+        elif tok.text == ",":
+            out.append(", ")
         else:
             out.append(tok.text)
-    return " ".join(out)
+    return "".join(out)
 
 
 def formula_error(exc: FormulaError, what: str, text: str, file: str, line: int | None) -> InputError:

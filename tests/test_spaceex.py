@@ -1,0 +1,231 @@
+"""SpaceEx import: the published files, hand-written constructs, malformed input, round trip."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from reach.cli import main
+from reach.errors import InputError
+from reach.model import load_model
+from reach.model.simulate import Simulator
+from reach.model.spaceex import documents, load_spaceex, write_yaml
+
+ROOT = Path(__file__).resolve().parents[1] / "models" / "spaceex"
+
+# (xml, cfg, states, modes, transitions, bounded inputs, forbidden terms): counted from the files
+# (Building: 48 states + t + the input u1, output y1 is an alias; Gearbox: 5 + clock, the two
+# locations plus a start mode because the initial set lies in both, 2 impacts + 4 meshings + 2
+# start jumps; Platoon: 9 + the input aL (+ clocks); filtered oscillator 4th order: 2 + 4 filter
+# states, 4 locations in a cycle; drivetrain: 11 + t, 5 locations, 5 transitions).
+PUBLISHED = [
+    ("Building/BLDC01.xml", "Building/BLDC01-BDS01.cfg", 50, 1, 0, 1, 1),
+    ("Building/BLDC01.xml", "Building/BLDC01-BDU02.cfg", 50, 1, 0, 1, 1),
+    ("Building/BLDF01.xml", "Building/BLDF01-BDS01.cfg", 50, 1, 0, 1, 1),
+    ("Building/BLDF01.xml", "Building/BLDF01-BDU01.cfg", 50, 1, 0, 1, 1),
+    ("Building/BLDF01.xml", "Building/BLDF01-BDU02.cfg", 50, 1, 0, 1, 1),
+    ("Gearbox/GRBX01-MES01.xml", "Gearbox/GRBX01-MES01.cfg", 6, 3, 8, 0, 2),
+    ("Platoon/PLAA01-BND.xml", "Platoon/PLAA01-BND.cfg", 10, 2, 2, 1, 0),
+    ("Platoon/PLAD01-BND.xml", "Platoon/PLAD01-BND30.cfg", 12, 2, 2, 1, 0),
+    ("Platoon/PLAD01-BND.xml", "Platoon/PLAD01-BND42.cfg", 12, 2, 2, 1, 0),
+    ("Platoon/PLAN01-UNB.xml", "Platoon/PLAN01-UNB50.cfg", 11, 2, 2, 1, 0),
+    ("FilteredOscillator/filtered_oscillator.xml", "FilteredOscillator/filtered_oscillator.cfg", 6, 4, 4, 0, 0),
+    ("BouncingBall/bball.xml", "BouncingBall/bball.cfg", 2, 1, 1, 0, 0),
+    ("BouncingBall/bball_flattened.xml", "BouncingBall/bball_flattened.cfg", 2, 1, 1, 0, 0),
+    ("Powertrain/drivetrain_2theta_30percent.xml", "Powertrain/drivetrain_2theta_30percent.cfg", 12, 5, 5, 0, 1),
+]
+
+
+@pytest.mark.parametrize("xml,cfg,n,modes,transitions,inputs,terms", PUBLISHED)
+def test_published_files_import_with_the_expected_structure(xml, cfg, n, modes, transitions, inputs, terms):
+    model, props, _ = load_spaceex(ROOT / xml, ROOT / cfg)
+    assert (model.n, len(model.modes), len(model.transitions), len(model.bounded_inputs)) == \
+        (n, modes, transitions, inputs)
+    assert len(props) == terms
+
+
+def test_building_details():
+    model, props, _ = load_spaceex(ROOT / "Building/BLDF01.xml", ROOT / "Building/BLDF01-BDU02.cfg")
+    (u,) = model.bounded_inputs
+    assert (u.name, u.low, u.high, u.varying) == ("u1", 0.8, 1.0, True)
+    assert "y1" not in model.state                       # the output is an alias of x25
+    assert model.horizon == 20.1                          # time-horizon of BDU02.cfg
+    assert props[0].raw["avoid"] == ["x25 < -0.00078", "t <= 20", "t >= 20"]
+    constant, _, _ = load_spaceex(ROOT / "Building/BLDC01.xml", ROOT / "Building/BLDC01-BDS01.cfg")
+    assert constant.bounded_inputs[0].varying is False     # u1' == 0 in BLDC01
+
+
+def test_powertrain_initial_set_is_the_published_segment():
+    model, props, _ = load_spaceex(ROOT / "Powertrain/drivetrain_2theta_30percent.xml",
+                                   ROOT / "Powertrain/drivetrain_2theta_30percent.cfg")
+    P = model.initial.polytope
+    assert P is not None
+    i = model.state.index
+    # x4 in [27, 33]; x1 = 0.00056 x4 - 0.06; x7 = 12 x4
+    assert model.initial.low[i("x4")] == pytest.approx(27) and model.initial.high[i("x4")] == pytest.approx(33)
+    for x4 in (27.0, 30.0, 33.0):
+        x = np.zeros(model.n)
+        x[i("x4")] = x4
+        x[i("x1")] = 0.00056 * x4 - 0.01512 - 0.04488
+        x[i("x2")] = 0.467 * x4 - 12.609 - 12.401
+        x[i("x6")] = x[i("x9")] = x[i("x11")] = x4
+        x[i("x7")] = 12 * x4
+        x[i("x8")] = x[i("x10")] = 0.00006 * x4 - 0.00162 - 0.0015
+        assert np.all(P.A @ x <= P.b + 1e-9) and np.allclose(P.E @ x, P.f, atol=1e-9)
+    assert props[0].raw["modes"] == ["error"]
+
+
+@pytest.mark.parametrize("xml,cfg", [("BouncingBall/bball.xml", "BouncingBall/bball.cfg"),
+                                     ("FilteredOscillator/filtered_oscillator.xml",
+                                      "FilteredOscillator/filtered_oscillator.cfg"),
+                                     ("Building/BLDC01.xml", "Building/BLDC01-BDS01.cfg")])
+def test_simulated_runs_agree_with_solve_ivp(xml, cfg):
+    """The first mode's flow, simulated, against scipy's solve_ivp of the same right-hand side."""
+    model, _, _ = load_spaceex(ROOT / xml, ROOT / cfg)
+    model.horizon = min(model.horizon, 0.5)
+    x0 = (model.initial.low + model.initial.high) / 2
+    sim = Simulator(model, dt=model.horizon / 200)
+    runs = sim.run(x0[None, :], record=True)
+    t, m, X = runs.path[0]
+    first = np.flatnonzero(m != m[0])
+    stop = first[0] if first.size else len(t)
+    rhs = model.modes[model.initial.mode].rhs
+    ref = solve_ivp(lambda s, y: rhs(y[None, :])[0], (0, t[stop - 1]), x0, t_eval=t[:stop],
+                    rtol=1e-10, atol=1e-12, method="LSODA")
+    scale = 1 + np.abs(ref.y.T).max()
+    assert np.max(np.abs(ref.y.T - X[:stop])) < 1e-6 * scale
+
+
+def test_bouncing_ball_bounces_at_the_ground():
+    """The may-transition is taken where the run leaves x >= 0: v flips with factor 0.75."""
+    model, _, _ = load_spaceex(ROOT / "BouncingBall/bball.xml", ROOT / "BouncingBall/bball.cfg")
+    model.horizon = 6.0
+    runs = Simulator(model, dt=0.01).run(np.array([[10.0, 0.0]]), record=True)
+    t, m, X = runs.path[0]
+    assert np.isnan(runs.blocked_at[0])
+    impact = np.sqrt(20.0)                               # x = 10 - t^2/2 hits 0
+    k = np.flatnonzero(np.diff(X[:, 1]) > 1.0)[0]
+    assert t[k] == pytest.approx(impact, abs=1e-6)
+    assert X[k + 1, 1] == pytest.approx(0.75 * impact, rel=1e-6)
+
+
+def test_check_and_import_give_the_same_verdicts(tmp_path, capsys):
+    xml, cfg = ROOT / "Gearbox/GRBX01-MES01.xml", ROOT / "Gearbox/GRBX01-MES01.cfg"
+    assert main(["import", str(xml), str(cfg), "--out", str(tmp_path)]) == 0
+    yaml_model = load_model(tmp_path / "models" / "GRBX01-MES01.yaml")
+    direct, _, _ = load_spaceex(xml, cfg)
+    assert yaml_model.state == direct.state and list(yaml_model.modes) == list(direct.modes)
+    for name, mode in direct.modes.items():
+        assert [str(f) for f in yaml_model.modes[name].flow] == [str(f) for f in mode.flow]
+        assert mode.timeless == yaml_model.modes[name].timeless
+    assert np.array_equal(yaml_model.initial.low, direct.initial.low)
+    code = main(["check", str(xml), str(cfg), "-b", "montecarlo", "-o", "samples=40", "-o", "search_rounds=0"])
+    yaml_code = main(["check", str(tmp_path / "models" / "GRBX01-MES01.yaml"),
+                      str(tmp_path / "properties" / "GRBX01-MES01.yaml"), "-b", "montecarlo",
+                      "-o", "samples=40", "-o", "search_rounds=0"])
+    out = capsys.readouterr().out
+    assert code == yaml_code == 0
+    assert "GRBX01-MES01 " in out and "UNKNOWN" in out and "UNSAFE" not in out
+
+
+# ---------------------------------------------------------------- hand-written cases
+HEADER = '<?xml version="1.0"?>\n<sspaceex xmlns="http://www-verimag.imag.fr/xml-namespaces/sspaceex" version="0.2">\n'
+
+
+def write(tmp_path, body: str, cfg: str):
+    (tmp_path / "m.xml").write_text(HEADER + body + "</sspaceex>\n")
+    (tmp_path / "m.cfg").write_text(cfg)
+    return tmp_path / "m.xml", tmp_path / "m.cfg"
+
+
+NETWORK = '''<component id="a">
+ <param name="x" type="real" local="false" dynamics="any"/>
+ <param name="k" type="real" local="false" dynamics="const"/>
+ <param name="go" type="label" local="false"/>
+ <location id="1" name="off"><invariant>x &lt;= 1</invariant><flow>x' == k</flow></location>
+ <location id="2" name="on"><invariant>true</invariant><flow>x' == -k*x</flow></location>
+ <transition source="1" target="2"><label>go</label><guard>x &gt;= 1</guard><assignment>x := 2*x</assignment></transition>
+</component>
+<component id="b">
+ <param name="y" type="real" local="false" dynamics="any"/>
+ <param name="go" type="label" local="false"/>
+ <location id="1" name="idle"><flow>y' == 0</flow></location>
+ <location id="2" name="busy"><flow>y' == 1</flow></location>
+ <location id="3" name="never"><flow>y' == 2</flow></location>
+ <transition source="1" target="2" asap="true"><label>go</label></transition>
+</component>
+<component id="sys">
+ <param name="x" type="real" local="false" dynamics="any"/>
+ <param name="y" type="real" local="false" dynamics="any"/>
+ <param name="go" type="label" local="false"/>
+ <bind component="a" as="A"><map key="x">x</map><map key="k">0.5</map><map key="go">go</map></bind>
+ <bind component="b" as="B"><map key="y">y</map><map key="go">go</map></bind>
+</component>
+'''
+
+
+def test_network_synchronises_on_labels_and_keeps_reachable_locations(tmp_path):
+    xml, cfg = write(tmp_path, NETWORK, 'system = sys\ninitially = "loc(A)==off & loc(B)==idle & '
+                     '0 <= x <= 0.5 & y == 0"\nforbidden = "loc(B) == busy & y >= 3"\ntime-horizon = 4\n')
+    model, props, _ = load_spaceex(xml, cfg)
+    assert list(model.modes) == ["off__idle", "on__busy"]           # 'never' is unreachable
+    (tr,) = model.transitions
+    assert (tr.source, tr.target, tr.urgent, str(tr.reset[0])) == ("off__idle", "on__busy", True, "2*x")
+    assert float(model.modes["off__idle"].flow[0]) == 0.5
+    assert props[0].raw == {"id": "m", "kind": "safety", "modes": ["on__busy"], "avoid": ["y >= 3"]}
+
+
+def test_unknown_names_in_initially_are_dropped_when_satisfiable(tmp_path):
+    xml, cfg = write(tmp_path, NETWORK, 'system = sys\ninitially = "loc(A)==off & loc(B)==idle & '
+                     'x == 0 & y == 0 & t == 0 & loc(C) == c"\ntime-horizon = 1\n')
+    _, _, docs = load_spaceex(xml, cfg)
+    assert len(docs.model["notes"]["dropped"]) == 2
+
+
+@pytest.mark.parametrize("body,cfg,needle", [
+    (NETWORK.replace("x' == k", "x' == k | x' == 1"), "", "disjunction"),
+    (NETWORK.replace("x' == k", "x' &gt;= k"), "", "flow: construct"),
+    (NETWORK.replace("x := 2*x", "x + 1 := 2"), "", "assignment: construct"),
+    (NETWORK.replace('<location id="3"', '<foo/><location id="3"'), "", "construct <foo>"),
+    (NETWORK.replace('type="label" local="false"/>\n <location id="1" name="idle"',
+                     'type="int" local="false"/>\n <location id="1" name="idle"'), "", 'type="int"'),
+    (NETWORK.replace("x' == k", "x' == foo(k)"), "", "function 'foo'"),
+    (NETWORK.replace("x' == k", "x' == k @ 2"), "", "unexpected character"),
+    (NETWORK.replace('<map key="k">0.5</map>', ''), "", "constant 'A.k' has no value"),
+    (NETWORK, 'initially = "x == 0 | x == 1"\n', "union of initial sets"),
+    (NETWORK, 'initially = "x == 0 & y == 0"\nforbidden = "x <= "\n', "empty side"),
+    (NETWORK.replace("</component>\n<component id=\"b\">", "<bogus>", 1), "", "invalid XML"),
+])
+def test_constructs_outside_scope_name_the_construct_and_line(tmp_path, capsys, body, cfg, needle):
+    text = 'system = sys\ntime-horizon = 1\n' + (cfg or 'initially = "loc(A)==off & loc(B)==idle & x == 0 & y == 0"\n')
+    xml, cfgp = write(tmp_path, body, text)
+    assert main(["check", str(xml), str(cfgp), "-b", "montecarlo"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and needle in err[0]
+    assert err[0].startswith("reach: ") and (":" in err[0].split(" ", 1)[1])
+    assert any(ch.isdigit() for ch in err[0].split(":")[2]) or "cfg" in err[0]
+
+
+def test_entity_declarations_are_refused(tmp_path, capsys):
+    (tmp_path / "m.xml").write_text('<?xml version="1.0"?>\n<!DOCTYPE x [<!ENTITY a "aaaaaaaaaa">'
+                                    '<!ENTITY b "&a;&a;&a;&a;&a;&a;&a;&a;">]>\n<sspaceex>&b;</sspaceex>\n')
+    (tmp_path / "m.cfg").write_text("system = s\n")
+    assert main(["import", str(tmp_path / "m.xml"), str(tmp_path / "m.cfg"), "--out", str(tmp_path)]) == 2
+    assert "document type declarations" in capsys.readouterr().err
+
+
+def test_missing_cfg_is_bad_input(tmp_path):
+    (tmp_path / "m.xml").write_text(HEADER + NETWORK + "</sspaceex>\n")
+    with pytest.raises(InputError, match="no .cfg"):
+        documents(tmp_path / "m.xml")
+
+
+def test_write_yaml_sanitises_the_name(tmp_path):
+    xml, cfg = write(tmp_path, NETWORK, 'system = sys\ninitially = "loc(A)==off & loc(B)==idle & x == 0 & y == 0"\n'
+                     'time-horizon = 1\n')
+    docs = documents(xml, cfg, name="../../evil name")
+    model_path, prop_path = write_yaml(docs, tmp_path / "out")
+    assert model_path.parent == tmp_path / "out" / "models" and prop_path is None
