@@ -212,7 +212,7 @@ def cmd_replay(args) -> int:
         raise InputError(f"initial_state has {len(cex.initial_state)} values, the model {model.n}", str(path),
                          "initial_state")
     prop = bind(props[0], model)
-    rep = replay(model, prop, cex.initial_state, cex.switch_time, cex.dt or None)
+    rep = replay(model, prop, cex.initial_state, cex.switch_time, cex.dt or None, cex.input_signal)
     state = ", ".join(f"{n}={v:.6g}" for n, v in zip(model.state, rep.state))
     if rep.violated:
         print(f"replayed: {model.name} violates '{prop.id}' at t={rep.time:.6g} in mode {rep.mode} "

@@ -183,11 +183,14 @@ class Simulator:
 
     # --------------------------------------------------------------- runs
     def run(self, x0: np.ndarray, switch_times: np.ndarray | None = None, record: bool = False,
-            observers=(), kicks=None) -> Trajectories:
+            observers=(), kicks=None, signal=None) -> Trajectories:
         """Simulate runs from ``x0`` (N, n) with window switch instants ``switch_times`` (N,).
 
         ``observers``: callables ``f(t, X, mode_index, rows)`` (``t`` per row) called with the
         visited states. ``kicks(k, count) -> (count, n)``: disturbance added at ``k * step``.
+        ``signal = (step, values)``: the varying bounded inputs (``model.varying_inputs``) are
+        piecewise constant, ``values[r, k]`` on ``[k step, (k+1) step)`` for run ``r``
+        (``values`` is (N, K, m); the last piece lasts to the horizon).
         """
         X = np.array(x0, dtype=float).reshape(-1, self.n).copy()
         N = X.shape[0]
@@ -196,6 +199,21 @@ class Simulator:
         t = np.zeros(N)
         blocked_at = np.full(N, np.nan)
         kick_step = self.model.disturbance.step if (kicks is not None and self.model.disturbance) else None
+        if signal is not None:
+            if kick_step:
+                raise ValueError("input signals and disturbance kicks together are not supported")
+            kick_step, values = float(signal[0]), np.asarray(signal[1], dtype=float)
+            columns = np.array([u.index for u in self.model.varying_inputs])
+
+            def kicks(k, sel):
+                X[np.ix_(sel, columns)] = values[sel, min(k, values.shape[1] - 1)]
+
+            kicks(0, np.arange(N))
+        elif kick_step:
+            disturbance = kicks
+
+            def kicks(k, sel):
+                X[sel] += disturbance(k, sel.size)
         next_kick = np.zeros(N) if kick_step else np.full(N, np.inf)
         kick_count = np.zeros(N, dtype=int)
         recorder = _Recorder() if record else None
@@ -215,8 +233,7 @@ class Simulator:
                 due = active[np.abs(next_kick[active] - t[active]) <= 1e-9 * max(1.0, horizon)]
                 if due.size:
                     for k in np.unique(kick_count[due]):
-                        sel = due[kick_count[due] == k]
-                        X[sel] += kicks(int(k), sel.size)
+                        kicks(int(k), due[kick_count[due] == k])
                     kick_count[due] += 1
                     next_kick[due] = kick_count[due] * kick_step
                     before = mode[due].copy()
@@ -247,7 +264,7 @@ class Simulator:
         steps = int(np.ceil(self.model.horizon / self.dt - 1e-9))    # the horizon may have been cut
         for k in range(steps):
             if kick_every and k % kick_every == 0:
-                X += kicks(k // kick_every, X.shape[0])
+                kicks(k // kick_every, rows)
             h = min(self.dt, self.model.horizon - k * self.dt)
             X[:] = X @ Phi + phi if h == self.dt else self.propagate(name, X, h)
             t[:] = k * self.dt + h
