@@ -229,3 +229,37 @@ def test_write_yaml_sanitises_the_name(tmp_path):
     docs = documents(xml, cfg, name="../../evil name")
     model_path, prop_path = write_yaml(docs, tmp_path / "out")
     assert model_path.parent == tmp_path / "out" / "models" and prop_path is None
+
+
+THERMOSTAT = '''<component id="heater">
+ <param name="T" type="real" local="false" dynamics="any"/>
+ <param name="d" type="real" local="false" dynamics="any" controlled="false"/>
+ <location id="1" name="on"><invariant>T &lt;= 21 &amp; -0.2 &lt;= d &lt;= 0.2</invariant>
+  <flow>T' == -0.1*(T - 10) + 3 + d</flow></location>
+ <location id="2" name="off"><invariant>T &gt;= 19 &amp;&amp; -0.2 &lt;= d &amp; d &lt;= 0.2</invariant>
+  <flow>T' == -0.1*(T - 10) + d</flow></location>
+ <transition source="1" target="2"><guard>T &gt;= 21</guard></transition>
+ <transition source="2" target="1"><guard>T &lt;= 19</guard></transition>
+</component>
+'''
+
+
+def test_thermostat_violation_is_found_saved_and_replayed(tmp_path, capsys):
+    """Hysteresis thermostat with a disturbance input: T <= 20.5 is violated (it heats to 21)."""
+    xml, cfg = write(tmp_path, THERMOSTAT, 'system = heater\ninitially = "loc(heater) == on & T == 20"\n'
+                     'forbidden = "T >= 20.5"\ntime-horizon = 60\n')
+    model, props, _ = load_spaceex(xml, cfg)
+    assert model.varying_inputs[0].name == "d" and len(model.transitions) == 2
+    out = tmp_path / "cex"
+    assert main(["check", str(xml), str(cfg), "-b", "montecarlo", "--counterexamples", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "UNSAFE" in text
+    (saved,) = out.glob("*.json")
+    assert main(["replay", str(saved)]) == 0
+    assert "replayed" in capsys.readouterr().out
+    # independent: no run heats faster than with d = 0.2, whose T' = -0.1 (T - 10) + 3.2 reaches
+    # 20.5 at t = 10 ln((42 - 20) / (42 - 20.5)) (closed form of the linear ODE)
+    import json
+    data = json.loads(saved.read_text())
+    assert data["violation_time"] >= 10 * np.log(22 / 21.5) - 1e-9
+    assert data["violation_state"][0] >= 20.5 and data["input_signal"]["inputs"] == ["d"]

@@ -35,6 +35,7 @@ name 'vyy'``.
 from __future__ import annotations
 
 import ast
+import copy
 from pathlib import Path
 
 import numpy as np
@@ -86,8 +87,9 @@ def load_model(path) -> HybridAutomaton:
 
 
 def model_from_doc(doc: Doc) -> HybridAutomaton:
-    """Build and check a model from a document made elsewhere (the SpaceEx import)."""
-    return _Builder(doc, doc.file).build()
+    """Build and check a model from a document made elsewhere (the SpaceEx import); the
+    document is left as it was (the builder fills in zero flows of bounded inputs)."""
+    return _Builder(Doc(copy.deepcopy(doc.data), doc.lines, doc.file), doc.file).build()
 
 
 class _Builder:
@@ -151,8 +153,8 @@ class _Builder:
         self.names.update(zip(self.state, self.symbols))
         self.names.update(zip(self.inputs, self.input_symbols))
         modes = self.read_modes()
-        for name in self.timeless:
-            modes[name].timeless = True
+        for timeless in self.timeless:
+            modes[timeless].timeless = True
         transitions = self.read_transitions(modes)
         initial = self.read_initial_set(modes, bounded)
         horizon = self.number(self.need("horizon"), self.where("horizon"))

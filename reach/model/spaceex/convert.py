@@ -590,7 +590,8 @@ class DocumentBuilder(Converter):
                 raise InputError(f"{where_key}: loc() without a component in a network of {len(inst)} "
                                  "components", self.cfg.file, line=self.cfg.line(where_key))
             return 0
-        matches = [i for i, x in enumerate(inst) if x.path == comp or x.path.endswith("." + comp)]
+        matches = [i for i, x in enumerate(inst) if x.path == comp or x.path.endswith("." + comp)
+                   or (x.path == "" and x.component.id == comp)]
         if len(matches) > 1:
             raise InputError(f"{where_key}: loc({comp}) is ambiguous", self.cfg.file, line=self.cfg.line(where_key))
         return matches[0] if matches else None
