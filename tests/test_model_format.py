@@ -236,3 +236,14 @@ def test_constant_input_is_a_state_and_other_backends_refuse_varying_ones(tmp_pa
     for backend in ("taylor", "fsr"):
         (r,) = check_files(varying, props, backend)
         assert r.status.value == "UNSUPPORTED" and "time-varying" in r.details["reason"]
+
+
+def test_the_readme_example_loads(tmp_path):
+    from pathlib import Path
+    text = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    block = text.split("## Model format: polytopes, bounded inputs, no clock")[1].split("```yaml")[1].split("```")[0]
+    model = load_model(model_file(tmp_path, "name: readme\nhorizon: 1\n" + block))
+    assert model.state == ["x1", "x2", "x4", "u", "p"] and model.modes["stop"].timeless
+    # x1 = 0.00056 x4 - 0.06 on x4 in [27, 33]
+    assert model.initial.low[0] == pytest.approx(0.00056 * 27 - 0.06)
+    assert model.initial.high[0] == pytest.approx(0.00056 * 33 - 0.06)
