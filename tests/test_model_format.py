@@ -247,3 +247,15 @@ def test_the_readme_example_loads(tmp_path):
     # x1 = 0.00056 x4 - 0.06 on x4 in [27, 33]
     assert model.initial.low[0] == pytest.approx(0.00056 * 27 - 0.06)
     assert model.initial.high[0] == pytest.approx(0.00056 * 33 - 0.06)
+
+
+def test_a_start_outside_the_polytope_does_not_replay(tmp_path):
+    from reach.backends.montecarlo import replay
+    from reach.spec import bind, load_properties
+    model = load_model(model_file(tmp_path, TRIANGLE))
+    props = model_file(tmp_path, """
+        properties:
+          - {id: corner, kind: safety, avoid: ["x >= 0.8", "y >= 0.8"]}
+        """, "p.yaml")
+    prop = bind(load_properties(props)[0], model)
+    assert not replay(model, prop, [0.9, 0.9], None).violated          # in the box, not the set

@@ -263,3 +263,52 @@ def test_thermostat_violation_is_found_saved_and_replayed(tmp_path, capsys):
     data = json.loads(saved.read_text())
     assert data["violation_time"] >= 10 * np.log(22 / 21.5) - 1e-9
     assert data["violation_state"][0] >= 20.5 and data["input_signal"]["inputs"] == ["d"]
+
+
+# ---------------------------------------------------------------- the formula parser
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+import sympy  # noqa: E402
+
+from reach.errors import Where  # noqa: E402
+from reach.model.expr import parse_expr  # noqa: E402
+from reach.model.spaceex.formula import Relation, parse_formula, to_python  # noqa: E402
+
+ATOMS = st.tuples(st.sampled_from(["x", "y", "x + y", "2*x - y"]), st.sampled_from(["<=", "<", ">=", ">"]),
+                  st.integers(-3, 3))
+
+
+def formulas(depth=3):
+    leaf = ATOMS.map(lambda a: (f"{a[0]} {a[1]} {a[2]}", lambda x, y, a=a: _cmp(eval_expr(a[0], x, y), a[1], a[2])))
+    return st.recursive(leaf, lambda sub: st.tuples(sub, st.sampled_from(["&", "&&", "|"]), sub).map(_join),
+                        max_leaves=8)
+
+
+def eval_expr(text, x, y):
+    return {"x": x, "y": y, "x + y": x + y, "2*x - y": 2 * x - y}[text]
+
+
+def _cmp(a, op, b):
+    return {"<=": a <= b, "<": a < b, ">=": a >= b, ">": a > b}[op]
+
+
+def _join(t):
+    (ta, fa), op, (tb, fb) = t
+    if op == "|":
+        return f"({ta}) | ({tb})", lambda x, y: fa(x, y) or fb(x, y)
+    return f"({ta}) {op} ({tb})", lambda x, y: fa(x, y) and fb(x, y)
+
+
+@settings(max_examples=60, deadline=None)
+@given(formulas(), st.lists(st.tuples(st.integers(-4, 4), st.integers(-4, 4)), min_size=5, max_size=10))
+def test_formulas_become_an_equivalent_dnf(formula, points):
+    text, truth = formula
+    dnf = parse_formula(text)
+    for x, y in points:
+        def holds(rel: Relation):
+            a = to_python(rel.parts[0], str)
+            b = to_python(rel.parts[1], str)
+            env = {"x": sympy.Integer(x), "y": sympy.Integer(y)}
+            return _cmp(float(parse_expr(a, env, Where())), rel.ops[0], float(parse_expr(b, env, Where())))
+        assert any(all(holds(r) for r in term) for term in dnf) == truth(x, y)

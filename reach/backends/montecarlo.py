@@ -161,6 +161,11 @@ def replay(model: HybridAutomaton, prop: BoundSafety, initial_state, switch_time
     tau = None if switch_time is None else np.array([float(switch_time)])
     monitor = SafetyMonitor(model, prop, 1)
     signal = _signal_of(model, input_signal)
+    if not model.initial.is_box:
+        init = model.initial
+        if not PolytopeSampler(init.polytope, init.low, init.high).contains(x0)[0]:
+            return Replay(False, float("nan"), "", np.full(model.n, np.nan), float("inf"), x0[0], switch_time,
+                          sim.dt, {"note": "the initial state is outside the initial polytope"})
     traj = sim.run(x0, tau, record=True, observers=[monitor], signal=signal)
     rep = _replay_result(model, monitor, traj, sim, x0, switch_time)
     if signal is not None:
