@@ -36,6 +36,9 @@ PUBLISHED = [
     ("BouncingBall/bball.xml", "BouncingBall/bball.cfg", 2, 1, 1, 0, 0),
     ("BouncingBall/bball_flattened.xml", "BouncingBall/bball_flattened.cfg", 2, 1, 1, 0, 0),
     ("Powertrain/drivetrain_2theta_30percent.xml", "Powertrain/drivetrain_2theta_30percent.cfg", 12, 5, 5, 0, 1),
+    ("Rendezvous_ARCH18/SRA01-SR0_.xml", "Rendezvous_ARCH18/SRA01-SR0_-LOS.cfg", 5, 3, 3, 0, 3),
+    ("Rendezvous_ARCH18/SRA01-SR0_.xml", "Rendezvous_ARCH18/SRA01-SR0_-collision.cfg", 5, 3, 3, 0, 1),
+    ("Rendezvous_ARCH18/SRNA01-SR0_.xml", "Rendezvous_ARCH18/SRNA01-SR0_-LOS.cfg", 5, 2, 1, 0, 3),
 ]
 
 
@@ -78,25 +81,55 @@ def test_powertrain_initial_set_is_the_published_segment():
     assert props[0].raw["modes"] == ["error"]
 
 
-@pytest.mark.parametrize("xml,cfg", [("BouncingBall/bball.xml", "BouncingBall/bball.cfg"),
-                                     ("FilteredOscillator/filtered_oscillator.xml",
-                                      "FilteredOscillator/filtered_oscillator.cfg"),
-                                     ("Building/BLDC01.xml", "Building/BLDC01-BDS01.cfg")])
+@pytest.mark.parametrize("xml,cfg", [
+    ("BouncingBall/bball.xml", "BouncingBall/bball.cfg"),
+    ("FilteredOscillator/filtered_oscillator.xml", "FilteredOscillator/filtered_oscillator.cfg"),
+    ("Building/BLDC01.xml", "Building/BLDC01-BDS01.cfg"),
+    ("Building/BLDF01.xml", "Building/BLDF01-BDU01.cfg"),
+    ("Gearbox/GRBX01-MES01.xml", "Gearbox/GRBX01-MES01.cfg"),
+    ("Platoon/PLAD01-BND.xml", "Platoon/PLAD01-BND42-forbidden.cfg"),
+    ("Powertrain/drivetrain_2theta_30percent.xml", "Powertrain/drivetrain_2theta_30percent.cfg"),
+    ("Rendezvous_ARCH18/SRA01-SR0_.xml", "Rendezvous_ARCH18/SRA01-SR0_-LOS.cfg"),
+])
 def test_simulated_runs_agree_with_solve_ivp(xml, cfg):
-    """The first mode's flow, simulated, against scipy's solve_ivp of the same right-hand side."""
+    """The first stretch of a run in one mode (after jumps at t = 0), simulated, against scipy's
+    solve_ivp of the same right-hand side; time-varying inputs held at their upper bound."""
     model, _, _ = load_spaceex(ROOT / xml, ROOT / cfg)
     model.horizon = min(model.horizon, 0.5)
     x0 = (model.initial.low + model.initial.high) / 2
+    if not model.initial.is_box:
+        from reach.backends.initial_sampling import PolytopeSampler
+        x0 = PolytopeSampler(model.initial.polytope, model.initial.low, model.initial.high).structured()[-1]
+    signal = None
+    if model.varying_inputs:
+        values = np.array([[[u.high for u in model.varying_inputs]]])
+        signal = (model.horizon, values)
+        for u in model.varying_inputs:
+            x0[u.index] = u.high
     sim = Simulator(model, dt=model.horizon / 200)
-    runs = sim.run(x0[None, :], record=True)
-    t, m, X = runs.path[0]
-    first = np.flatnonzero(m != m[0])
-    stop = first[0] if first.size else len(t)
-    rhs = model.modes[model.initial.mode].rhs
-    ref = solve_ivp(lambda s, y: rhs(y[None, :])[0], (0, t[stop - 1]), x0, t_eval=t[:stop],
+    t, m, X = sim.run(x0[None, :], record=True, signal=signal).path[0]
+    start = int(np.flatnonzero(t == 0)[-1])
+    jump = (m[start + 1:] != m[start]) | (np.diff(t[start:]) <= 0)     # a mode change or a self-loop
+    stop = start + 1 + (int(np.argmax(jump)) if jump.any() else len(t) - start - 1)
+    assert t[stop - 1] > 0.01
+    rhs = model.modes[list(model.modes)[m[start]]].rhs
+    ref = solve_ivp(lambda s, y: rhs(y[None, :])[0], (0, t[stop - 1]), X[start], t_eval=t[start:stop],
                     rtol=1e-10, atol=1e-12, method="LSODA")
     scale = 1 + np.abs(ref.y.T).max()
-    assert np.max(np.abs(ref.y.T - X[:stop])) < 1e-6 * scale
+    assert np.max(np.abs(ref.y.T - X[start:stop])) < 1e-6 * scale
+
+
+def test_rendezvous_file_is_the_suites_sra01():
+    """The benchmark authors' SpaceEx SRA01 and the suite's own models/SRA01.yaml: same flows."""
+    imported, _, _ = load_spaceex(ROOT / "Rendezvous_ARCH18/SRA01-SR0_.xml",
+                                  ROOT / "Rendezvous_ARCH18/SRA01-SR0_-LOS.cfg")
+    own = load_model(ROOT.parent / "SRA01.yaml")
+    order = [imported.state.index(s) for s in own.state]
+    for mine, theirs in (("approach", "P2"), ("rendezvous", "P3"), ("passive", "Passive")):
+        A, b = imported.modes[theirs].linear
+        A_own, b_own = own.modes[mine].linear
+        assert np.allclose(A[np.ix_(order, order)], A_own, atol=1e-9) and np.allclose(b[order], b_own)
+    assert np.array_equal(imported.initial.low[order], own.initial.low)
 
 
 def test_bouncing_ball_bounces_at_the_ground():
