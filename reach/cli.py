@@ -101,6 +101,10 @@ def cmd_check_spaceex(args) -> int:
     results, model, docs = check_spaceex(args.model, args.properties, args.backend, _parse_options(args.option))
     for finding in model.lints:
         print(f"warning: {finding}", file=sys.stderr)
+    if args.json:
+        print(json.dumps([{"property": r.property, "status": r.status.value.lower(), "seconds": r.seconds,
+                           **r.to_dict()} for r in results], indent=1))
+        return 0
     print(f"{model.name} with {args.backend}:")
     if not results:
         print(f"  {args.properties} forbids nothing: nothing to check")

@@ -95,7 +95,7 @@ def test_simulated_runs_agree_with_solve_ivp(xml, cfg):
     """The first stretch of a run in one mode (after jumps at t = 0), simulated, against scipy's
     solve_ivp of the same right-hand side; time-varying inputs held at their upper bound."""
     model, _, _ = load_spaceex(ROOT / xml, ROOT / cfg)
-    model.horizon = min(model.horizon, 0.5)
+    model.horizon = min(model.horizon, 0.2)
     x0 = (model.initial.low + model.initial.high) / 2
     if not model.initial.is_box:
         from reach.backends.initial_sampling import PolytopeSampler
@@ -111,10 +111,14 @@ def test_simulated_runs_agree_with_solve_ivp(xml, cfg):
     start = int(np.flatnonzero(t == 0)[-1])
     jump = (m[start + 1:] != m[start]) | (np.diff(t[start:]) <= 0)     # a mode change or a self-loop
     stop = start + 1 + (int(np.argmax(jump)) if jump.any() else len(t) - start - 1)
-    assert t[stop - 1] > 0.01
-    rhs = model.modes[list(model.modes)[m[start]]].rhs
-    ref = solve_ivp(lambda s, y: rhs(y[None, :])[0], (0, t[stop - 1]), X[start], t_eval=t[start:stop],
-                    rtol=1e-10, atol=1e-12, method="LSODA")
+    assert t[stop - 1] > 0.005
+    mode = model.modes[list(model.modes)[m[start]]]
+    if mode.linear is not None:
+        A, b = mode.linear
+        f = lambda s, y: A @ y + b                  # noqa: E731
+    else:
+        f = lambda s, y: mode.rhs(y[None, :])[0]    # noqa: E731
+    ref = solve_ivp(f, (0, t[stop - 1]), X[start], t_eval=t[start:stop], rtol=1e-10, atol=1e-12, method="LSODA")
     scale = 1 + np.abs(ref.y.T).max()
     assert np.max(np.abs(ref.y.T - X[start:stop])) < 1e-6 * scale
 
@@ -345,3 +349,14 @@ def test_formulas_become_an_equivalent_dnf(formula, points):
             env = {"x": sympy.Integer(x), "y": sympy.Integer(y)}
             return _cmp(float(parse_expr(a, env, Where())), rel.ops[0], float(parse_expr(b, env, Where())))
         assert any(all(holds(r) for r in term) for term in dnf) == truth(x, y)
+
+
+def test_dotted_cfg_name_gives_a_valid_property_id_and_json(tmp_path, capsys):
+    xml, cfg = write(tmp_path, NETWORK, 'system = sys\ninitially = "loc(A)==off & loc(B)==idle & x == 0 & y == 0"\n'
+                     'forbidden = "x >= 5"\ntime-horizon = 1\n')
+    dotted = tmp_path / "m.4th_order.cfg"
+    dotted.write_text(cfg.read_text())
+    assert main(["check", str(xml), str(dotted), "-b", "montecarlo", "--json", "-o", "samples=20"]) == 0
+    import json
+    (row,) = json.loads(capsys.readouterr().out)
+    assert row["property"] == "m_4th_order" and row["status"] == "unknown"

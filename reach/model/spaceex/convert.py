@@ -713,8 +713,9 @@ class DocumentBuilder(Converter):
 
     def forbidden_doc(self):
         terms = self.cfg_formula("forbidden")
-        stem = self.cfg.file.rsplit("/", 1)[-1]
-        pid = stem[:-4] if stem.endswith(".cfg") else stem
+        stem = self.cfg.file.replace("\\", "/").rsplit("/", 1)[-1]
+        stem = stem[:-4] if stem.endswith(".cfg") else stem
+        pid = re.sub(r"[^A-Za-z0-9_-]", "_", stem) or "forbidden"     # a property id is a name
         line = self.cfg.line("forbidden")
         props, plines = [], {}
         for term in terms:

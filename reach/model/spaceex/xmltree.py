@@ -89,6 +89,8 @@ def parse_xml(data: bytes, file: str) -> Node:
 def read_xml(path) -> Node:
     path = Path(path)
     try:
+        if path.stat().st_size > MAX_BYTES:
+            raise InputError(f"file larger than {MAX_BYTES} bytes", str(path))
         data = path.read_bytes()
     except FileNotFoundError:
         raise InputError("no such file", str(path)) from None
