@@ -360,3 +360,25 @@ def test_dotted_cfg_name_gives_a_valid_property_id_and_json(tmp_path, capsys):
     import json
     (row,) = json.loads(capsys.readouterr().out)
     assert row["property"] == "m_4th_order" and row["status"] == "unknown"
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.data())
+def test_mangled_models_are_bad_input_or_load(tmp_path_factory, data):
+    """Cut, duplicate or replace a span of a valid XML or cfg: it loads or is one InputError."""
+    tmp = tmp_path_factory.mktemp("mangled")
+    xml_text = HEADER + NETWORK + "</sspaceex>\n"
+    cfg_text = ('system = sys\ninitially = "loc(A)==off & loc(B)==idle & 0 <= x <= 0.5 & y == 0"\n'
+                'forbidden = "loc(B) == busy & y >= 3 | x >= 4"\ntime-horizon = 4\n')
+    which = data.draw(st.sampled_from(["xml", "cfg"]))
+    text = xml_text if which == "xml" else cfg_text
+    i = data.draw(st.integers(0, len(text) - 1))
+    j = data.draw(st.integers(i, min(len(text), i + 12)))
+    piece = data.draw(st.sampled_from(["", text[i:j] * 2, "&", "(", ")", "'", "<", "==", "loc(", "|", "\"", "x"]))
+    text = text[:i] + piece + text[j:]
+    (tmp / "m.xml").write_text(xml_text if which == "cfg" else text)
+    (tmp / "m.cfg").write_text(cfg_text if which == "xml" else text)
+    try:
+        load_spaceex(tmp / "m.xml", tmp / "m.cfg")
+    except InputError as exc:
+        assert str(exc).count("\n") == 0

@@ -621,8 +621,12 @@ class DocumentBuilder(Converter):
         pairs = []
         for r in rels:
             for lhs, op, rhs in _pairs(r):
-                a = to_python(lhs, lambda n: n.replace(".", "_"))
-                b = to_python(rhs, lambda n: n.replace(".", "_"))
+                try:
+                    a = to_python(lhs, lambda n: n.replace(".", "_"))
+                    b = to_python(rhs, lambda n: n.replace(".", "_"))
+                except FormulaError as exc:
+                    raise InputError(f"{where_key}: construct not supported: {exc}", self.cfg.file,
+                                     line=self.cfg.line(where_key)) from None
                 kind = "==" if op in ("==", "=") else "<="
                 if op in (">=", ">"):
                     a, b = b, a
