@@ -382,3 +382,45 @@ def test_mangled_models_are_bad_input_or_load(tmp_path_factory, data):
         load_spaceex(tmp / "m.xml", tmp / "m.cfg")
     except InputError as exc:
         assert str(exc).count("\n") == 0
+
+
+def _same_automaton(a, b):
+    assert a.state == b.state and list(a.modes) == list(b.modes) and a.horizon == b.horizon
+    for name, mode in a.modes.items():
+        other = b.modes[name]
+        assert [sympy.srepr(f) for f in mode.flow] == [sympy.srepr(f) for f in other.flow]
+        assert [(sympy.srepr(c.g), c.strict) for c in mode.invariant] == \
+            [(sympy.srepr(c.g), c.strict) for c in other.invariant]
+        assert mode.timeless == other.timeless
+    assert [(t.name, t.source, t.target, t.urgent, [sympy.srepr(c.g) for c in t.guard],
+             {k: sympy.srepr(v) for k, v in t.reset.items()}) for t in a.transitions] == \
+        [(t.name, t.source, t.target, t.urgent, [sympy.srepr(c.g) for c in t.guard],
+          {k: sympy.srepr(v) for k, v in t.reset.items()}) for t in b.transitions]
+    assert a.initial.mode == b.initial.mode
+    assert np.array_equal(a.initial.low, b.initial.low) and np.array_equal(a.initial.high, b.initial.high)
+    assert (a.initial.polytope is None) == (b.initial.polytope is None)
+    assert a.bounded_inputs == b.bounded_inputs
+
+
+@pytest.mark.parametrize("xml,cfg", [
+    ("Gearbox/GRBX01-MES01.xml", "Gearbox/GRBX01-MES01.cfg"),
+    ("Powertrain/drivetrain_2theta_30percent.xml", "Powertrain/drivetrain_2theta_30percent.cfg"),
+    ("Platoon/PLAD01-BND.xml", "Platoon/PLAD01-BND42-forbidden.cfg"),
+    ("FilteredOscillator/filtered_oscillator.xml", "FilteredOscillator/filtered_oscillator.4th_order.cfg"),
+    ("Rendezvous_ARCH18/SRA01-SR0_.xml", "Rendezvous_ARCH18/SRA01-SR0_-LOS.cfg"),
+    ("Building/BLDF01.xml", "Building/BLDF01-BDU02.cfg"),
+])
+def test_import_round_trip_is_the_same_automaton_and_property(tmp_path, xml, cfg):
+    from reach.spec import bind, load_properties
+    direct, props, docs = load_spaceex(ROOT / xml, ROOT / cfg)
+    model_file, prop_file = write_yaml(docs, tmp_path)
+    again = load_model(model_file)
+    _same_automaton(direct, again)
+    if prop_file is not None:
+        reread = load_properties(prop_file)
+        assert [p.id for p in reread] == [p.id for p in props]
+        for p, q in zip(props, reread):
+            bp, bq = bind(p, direct), bind(q, again)
+            assert bp.modes == bq.modes
+            assert {m: [[sympy.srepr(c.g) for c in piece] for piece in bp.pieces[m]] for m in bp.modes} == \
+                {m: [[sympy.srepr(c.g) for c in piece] for piece in bq.pieces[m]] for m in bq.modes}
