@@ -32,7 +32,7 @@ import numpy as np
 from reach.backends.event_sampling import outside_bounds, sample_extrema
 from reach.backends.taylor import BACKEND
 from reach.backends.taylor.units import sweep_box
-from reach.bench.executors import LocalExecutor
+from reach.executors import LocalExecutor
 from reach.bench.plots import plot_subdomain_map
 from reach.model.loader import load_model
 from reach.spec.properties import bind, load_properties

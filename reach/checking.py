@@ -1,12 +1,25 @@
-"""Check a model file against a property file with one back-end: the core of ``reach check``."""
+"""Check a model file against a property file with one back-end: the core of ``reach check``,
+and the exit code of a list of results (the command-line contract of DESIGN.md):
+
+* 0: every property SAFE (a probability: its threshold proved met);
+* 1: a violation: UNSAFE (always with a replayed counterexample) or a probability interval wholly
+  below its threshold;
+* 3: undecided: some UNKNOWN or UNSUPPORTED, nothing violated.
+
+(2, bad input, is an :class:`InputError` raised before any result exists.) A property whose
+``modes`` the model lacks is bad input, unless the property says ``optional: true``: then, on a
+model with none of its modes, it is not applicable and left out of the exit code.
+"""
 
 from __future__ import annotations
+
+import difflib
 
 from reach.backends import registry
 from reach.backends.base import input_reason, run, unsupported
 from reach.errors import InputError
 from reach.model import load_model
-from reach.result import Result
+from reach.result import Result, Status
 from reach.spec import bind, load_properties
 
 
@@ -28,7 +41,48 @@ def check_files(model_path, property_path, backend_name: str, options: dict | No
         if unknown:
             raise InputError(f"no property '{sorted(unknown)[0]}' in {property_path}", field="--property")
         props = [p for p in props if p.id in only]
+    for prop in props:
+        check_modes(prop, model)
     return check_model(backend, model, [bind(p, model) for p in props], options)
+
+
+def check_modes(prop, model) -> None:
+    """A listed mode the model lacks is an InputError unless the property is ``optional``."""
+    if not isinstance(prop.raw.get("optional", False), bool):
+        raise prop.where("optional").error("expected true or false")
+    modes = prop.raw.get("modes")
+    if not isinstance(modes, list) or prop.raw.get("optional") is True:
+        return
+    for k, mode in enumerate(modes):
+        if mode not in model.modes:
+            close = difflib.get_close_matches(str(mode), list(model.modes), n=1)
+            hint = f" (did you mean '{close[0]}'?)" if close else f" (modes: {', '.join(model.modes)})"
+            raise prop.where("modes", k).error(
+                f"model '{model.name}' has no mode '{mode}'{hint}; write 'optional: true' in the property "
+                "to skip it on models without its modes")
+
+
+def not_applicable(result: Result) -> bool:
+    """An optional property on a model that has none of its modes."""
+    return result.status == Status.UNSUPPORTED and bool(result.details.get("not_applicable"))
+
+
+def violated(result: Result) -> bool:
+    """UNSAFE, or a probability interval wholly below the property's threshold (``at_least``
+    in the details, put there by :func:`check_model`)."""
+    if result.status == Status.UNSAFE:
+        return True
+    at_least = result.details.get("at_least")
+    return (result.probability is not None and at_least is not None
+            and float(result.probability[1]) < float(at_least))
+
+
+def exit_code(results: list[Result]) -> int:
+    """0 all SAFE, 1 a violation, 3 undecided (see the module docstring)."""
+    relevant = [r for r in results if not not_applicable(r)]
+    if any(violated(r) for r in relevant):
+        return 1
+    return 0 if all(r.status == Status.SAFE for r in relevant) else 3
 
 
 def check_model(backend, model, bound: list, options: dict | None = None) -> list[Result]:
@@ -36,6 +90,12 @@ def check_model(backend, model, bound: list, options: dict | None = None) -> lis
     results: dict[int, Result] = {}
     todo = []
     for prop in bound:
+        absent = getattr(prop, "missing_modes", [])
+        if absent and not getattr(prop, "modes", True):
+            results[id(prop)] = unsupported(backend.name, model, prop,
+                                            f"not applicable: the model has no mode {', '.join(absent)}")
+            results[id(prop)].details["not_applicable"] = True
+            continue
         reason = input_reason(backend, model) or backend.supports(model, prop)
         if reason is not None:
             results[id(prop)] = unsupported(backend.name, model, prop, reason)
@@ -47,6 +107,9 @@ def check_model(backend, model, bound: list, options: dict | None = None) -> lis
     else:
         for prop in todo:
             results[id(prop)] = run(backend, model, prop, options)
+    for prop in bound:
+        if getattr(prop, "at_least", None) is not None:
+            results[id(prop)].details.setdefault("at_least", float(prop.at_least))
     return [results[id(p)] for p in bound]
 
 
@@ -57,17 +120,17 @@ def is_spaceex(path) -> bool:
 def check_spaceex(xml_path, cfg_path, backend_name: str, options: dict | None = None):
     """Check a SpaceEx model against its cfg's forbidden set: one property whose id is the cfg's
     file name and whose unsafe set is the union of the forbidden terms. Returns
-    ``(results, model, documents)`` (no result when the cfg forbids nothing)."""
+    ``(results, model, documents, {id: bound property})`` (no result when the cfg forbids nothing)."""
     from reach.model.spaceex import load_spaceex
     from reach.spec.properties import BoundSafety
 
     backend = resolve_backend(backend_name)
     model, props, docs = load_spaceex(xml_path, cfg_path)
     if not props:
-        return [], model, docs
+        return [], model, docs, {}
     bound = [bind(p, model) for p in props]
     modes = [m for m in model.modes if any(m in b.modes for b in bound)]
     pieces = {m: [piece for b in bound for piece in b.pieces.get(m, [])] for m in modes}
     merged = BoundSafety(docs.property_id, modes, pieces, model.symbols, str(cfg_path),
                          f"forbidden set of {cfg_path}")
-    return check_model(backend, model, [merged], options), model, docs
+    return check_model(backend, model, [merged], options), model, docs, {merged.id: merged}

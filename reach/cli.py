@@ -10,8 +10,17 @@
     reach import MODEL.xml [CONFIG.cfg] --out DIR   (SpaceEx -> models/ and properties/ YAML)
     reach check MODEL.xml CONFIG.cfg ...           (a SpaceEx model against its cfg's forbidden set)
 
-Bad input prints one line ``file:line: field: message`` and exits with 2. ``check`` prints the
-model's lints (structural findings, :mod:`reach.model.lint`) to stderr as ``warning: ...``.
+Exit codes (``check``, ``replay``, ``bench``; see :mod:`reach.checking`):
+
+* 0 every property SAFE (``bench``: every cross-check and expected verdict holds);
+* 1 a violation: UNSAFE with a replayed counterexample, a probability wholly below its threshold
+  (``replay``: the counterexample replays; ``bench``: a failed cross-check);
+* 2 bad input or options: one line ``file:line: field: message``, no traceback;
+* 3 undecided: UNKNOWN or UNSUPPORTED left, nothing violated (``replay``: the run does not violate).
+
+``check`` prints the model's lints (structural findings, :mod:`reach.model.lint`) to stderr as
+``warning: ...``. Names from user files are escaped on output; files written from them go inside
+their output folder (:func:`reach.paths.safe_name`).
 """
 
 from __future__ import annotations
@@ -19,6 +28,8 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
+import os
 import sys
 from pathlib import Path
 
@@ -26,18 +37,25 @@ import yaml
 
 from reach.errors import InputError
 from reach.locate import find_model
-from reach.result import Status
+from reach.paths import printable, safe_name
+
+EXIT_CODES = """exit codes: 0 every property SAFE; 1 a violation (UNSAFE with a replayed counterexample, a
+probability below its threshold; bench: a failed cross-check); 2 bad input or options (one line
+file:line: field: message); 3 undecided (UNKNOWN or UNSUPPORTED left, nothing violated)"""
+MAX_OPTION_TEXT = 10_000
 
 
 def _parse_options(pairs: list[str]) -> dict:
     options = {}
     for pair in pairs or []:
+        if len(pair) > MAX_OPTION_TEXT:
+            raise InputError(f"option longer than {MAX_OPTION_TEXT} characters", field="--option")
         if "=" not in pair:
             raise InputError(f"expected KEY=VALUE, got '{pair}'", field="--option")
         key, value = pair.split("=", 1)
         try:
             options[key.strip()] = yaml.safe_load(value)
-        except yaml.YAMLError:
+        except (yaml.YAMLError, RecursionError):
             raise InputError(f"cannot read the value of '{key}'", field="--option") from None
         if isinstance(options[key.strip()], str):
             try:                    # YAML 1.1 reads 1e-4 (no dot) as text
@@ -48,45 +66,44 @@ def _parse_options(pairs: list[str]) -> dict:
 
 
 def cmd_check(args) -> int:
-    from reach.checking import check_files, is_spaceex
+    from reach.checking import check_files, exit_code, is_spaceex
+    from reach.model import load_model
+    from reach.report import json_row
+    from reach.spec import bind, load_properties
 
     if is_spaceex(args.model):
         return cmd_check_spaceex(args)
     if args.verbose:
         logging.basicConfig(stream=sys.stderr, format="%(name)s: %(message)s")
         logging.getLogger("reach").setLevel(logging.INFO)
-
     model_path = find_model(args.model)
-    from reach.model import load_model
-    for finding in load_model(model_path).lints:
-        print(f"warning: {finding}", file=sys.stderr)
+    model = load_model(model_path)
+    for finding in model.lints:
+        print(printable(f"warning: {finding}"), file=sys.stderr)
     results = check_files(model_path, args.properties, args.backend, _parse_options(args.option),
                           args.property)
+    bound = {p.id: bind(p, model) for p in load_properties(args.properties)
+             if not args.property or p.id in args.property}
     saved = {}
     if args.counterexamples:
         out = Path(args.counterexamples)
         for r in results:
             if r.counterexample is not None:
-                out.mkdir(parents=True, exist_ok=True)
-                path = out / f"{r.model}_{r.property}_{r.backend}.json"
+                path = out / (safe_name(f"{r.model}_{r.property}_{r.backend}") + ".json")
+                _writable(path, "--counterexamples")
                 r.counterexample.save(path)
                 saved[r.property] = str(path)
     if args.json:
-        rows = []
-        for r in results:
-            row = {"property": r.property, "status": r.status.value.lower(), "seconds": r.seconds}
-            row.update(r.to_dict())
-            if r.property in saved:
-                row["counterexample_file"] = saved[r.property]
-            rows.append(row)
+        rows = [json_row(r, bound.get(r.property), model, saved.get(r.property)) for r in results]
         print(json.dumps(rows, indent=1))
-        return 0
-    print(f"{results[0].model if results else args.model} with {args.backend}:")
+        return exit_code(results)
+    print(printable(f"{results[0].model if results else args.model} with {args.backend}:"))
     for r in results:
-        print(f"  {r.property:<16} {r.status.value:<11} {r.seconds:8.2f} s  {summary(r)}")
+        print(printable(f"  {r.property:<16} {r.status.value:<11} {r.seconds:8.2f} s  "
+                        f"{summary(r, bound.get(r.property), model)}"))
         if r.property in saved:
-            print(f"  {'':<16} counterexample: {saved[r.property]}  (reach replay {saved[r.property]})")
-    return 0
+            print(printable(f"  {'':<16} counterexample: {saved[r.property]}  (reach replay {saved[r.property]})"))
+    return exit_code(results)
 
 
 def cmd_check_spaceex(args) -> int:
@@ -98,28 +115,37 @@ def cmd_check_spaceex(args) -> int:
     if args.verbose:
         logging.basicConfig(stream=sys.stderr, format="%(name)s: %(message)s")
         logging.getLogger("reach").setLevel(logging.INFO)
-    results, model, docs = check_spaceex(args.model, args.properties, args.backend, _parse_options(args.option))
+    from reach.checking import exit_code
+    from reach.report import json_row
+
+    results, model, docs, bound = check_spaceex(args.model, args.properties, args.backend,
+                                                _parse_options(args.option))
     for finding in model.lints:
-        print(f"warning: {finding}", file=sys.stderr)
-    if args.json:
-        print(json.dumps([{"property": r.property, "status": r.status.value.lower(), "seconds": r.seconds,
-                           **r.to_dict()} for r in results], indent=1))
-        return 0
-    print(f"{model.name} with {args.backend}:")
-    if not results:
-        print(f"  {args.properties} forbids nothing: nothing to check")
+        print(printable(f"warning: {finding}"), file=sys.stderr)
+    saved = {}
     for r in results:
-        print(f"  {r.property:<16} {r.status.value:<11} {r.seconds:8.2f} s  {summary(r)}")
         if r.counterexample is not None and args.counterexamples:
             model_file, prop_file = write_yaml(docs, args.counterexamples)
             cex = r.counterexample
             cex.model_file, cex.property_file = str(model_file), str(prop_file)
             # the YAML property file names each forbidden term; replay the one that was hit
             cex.property = _term_hit(docs, model, cex)
-            path = Path(args.counterexamples) / f"{model_file.stem}_{r.backend}.json"
+            path = Path(args.counterexamples) / (safe_name(f"{model_file.stem}_{r.backend}") + ".json")
             cex.save(path)
-            print(f"  {'':<16} counterexample: {path}  (reach replay {path})")
-    return 0
+            saved[r.property] = str(path)
+    if args.json:
+        print(json.dumps([json_row(r, bound.get(r.property), model, saved.get(r.property)) for r in results],
+                         indent=1))
+        return exit_code(results)
+    print(printable(f"{model.name} with {args.backend}:"))
+    if not results:
+        print(printable(f"  {args.properties} forbids nothing: nothing to check"))
+    for r in results:
+        print(printable(f"  {r.property:<16} {r.status.value:<11} {r.seconds:8.2f} s  "
+                        f"{summary(r, bound.get(r.property), model)}"))
+        if r.property in saved:
+            print(printable(f"  {'':<16} counterexample: {saved[r.property]}  (reach replay {saved[r.property]})"))
+    return exit_code(results)
 
 
 def _term_hit(docs, model, cex) -> str:
@@ -146,29 +172,22 @@ def cmd_import(args) -> int:
     return 0
 
 
-def summary(result) -> str:
-    """One line of the most telling details of a result."""
-    d = result.details
-    if result.status == Status.UNSUPPORTED:
-        return d.get("reason", "")
-    if result.counterexample is not None:
-        c = result.counterexample
-        abort = "" if c.switch_time is None else f", switch at t={c.switch_time:g}"
-        return f"violated at t={c.violation_time:.4g} in {c.violation_mode}{abort}"
-    parts = []
-    if result.probability is not None:
-        parts.append(f"P in [{result.probability[0]:.4f}, {result.probability[1]:.4f}]")
-    if result.bound is not None:
-        parts.append(f"bound [{result.bound[0]:.4g}, {result.bound[1]:.4g}]")
-    if "closest_depth" in d:
-        parts.append(f"closest margin {d['closest_depth']:.4g}")
-    if "violation_probability_upper_95" in d:
-        parts.append(f"P(violation) <= {d['violation_probability_upper_95']:.2g} (95 %)")
-    if "method" in d:
-        parts.append(str(d["method"]))
-    if "remainder" in d:
-        parts.append(f"remainder {d['remainder']}")
-    return ", ".join(parts)
+def _writable(path: Path, option: str) -> None:
+    """Create ``path``'s folder; a folder that cannot be made or written is bad input."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"cannot create the folder {path.parent} ({exc.__class__.__name__})", field=option) from None
+    if not os.access(path.parent, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
+        raise InputError(f"cannot write {path}", field=option)
+
+
+def summary(result, prop, model) -> str:
+    """One line of the most telling details of a result, in the requirement's units
+    (:func:`reach.report.line`)."""
+    from reach.report import line
+
+    return line(result, prop, model)
 
 
 def cmd_lint(args) -> int:
@@ -185,7 +204,7 @@ def cmd_lint(args) -> int:
             files.append(find_model(name))
     findings = [line for f in files for line in load_model(f).lints]
     for line in findings:
-        print(line)
+        print(printable(line))
     if not findings:
         print(f"no findings ({len(files)} model{'s' if len(files) != 1 else ''})")
     return 1 if findings else 0
@@ -197,49 +216,65 @@ def cmd_replay(args) -> int:
     from reach.result import Counterexample
     from reach.spec import bind, load_properties
 
-    path = Path(args.counterexample)
-    try:
-        data = json.loads(path.read_text())
-    except FileNotFoundError:
-        raise InputError("no such file", str(path)) from None
-    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(f"not a counterexample file: {exc.__class__.__name__}", str(path)) from None
-    if not isinstance(data, dict) or not {"model_file", "property_file", "property", "initial_state"} <= set(data):
-        raise InputError("not a counterexample file (needs model_file, property_file, property, initial_state)",
-                         str(path))
-    cex = Counterexample.from_dict(data)
+    cex = Counterexample.load(args.counterexample)
     model = load_model(cex.model_file)
     props = [p for p in load_properties(cex.property_file) if p.id == cex.property]
     if not props:
-        raise InputError(f"property '{cex.property}' is not in {cex.property_file}", str(path), "property")
+        raise InputError(f"property '{cex.property}' is not in {cex.property_file}", args.counterexample, "property")
     if len(cex.initial_state) != model.n:
-        raise InputError(f"initial_state has {len(cex.initial_state)} values, the model {model.n}", str(path),
-                         "initial_state")
+        raise InputError(f"initial_state has {len(cex.initial_state)} values, the model {model.n}",
+                         args.counterexample, "initial_state")
     prop = bind(props[0], model)
     rep = replay(model, prop, cex.initial_state, cex.switch_time, cex.dt or None, cex.input_signal)
     state = ", ".join(f"{n}={v:.6g}" for n, v in zip(model.state, rep.state))
     if rep.violated:
-        print(f"replayed: {model.name} violates '{prop.id}' at t={rep.time:.6g} in mode {rep.mode} "
-              f"(depth {rep.depth:.3g}); state {state}")
-        return 0
-    print(f"NOT replayed: {model.name} satisfies '{prop.id}' along this run (closest margin {rep.depth:.4g})")
-    return 1
+        print(printable(f"replayed: {model.name} violates '{prop.id}' at t={rep.time:.6g} in mode {rep.mode} "
+                        f"(depth {rep.depth:.3g}); state {state}"))
+        return 1
+    print(printable(f"NOT replayed: {model.name} satisfies '{prop.id}' along this run "
+                    f"(closest margin {rep.depth:.4g})"))
+    return 3
+
+
+def _figure_path(out: str | None, default: Path) -> Path:
+    """The output file of a picture: a format matplotlib writes, in a folder that can be written."""
+    from matplotlib.figure import Figure
+
+    path = Path(out) if out else default
+    formats = Figure().canvas.get_supported_filetypes()
+    if path.suffix.lstrip(".").lower() not in formats:
+        raise InputError(f"unknown picture format '{path.suffix or '(none)'}'; use one of "
+                         f"{', '.join('.' + f for f in sorted(formats))}", field="--out")
+    _writable(path, "--out")
+    return path
+
+
+def _number(value: float, option: str, low: float, high: float | None = None, open_low: bool = False):
+    if not math.isfinite(value) or value < low or (open_low and value <= low) or (high is not None and value > high):
+        bound = f"{'>' if open_low else '>='} {low:g}" + ("" if high is None else f" and <= {high:g}")
+        raise InputError(f"expected a number {bound}, got {value}", field=option)
+    return value
 
 
 def cmd_plot(args) -> int:
     from reach.bench.plots import plot_model_runs
     from reach.model import load_model
 
+    _number(args.runs, "--runs", 1, 10_000)
     model = load_model(find_model(args.model))
-    out = Path(args.out or f"results/plots/{model.name}_runs.png")
+    out = _figure_path(args.out, Path("results/plots") / f"{safe_name(model.name)}_runs.png")
     plot_model_runs(model, out, runs=args.runs, seed=args.seed)
-    print(f"wrote {out}")
+    print(printable(f"wrote {out}"))
     return 0
 
 
 def cmd_bench(args) -> int:
     from reach.bench.runner import run_suite
 
+    if args.time_limit is not None:
+        _number(args.time_limit, "--time-limit", 0.0, 7 * 86400.0, open_low=True)
+    if args.jobs is not None:
+        _number(args.jobs, "--jobs", 1, 256)
     return run_suite(args.suite, backends=args.backend, instances=args.instance, out=args.out,
                      jobs=args.jobs, scheduler=args.scheduler, time_limit=args.time_limit)
 
@@ -248,43 +283,59 @@ def cmd_sweep(args) -> int:
     import time
 
     from reach.backends.star import arc_cells, safe_abort_map
-    from reach.bench.executors import make_executor
     from reach.bench.plots import plot_abort_map
+    from reach.executors import make_executor
     from reach.model import load_model
 
+    _number(args.radius, "--radius", 0.0, open_low=True)
+    _number(args.cells, "--cells", 1, 1000)
+    _number(args.start, "--start", -360.0, 720.0)
+    _number(args.end, "--end", -360.0, 720.0)
+    if args.jobs is not None:
+        _number(args.jobs, "--jobs", 1, 256)
     model_path = find_model(args.model)
     model = load_model(model_path)
     windows = [tr.window for tr in model.transitions if tr.window is not None]
     if not windows:
         raise InputError(f"model '{model.name}' has no abort window to sweep", str(model_path))
     window = (min(w[1] for w in windows), max(w[2] for w in windows))
+    out = _figure_path(args.out, Path("results/plots") / f"{safe_name(model.name)}_abort_map.png")
     cells = arc_cells(model, args.radius, args.cells, args.start, args.end)
     start = time.perf_counter()
     times = safe_abort_map(model_path, [args.properties], cells, args.property, {},
                            make_executor(args.jobs, args.scheduler))
     seconds = time.perf_counter() - start
-    out = Path(args.out or f"results/plots/{model.name}_abort_map.png")
     plot_abort_map(cells, times, window, out, f"{model.name}: latest safe abort ({seconds:.1f} s)")
     print(f"| angle [deg] | x [m] | y [m] | latest safe abort [{model.units.time}] |")
     print("|---|---|---|---|")
     for (low, high, angle), t in zip(cells, times):
         print(f"| {angle:.1f} | [{low[0]:.0f}, {high[0]:.0f}] | [{low[1]:.0f}, {high[1]:.0f}] | {t:.2f} |")
-    print(f"{len(cells)} cells in {seconds:.1f} s; wrote {out}")
+    print(printable(f"{len(cells)} cells in {seconds:.1f} s; wrote {out}"))
     return 0
 
 
 def cmd_compare(args) -> int:
     from reach.bench.tables import compare_runs
 
-    print(compare_runs(args.old, args.new))
+    for line in compare_runs(args.old, args.new).splitlines():
+        print(printable(line))
     return 0
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with the contract's one-line errors (exit 2) instead of a usage block."""
+
+    def error(self, message):
+        print(printable(f"{self.prog}: {message}"), file=sys.stderr)
+        raise SystemExit(2)
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="reach", description="Reachability verification of spacecraft "
-                                     "guidance and control: one model, several back-ends.")
-    sub = parser.add_subparsers(dest="command", required=True)
-    p = sub.add_parser("check", help="check a model against a property file")
+    parser = _Parser(prog="reach", description="Reachability verification of spacecraft "
+                     "guidance and control: one model, several back-ends.", epilog=EXIT_CODES,
+                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    p = sub.add_parser("check", help="check a model against a property file", epilog=EXIT_CODES)
     p.add_argument("model", help="model file, or a model's name (searched in models/)")
     p.add_argument("properties", help="property file")
     p.add_argument("--backend", "-b", default="montecarlo")
@@ -298,7 +349,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("lint", help="structural checks of models (zero-dwell cycles); exit 1 on findings")
     p.add_argument("models", nargs="+", help="model files, names, or directories of models")
     p.set_defaults(func=cmd_lint)
-    p = sub.add_parser("replay", help="replay a counterexample file with the simulator")
+    p = sub.add_parser("replay", help="replay a counterexample file with the simulator "
+                       "(exit 1: it violates the property, 3: it does not)", epilog=EXIT_CODES)
     p.add_argument("counterexample")
     p.set_defaults(func=cmd_replay)
     p = sub.add_parser("plot", help="plot sample runs of a model, coloured by mode")
@@ -307,7 +359,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out")
     p.set_defaults(func=cmd_plot)
-    p = sub.add_parser("bench", help="run the benchmark suite")
+    p = sub.add_parser("bench", help="run the benchmark suite (exit 1 on a failed cross-check)", epilog=EXIT_CODES)
     p.add_argument("--suite", default="suite.yaml")
     p.add_argument("--backend", "-b", action="append", help="only this back-end (repeatable)")
     p.add_argument("--instance", "-i", action="append", help="only this instance (repeatable)")
@@ -329,7 +381,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scheduler", help="Dask scheduler address")
     p.add_argument("--out")
     p.set_defaults(func=cmd_sweep)
-    p = sub.add_parser("compare", help="what changed between two results.json files")
+    p = sub.add_parser("compare", help="what changed between two results.json files (rows added, changed, gone)")
     p.add_argument("old")
     p.add_argument("new")
     p.set_defaults(func=cmd_compare)
@@ -342,15 +394,29 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
+    """Run one command; every failure becomes one line on stderr and an exit code of the contract."""
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
     except InputError as exc:
-        print(f"reach: {exc}", file=sys.stderr)
+        print(printable(f"reach: {exc}"), file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("reach: interrupted", file=sys.stderr)
         return 130
+    except MemoryError:
+        print("reach: out of memory: the problem is too large for this machine (nothing was decided)",
+              file=sys.stderr)
+        return 3
+    except RecursionError:
+        print("reach: input nested too deeply (nothing was decided)", file=sys.stderr)
+        return 2
+    except Exception as exc:  # a defect in reach, not in the input: one line, and undecided
+        if os.environ.get("REACH_DEBUG"):
+            raise
+        print(printable(f"reach: internal error: {exc.__class__.__name__}: {exc} "
+                        "(nothing was decided; please report it with the input)"), file=sys.stderr)
+        return 3
 
 
 if __name__ == "__main__":

@@ -56,6 +56,49 @@ class Counterexample:
         names = {f for f in cls.__dataclass_fields__}
         return cls(**{k: v for k, v in data.items() if k in names})
 
+    @classmethod
+    def load(cls, path) -> "Counterexample":
+        """Read a counterexample file (JSON under the size cap, fields checked); InputError otherwise.
+
+        ``model_file`` and ``property_file`` must name model and property files by their suffix
+        (``.yaml``/``.yml``, or SpaceEx ``.xml``/``.cfg``); they are opened by the loaders, which
+        read only regular files under the size cap and never quote a file that is not a model.
+        """
+        from reach.errors import InputError
+        from reach.paths import printable, read_text
+
+        file = printable(str(path))
+        text = read_text(path, (".json",), "counterexample file")
+        try:
+            data = json.loads(text)
+        except (json.JSONDecodeError, RecursionError, ValueError) as exc:
+            raise InputError(f"not a counterexample file: invalid JSON ({exc.__class__.__name__})", file) from None
+        if not isinstance(data, dict):
+            raise InputError("not a counterexample file (expected a JSON object)", file)
+        for key, kinds in (("model_file", (".yaml", ".yml", ".xml")), ("property_file", (".yaml", ".yml", ".cfg"))):
+            value = data.get(key)
+            if not isinstance(value, str) or not value:
+                raise InputError("not a counterexample file: expected a file name", file, key)
+            if Path(value).suffix.lower() not in kinds:
+                raise InputError(f"expected a {' or '.join(kinds)} file", file, key)
+        if not isinstance(data.get("property"), str):
+            raise InputError("not a counterexample file: expected a property id", file, "property")
+        state = data.get("initial_state")
+        if not isinstance(state, list) or not state or not all(_finite(v) for v in state):
+            raise InputError("expected a list of finite numbers", file, "initial_state")
+        for key in ("switch_time", "dt"):
+            if data.get(key) is not None and not (_finite(data[key]) and data[key] >= 0):
+                raise InputError("expected a finite number >= 0 or null", file, key)
+        data.setdefault("switch_time", None)
+        data.setdefault("dt", 0.0)
+        for key, default in (("model", ""), ("violation_time", 0.0), ("violation_mode", ""),
+                             ("violation_state", [])):
+            data.setdefault(key, default)
+        try:
+            return cls.from_dict(data)
+        except TypeError as exc:
+            raise InputError(f"not a counterexample file ({exc})", file) from None
+
     def save(self, path) -> None:
         Path(path).write_text(json.dumps(self.to_dict(), indent=1))
 
@@ -82,6 +125,10 @@ class Result:
             "details": self.details,
         }
         return _plain(out)
+
+
+def _finite(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and bool(np.isfinite(value))
 
 
 def _plain(obj):

@@ -7,14 +7,12 @@ loader only) and a map from field path to line, so a loader can say
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import yaml
 
 from reach.errors import InputError, Where
+from reach.paths import MAX_BYTES, YAML_SUFFIXES, printable, read_text
 
 MAX_NODES = 200_000
-MAX_BYTES = 5_000_000
 
 
 class Doc:
@@ -32,10 +30,7 @@ class Doc:
                 if tuple(path[:k]) in self.lines:
                     file, line = self.lines[tuple(path[:k])]
                     break
-        field = ""
-        for key in path:
-            field = f"{field}[{key}]" if isinstance(key, int) else (f"{field}.{key}" if field else str(key))
-        return Where(file, field, line)
+        return Where(file, _field(path) or "", line)
 
 
 def _convert(node, loader, path, lines, file, budget):
@@ -49,7 +44,10 @@ def _convert(node, loader, path, lines, file, budget):
             if not isinstance(key_node, yaml.ScalarNode):
                 raise InputError("mapping keys must be plain names", file, line=key_node.start_mark.line + 1)
             key = loader.construct_object(key_node)
-            if not isinstance(key, (str, int, float)) or isinstance(key, bool):
+            if isinstance(key, bool) or key is None:
+                raise InputError(f"YAML reads the name '{printable(key_node.value)}' as {str(key).lower()}: quote it "
+                                 f"(\"{printable(key_node.value)}\")", file, _field(path), key_node.start_mark.line + 1)
+            if not isinstance(key, (str, int, float)):
                 key = str(key)
             if key in out:
                 raise InputError(f"duplicate key '{key}'", file, line=key_node.start_mark.line + 1)
@@ -87,15 +85,17 @@ def parse_text(text: str, file: str) -> Doc:
 
 
 def load(path) -> Doc:
-    """Read and parse a YAML file; a missing or unreadable file is an InputError."""
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError("no such file", str(path)) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read file: {exc.__class__.__name__}", str(path)) from None
+    """Read and parse a YAML file: a regular ``.yaml``/``.yml`` file under the size cap
+    (:func:`reach.paths.read_text`); anything else is an InputError."""
+    text = read_text(path, YAML_SUFFIXES, "YAML file", MAX_BYTES)
     return parse_text(text, str(path))
+
+
+def _field(path: tuple) -> str | None:
+    field = ""
+    for key in path:
+        field = f"{field}[{key}]" if isinstance(key, int) else (f"{field}.{key}" if field else str(key))
+    return field or None
 
 
 def merge(base: Doc, child: Doc) -> Doc:

@@ -2,7 +2,7 @@
 
 import pytest
 
-from reach.bench.executors import DaskExecutor, LocalExecutor
+from reach.executors import DaskExecutor, LocalExecutor
 from reach.bench.runner import run_unit
 
 UNITS = [("models/SRA01.yaml", "properties/thrust_7N.yaml", "montecarlo", {"samples": 40, "search_rounds": 0}),

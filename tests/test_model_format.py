@@ -214,11 +214,11 @@ def test_counterexample_carries_its_signal_and_replays(tmp_path):
     assert x_then == pytest.approx(cex.violation_state[0], abs=1e-9) and x_then > 1.5
     file = tmp_path / "cex.json"
     cex.save(file)
-    assert main(["replay", str(file)]) == 0
+    assert main(["replay", str(file)]) == 1                # it violates the property
     data = json.loads(file.read_text())
     data["input_signal"]["values"] = [[-v[0]] for v in data["input_signal"]["values"]]
     file.write_text(json.dumps(data))
-    assert main(["replay", str(file)]) == 1                # the mirrored signal stays below 1.5
+    assert main(["replay", str(file)]) == 3                # the mirrored signal stays below 1.5
     del data["input_signal"]
     file.write_text(json.dumps(data))
     assert main(["replay", str(file)]) == 2

@@ -87,26 +87,27 @@ def test_confidence_intervals():
 def test_cli_check_json_and_replay(tmp_path):
     out = subprocess.run([sys.executable, "-m", "reach", "check", "SRA01", "properties/thrust_7N.yaml",
                           "--json", "-o", "samples=100", "-o", "search_rounds=0",
-                          "--counterexamples", str(tmp_path)], capture_output=True, text=True, check=True)
+                          "--counterexamples", str(tmp_path)], capture_output=True, text=True)
+    assert out.returncode == 1, out.stderr       # a violation
     rows = json.loads(out.stdout)
     assert rows[0]["property"] == "thrust_7N" and rows[0]["status"] == "unsafe" and rows[0]["seconds"] > 0
     replayed = subprocess.run([sys.executable, "-m", "reach", "replay", rows[0]["counterexample_file"]],
                               capture_output=True, text=True)
-    assert replayed.returncode == 0 and replayed.stdout.startswith("replayed:")
+    assert replayed.returncode == 1 and replayed.stdout.startswith("replayed:")
     # a tampered counterexample (start moved inside the bound) does not replay
     data = json.loads(open(rows[0]["counterexample_file"]).read())
     data["initial_state"] = [-500.0, -200.0, 0.0, 0.0, 0.0]
     (tmp_path / "tampered.json").write_text(json.dumps(data))
     tampered = subprocess.run([sys.executable, "-m", "reach", "replay", str(tmp_path / "tampered.json")],
                               capture_output=True, text=True)
-    assert tampered.returncode == 1 and tampered.stdout.startswith("NOT replayed")
+    assert tampered.returncode == 3 and tampered.stdout.startswith("NOT replayed")
 
 
 @pytest.mark.parametrize("args, message", [
     (["check", "NOPE", "properties/rendezvous.yaml"], "no model named 'NOPE'"),
     (["check", "SRA01", "properties/rendezvous.yaml", "-b", "magic"], "unknown back-end 'magic'"),
     (["check", "SRA01", "properties/missing.yaml"], "properties/missing.yaml: no such file"),
-    (["replay", "suite.yaml"], "not a counterexample file"),
+    (["replay", "suite.yaml"], "a counterexample file must be a .json file"),
 ])
 def test_cli_bad_input_is_one_line_and_exit_2(args, message):
     out = subprocess.run([sys.executable, "-m", "reach", *args], capture_output=True, text=True)

@@ -68,7 +68,7 @@ from scipy.special import ndtr
 
 from reach.backends import fsr_fourier
 from reach.backends.base import unsupported
-from reach.backends.options import option_error, parse_options
+from reach.backends.options import option_error, parse_options, ranged
 from reach.model.ltv import KickedLinearSystem
 from reach.model.constraints import halfspaces
 from reach.result import Result, Status
@@ -82,13 +82,13 @@ METHODS = ("auto", "genz", "markov", "fourier")   # auto: genz, or fourier for a
 
 @dataclass
 class Options:
-    abs_error: float = 1e-3          # target half-width of the integration error
+    abs_error: float = ranged(1e-3, 1e-9, 0.5)         # target half-width of the integration error
     drop_budget: float | None = None  # Boole budget for dropped constraints (default abs_error / 10)
     method: str = "auto"             # auto | genz | markov | fourier
     seed: int = 0
-    max_points: int = 2 ** 22        # quasi-Monte Carlo evaluations at most
-    max_frequencies: int = fsr_fourier.MAX_FREQUENCIES   # Fourier path: frequency vectors at most
-    max_rows: int = 1000             # reach-avoid: constraint rows integrated at most (row cap)
+    max_points: int = ranged(2 ** 22, 1, 2 ** 30)       # quasi-Monte Carlo evaluations at most
+    max_frequencies: int = ranged(fsr_fourier.MAX_FREQUENCIES, 1, 10 ** 8)  # Fourier path: frequency vectors at most
+    max_rows: int = ranged(1000, 1, 100_000)            # reach-avoid: constraint rows integrated at most (row cap)
 
     @classmethod
     def from_dict(cls, options: dict | None) -> "Options":

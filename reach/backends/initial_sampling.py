@@ -26,9 +26,11 @@ import numpy as np
 import scipy.linalg
 
 from reach import lp
+from reach.errors import InputError
 from reach.model.automaton import HybridAutomaton, LinearSet
 
 MAX_SUBSETS = 4000
+MAX_PIECES = 100_000
 TOL = 1e-9
 
 
@@ -164,7 +166,11 @@ def _unique(Z: np.ndarray) -> np.ndarray:
 def input_step(model: HybridAutomaton, dt: float, step: float | None) -> float:
     """The signals' piece length: ``step`` (default horizon / 20) as a multiple of ``dt``."""
     step = model.horizon / 20.0 if step is None else float(step)
-    return dt * max(1, int(round(step / dt)))
+    step = dt * max(1, int(round(step / dt)))
+    if model.horizon / step > MAX_PIECES:
+        raise InputError(f"input_step {step:g} cuts the horizon into more than {MAX_PIECES} pieces",
+                         field="--option input_step")
+    return step
 
 
 def pieces(model: HybridAutomaton, step: float) -> int:

@@ -36,7 +36,7 @@ import numpy as np
 
 from reach.backends.event_sampling import check_events, replay_event
 from reach.backends.initial_sampling import PolytopeSampler, input_signals, input_step, structured_signals
-from reach.backends.options import parse_options
+from reach.backends.options import parse_options, ranged
 from reach.errors import InputError
 from reach.model.automaton import HybridAutomaton
 from reach.model.constraints import lambdify_margins
@@ -50,12 +50,12 @@ NAME = "montecarlo"
 
 @dataclass
 class Options:
-    samples: int = 1000            # i.i.d. runs (safety) or runs (stochastic reach)
-    search_rounds: int = 3         # cross-entropy generations after the i.i.d. round
-    search_size: int = 200         # runs per generation
+    samples: int = ranged(1000, 1, 10_000_000)           # i.i.d. runs (safety) or runs (stochastic reach)
+    search_rounds: int = ranged(3, 0, 1000)        # cross-entropy generations after the i.i.d. round
+    search_size: int = ranged(200, 1, 1_000_000)        # runs per generation
     seed: int = 0
     dt: float | None = None        # simulator grid step (model default if None)
-    batch: int = 20000             # runs per numpy batch for stochastic estimates
+    batch: int = ranged(20000, 1, 1_000_000)            # runs per numpy batch for stochastic estimates
     input_step: float | None = None  # piece length of sampled input signals (horizon/20 if None)
 
     @classmethod

@@ -10,7 +10,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from reach.bench.crosscheck import cross_check
-from reach.bench.executors import make_executor
+from reach.executors import make_executor
 from reach.bench.suite import load_suite
 from reach.bench.tables import markdown_table
 from reach.errors import InputError
@@ -63,9 +63,50 @@ def plot_subdomains(rows, folder: Path) -> list[str]:
     return written
 
 
+def previous_rows(path: Path, suite_path, rerun: set, instances: set, stream) -> tuple[list, list]:
+    """Rows and runs of an earlier report of the same suite that this (filtered) run keeps: every
+    row whose (instance, back-end) is not run again and whose instance is still in the suite."""
+    if not path.is_file():
+        return [], []
+    try:
+        old = read_report(path)
+    except InputError as exc:
+        print(f"  earlier results not kept: {exc}", file=stream)
+        return [], []
+    if old.get("suite") != str(suite_path):
+        print(f"  earlier results in {path} are of another suite ({old.get('suite')}); not kept", file=stream)
+        return [], []
+    runs = old.get("runs") or [{"run": old.get("started", "earlier"), "filter": "",
+                                "wall_seconds": old.get("wall_seconds", 0.0)}]
+    kept = []
+    for r in old["rows"]:
+        r.setdefault("run", runs[-1]["run"])
+        if (r.get("instance"), r.get("backend")) not in rerun and r.get("instance") in instances:
+            kept.append(r)
+    return kept, runs
+
+
+def read_report(path) -> dict:
+    """A results.json (size-capped read); InputError if it is not one."""
+    from reach.paths import read_text
+
+    try:
+        report = json.loads(read_text(path, (".json",), "results file", max_bytes=200_000_000))
+    except (json.JSONDecodeError, RecursionError, ValueError) as exc:
+        raise InputError(f"not a results file: invalid JSON ({exc.__class__.__name__})", str(path)) from None
+    if not isinstance(report, dict) or not isinstance(report.get("rows"), list) or not all(
+            isinstance(r, dict) and {"instance", "property", "backend", "status"} <= set(r) for r in report["rows"]):
+        raise InputError("not a results file (expected rows with instance, property, backend, status)", str(path))
+    return report
+
+
 def run_suite(suite_path, backends=None, instances=None, out="results", jobs=None, scheduler=None,
               time_limit=None, stream=sys.stdout) -> int:
-    """Run (a filtered part of) a suite; exit code 1 if a cross-check fails, else 0."""
+    """Run (a filtered part of) a suite; exit code 1 if a cross-check fails, else 0.
+
+    A filtered run (``backends`` or ``instances``) replaces only its own rows of an existing
+    ``results.json`` of the same suite and keeps the others; every row says which run it came
+    from (``run``), and the report lists the runs."""
     suite = load_suite(suite_path)
     from reach.backends import available
     names = list(suite.backends)
@@ -85,6 +126,8 @@ def run_suite(suite_path, backends=None, instances=None, out="results", jobs=Non
     units = [(inst, b) for inst in chosen for b in names
              if b not in missing and (inst.backends is None or b in inst.backends)]
     executor = make_executor(jobs, scheduler)
+    run_id = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    flags = [f"--backend {b}" for b in backends or []] + [f"--instance {i}" for i in instances or []]
     print(f"reach bench: {len(units)} units ({len(chosen)} instances x {len(names)} back-ends) "
           f"on {executor.name} executor", file=stream)
     for b in missing:
@@ -98,6 +141,7 @@ def run_suite(suite_path, backends=None, instances=None, out="results", jobs=Non
             value = [{"backend": backend, "property": "*", "status": "timeout", "seconds": time_limit,
                       "details": {"error": f"stopped after {time_limit} s"}}]
         for r in value:
+            r["run"] = run_id
             r["instance"] = inst.id
             r["expected"] = inst.expect.get(r["property"])
             r["source"] = inst.source
@@ -107,17 +151,28 @@ def run_suite(suite_path, backends=None, instances=None, out="results", jobs=Non
         print(f"  [{done:>3}/{len(units)}] {inst.id:<14} {backend:<11} {unit_seconds:7.2f} s  {verdicts}",
               file=stream, flush=True)
     wall = time.perf_counter() - start
-    checks = cross_check(rows)
     out = Path(out)
+    runs = []
+    if flags:
+        kept, runs = previous_rows(out / "results.json", suite_path, {(inst.id, b) for inst, b in units},
+                                   {i.id for i in suite.instances}, stream)
+        if kept:
+            print(f"  kept {len(kept)} rows of earlier runs in {out / 'results.json'}", file=stream)
+        rows = kept + rows
+    runs = [r for r in runs if any(row.get("run") == r["run"] for row in rows)]
+    runs.append({"run": run_id, "filter": " ".join(flags), "wall_seconds": wall})
+    checks = cross_check(rows)
     (out / "plots").mkdir(parents=True, exist_ok=True)
     report = {
-        "suite": str(suite_path), "started": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "suite": str(suite_path), "started": run_id,
         "machine": {"python": platform.python_version(), "platform": platform.platform(),
                     "processor": platform.machine()},
-        "executor": executor.name, "wall_seconds": wall, "backends": names,
-        "rows": rows, "cross_checks": checks,
+        "executor": executor.name, "wall_seconds": wall,
+        "backends": [b for b in suite.backends if any(r.get("backend") == b for r in rows)],
+        "runs": runs, "rows": rows, "cross_checks": checks,
     }
-    report["plots"] = plot_models(chosen, out / "plots", stream) + plot_subdomains(rows, out / "plots")
+    report["plots"] = plot_models(chosen, out / "plots", stream) + plot_subdomains(
+        [r for r in rows if r.get("run") == run_id], out / "plots")
     (out / "results.json").write_text(json.dumps(report, indent=1))
     (out / "results.md").write_text(markdown_table(report))
     failures = [c for c in checks if c["level"] == "fail"]

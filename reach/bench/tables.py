@@ -2,12 +2,10 @@
 
 from __future__ import annotations
 
-import json
 from collections import defaultdict
-from pathlib import Path
 
 
-def _cell(row) -> str:
+def _cell(row, run_marks: dict) -> str:
     status = row["status"].upper()
     if status == "UNSUPPORTED":
         return "n/a"
@@ -15,7 +13,7 @@ def _cell(row) -> str:
     if row.get("probability"):
         lo, hi = row["probability"]
         text += f" [{lo:.4f}, {hi:.4f}]"
-    return text
+    return text + run_marks.get(row.get("run"), "")
 
 
 def markdown_table(report: dict) -> str:
@@ -30,14 +28,25 @@ def markdown_table(report: dict) -> str:
             order.append(key)
         grid[key][r["backend"]] = r
         expected[key] = r.get("expected") or ""
+    runs = report.get("runs") or []
+    run_marks = {}
     lines = [f"# reach bench: {report['suite']}", "",
              f"{report['started']}, {report['machine']['platform']}, executor {report['executor']}, "
-             f"wall time {report['wall_seconds']:.1f} s.", "",
-             "Verdict and seconds per back-end (n/a: the back-end does not handle this case).", "",
+             f"wall time {report['wall_seconds']:.1f} s.", ""]
+    if len(runs) > 1:
+        lines.append("Rows come from several runs; a cell from an earlier run carries its mark:")
+        lines.append("")
+        for k, run in enumerate(runs[:-1], start=1):
+            run_marks[run["run"]] = f" ({k})"
+            lines.append(f"- ({k}) {run['run']}{', ' + run['filter'] if run.get('filter') else ' (whole suite)'}, "
+                         f"wall time {float(run.get('wall_seconds') or 0):.1f} s")
+        last = runs[-1]
+        lines += [f"- unmarked: {last['run']}{', ' + last['filter'] if last.get('filter') else ''}", ""]
+    lines += ["Verdict and seconds per back-end (n/a: the back-end does not handle this case).", "",
              "| instance | property | expected | " + " | ".join(backends) + " |",
              "|---|---|---|" + "---|" * len(backends)]
     for key in order:
-        cells = [_cell(grid[key][b]) if b in grid[key] else "" for b in backends]
+        cells = [_cell(grid[key][b], run_marks) if b in grid[key] else "" for b in backends]
         lines.append(f"| {key[0]} | {key[1]} | {expected[key]} | " + " | ".join(cells) + " |")
     lines += ["", "## Cross-checks", ""]
     if not report["cross_checks"]:
@@ -47,20 +56,38 @@ def markdown_table(report: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _seconds(row) -> float:
+    try:
+        return float(row.get("seconds") or 0.0)
+    except (TypeError, ValueError):
+        return float("nan")
+
+
 def compare_runs(old_path, new_path) -> str:
-    """Verdict changes and time ratios (new/old) between two results.json files."""
-    old = json.loads(Path(old_path).read_text())
-    new = json.loads(Path(new_path).read_text())
+    """Verdict changes and time ratios (new/old) between two results.json files, and the rows of
+    the old one that the new one lacks ("gone")."""
+    from reach.bench.runner import read_report
+
+    old = read_report(old_path)
+    new = read_report(new_path)
     index = {(r["instance"], r["property"], r["backend"]): r for r in old["rows"]}
+    present = {(r["instance"], r["property"], r["backend"]) for r in new["rows"]}
     lines = ["| instance | property | back-end | verdict | seconds old -> new | ratio |", "|---|---|---|---|---|---|"]
     for r in new["rows"]:
         key = (r["instance"], r["property"], r["backend"])
         before = index.get(key)
         if before is None:
-            lines.append(f"| {key[0]} | {key[1]} | {key[2]} | new: {r['status']} | {r['seconds']:.2f} | |")
+            lines.append(f"| {key[0]} | {key[1]} | {key[2]} | new: {r['status']} | {_seconds(r):.2f} | |")
             continue
         verdict = r["status"] if r["status"] == before["status"] else f"{before['status']} -> {r['status']}"
-        ratio = (r["seconds"] / before["seconds"]) if before["seconds"] else float("nan")
-        lines.append(f"| {key[0]} | {key[1]} | {key[2]} | {verdict} | {before['seconds']:.2f} -> "
-                     f"{r['seconds']:.2f} | {ratio:.2f} |")
+        ratio = (_seconds(r) / _seconds(before)) if _seconds(before) else float("nan")
+        lines.append(f"| {key[0]} | {key[1]} | {key[2]} | {verdict} | {_seconds(before):.2f} -> "
+                     f"{_seconds(r):.2f} | {ratio:.2f} |")
+    gone = [key for key in index if key not in present]
+    for key in gone:
+        lines.append(f"| {key[0]} | {key[1]} | {key[2]} | gone (was {index[key]['status']}) | "
+                     f"{_seconds(index[key]):.2f} -> | |")
+    lines.append("")
+    lines.append(f"{len(new['rows'])} rows now, {len(old['rows'])} before: {len(present - set(index))} new, "
+                 f"{len(gone)} gone")
     return "\n".join(lines)

@@ -18,7 +18,7 @@ import sympy
 
 from reach.errors import Where
 from reach.model.constraints import Constraint, affine_coefficients, halfspaces, lambdify_margins
-from reach.model.units import UnitSystem
+from reach.model.units import DimensionSystem, UnitSystem
 
 
 @dataclass
@@ -188,6 +188,7 @@ class HybridAutomaton:
     disturbance: Disturbance | None = None
     clocks: list[int] = field(default_factory=list)   # states with rate 1 in every mode
     bounded_inputs: list[BoundedInput] = field(default_factory=list)
+    dimensions: DimensionSystem | None = None          # None: the model declares no units
 
     @property
     def varying_inputs(self) -> list[BoundedInput]:
@@ -228,8 +229,12 @@ class HybridAutomaton:
         copy = HybridAutomaton(self.name, self.description, self.file, self.units, self.constants,
                                self.state + ["_time"], self.inputs, modes, transitions, initial,
                                self.horizon, self.disturbance, self.clocks + [self.n],
-                               list(self.bounded_inputs))
+                               bounded_inputs=list(self.bounded_inputs), dimensions=self.dimensions)
         return copy, self.n
+
+    def dimension_of(self, name: str):
+        """The dimension of a state, input or constant, or None if not known."""
+        return None if self.dimensions is None else self.dimensions.of(name)
 
     @cached_property
     def symbols(self) -> list[sympy.Symbol]:

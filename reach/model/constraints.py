@@ -7,7 +7,7 @@ becomes a union of convex unsafe pieces.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Sequence
 
 import numpy as np
@@ -15,25 +15,29 @@ import sympy
 
 from reach.errors import Where
 from reach.model.expr import Comparison
+from reach.model.units import DisplayUnit
 
 NUMERICAL_TOLERANCE = 1e-9
 
 
 @dataclass(frozen=True)
 class Constraint:
-    """``g <= 0`` (``g < 0`` when strict), ``text`` being what the user wrote."""
+    """``g <= 0`` (``g < 0`` when strict), ``text`` being what the user wrote; ``dimension``
+    of ``g`` and the ``unit`` the requirement was written in, when known."""
 
     g: sympy.Expr
     strict: bool
     text: str
     where: Where
+    dimension: tuple | None = None
+    unit: DisplayUnit | None = None
 
     def negated(self) -> "Constraint":
         """The complement: ``-g < 0`` (or ``-g <= 0`` for a strict constraint)."""
-        return Constraint(-self.g, not self.strict, f"not ({self.text})", self.where)
+        return replace(self, g=-self.g, strict=not self.strict, text=f"not ({self.text})")
 
     def substitute(self, mapping) -> "Constraint":
-        return Constraint(sympy.sympify(self.g).subs(mapping), self.strict, self.text, self.where)
+        return replace(self, g=sympy.sympify(self.g).subs(mapping))
 
 
 def from_comparisons(comparisons: Sequence[Comparison], text: str, where: Where) -> list[Constraint]:
@@ -42,12 +46,13 @@ def from_comparisons(comparisons: Sequence[Comparison], text: str, where: Where)
     for cmp in comparisons:
         small, big = (cmp.lhs, cmp.rhs) if cmp.op in ("<=", "<") else (cmp.rhs, cmp.lhs)
         strict = cmp.op in ("<", ">")
+        tags = (cmp.dimension, cmp.unit)
         if isinstance(small, sympy.Abs):
             inner = small.args[0]
-            out.append(Constraint(sympy.expand(inner - big), strict, text, where))
-            out.append(Constraint(sympy.expand(-inner - big), strict, text, where))
+            out.append(Constraint(sympy.expand(inner - big), strict, text, where, *tags))
+            out.append(Constraint(sympy.expand(-inner - big), strict, text, where, *tags))
         else:
-            out.append(Constraint(sympy.expand(small - big), strict, text, where))
+            out.append(Constraint(sympy.expand(small - big), strict, text, where, *tags))
     return out
 
 

@@ -13,13 +13,26 @@ transition graph has a clock ``x`` (rate 1 in every mode of the model) that is
 Then between two passes through that guard the run passes the reset, so ``x`` grows from
 ``r`` to at least ``L``: every traversal of the cycle takes at least ``L - r > 0`` time, a
 run of ``k * |modes|`` jumps lasts at least ``k * min(L - r)`` and jumps are finitely many on
-any bounded horizon. It suffices to check *simple* cycles: every cycle's transitions contain
-those of a simple cycle, and with them its reset and its bound.
+any bounded horizon. It suffices to check *simple* cycles of the transition graph: every
+cycle's transitions contain those of a simple cycle, and with them its reset and its bound.
 
 A lower bound is read from single-variable guard rows ``-a x <= -b`` (``a > 0``), i.e.
 ``x >= b / a``; a reset counts when it sets ``x`` to a constant expression. Parallel
 transitions (same source and target) are alternatives: a mode cycle is reported when some
 choice of one transition per step leaves no clock both reset and bounded on it.
+
+A second sufficient condition covers hysteresis without clocks (a thermostat that switches off
+at ``T >= 21`` and on at ``T <= 19``): the cycle cannot be traversed at one instant. With its
+guards, the invariants of the modes it leaves and its resets all linear (affine resets
+``x+ = R x + r``), a zero-time traversal ``x_0 -> x_1 -> ... -> x_k`` is the polyhedron
+
+    G_j x_j <= g_j,  I_j x_j <= i_j,  x_{j+1} = R_j x_j + r_j      (j = 0 .. k-1)
+
+in the stacked states (strict inequalities relaxed to non-strict ones, which only makes it
+larger). If it is empty by more than the LP tolerance, consecutive passes through the cycle are
+separated by a positive distance that a continuous flow crosses only in positive time on any
+bounded region: no zero-dwell run goes round it. When it is not empty, the finding names a state
+where every jump of the cycle can happen at once, so a reader can check it.
 
 Each finding is one line naming the file, the field and the mode cycle (the shortest
 :data:`MAX_REPORTED` cycles, then a count)::
@@ -30,7 +43,6 @@ Each finding is one line naming the file, the field and the mode cycle (the shor
 
 from __future__ import annotations
 
-import itertools
 
 import numpy as np
 import sympy
@@ -81,114 +93,134 @@ def cycle_is_safe(signatures) -> bool:
     return any(x in bounds and bounds[x] > r for x, r in resets.items())
 
 
-def strongly_connected(nodes: list, successors: dict) -> list[list]:
-    """Strongly connected components (Tarjan), each in ``nodes`` order."""
-    index, low, stack, on_stack, out = {}, {}, [], set(), []
-    order = {n: i for i, n in enumerate(nodes)}
-
-    def visit(v):
-        index[v] = low[v] = len(index)
-        stack.append(v)
-        on_stack.add(v)
-        for w in sorted(successors.get(v, ()), key=order.get):
-            if w not in index:
-                visit(w)
-                low[v] = min(low[v], low[w])
-            elif w in on_stack:
-                low[v] = min(low[v], index[w])
-        if low[v] == index[v]:
-            component = []
-            while True:
-                w = stack.pop()
-                on_stack.discard(w)
-                component.append(w)
-                if w == v:
-                    break
-            out.append(sorted(component, key=order.get))
-
-    for v in nodes:
-        if v not in index:
-            visit(v)
-    return out
+def _halfspaces(constraints, symbols):
+    """``(H, h)`` with ``H x <= h`` for linear constraints; None if any is nonlinear."""
+    rows, rhs = [], []
+    for con in constraints:
+        coeffs = affine_coefficients(con.g, symbols)
+        if coeffs is None:
+            return None
+        a, c = coeffs
+        rows.append(a)
+        rhs.append(-c)
+    n = len(symbols)
+    return np.array(rows, dtype=float).reshape(-1, n), np.array(rhs, dtype=float)
 
 
-def simple_cycles(nodes: list, successors: dict, limit: int = MAX_CYCLES) -> list[list]:
-    """Simple cycles of a directed graph (each once, starting at its smallest node in
-    ``nodes`` order); ``successors[n]`` is the set of successors of ``n``. Depth-first search
-    from each node through larger nodes only; stops after ``limit`` cycles."""
-    order = {n: i for i, n in enumerate(nodes)}
-    cycles = []
-    for start in nodes:
-        stack = [(start, iter(sorted(successors.get(start, ()), key=order.get)))]
-        path, on_path = [start], {start}
+def linear_jump(model, transition):
+    """``(H, h, R, r)`` of a transition: the jump is possible from ``x`` with ``H x <= h`` (its
+    guard and its source's invariant) and lands at ``R x + r``; None if any part is nonlinear."""
+    symbols = model.symbols
+    hs = _halfspaces(list(transition.guard) + list(model.modes[transition.source].invariant), symbols)
+    if hs is None:
+        return None
+    R, r = np.eye(model.n), np.zeros(model.n)
+    for i, expr in transition.reset.items():
+        coeffs = affine_coefficients(expr, symbols)
+        if coeffs is None:
+            return None
+        R[i], r[i] = coeffs
+    return hs[0], hs[1], R, r
+
+
+def zero_time_witness(n: int, jumps) -> tuple[bool, np.ndarray | None]:
+    """``(possible, state)``: whether a chain of jumps (each a :func:`linear_jump`, or None for
+    a nonlinear one) can be taken at one instant (the polyhedron of the module doc is not empty),
+    with a start state where it can. A nonlinear jump counts as possible (no witness)."""
+    from reach.lp import LPError, feasible_point
+
+    if any(j is None for j in jumps):
+        return True, None
+    k = len(jumps)
+    blocks_A, blocks_b, eq_A, eq_b = [], [], [], []
+    for j, (H, h, R, r) in enumerate(jumps):
+        row = np.zeros((H.shape[0], n * (k + 1)))
+        row[:, j * n:(j + 1) * n] = H
+        blocks_A.append(row)
+        blocks_b.append(h)
+        link = np.zeros((n, n * (k + 1)))
+        link[:, j * n:(j + 1) * n] = R
+        link[:, (j + 1) * n:(j + 2) * n] = -np.eye(n)
+        eq_A.append(link)
+        eq_b.append(-r)
+    A_ub, b_ub = np.vstack(blocks_A), np.concatenate(blocks_b)
+    try:
+        x = feasible_point(A_ub if A_ub.size else None, b_ub if A_ub.size else None,
+                           A_eq=np.vstack(eq_A), b_eq=np.concatenate(eq_b), n=n * (k + 1))
+    except LPError:
+        return True, None
+    return (x is not None), (None if x is None else x[:n])
+
+
+def zero_dwell_cycles(model) -> tuple[list, bool]:
+    """``(found, complete)``: ``found`` lists ``(modes, transition names, state)`` for simple
+    mode cycles (``modes``: ``[m0, m1, ..., m0]``), one choice of transition per step, on which
+    no clock is reset and bounded below by a larger constant and whose jumps can be taken at one
+    instant (``state``: a start state where they can, None when a nonlinear constraint left that
+    open); ``complete``: whether every offending cycle is in the list.
+
+    Depth-first search over chains of transitions that can be taken at one instant: a chain
+    that cannot be is never extended, since no cycle through it can be traversed in zero time
+    (so nothing offending is pruned). A cycle is found once, from its transition of smallest
+    index. At most :data:`MAX_CYCLES` chains are tried and :data:`MAX_REPORTED` + 1 findings
+    kept."""
+    transitions = model.transitions
+    signature = [edge_signature(model, tr) for tr in transitions]
+    jumps = [linear_jump(model, tr) for tr in transitions]
+    leaving: dict[str, list[int]] = {}
+    for k, tr in enumerate(transitions):
+        leaving.setdefault(tr.source, []).append(k)
+    order = {name: i for i, name in enumerate(model.modes)}
+    found, tried = [], 0
+    for first in range(len(transitions)):
+        home = transitions[first].source
+        stack = [iter([first])]
+        chain: list[int] = []
         while stack:
-            node, it = stack[-1]
-            nxt = next(it, None)
-            if nxt is None:
+            k = next(stack[-1], None)
+            if k is None:
                 stack.pop()
-                on_path.discard(path.pop())
+                if chain:
+                    chain.pop()
                 continue
-            if nxt == start:
-                cycles.append(list(path))
-                if len(cycles) >= limit:
-                    return cycles
-            elif nxt in order and order[nxt] > order[start] and nxt not in on_path:
-                path.append(nxt)
-                on_path.add(nxt)
-                stack.append((nxt, iter(sorted(successors.get(nxt, ()), key=order.get))))
-    return cycles
-
-
-def zero_dwell_cycles(model) -> tuple[list[list[str]], bool]:
-    """``(cycles, complete)``: mode cycles (``[m0, m1, ..., m0]``) on which some choice of
-    transitions has no clock that is reset and bounded below by a larger constant (see the
-    module doc), and whether every offending cycle is in the list.
-
-    Per strongly connected component: when no clock is both reset and bounded (above its
-    reset value) on the component's own transitions, every cycle in it offends and only the
-    first :data:`MAX_REPORTED` + 1 are enumerated; otherwise its simple cycles are checked
-    one by one (up to :data:`MAX_CYCLES`)."""
-    names = list(model.modes)
-    edges: dict[tuple[str, str], set] = {}
-    for tr in model.transitions:
-        reset, bound = edge_signature(model, tr)
-        key = (frozenset(reset.items()), frozenset(bound.items()))
-        edges.setdefault((tr.source, tr.target), set()).add(key)
-    successors: dict[str, set] = {}
-    for source, target in edges:
-        successors.setdefault(source, set()).add(target)
-    found, complete = [], True
-    for component in strongly_connected(names, successors):
-        members = set(component)
-        inner = {k: v for k, v in edges.items() if k[0] in members and k[1] in members}
-        if not inner:
-            continue
-        local = {m: successors.get(m, set()) & members for m in component}
-        signatures = [(dict(r), dict(b)) for keys in inner.values() for r, b in keys]
-        if not cycle_is_safe(signatures):       # no cycle of the component can be safe
-            cycles = simple_cycles(component, local, MAX_REPORTED + 1)
-            complete = complete and len(cycles) <= MAX_REPORTED
-            found.extend(c + [c[0]] for c in cycles)
-            continue
-        cycles = simple_cycles(component, local)
-        complete = complete and len(cycles) < MAX_CYCLES
-        for cycle in cycles:
-            steps = list(zip(cycle, cycle[1:] + cycle[:1]))
-            choices = [sorted(inner[s], key=repr) for s in steps]
-            for choice in itertools.product(*choices):
-                if not cycle_is_safe([(dict(r), dict(b)) for r, b in choice]):
-                    found.append(cycle + [cycle[0]])
-                    break
-    return found, complete
+            visited = {transitions[j].source for j in chain}
+            target = transitions[k].target
+            if (k < first or (target != home and target in visited)
+                    or transitions[k].source in visited):
+                continue
+            tried += 1
+            if tried > MAX_CYCLES:
+                return found, False
+            possible, state = zero_time_witness(model.n, [jumps[j] for j in chain + [k]])
+            if not possible:
+                continue
+            if target == home:
+                cycle = chain + [k]
+                if not cycle_is_safe([signature[j] for j in cycle]):
+                    shift = min(range(len(cycle)), key=lambda i: order[transitions[cycle[i]].source])
+                    cycle = cycle[shift:] + cycle[:shift]
+                    if shift:
+                        state = zero_time_witness(model.n, [jumps[j] for j in cycle])[1]
+                    modes = [transitions[j].source for j in cycle] + [transitions[cycle[0]].source]
+                    found.append((modes, [transitions[j].name for j in cycle], state))
+                    if len(found) > MAX_REPORTED:
+                        return found, False
+                continue
+            chain.append(k)
+            stack.append(iter(leaving.get(target, [])))
+    return found, True
 
 
 def lint(model) -> list[str]:
     """All findings for ``model``, one line each (empty when the model is clean)."""
     cycles, complete = zero_dwell_cycles(model)
-    cycles = sorted(cycles, key=len)
-    findings = [f"{model.file}: transitions: possible zero-dwell cycle {' -> '.join(c)} "
-                f"(no clock reset on it is bounded below by a positive guard)"
-                for c in cycles[:MAX_REPORTED]]
+    cycles = sorted(cycles, key=lambda found: len(found[0]))
+    findings = []
+    for cycle, names, state in cycles[:MAX_REPORTED]:
+        at = ("" if state is None else ", and its jumps " + ", ".join(names) + " can all be taken at one instant from "
+              + ", ".join(f"{v}={x + 0.0:.6g}" for v, x in zip(model.state, state)))
+        findings.append(f"{model.file}: transitions: possible zero-dwell cycle {' -> '.join(cycle)} "
+                        f"(no clock reset on it is bounded below by a positive guard{at})")
     if len(cycles) > MAX_REPORTED or not complete:
         findings.append(f"{model.file}: transitions: more possible zero-dwell cycles not listed")
     return findings

@@ -6,9 +6,9 @@ Format (all expressions are strings parsed by :mod:`reach.model.expr`)::
     extends: _rendezvous_abort.yaml        # optional template; mappings merge, child wins
     description: ...
     units: {length: m, time: min, mass: kg}  # base units of the model (SI by default)
-    constants: {n: 0.00438138, mc: 500}     # in order; later ones may use earlier ones
-    state: [x, y, vx, vy, t]
-    inputs: [Fx, Fy]
+    constants: {n: 0.00438138, mc: 500[kg]} # in order; later ones may use earlier ones
+    state: {x: m, y: m, vx: m/min, vy: m/min, t: min}   # or a plain list [x, y, vx, vy, t]
+    inputs: {Fx: kg*m/min**2, Fy: kg*m/min**2}          # or [Fx, Fy]
     modes:
       approach:
         flow: {x: vx, vx: "3*n**2*x + 2*n*vy + Fx/mc", t: 1, ...}
@@ -30,6 +30,17 @@ state (flow 0, initial interval = their range, never reset): see
 
 Every error names file, line and field: ``models/x.yaml:14: modes.approach.flow.vx: unknown
 name 'vyy'``.
+
+Dimensions (:mod:`reach.model.units`). A model that gives ``units:`` or declares a state or
+input unit is dimension-checked: a declaration ``vx: m/min`` (in the model's own units: the
+values are model units; ``1`` for a pure number) and a constant's bracket (``mc: 500[kg]``)
+fix dimensions, and the rest is inferred from how names meet: ``x' = vx`` makes ``vx`` a
+length per time, ``Fx/mc`` added to an acceleration ties ``Fx`` to ``mc``. Flows, control
+laws, resets, invariants, guards, initial values, the horizon (a time) and the disturbance
+(mean in the units of the state it enters, covariance in their products, step a time) are
+equations; a contradiction is an InputError at the field that brought it. A model with
+neither is not checked (every dimension unknown). ``HybridAutomaton.dimensions`` keeps the
+equations for the property files.
 """
 
 from __future__ import annotations
@@ -41,14 +52,15 @@ from pathlib import Path
 import numpy as np
 import sympy
 
-from reach.errors import InputError, Where
 from reach import lp
+from reach.errors import InputError, Where
 from reach.model.automaton import (BoundedInput, Controller, Disturbance, HybridAutomaton, InitialSet,
                                    LinearSet, Mode, Transition)
 from reach.model.constraints import affine_coefficients, from_comparisons
 from reach.model.controllers import build_law, build_network_law
-from reach.model.expr import CONSTANTS, FUNCTIONS, parse_comparison, parse_expr
-from reach.model.units import UnitSystem, check_base
+from reach.model.expr import (CONSTANTS, FUNCTIONS, DimensionContext, parse_comparison, parse_expr,
+                               parse_quantity, parse_unit, side_text)
+from reach.model.units import TIME, DimensionSystem, Form, UnitSystem, check_base
 from reach.yamlio import Doc, load, merge
 
 TOP_FIELDS = {"name", "extends", "description", "units", "constants", "state", "inputs", "modes",
@@ -108,28 +120,56 @@ class _Builder:
 
     # ----------------------------------------------------------- pieces
     def names_list(self, key, allow_empty=False) -> list[str]:
+        """The names of ``state`` or ``inputs``: a list, or a mapping name -> unit (kept in
+        ``self.declared``)."""
         value = self.data.get(key, []) if allow_empty else self.need(key)
-        if not isinstance(value, list) or (not value and not allow_empty):
-            raise self.where(key).error("expected a list of names")
+        mapping = isinstance(value, dict)
+        if (not mapping and not isinstance(value, list)) or (not value and not allow_empty):
+            raise self.where(key).error("expected a list of names, or a mapping name: unit")
+        names = list(value)
         seen = set()
-        for i, name in enumerate(value):
+        for i, name in enumerate(names):
+            w = self.where(key, name if mapping else i)
             if not isinstance(name, str) or not name.isidentifier() or name.startswith("_"):
-                raise self.where(key, i).error(f"'{name}' is not a valid name")
+                raise w.error(f"'{name}' is not a valid name")
             if name in RESERVED:
-                raise self.where(key, i).error(f"'{name}' is a reserved function or constant name")
+                raise w.error(f"'{name}' is a reserved function or constant name")
             if name in seen:
-                raise self.where(key, i).error(f"duplicate name '{name}'")
+                raise w.error(f"duplicate name '{name}'")
             seen.add(name)
-        return value
+            if mapping:
+                self.declared[name] = (value[name], w)
+        return names
 
-    def number(self, value, where: Where, names=None) -> float:
-        expr = parse_expr(value, names if names is not None else self.constant_names, where, self.units)
+    def number(self, value, where: Where, names=None, dimension=None, what: str = "") -> float:
+        """A number (constants and units allowed); with ``dimension`` (a :class:`Form`, or a
+        fixed dimension) it must have that dimension (``what`` names it in the error)."""
+        expr, form = parse_quantity(value, names if names is not None else self.constant_names, where,
+                                    self.units, self.dims)
         if not expr.is_number:
             raise where.error("expected a number (constants allowed, no state variables)")
         result = complex(expr)
         if result.imag != 0 or not np.isfinite(result.real):
             raise where.error("expression does not evaluate to a finite real number")
+        if dimension is not None and self.dims is not None:
+            expected = dimension if isinstance(dimension, Form) else Form(const=dimension)
+            self.dims.require(form, expected, where,
+                              lambda got, want: f"{side_text(value, got)} given for {what} {want}")
         return result.real
+
+    def make_dims(self, constants: list[str]) -> DimensionContext | None:
+        """The dimension equations, starting from the declarations; None if the model gives
+        neither ``units`` nor any declaration (then nothing is checked)."""
+        if "units" not in self.data and not self.declared:
+            return None
+        dims = DimensionContext(DimensionSystem(), self.units, frozenset(self.state + self.inputs + constants))
+        for name, (unit, where) in self.declared.items():
+            si, dim = parse_unit(unit, where)
+            if abs(si / self.units.factor(dim) - 1) > 1e-9:
+                raise where.error(f"'{unit}' is not in the model's units (values are in model units): "
+                                  f"write {self.units.name(dim)}")
+            dims.system.equate(Form.name(name), Form(const=dim))
+        return dims
 
     def build(self) -> HybridAutomaton:
         extra = set(self.data) - TOP_FIELDS
@@ -140,6 +180,7 @@ class _Builder:
         if not isinstance(name, str) or not name.strip():
             raise self.where("name").error("expected a non-empty name")
         self.units = self.read_units()
+        self.declared: dict = {}
         self.state = self.names_list("state")
         self.inputs = self.names_list("inputs", allow_empty=True)
         clash = set(self.state) & set(self.inputs)
@@ -157,7 +198,7 @@ class _Builder:
             modes[timeless].timeless = True
         transitions = self.read_transitions(modes)
         initial = self.read_initial_set(modes, bounded)
-        horizon = self.number(self.need("horizon"), self.where("horizon"))
+        horizon = self.number(self.need("horizon"), self.where("horizon"), dimension=TIME, what="the horizon")
         if horizon <= 0:
             raise self.where("horizon").error("horizon must be positive")
         clocks = [i for i in range(len(self.state))
@@ -168,7 +209,8 @@ class _Builder:
             name=name.strip(), description=str(self.data.get("description", "")).strip(),
             file=self.file, units=self.units, constants=self.constants, state=self.state,
             inputs=self.inputs, modes=modes, transitions=transitions, initial=initial,
-            horizon=horizon, disturbance=self.read_disturbance(), clocks=clocks, bounded_inputs=bounded)
+            horizon=horizon, disturbance=self.read_disturbance(), clocks=clocks, bounded_inputs=bounded,
+            dimensions=None if self.dims is None else self.dims.system)
         self.check_bounded_inputs(model)
         return model
 
@@ -195,9 +237,11 @@ class _Builder:
             if key in RESERVED or key in self.state or key in self.inputs:
                 raise self.where("constants", key).error(
                     f"constant '{key}' clashes with a reserved, state or input name")
+        self.dims = self.make_dims(list(raw))
         values = {}
         for key in _dependency_order(raw, self.where):
-            number = self.number(raw[key], self.where("constants", key))
+            number = self.number(raw[key], self.where("constants", key), dimension=Form.name(key),
+                                 what=f"constant {key}")
             values[key] = number
             self.constant_names[key] = sympy.Float(number)
         return values
@@ -225,18 +269,49 @@ class _Builder:
             missing = [v for v in self.state if v not in flow_raw]
             if missing:
                 raise self.where("modes", mname, "flow").error(f"no derivative given for '{missing[0]}'")
-            open_flow = [parse_expr(flow_raw[v], self.names, self.where("modes", mname, "flow", v), self.units)
-                         for v in self.state]
+            open_flow = [self.rate(flow_raw[v], v, self.where("modes", mname, "flow", v)) for v in self.state]
             law, controller = self.read_control(mname, spec.get("control"), open_flow)
             substitution = {self.input_symbols[i]: law[u] for i, u in enumerate(self.inputs)}
             flow = [sympy.sympify(f).subs(substitution) for f in open_flow]
             invariant = []
             for j, text in enumerate(self.text_list(spec.get("invariant", []), ("modes", mname, "invariant"))):
                 wj = self.where("modes", mname, "invariant", j)
-                cons = from_comparisons(parse_comparison(text, self.names, wj, self.units), text, wj)
+                cons = from_comparisons(parse_comparison(text, self.names, wj, self.units, self.dims), text, wj)
                 invariant.extend(c.substitute(substitution) for c in cons)
             modes[mname] = Mode(mname, self.symbols, flow, law, invariant, controller, w)
         return modes
+
+    def rate(self, text, var: str, where: Where) -> sympy.Expr:
+        """The flow of ``var``, whose dimension is ``var``'s per time."""
+        expr, form = parse_quantity(text, self.names, where, self.units, self.dims)
+        if self.dims is not None:
+            self.dims.require(form, Form.name(var).minus(Form(const=TIME)), where,
+                              lambda got, want: f"{side_text(text, got)} is not a rate of {var}: expected {want} "
+                              f"(a plain number is a pure number: write a rate constant with its unit, e.g. "
+                              f"0.1[1/{self.units.time}])")
+        return expr
+
+    def assigned(self, text, var: str, names, where: Where) -> sympy.Expr:
+        """An expression that gives ``var`` its value (a control law, a reset)."""
+        expr, form = parse_quantity(text, names, where, self.units, self.dims)
+        if self.dims is not None:
+            self.dims.require(form, Form.name(var), where,
+                              lambda got, want: f"{side_text(text, got)} given for {var} {want}")
+        return expr
+
+    def check_control_dims(self, mname: str, spec: dict) -> None:
+        """Set-points and Bryson maxima have the dimension of their state or input."""
+        groups = [(("setpoint",), spec.get("setpoint"))]
+        lqr = spec.get("lqr")
+        if isinstance(lqr, dict) and isinstance(lqr.get("bryson"), dict):
+            groups += [(("lqr", "bryson", k), lqr["bryson"].get(k)) for k in ("state", "input")]
+        for path, values in groups:
+            if not isinstance(values, dict):
+                continue
+            for name, value in values.items():
+                if name in self.state or name in self.inputs:
+                    self.number(value, self.where("modes", mname, "control", *path, name),
+                                dimension=Form.name(name), what=name)
 
     def text_list(self, value, path) -> list[str]:
         if isinstance(value, str):
@@ -265,6 +340,7 @@ class _Builder:
                 raise w.error("give either 'gain' or 'lqr', not both")
             if not self.inputs:
                 raise w.error("a gain or LQR controller needs 'inputs'")
+            self.check_control_dims(mname, spec)
             return build_law(spec, open_flow, self.symbols, self.state, self.input_symbols, self.inputs, w,
                              lambda value, where: self.number(value, where))
         for u in spec:
@@ -275,7 +351,7 @@ class _Builder:
         for u in self.inputs:
             if u not in spec:
                 raise w.error(f"no control law for input '{u}'")
-            law[u] = parse_expr(spec[u], state_names, self.where("modes", mname, "control", u), self.units)
+            law[u] = self.assigned(spec[u], u, state_names, self.where("modes", mname, "control", u))
         return law, Controller("law")
 
     def read_transitions(self, modes) -> list[Transition]:
@@ -314,16 +390,17 @@ class _Builder:
             for var, value in reset_raw.items():
                 if var not in self.state:
                     raise self.where(*path, "reset", var).error(f"'{var}' is not a state variable")
-                reset[self.state.index(var)] = parse_expr(value, {k: v for k, v in self.names.items()
-                                                                  if v not in self.input_symbols},
-                                                          self.where(*path, "reset", var), self.units)
+                reset[self.state.index(var)] = self.assigned(
+                    value, var, {k: v for k, v in self.names.items() if v not in self.input_symbols},
+                    self.where(*path, "reset", var))
             for source in sources:
                 sub = {self.input_symbols[i]: modes[source].control[u] for i, u in enumerate(self.inputs)}
                 guard = []
                 for j, text in enumerate(guard_text):
                     wj = self.where(*path, "guard", j)
                     guard.extend(c.substitute(sub) for c in
-                                 from_comparisons(parse_comparison(text, self.names, wj, self.units), text, wj))
+                                 from_comparisons(parse_comparison(text, self.names, wj, self.units, self.dims),
+                                                  text, wj))
                 name = key if len(sources) == 1 else f"{key}:{source}"
                 out.append(Transition(name, source, spec["to"], guard, urgent, reset, None, w))
         return out
@@ -377,11 +454,11 @@ class _Builder:
             if isinstance(value, list):
                 if len(value) != 2:
                     raise w.error("expected [low, high]")
-                low[i], high[i] = self.number(value[0], w), self.number(value[1], w)
+                low[i], high[i] = (self.number(v, w, dimension=Form.name(var), what=var) for v in value)
                 if low[i] > high[i]:
                     raise w.error(f"empty interval [{low[i]:g}, {high[i]:g}]")
             else:
-                low[i] = high[i] = self.number(value, w)
+                low[i] = high[i] = self.number(value, w, dimension=Form.name(var), what=var)
         return InitialSet(raw["mode"], low, high)
 
     def read_disturbance(self) -> Disturbance | None:
@@ -401,7 +478,9 @@ class _Builder:
         mean_raw = g.get("mean", [0] * p)
         if not isinstance(mean_raw, list) or len(mean_raw) != p:
             raise self.where("disturbance", "gaussian", "mean").error(f"expected a list of {p} numbers")
-        mean = np.array([self.number(v, self.where("disturbance", "gaussian", "mean", i))
+        kick = [Form.name(e) for e in enters]
+        mean = np.array([self.number(v, self.where("disturbance", "gaussian", "mean", i), dimension=kick[i],
+                                     what=f"a kick on {enters[i]}")
                          for i, v in enumerate(mean_raw)])
         cov_raw = g["cov"]
         wc = self.where("disturbance", "gaussian", "cov")
@@ -410,14 +489,17 @@ class _Builder:
         if all(isinstance(r, list) for r in cov_raw):
             if any(len(r) != p for r in cov_raw):
                 raise wc.error(f"expected a {p}x{p} matrix")
-            cov = np.array([[self.number(v, wc) for v in r] for r in cov_raw])
+            cov = np.array([[self.number(v, wc, dimension=kick[i].plus(kick[j]),
+                                         what=f"the covariance of {enters[i]} and {enters[j]}")
+                             for j, v in enumerate(r)] for i, r in enumerate(cov_raw)])
         else:
-            cov = np.diag([self.number(v, wc) for v in cov_raw])
+            cov = np.diag([self.number(v, wc, dimension=kick[i].times(2), what=f"the variance of {enters[i]}")
+                           for i, v in enumerate(cov_raw)])
         if not np.allclose(cov, cov.T, rtol=1e-9, atol=0):
             raise wc.error("covariance is not symmetric")
         if np.min(np.linalg.eigvalsh(cov)) < -1e-9 * max(1e-300, np.max(np.abs(cov))):
             raise wc.error("covariance is not positive semidefinite")
-        step = self.number(raw["step"], self.where("disturbance", "step"))
+        step = self.number(raw["step"], self.where("disturbance", "step"), dimension=TIME, what="the kick step")
         if step <= 0:
             raise self.where("disturbance", "step").error("step must be positive")
         return Disturbance(mean, cov, [self.state.index(e) for e in enters], step)
@@ -433,6 +515,8 @@ class _Builder:
         if not isinstance(raw, dict):
             raise self.where("bounded_inputs").error("expected {name: {range: [low, high], varying: true/false}}")
         out = []
+        if self.dims is not None:              # their dimensions are unknowns like the states'
+            self.dims.names = self.dims.names | {k for k in raw if isinstance(k, str)}
         for name, spec in raw.items():
             w = self.where("bounded_inputs", name)
             if not isinstance(name, str) or not name.isidentifier() or name.startswith("_") or name in RESERVED:
@@ -445,7 +529,7 @@ class _Builder:
             if not isinstance(bounds, list) or len(bounds) != 2:
                 raise self.where("bounded_inputs", name, "range").error("expected [low, high]")
             wr = self.where("bounded_inputs", name, "range")
-            low, high = self.number(bounds[0], wr), self.number(bounds[1], wr)
+            low, high = (self.number(v, wr, dimension=Form.name(name), what=name) for v in bounds)
             if low > high:
                 raise wr.error(f"empty interval [{low:g}, {high:g}]")
             varying = spec.get("varying", False)
@@ -504,7 +588,7 @@ class _Builder:
             pair = value if isinstance(value, list) else [value, value]
             if len(pair) != 2:
                 raise w.error("expected [low, high]")
-            lo, hi = self.number(pair[0], w), self.number(pair[1], w)
+            lo, hi = (self.number(v, w, dimension=Form.name(var), what=var) for v in pair)
             rows += [-e, e]
             rhs += [-lo, hi]
         for u in bounded:
@@ -514,7 +598,7 @@ class _Builder:
         state_names = {k: v for k, v in self.names.items() if v not in self.input_symbols}
         for j, text in enumerate(self.text_list(raw["constraints"], ("initial", "constraints"))):
             w = self.where("initial", "constraints", j)
-            for kind, g in _linear_relations(text, state_names, w, self.units):
+            for kind, g in _linear_relations(text, state_names, w, self.units, self.dims):
                 coeffs = affine_coefficients(g, self.symbols)
                 if coeffs is None:
                     raise w.error(f"'{text}' is not linear in the state")
@@ -545,7 +629,7 @@ class _Builder:
                     raise tr.where.error(f"the varying input '{u.name}' appears in a guard")
 
 
-def _linear_relations(text, names, where: Where, units):
+def _linear_relations(text, names, where: Where, units, dims=None):
     """``lhs == rhs`` as ``[("==", lhs - rhs)]``; any other comparison (chains too) as
     ``[("<=", g), ...]`` with ``g <= 0`` (strictness is dropped: the set is closed)."""
     stripped = str(text).strip()
@@ -556,9 +640,9 @@ def _linear_relations(text, names, where: Where, units):
     if isinstance(tree, ast.Compare) and len(tree.ops) == 1 and isinstance(tree.ops[0], ast.Eq):
         lhs = ast.get_source_segment(stripped, tree.left)
         rhs = ast.get_source_segment(stripped, tree.comparators[0])
-        g = parse_expr(f"({lhs}) - ({rhs})", names, where, units)
+        g = parse_expr(f"({lhs}) - ({rhs})", names, where, units, dims)
         return [("==", sympy.expand(g))]
-    return [("<=", c.g) for c in from_comparisons(parse_comparison(stripped, names, where, units),
+    return [("<=", c.g) for c in from_comparisons(parse_comparison(stripped, names, where, units, dims),
                                                    stripped, where)]
 
 

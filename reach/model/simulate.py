@@ -14,8 +14,8 @@ together:
   inside the grid interval where it first holds (to ``dt * 2**-40``); the window transition
   is taken exactly at ``tau``; a may-transition with a general guard is taken when a run would
   leave the source invariant, if its guard holds there (the exit instant, by bisection: one
-  of the automaton's runs, the one that stays longest); Gaussian kicks (if asked for) are applied at ``k * step``, and
-  an urgent transition whose guard holds right after a kick is taken at that instant;
+  of the automaton's runs, the one that stays longest); Gaussian kicks (if asked for) are
+  applied at ``k * step``, and so are the pieces of a time-varying input signal; an urgent transition whose guard holds right after a kick is taken at that instant;
 * a run found outside its mode's invariant at a grid point with no transition taken is
   *blocked* (it has no continuation in the automaton's semantics) and stops there.
 
@@ -36,6 +36,29 @@ from reach.model.constraints import lambdify_margins
 BISECTION_STEPS = 40
 INVARIANT_TOLERANCE = 1e-7
 CHUNK_VALUES = 4_000_000          # states x steps x dims held at once in a linear segment
+MAX_STEPS = 5_000_000             # grid steps over the horizon (horizon / dt)
+MEMORY_BUDGET = 4 * 2 ** 30       # bytes the simulator may plan to hold at once
+RUN_BYTES_PER_VALUE = 8 * 24      # per run and state value: the arrays a batch of runs carries
+
+
+def check_size(model: HybridAutomaton, dt: float, runs: int = 0) -> None:
+    """Refuse (InputError) a grid or a batch of runs that would not fit: more than
+    :data:`MAX_STEPS` steps, or an estimate of the one-step matrix powers of the linear modes
+    plus ``runs`` runs' arrays above :data:`MEMORY_BUDGET`."""
+    from reach.errors import InputError
+
+    if not np.isfinite(dt) or dt <= 0:
+        raise InputError(f"the simulator step must be a positive number, got {dt}", field="options.dt")
+    steps = model.horizon / dt
+    if steps > MAX_STEPS:
+        raise InputError(f"{model.name}: horizon {model.horizon:g} / step {dt:g} = {steps:.3g} grid steps; at "
+                         f"most {MAX_STEPS:.0e} (use a larger dt)", field="options.dt")
+    linear = sum(1 for m in model.modes.values() if m.linear is not None)
+    planned = linear * (steps + 2) * (model.n + 1) ** 2 * 8 + runs * (model.n + 4) * RUN_BYTES_PER_VALUE
+    if planned > MEMORY_BUDGET:
+        raise InputError(f"{model.name}: about {planned / 2 ** 30:.1f} GiB needed for {runs} runs on {steps:.0f} "
+                         f"steps; at most {MEMORY_BUDGET / 2 ** 30:.0f} GiB are planned for (fewer samples or a "
+                         "larger dt)", field="options.samples" if runs else "options.dt")
 
 
 def default_dt(model: HybridAutomaton) -> float:
@@ -82,6 +105,7 @@ class Simulator:
     def __init__(self, model: HybridAutomaton, dt: float | None = None, substeps: int = 2):
         self.model = model
         self.dt = float(dt) if dt else default_dt(model)
+        check_size(model, self.dt)
         self.substeps = substeps
         self.mode_names = list(model.modes)
         self.n = model.n
@@ -194,6 +218,7 @@ class Simulator:
         """
         X = np.array(x0, dtype=float).reshape(-1, self.n).copy()
         N = X.shape[0]
+        check_size(self.model, self.dt, N)
         tau = np.full(N, np.nan) if switch_times is None else np.array(switch_times, dtype=float).reshape(N)
         mode = np.full(N, self.mode_names.index(self.model.initial.mode))
         t = np.zeros(N)

@@ -30,6 +30,11 @@ A property file (``properties/*.yaml``) is written once and checked against many
 
 Loading checks the structure; :func:`bind` parses the expressions against one model (its
 names, units and per-mode control laws) and produces the ``Bound*`` objects back-ends read.
+Binding continues the model's dimension equations (:mod:`reach.model.units`): both sides of
+every comparison, a box bound and its variable, an event quantity and its bound must agree,
+``at`` is a time; a mismatch names the field and both sides
+(``properties[1].require[0]: 0.055[m] compared with abs(vx) [m/min]``). Each constraint and
+event keeps the unit its requirement was written in, for reports.
 A safety requirement ``c1 and c2 and ...`` becomes the union of unsafe pieces ``not ci``;
 an ``avoid`` set is one (convex) unsafe piece.
 """
@@ -43,15 +48,16 @@ import sympy
 
 from reach.errors import InputError, Where
 from reach.model.constraints import Constraint, from_comparisons, halfspaces, violation_test
-from reach.model.expr import parse_comparison, parse_expr
+from reach.model.expr import DimensionContext, parse_comparison, parse_quantity, side_text
+from reach.model.units import TIME, DisplayUnit, Form
 from reach.yamlio import Doc, load
 
 KINDS = ("safety", "reach", "reach_avoid", "event")
 _FIELDS = {
-    "safety": {"id", "kind", "description", "modes", "require", "avoid"},
+    "safety": {"id", "kind", "description", "modes", "optional", "require", "avoid"},
     "reach": {"id", "kind", "description", "at", "target", "probability"},
     "reach_avoid": {"id", "kind", "description", "at", "target", "safe", "probability"},
-    "event": {"id", "kind", "description", "modes", "minimize", "maximize", "require"},
+    "event": {"id", "kind", "description", "modes", "optional", "minimize", "maximize", "require"},
 }
 
 
@@ -113,6 +119,16 @@ class BoundSafety:
 
         return violation
 
+    def margin_unit(self) -> DisplayUnit | None:
+        """The unit of a depth or margin into the unsafe pieces: the requirement's unit if every
+        constraint of every piece has one dimension, else None (then depths are model units of
+        mixed dimensions)."""
+        constraints = [c for pieces in self.pieces.values() for piece in pieces for c in piece]
+        dims = {c.dimension for c in constraints}
+        if len(dims) != 1 or None in dims:
+            return None
+        return next((c.unit for c in constraints if c.unit is not None), None)
+
 
 @dataclass
 class BoundReach:
@@ -158,6 +174,8 @@ class BoundEvent:
     file: str = ""
     description: str = ""
     kind: str = "event"
+    text: str = ""                      # the quantity as written
+    unit: DisplayUnit | None = None     # the unit of the requirement's bound
 
 
 # ---------------------------------------------------------------- loading
@@ -269,7 +287,12 @@ def _check_set(prop: Property, key: str) -> None:
 
 # ---------------------------------------------------------------- binding
 
-def _set_constraints(prop: Property, key: str, names, units) -> list[Constraint]:
+def _shown_unit(dims: DimensionContext | None, form, brackets) -> tuple:
+    """``(dimension, unit)`` of a checked quantity, ``(None, None)`` if unknown."""
+    return dims.display(form, brackets) if dims is not None else (None, None)
+
+
+def _set_constraints(prop: Property, key: str, names, units, dims=None) -> list[Constraint]:
     """A ``box`` or a list of constraint strings, as one conjunction."""
     value = prop.raw[key]
     if isinstance(value, dict):
@@ -279,31 +302,43 @@ def _set_constraints(prop: Property, key: str, names, units) -> list[Constraint]
             if name not in names:
                 raise where.error(f"unknown name '{name}'")
             var = names[name]
-            lo = parse_expr(low, names, where, units)
-            hi = parse_expr(high, names, where, units)
+            bounds, brackets = [], []
+            for text in (low, high):
+                bound, form = parse_quantity(text, names, where, units, dims)
+                if dims is not None:
+                    brackets += dims.brackets
+                    dims.require(form, Form.name(name), where,
+                                 lambda got, want: f"{side_text(text, got)} compared with {name} {want}")
+                bounds.append(bound)
+            lo, hi = bounds
             if not (lo.is_number and hi.is_number):
                 raise where.error("box bounds must be numbers")
             if float(lo) > float(hi):
                 raise where.error(f"empty interval [{float(lo):g}, {float(hi):g}]")
-            out.append(Constraint(sympy.expand(lo - var), False, f"{name} >= {low}", where))
-            out.append(Constraint(sympy.expand(var - hi), False, f"{name} <= {high}", where))
+            tags = _shown_unit(dims, Form.name(name), brackets)
+            out.append(Constraint(sympy.expand(lo - var), False, f"{name} >= {low}", where, *tags))
+            out.append(Constraint(sympy.expand(var - hi), False, f"{name} <= {high}", where, *tags))
         return out
-    return _conjunction(prop, key, names, units)
+    return _conjunction(prop, key, names, units, dims)
 
 
-def _conjunction(prop: Property, key: str, names, units) -> list[Constraint]:
+def _conjunction(prop: Property, key: str, names, units, dims=None) -> list[Constraint]:
     value = prop.raw[key]
     texts = [value] if not isinstance(value, list) else value
     out = []
     for j, text in enumerate(texts):
         where = prop.where(key, j) if isinstance(value, list) else prop.where(key)
-        out.extend(from_comparisons(parse_comparison(text, names, where, units), str(text), where))
+        out.extend(from_comparisons(parse_comparison(text, names, where, units, dims), str(text), where))
     return out
 
 
-def _time(prop: Property, names, units) -> float:
+def _time(prop: Property, names, units, dims=None) -> float:
     where = prop.where("at")
-    value = parse_expr(prop.raw["at"], {k: v for k, v in names.items() if v.is_number}, where, units)
+    text = prop.raw["at"]
+    value, form = parse_quantity(text, {k: v for k, v in names.items() if v.is_number}, where, units, dims)
+    if dims is not None:
+        dims.require(form, Form(const=TIME), where,
+                     lambda got, want: f"'at' must be a time {want}, got {side_text(text, got)}")
     if not value.is_number or float(value) < 0:
         raise where.error("'at' must be a non-negative time")
     return float(value)
@@ -323,6 +358,10 @@ def bind(prop: Property, model):
     names.update(input_symbols)
     units = model.units
     description = str(prop.raw.get("description", ""))
+    dims = None
+    if getattr(model, "dimensions", None) is not None:
+        dims = DimensionContext(model.dimensions.copy(), units,
+                                frozenset(list(model.state) + list(model.inputs) + list(model.constants)))
 
     def per_mode(expr, mode):
         law = model.modes[mode].control
@@ -340,10 +379,10 @@ def bind(prop: Property, model):
         missing = [m for m in requested if m not in model.modes]
     if prop.kind == "safety":
         if "require" in prop.raw:
-            safe = _conjunction(prop, "require", names, units)
+            safe = _conjunction(prop, "require", names, units, dims)
             generic = [[c.negated()] for c in safe]
         else:
-            generic = [_set_constraints(prop, "avoid", names, units)]
+            generic = [_set_constraints(prop, "avoid", names, units, dims)]
         pieces = {m: [[c.substitute({input_symbols[u]: model.modes[m].control.get(u, sympy.Integer(0))
                                      for u in model.inputs}) for c in piece] for piece in generic]
                   for m in modes}
@@ -352,23 +391,32 @@ def bind(prop: Property, model):
     if prop.kind == "event":
         sense = "min" if "minimize" in prop.raw else "max"
         key = "minimize" if sense == "min" else "maximize"
-        expr = parse_expr(prop.raw[key], names, prop.where(key), units)
+        expr, quantity_form = parse_quantity(prop.raw[key], names, prop.where(key), units, dims)
+        quantity_brackets = list(dims.brackets) if dims is not None else []
         text = prop.raw["require"].strip()
         op = next((o for o in ("<=", ">=") if text.startswith(o)), None)
         if op is None:
             raise prop.where("require").error("expected '<= VALUE' or '>= VALUE'")
-        value = parse_expr(text[2:], {k: v for k, v in names.items() if v.is_number},
-                           prop.where("require"), units)
+        bound_text = text[2:].strip()
+        value, value_form = parse_quantity(bound_text, {k: v for k, v in names.items() if v.is_number},
+                                           prop.where("require"), units, dims)
         if not value.is_number:
             raise prop.where("require").error("the bound must be a number")
+        unit = None
+        if dims is not None:
+            brackets = dims.brackets + quantity_brackets
+            dims.require(value_form, quantity_form, prop.where("require"),
+                         lambda got, want: f"{side_text(bound_text, got)} compared with {prop.raw[key]} {want}")
+            _, unit = _shown_unit(dims, quantity_form if quantity_form is not None else value_form,
+                                          brackets)
         return BoundEvent(prop.id, modes, sense, {m: per_mode(expr, m) for m in modes}, op,
-                          float(value), symbols, prop.file, description)
-    at = _time(prop, names, units)
+                          float(value), symbols, prop.file, description, text=str(prop.raw[key]), unit=unit)
+    at = _time(prop, names, units, dims)
     if at > model.horizon * (1 + 1e-12):
         raise prop.where("at").error(f"'at' = {at:g} is beyond the model horizon {model.horizon:g}")
-    target = state_only(_set_constraints(prop, "target", names, units), "target")
+    target = state_only(_set_constraints(prop, "target", names, units, dims), "target")
     at_least = prop.raw.get("probability", {}).get("at_least")
     if prop.kind == "reach":
         return BoundReach(prop.id, at, target, symbols, at_least, prop.file, description)
-    safe = state_only(_conjunction(prop, "safe", names, units), "safe")
+    safe = state_only(_conjunction(prop, "safe", names, units, dims), "safe")
     return BoundReachAvoid(prop.id, at, target, safe, symbols, at_least, prop.file, description)

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from reach.backends.options import option_error, parse_options
+from reach.backends.options import option_error, parse_options, ranged
 from reach.backends.taylor.ads import Subdomain, split_domain, truncation_estimate
 from reach.backends.taylor.bound import contenders, enclose, estimated_remainder, next_order_remainder
 from reach.backends.taylor.da import stack
@@ -49,14 +49,14 @@ log = logging.getLogger(__name__)
 
 @dataclass
 class Options:
-    order: int = 4                  # Taylor order n
+    order: int = ranged(4, 1, 12)                 # Taylor order n
     e_tol: float | None = None      # ADS tolerance on the event value; default 1e-4 (1 + |value|)
-    max_splits: int = 6             # N_max: halvings on the way to one subdomain
+    max_splits: int = ranged(6, 0, 30)            # N_max: halvings on the way to one subdomain
     remainder: str = "estimated"    # "estimated" (eq. 28), "next-order" or "rigorous"
     integration_tol: float = 1e-9   # step doubling tolerance on the nominal run
     step_tol: float = 1e-4          # rigorous mode: largest step defect relative to the rates
-    refine: int = 0                 # extra halvings of subdomains whose bound straddles the requirement
-    jobs: int = 1                   # local worker processes for ADS boxes and sweeps
+    refine: int = ranged(0, 0, 12)                # extra halvings of subdomains whose bound straddles the requirement
+    jobs: int = ranged(1, 1, 256)                  # local worker processes for ADS boxes and sweeps
     scheduler: object = None        # or a Dask scheduler address (or Client) to run them on
 
     @classmethod
@@ -219,7 +219,7 @@ def _unit_runner(opts: Options, portable: bool):
     the model can be sent to worker processes)."""
     if (opts.jobs <= 1 and opts.scheduler is None) or not portable:
         return lambda fn, arg_list: [fn(*args) for args in arg_list]
-    from reach.bench.executors import make_executor
+    from reach.executors import make_executor
 
     executor = make_executor(opts.jobs, opts.scheduler)
 

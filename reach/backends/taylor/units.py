@@ -2,7 +2,7 @@
 
 They are module-level functions of picklable arguments (the model, the bound property, plain
 numbers), so a level of ADS boxes or the rigorous sweeps of all subdomains can run on local worker
-processes or a Dask cluster (:mod:`reach.bench.executors`). Each process compiles a problem once
+processes or a Dask cluster (:mod:`reach.executors`). Each process compiles a problem once
 and keeps it, keyed by a digest of the pickled model and property.
 """
 

@@ -9,10 +9,12 @@ capped so one runaway case cannot take the machine down.
 from __future__ import annotations
 
 import os
+import re
 import signal
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 
 MEMORY_LIMIT_BYTES = 16 * 2 ** 30
+CONNECT_SECONDS = 10
 
 
 class UnitTimeout(Exception):
@@ -78,7 +80,17 @@ class DaskExecutor:
         except ImportError:
             from reach.errors import InputError
             raise InputError("Dask is not installed: pip install 'reach[dist]'", field="--scheduler") from None
-        self.client = scheduler if hasattr(scheduler, "submit") else Client(scheduler)
+        if hasattr(scheduler, "submit"):
+            self.client = scheduler
+            return
+        from reach.errors import InputError
+        if not isinstance(scheduler, str) or not re.fullmatch(r"(tcp|tls|inproc|ws|wss)://[^\s/]+", scheduler):
+            raise InputError(f"expected an address such as tcp://host:8786, got {scheduler!r}", field="--scheduler")
+        try:
+            self.client = Client(scheduler, timeout=CONNECT_SECONDS)
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise InputError(f"cannot reach the Dask scheduler {scheduler} within {CONNECT_SECONDS} s "
+                             f"({exc.__class__.__name__})", field="--scheduler") from None
 
     def map_unordered(self, fn, arg_list, time_limit=None):
         from distributed import as_completed

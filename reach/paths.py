@@ -1,0 +1,72 @@
+"""Where reach reads and writes: capped reads of regular text files, and output names that
+cannot leave their folder.
+
+* :func:`read_text` opens only regular files (not ``/dev/zero``, a FIFO or a directory) of at
+  most ``MAX_BYTES``, with an allowed suffix, and refuses text with NUL bytes. Its errors name the
+  file and never quote its content.
+* :func:`safe_name` turns a model or property name into one file-name component: letters,
+  digits, ``.``, ``-`` and ``_`` only, no leading dot, at most 80 characters, so
+  ``name: "../../x"`` writes ``x`` inside the output folder, never outside it.
+* :func:`printable` escapes control characters of a user's name for terminal output.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import stat
+from pathlib import Path
+
+from reach.errors import InputError
+
+MAX_BYTES = 5_000_000
+YAML_SUFFIXES = (".yaml", ".yml")
+
+
+def read_text(path, suffixes: tuple[str, ...] | None = None, what: str = "file",
+              max_bytes: int = MAX_BYTES) -> str:
+    """The UTF-8 text of a regular file of at most ``max_bytes`` bytes (an InputError otherwise)."""
+    path = Path(path)
+    shown = printable(str(path))
+    if suffixes is not None and path.suffix.lower() not in suffixes:
+        raise InputError(f"a {what} must be a {' or '.join(suffixes)} file", shown)
+    try:
+        info = os.stat(path)
+    except FileNotFoundError:
+        raise InputError("no such file", shown) from None
+    except (OSError, ValueError) as exc:
+        raise InputError(f"cannot read file: {exc.__class__.__name__}", shown) from None
+    if not stat.S_ISREG(info.st_mode):
+        raise InputError(f"not a regular file (a {what} must be a plain file)", shown)
+    if info.st_size > max_bytes:
+        raise InputError(f"file larger than {max_bytes} bytes ({info.st_size})", shown)
+    try:
+        with open(path, "rb") as handle:
+            data = handle.read(max_bytes + 1)
+    except OSError as exc:
+        raise InputError(f"cannot read file: {exc.__class__.__name__}", shown) from None
+    if len(data) > max_bytes:
+        raise InputError(f"file larger than {max_bytes} bytes", shown)
+    if b"\x00" in data:
+        raise InputError(f"contains NUL bytes: not a text {what}", shown)
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise InputError(f"not UTF-8 text (byte {exc.start})", shown) from None
+
+
+_UNSAFE_CHARS = re.compile(r"[^A-Za-z0-9._-]+")
+
+
+def safe_name(name, fallback: str = "unnamed") -> str:
+    """One file-name component made from ``name`` (see the module docstring)."""
+    text = _UNSAFE_CHARS.sub("_", str(name)).strip("._")
+    return text[:80] or fallback
+
+
+_CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f]")
+
+
+def printable(text) -> str:
+    """``text`` with control characters shown as escapes (``\\x1b``), for one-line messages."""
+    return _CONTROL.sub(lambda m: m.group().encode("unicode_escape").decode("ascii"), str(text))

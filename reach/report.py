@@ -1,0 +1,214 @@
+"""Results read in the requirement's own units, next to the requirement.
+
+A back-end answers in model units (a thrust bound in kg m/min^2 for a minute-based model);
+a requirement was written ``<= 10[N]``. These pure functions of a :class:`~reach.result.Result`,
+its bound property (:mod:`reach.spec.properties`) and the model turn the figures into that
+unit (the constraint's or event's :class:`~reach.model.units.DisplayUnit`: a model value
+``v`` reads ``v / scale``) and put them beside the requirement::
+
+    max Fx in [7.396, 7.397] N <= 10 N, margin 2.603 N
+    abs(Fx) <= 10[N], abs(Fy) <= 10[N]: closest margin 2.603 N
+
+``line`` is the text summary, ``figures`` the same numbers for ``--json``.
+
+Margins: positive is room left before the requirement is violated. For an event bound
+``[lo, hi]`` it is ``value - hi`` (``<=``) or ``lo - value`` (``>=``), the worst case over
+the bound; for a safety property it is the smallest depth ``max_j g_j`` to any unsafe piece
+over the sampled runs (:meth:`BoundSafety.violation`). A margin at or just below zero on a
+run that was not reported as a violation is a touch: the run reaches the boundary within
+the rounding tolerance ``1e-9 (1 + |x|)`` that a violation must exceed.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from reach.model.constraints import NUMERICAL_TOLERANCE
+from reach.result import Status, _plain
+
+TOUCH = f"touching: within the rounding tolerance {NUMERICAL_TOLERANCE:g}*(1 + |x|), not a violation"
+
+
+def number(value: float, digits: int = 4) -> str:
+    """``value`` to ``digits`` significant figures (``inf``/``nan`` spelled out)."""
+    if value is None or not math.isfinite(value):
+        return str(value)
+    return f"{value:.{digits}g}"
+
+
+def interval(low: float, high: float) -> str:
+    """``[low, high]`` with just enough figures (4 to 10) to tell the ends apart."""
+    for digits in range(4, 11):
+        a, b = number(low, digits), number(high, digits)
+        if a != b or low == high:
+            break
+    return f"[{a}, {b}]"
+
+
+def _with_unit(text: str, unit) -> str:
+    return f"{text} {unit.text}" if unit is not None and unit.text else text
+
+
+def _in(unit, value: float) -> float:
+    return value if unit is None else unit.of(value)
+
+
+def requirement(prop) -> str:
+    """The requirement as written: constraint texts, or the event's quantity and bound."""
+    kind = getattr(prop, "kind", "")
+    if kind == "event":
+        return f"{prop.sense} {prop.text or 'quantity'} {prop.op} {_bound_value(prop)}"
+    if kind == "safety":
+        # a required constraint c is stored as its negation, the unsafe piece "not (c)"
+        texts = list(dict.fromkeys(con.text for pieces in prop.pieces.values()
+                                   for piece in pieces for con in piece))
+        if texts and all(t.startswith("not (") and t.endswith(")") for t in texts):
+            return ", ".join(t[len("not ("):-1] for t in texts)
+        return "avoid " + " and ".join(texts) if texts else ""
+    if kind in ("reach", "reach_avoid") and prop.at_least is not None:
+        return f"P >= {number(prop.at_least)}"
+    return ""
+
+
+def _bound_value(prop) -> str:
+    return _with_unit(number(_in(prop.unit, prop.value)), prop.unit)
+
+
+def figures(result, prop, model) -> dict:
+    """The result's figures in the requirement's units (JSON-ready)."""
+    out: dict = {"requirement": requirement(prop)}
+    kind = getattr(prop, "kind", "")
+    d = result.details
+    if kind == "event":
+        unit = prop.unit
+        out["unit"] = unit.text if unit is not None else None
+        out["required"] = {"op": prop.op, "value": _in(unit, prop.value)}
+        if result.bound is not None:
+            lo, hi = (_in(unit, v) for v in result.bound)
+            out["bound"] = [lo, hi]
+            margin = (prop.value - result.bound[1]) if prop.op == "<=" else (result.bound[0] - prop.value)
+            out["margin"] = _in(unit, margin)
+        if "sampled_range" in d:
+            out["sampled_range"] = [_in(unit, v) for v in d["sampled_range"]]
+        if "closest_margin" in d:
+            out["closest_margin"] = _in(unit, d["closest_margin"])
+    elif kind == "safety":
+        unit = prop.margin_unit()
+        out["unit"] = unit.text if unit is not None else None
+        if unit is None:
+            out["unit_note"] = "requirements of different dimensions: margins in model units"
+        if "closest_depth" in d:
+            out["closest_margin"] = _in(unit, d["closest_depth"])
+        depth = _depth_at_violation(result.counterexample, prop)
+        if depth is not None:
+            out["violation_margin"] = _in(unit, depth)
+    if result.probability is not None:
+        out["probability"] = list(result.probability)
+        if getattr(prop, "at_least", None) is not None:
+            out["at_least"] = prop.at_least
+    note = _margin_note(result, kind, out)
+    if note:
+        out["margin_note"] = note
+    if result.counterexample is not None:
+        out["time_unit"] = model.units.time
+    return out
+
+
+def _depth_at_violation(cex, prop) -> float | None:
+    """The margin (negative: how far past) of the counterexample's violating state."""
+    if cex is None or cex.violation_mode not in prop.pieces or len(cex.violation_state) != len(prop.symbols):
+        return None
+    test = prop.violation(cex.violation_mode)
+    if test is None:
+        return None
+    _, depth = test(np.asarray(cex.violation_state, dtype=float).reshape(1, -1))
+    return float(depth[0]) if np.isfinite(depth[0]) else None
+
+
+def _margin_note(result, kind: str, out: dict) -> str | None:
+    """Why a margin at or below zero came with no violation (None if there is nothing to say)."""
+    margin = out.get("margin", out.get("closest_margin"))
+    if margin is None or margin > 0 or result.status in (Status.UNSAFE, Status.SAFE):
+        return None
+    d = result.details
+    if d.get("note") or d.get("unreplayed"):
+        return d.get("note") or d.get("unreplayed")
+    if kind == "event" and "bound" in out and margin < 0:
+        return "the bound reaches past the requirement: neither proved nor refuted"
+    if kind == "event":
+        return "touching: the extremum equals the bound, which the requirement allows"
+    return TOUCH
+
+
+def line(result, prop, model) -> str:
+    """One line: the figures in the requirement's units beside the requirement."""
+    d = result.details
+    if result.status == Status.UNSUPPORTED:
+        return d.get("reason", "")
+    f = figures(result, prop, model)
+    kind = getattr(prop, "kind", "")
+    parts = []
+    if result.counterexample is not None:
+        c = result.counterexample
+        t = model.units.time
+        abort = "" if c.switch_time is None else f", switch at t={c.switch_time:g} {t}"
+        parts.append(f"violated at t={c.violation_time:.4g} {t} in {c.violation_mode}{abort}")
+    if kind == "event":
+        unit = prop.unit
+        quantity = f"{prop.sense} {prop.text or 'quantity'}"
+        required = f"{prop.op} {_bound_value(prop)}"
+        if "bound" in f:
+            lo, hi = f["bound"]
+            shown = number(lo) if lo == hi else interval(lo, hi)
+            parts.append(f"{quantity} in {_with_unit(shown, unit)} {required}, "
+                         f"margin {_with_unit(number(f['margin']), unit)}")
+        elif "sampled_range" in f:
+            extreme = f["sampled_range"][1 if prop.sense == "max" else 0]
+            parts.append(f"{quantity} sampled {_with_unit(number(extreme), unit)} {required}, "
+                         f"closest margin {_with_unit(number(f['closest_margin']), unit)}")
+        else:
+            parts.append(f"{quantity} {required}")
+    elif kind == "safety":
+        text = f["requirement"]
+        if "closest_margin" in f:
+            unit = prop.margin_unit()
+            text += f": closest margin {_with_unit(number(f['closest_margin']), unit)}"
+            if unit is None:
+                text += " (model units)"
+        if "violation_margin" in f:
+            unit = prop.margin_unit()
+            text += f": margin {_with_unit(number(f['violation_margin']), unit)} at the violation"
+            if unit is None:
+                text += " (model units)"
+        parts.append(text)
+    if result.probability is not None:
+        p = f"P in {interval(*result.probability)}"
+        if "at_least" in f:
+            p += f", required >= {number(f['at_least'])}"
+        parts.append(p)
+    if "margin_note" in f:
+        parts.append(f["margin_note"])
+    if "violation_probability_upper_95" in d:
+        parts.append(f"P(violation) <= {d['violation_probability_upper_95']:.2g} (95 %)")
+    if "method" in d:
+        parts.append(str(d["method"]))
+    if "remainder" in d:
+        parts.append(f"remainder {d['remainder']}")
+    return "; ".join(parts)
+
+
+def json_row(result, prop, model, counterexample_file: str | None = None) -> dict:
+    """The ``--json`` row: the result's own keys, its figures in the requirement's units under
+    ``report``, and no inline trajectory when the counterexample file holds it."""
+    row = {"property": result.property, "status": result.status.value.lower(), "seconds": result.seconds}
+    row.update(result.to_dict())
+    if prop is not None:
+        row["report"] = _plain(figures(result, prop, model))
+    if counterexample_file is not None:
+        row["counterexample_file"] = counterexample_file
+        if row.get("counterexample"):
+            row["counterexample"].pop("trajectory", None)
+            row["counterexample"]["trajectory_file"] = counterexample_file
+    return row

@@ -1,0 +1,141 @@
+"""Reported figures in the requirement's units, checked against hand conversions.
+
+The ARCH models are in kg, m, min: 1 N = 1 kg m/s^2 = 3600 kg m/min^2, so 10 N = 36000 model
+units; 1 m/s = 60 m/min.
+"""
+
+import json
+
+import pytest
+
+from reach.cli import main
+from reach.model import load_model
+from reach.report import figures, json_row, line
+from reach.result import Counterexample, Result, Status
+from reach.spec import bind, load_properties
+
+
+@pytest.fixture(scope="module")
+def sra01():
+    return load_model("models/SRA01.yaml")
+
+
+def _prop(model, path, pid):
+    return bind(next(p for p in load_properties(path) if p.id == pid), model)
+
+
+def test_ten_newtons_is_36000_model_units(sra01):
+    event = _prop(load_model("models/SRNA01.yaml"), "properties/rendezvous_events.yaml", "thrust_x_max")
+    assert event.value == pytest.approx(36000.0)
+    assert event.unit.text == "N" and event.unit.scale == pytest.approx(3600.0)
+    result = Result("taylor", "SRNA01", event.id, Status.UNKNOWN, bound=(25180.0, 26630.0))
+    f = figures(result, event, sra01)
+    assert f["bound"] == pytest.approx([25180 / 3600, 26630 / 3600])
+    assert f["margin"] == pytest.approx((36000 - 26630) / 3600)
+    assert f["required"] == {"op": "<=", "value": pytest.approx(10.0)}
+    assert line(result, event, sra01) == "max Fx in [6.994, 7.397] N <= 10 N, margin 2.603 N"
+
+
+def test_safety_margin_in_newtons_next_to_the_requirement(sra01):
+    thrust = _prop(sra01, "properties/rendezvous.yaml", "thrust")
+    result = Result("montecarlo", "SRA01", "thrust", Status.UNKNOWN, details={"closest_depth": 9371.0})
+    assert figures(result, thrust, sra01)["closest_margin"] == pytest.approx(9371 / 3600)
+    assert line(result, thrust, sra01).startswith("abs(Fx) <= 10[N], abs(Fy) <= 10[N]: closest margin 2.603 N")
+
+
+def test_velocity_margin_in_metres_per_second(sra01):
+    velocity = _prop(sra01, "properties/rendezvous.yaml", "velocity")
+    result = Result("montecarlo", "SRA01", "velocity", Status.UNKNOWN, details={"closest_depth": 0.07698})
+    assert velocity.margin_unit().text == "m/s"
+    assert figures(result, velocity, sra01)["closest_margin"] == pytest.approx(0.07698 / 60)
+
+
+def test_squared_speed_in_the_square_of_the_written_unit():
+    model = load_model("models/SRNA01.yaml")
+    speed = _prop(model, "properties/rendezvous_events.yaml", "speed")
+    assert speed.value == pytest.approx((0.055 * 60) ** 2)             # (m/min)^2
+    assert speed.unit.text == "(m/s)**2" and speed.unit.scale == pytest.approx(3600.0)
+    result = Result("taylor", model.name, "speed", Status.UNKNOWN, bound=(9.0, 9.9))
+    assert figures(result, speed, model)["margin"] == pytest.approx((10.89 - 9.9) / 3600)
+
+
+def test_a_touching_margin_says_why(sra01):
+    los = _prop(sra01, "properties/rendezvous.yaml", "los")
+    result = Result("montecarlo", "SRA01", "los", Status.UNKNOWN, details={"closest_depth": -2.8e-14})
+    text = line(result, los, sra01)
+    assert "closest margin -2.8e-14 m" in text and "touching" in text
+    safe_margin = Result("montecarlo", "SRA01", "los", Status.UNKNOWN, details={"closest_depth": 3.0})
+    assert "touching" not in line(safe_margin, los, sra01)
+
+
+def test_metres_in_a_kilometre_model():
+    model = load_model("models/fsr_lqr1_reach.yaml")
+    dock = _prop(model, "properties/fsr_lqr1_reach.yaml", "dock")
+    x_low = dock.target[0]
+    assert x_low.unit.text == "m" and x_low.unit.scale == pytest.approx(1e-3)
+    corridor = _prop(model, "properties/fsr_lqr1_reach.yaml", "dock_corridor")
+    assert corridor.safe[0].unit.text == "km" and corridor.safe[0].unit.scale == 1.0
+    result = Result("fsr", model.name, "dock", Status.SAFE, probability=(0.71, 0.72))
+    assert line(result, dock, model).startswith("P in [0.71, 0.72], required >= 0.6")
+
+
+def test_mixed_dimensions_stay_in_model_units(tmp_path, sra01):
+    path = tmp_path / "p.yaml"
+    path.write_text("properties:\n  - id: mixed\n    kind: safety\n    modes: [passive]\n"
+                    "    avoid: {box: {x: ['-1[m]', '1[m]'], vx: ['-1[m/s]', '1[m/s]']}}\n")
+    mixed = bind(load_properties(path)[0], sra01)
+    assert mixed.margin_unit() is None
+    result = Result("montecarlo", "SRA01", "mixed", Status.UNKNOWN, details={"closest_depth": 12.0})
+    assert "closest margin 12 (model units)" in line(result, mixed, sra01)
+
+
+def test_json_keeps_old_keys_and_leaves_the_trajectory_in_its_file(sra01):
+    thrust = _prop(sra01, "properties/thrust_7N.yaml", "thrust_7N")
+    cex = Counterexample("SRA01", "thrust_7N", "models/SRA01.yaml", "properties/thrust_7N.yaml",
+                         [0.0] * 5, 120.0, 0.0, "approach", [0.0] * 5, 0.1,
+                         trajectory={"t": [0.0, 0.1], "mode": ["approach"] * 2, "x": [[0.0] * 5] * 2})
+    result = Result("star", "SRA01", "thrust_7N", Status.UNSAFE, counterexample=cex)
+    row = json_row(result, thrust, sra01, "out/cex.json")
+    for key in ("property", "status", "seconds", "backend", "model", "bound", "probability", "details"):
+        assert key in row
+    assert "trajectory" not in row["counterexample"]
+    assert row["counterexample"]["trajectory_file"] == "out/cex.json"
+    assert row["report"]["unit"] == "N" and row["report"]["time_unit"] == "min"
+    assert json_row(result, thrust, sra01)["counterexample"]["trajectory"]["t"] == [0.0, 0.1]
+    assert "violated at t=0 min in approach, switch at t=120 min" in line(result, thrust, sra01)
+
+
+def test_cli_text_and_json_agree_on_the_margin(capsys, tmp_path):
+    args = ["check", "models/SRA01.yaml", "properties/rendezvous.yaml", "--backend", "montecarlo",
+            "--property", "thrust", "--option", "samples=40", "--option", "search_rounds=0",
+            "--counterexamples", str(tmp_path)]
+    main(args + ["--json"])
+    row = json.loads(capsys.readouterr().out)[0]
+    depth = row["details"]["closest_depth"]                              # kg m/min^2
+    assert row["report"]["closest_margin"] == pytest.approx(depth / 3600)
+    main(args)
+    text = capsys.readouterr().out
+    assert f"closest margin {depth / 3600:.4g} N" in text
+
+
+def test_a_star_counterexample_is_measured_against_the_requirement(sra01):
+    """At the corner (-925, -375) at rest the ARCH gain K1 asks Fx = K1[0] . x (kg m/min^2)."""
+    thrust = _prop(sra01, "properties/thrust_7N.yaml", "thrust_7N")
+    corner = [-925.0, -375.0, 0.0, 0.0, 0.0]
+    fx = (-28.82867767694 * -925.0 + 0.1004799482599 * -375.0) / 3600     # N, from the model file
+    cex = Counterexample("SRA01", "thrust_7N", "models/SRA01.yaml", "properties/thrust_7N.yaml",
+                         corner, 120.0, 0.0, "approach", corner, 0.1)
+    result = Result("star", "SRA01", "thrust_7N", Status.UNSAFE, counterexample=cex)
+    f = figures(result, thrust, sra01)
+    assert fx == pytest.approx(7.3969, abs=1e-4)
+    assert f["violation_margin"] == pytest.approx(7.0 - fx, rel=1e-9)
+    assert f"margin {7.0 - fx:.4g} N at the violation" in line(result, thrust, sra01)
+
+
+def test_an_avoided_set_reads_as_avoid(tmp_path, sra01):
+    path = tmp_path / "p.yaml"
+    path.write_text("properties:\n  - id: wall\n    kind: safety\n    modes: [passive]\n"
+                    "    avoid: ['x >= 5[m]']\n")
+    wall = bind(load_properties(path)[0], sra01)
+    result = Result("montecarlo", "SRA01", "wall", Status.UNKNOWN, details={"closest_depth": 60.0})
+    assert line(result, wall, sra01).startswith("avoid x >= 5[m]: closest margin 60 m")
