@@ -424,3 +424,13 @@ def test_import_round_trip_is_the_same_automaton_and_property(tmp_path, xml, cfg
             assert bp.modes == bq.modes
             assert {m: [[sympy.srepr(c.g) for c in piece] for piece in bp.pieces[m]] for m in bp.modes} == \
                 {m: [[sympy.srepr(c.g) for c in piece] for piece in bq.pieces[m]] for m in bq.modes}
+
+
+def test_folders_and_wrong_suffixes_are_bad_input(tmp_path, capsys):
+    (tmp_path / "m.xml").mkdir()
+    (tmp_path / "m.txt").write_text("system = s\n")
+    assert main(["import", str(tmp_path / "m.xml"), str(tmp_path / "m.txt"), "--out", str(tmp_path)]) == 2
+    assert ".cfg" in capsys.readouterr().err
+    (tmp_path / "m.cfg").write_text("system = s\n")
+    assert main(["import", str(tmp_path / "m.xml"), str(tmp_path / "m.cfg"), "--out", str(tmp_path)]) == 2
+    assert "not a regular file" in capsys.readouterr().err

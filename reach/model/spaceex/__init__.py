@@ -78,11 +78,11 @@ def load_spaceex(xml_path, cfg_path=None):
 def write_yaml(docs: Documents, out_dir) -> tuple[Path, Path | None]:
     """Write ``out_dir/models/NAME.yaml`` and ``out_dir/properties/NAME.yaml`` (if the cfg
     forbids anything); NAME is the cfg's file name, sanitised."""
-    import re
-
     import yaml
 
-    safe = re.sub(r"[^A-Za-z0-9_.-]", "_", str(docs.model["name"])).lstrip(".") or "model"
+    from reach.paths import safe_name
+
+    safe = safe_name(str(docs.model["name"]), "model")
     out = Path(out_dir)
     model_path = out / "models" / f"{safe}.yaml"
     model_path.parent.mkdir(parents=True, exist_ok=True)

@@ -8,9 +8,9 @@ SpaceEx's own algorithms (scenario, directions, tolerances, output) and are kept
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from pathlib import Path
 
 from reach.errors import InputError
+from reach.paths import read_text
 
 MAX_BYTES = 1_000_000
 
@@ -86,13 +86,4 @@ def parse_cfg(text: str, file: str) -> Config:
 
 
 def read_cfg(path) -> Config:
-    path = Path(path)
-    try:
-        if path.stat().st_size > MAX_BYTES:
-            raise InputError(f"file larger than {MAX_BYTES} bytes", str(path))
-        text = path.read_text(encoding="utf-8", errors="strict")
-    except FileNotFoundError:
-        raise InputError("no such file", str(path)) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read file: {exc.__class__.__name__}", str(path)) from None
-    return parse_cfg(text, str(path))
+    return parse_cfg(read_text(path, (".cfg",), "SpaceEx configuration", MAX_BYTES), str(path))

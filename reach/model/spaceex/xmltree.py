@@ -8,11 +8,14 @@ fetches external resources.
 
 from __future__ import annotations
 
+import os
+import stat
 from dataclasses import dataclass, field
 from pathlib import Path
 from xml.parsers import expat
 
 from reach.errors import InputError
+from reach.paths import printable
 
 MAX_BYTES = 5_000_000
 MAX_ELEMENTS = 200_000
@@ -87,13 +90,22 @@ def parse_xml(data: bytes, file: str) -> Node:
 
 
 def read_xml(path) -> Node:
+    """The root element of a regular file of at most ``MAX_BYTES`` (not a FIFO, device or folder)."""
     path = Path(path)
+    shown = printable(str(path))
     try:
-        if path.stat().st_size > MAX_BYTES:
-            raise InputError(f"file larger than {MAX_BYTES} bytes", str(path))
-        data = path.read_bytes()
+        info = os.stat(path)
     except FileNotFoundError:
-        raise InputError("no such file", str(path)) from None
+        raise InputError("no such file", shown) from None
+    except (OSError, ValueError) as exc:
+        raise InputError(f"cannot read file: {exc.__class__.__name__}", shown) from None
+    if not stat.S_ISREG(info.st_mode):
+        raise InputError("not a regular file (a SpaceEx model must be a plain file)", shown)
+    if info.st_size > MAX_BYTES:
+        raise InputError(f"file larger than {MAX_BYTES} bytes", shown)
+    try:
+        with open(path, "rb") as handle:
+            data = handle.read(MAX_BYTES + 1)
     except OSError as exc:
-        raise InputError(f"cannot read file: {exc.__class__.__name__}", str(path)) from None
-    return parse_xml(data, str(path))
+        raise InputError(f"cannot read file: {exc.__class__.__name__}", shown) from None
+    return parse_xml(data, shown)
