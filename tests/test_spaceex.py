@@ -434,3 +434,73 @@ def test_folders_and_wrong_suffixes_are_bad_input(tmp_path, capsys):
     (tmp_path / "m.cfg").write_text("system = s\n")
     assert main(["import", str(tmp_path / "m.xml"), str(tmp_path / "m.cfg"), "--out", str(tmp_path)]) == 2
     assert "not a regular file" in capsys.readouterr().err
+
+
+NESTED = '''<component id="lag">
+ <param name="u" type="real" local="false" dynamics="any"/>
+ <param name="z" type="real" local="true" dynamics="any"/>
+ <param name="y" type="real" local="false" dynamics="any"/>
+ <param name="c" type="real" local="false" dynamics="const"/>
+ <location id="1" name="run"><flow>z' == c*(u - z) &amp; y' == z - y</flow></location>
+</component>
+<component id="pair">
+ <param name="u" type="real" local="false" dynamics="any"/>
+ <param name="y" type="real" local="false" dynamics="any"/>
+ <param name="mid" type="real" local="true" dynamics="any"/>
+ <bind component="lag" as="first"><map key="u">u</map><map key="y">mid</map><map key="c">2</map></bind>
+ <bind component="lag" as="second"><map key="u">first.z</map><map key="y">y</map><map key="c">3</map></bind>
+</component>
+<component id="top">
+ <param name="y" type="real" local="false" dynamics="any"/>
+ <param name="s" type="real" local="false" dynamics="any"/>
+ <location id="1" name="idle"><flow>s' == 1</flow></location>
+</component>
+<component id="sys">
+ <param name="y" type="real" local="false" dynamics="any"/>
+ <param name="s" type="real" local="false" dynamics="any"/>
+ <bind component="pair" as="p"><map key="u">s</map><map key="y">y</map></bind>
+ <bind component="top" as="clock"><map key="s">s</map><map key="y">y</map></bind>
+</component>
+'''
+
+
+def test_nested_binds_rename_locals_per_instance_and_map_dotted_names(tmp_path):
+    xml, cfg = write(tmp_path, NESTED, 'system = sys\ninitially = "y == 0 & s == 0 & p.mid == 0 & '
+                     'first.z == 0 & p.second.z == 1"\nforbidden = "second.z >= 2"\ntime-horizon = 1\n')
+    model, props, _ = load_spaceex(xml, cfg)
+    # y, s (the system's), then the instance locals: p.mid, p.first.z, p.second.z
+    assert sorted(model.state) == ["mid", "p_first_z", "p_second_z", "s", "y"]   # z: unique by path
+    flows = {name: str(f) for name, f in zip(model.state, model.modes["run__run__idle"].flow)}
+    assert flows["p_first_z"] == "-2*p_first_z + 2*s"            # u of 'first' is the system's s
+    assert flows["p_second_z"] == "3*p_first_z - 3*p_second_z"   # u of 'second' is first.z (dotted map)
+    assert flows["mid"] == "-mid + p_first_z" and flows["y"] == "p_second_z - y"
+    i = model.state.index("p_second_z")
+    assert model.initial.low[i] == model.initial.high[i] == 1
+    assert props[0].raw["avoid"] == ["p_second_z >= 2"]
+
+
+def test_cfg_values_comments_quotes_and_lines():
+    from reach.model.spaceex.cfg import parse_cfg
+    cfg = parse_cfg('# analysis\nsystem = "sys"\ninitially = "x >= 1 &\n  y == 2"  # two lines\n'
+                    '\nforbidden = x >= 3 # a comment\ntime-horizon = 2.5\n', "a.cfg")
+    assert cfg.text("system") == "sys" and cfg.text("initially") == "x >= 1 &\n  y == 2"
+    assert (cfg.line("forbidden"), cfg.text("forbidden"), cfg.number("time-horizon")) == (6, "x >= 3", 2.5)
+    assert cfg.line("time-horizon") == 7
+    with pytest.raises(InputError, match="duplicate key"):
+        parse_cfg("a = 1\na = 2\n", "b.cfg")
+    with pytest.raises(InputError, match="unterminated"):
+        parse_cfg('a = "1\n', "c.cfg")
+    with pytest.raises(InputError, match="expected a number") as info:
+        parse_cfg("time-horizon = soon\n", "d.cfg").number("time-horizon")
+    assert info.value.line == 1
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.dictionaries(st.from_regex(r"[a-z][a-z0-9-]{0,8}", fullmatch=True),
+                       st.from_regex(r"[A-Za-z0-9 <>=&|.()+*-]{0,30}", fullmatch=True), max_size=6),
+       st.booleans())
+def test_cfg_reads_back_what_was_written(values, quoted):
+    from reach.model.spaceex.cfg import parse_cfg
+    text = "".join(f'{k} = "{v}"\n' if quoted else f"{k} = {v}\n" for k, v in values.items())
+    cfg = parse_cfg(text, "e.cfg")
+    assert {k: cfg.text(k) for k in values} == {k: (v if quoted else v.strip()) for k, v in values.items()}
