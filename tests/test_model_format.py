@@ -259,3 +259,45 @@ def test_a_start_outside_the_polytope_does_not_replay(tmp_path):
         """, "p.yaml")
     prop = bind(load_properties(props)[0], model)
     assert not replay(model, prop, [0.9, 0.9], None).violated          # in the box, not the set
+
+
+SWITCHED = """
+name: updown
+state: [x]
+modes:
+  up: {flow: {x: 1}}
+  down: {flow: {x: -1}}
+transitions:
+  - {from: up, to: down}
+  - {from: down, to: up}
+initial: {mode: up, box: {x: 0}}
+horizon: 4
+"""
+
+
+def test_arbitrary_switching_is_sampled_and_replayed(tmp_path):
+    """Guard-free may-transitions and no invariant: only a run that switches early goes below 0."""
+    path = model_file(tmp_path, SWITCHED)
+    props = model_file(tmp_path, """
+        properties:
+          - {id: stays_up, kind: safety, require: ["x >= -0.5"]}
+        """, "p.yaml")
+    (result,) = check_files(path, props, "montecarlo", {"samples": 200})
+    assert result.status.value == "UNSAFE"
+    cex = result.counterexample
+    switch = np.array(cex.input_signal["switch"])
+    step = cex.input_signal["step"]
+    # independent: x is the integral of +1 in 'up' and -1 in 'down', the mode flipping at the
+    # piece starts k * step (k >= 1) where switch[k] is 1
+    t = np.linspace(0, cex.violation_time, 4001)
+    flips = np.array([k * step for k in range(1, len(switch)) if switch[k]])
+    rate = np.where(np.searchsorted(flips, t, side="right") % 2 == 0, 1.0, -1.0)
+    x = np.concatenate([[0], np.cumsum(rate[1:] * np.diff(t))])
+    assert x[-1] == pytest.approx(cex.violation_state[0], abs=2e-3) and x[-1] < -0.5
+    file = tmp_path / "cex.json"
+    cex.save(file)
+    assert main(["replay", str(file)]) == 1
+    data = json.loads(file.read_text())
+    data["input_signal"]["switch"] = [0] * len(switch)
+    file.write_text(json.dumps(data))
+    assert main(["replay", str(file)]) == 3                # never switching, x only grows

@@ -12,7 +12,10 @@ A polytopic initial set is sampled by its vertices, facet points and centre (str
 uniformly by hit-and-run (random); time-varying bounded inputs are piecewise-constant signals
 with pieces of ``input_step`` (default horizon / 20): constant extremes and bang-bang signals
 in the structured round, uniform pieces in the random one, perturbed by the search
-(:mod:`reach.backends.initial_sampling`). A counterexample carries its input signal.
+(:mod:`reach.backends.initial_sampling`). May-transitions with general guards are taken where a
+run would leave its invariant, and, in the random and search rounds, also at piece starts
+where the run's switching signal says so and a guard holds (each with probability
+``SWITCH_PROBABILITY``). A counterexample carries its input and switching signal.
 
 Every visited state is checked against every unsafe piece of the property. A violation is
 replayed alone (:func:`replay`) and returned as UNSAFE with its counterexample. Otherwise the
@@ -46,6 +49,7 @@ from reach.spec.properties import BoundEvent, BoundReach, BoundReachAvoid, Bound
 from reach.stats import clopper_pearson_upper, wilson
 
 NAME = "montecarlo"
+SWITCH_PROBABILITY = 0.3       # chance that a random run takes an enabled may-transition at a piece start
 
 
 @dataclass
@@ -168,32 +172,47 @@ def replay(model: HybridAutomaton, prop: BoundSafety, initial_state, switch_time
                           sim.dt, {"note": "the initial state is outside the initial polytope"})
     traj = sim.run(x0, tau, record=True, observers=[monitor], signal=signal)
     rep = _replay_result(model, monitor, traj, sim, x0, switch_time)
-    if signal is not None:
-        rep.input_signal = {"step": signal[0], "inputs": [u.name for u in model.varying_inputs],
-                            "values": signal[1][0].tolist()}
+    rep.input_signal = signal_record(model, signal, 0)
     return rep
 
 
 def _signal_of(model: HybridAutomaton, data: dict | None):
-    """``(step, values (1, K, m))`` from a counterexample's input signal, checked."""
-    if not model.varying_inputs:
-        return None
+    """``(step, values (1, K, m), switch (1, K) or None)`` from a counterexample's input
+    signal, checked; None when the run needs none."""
     names = [u.name for u in model.varying_inputs]
+    if data is None and not names:
+        return None
     if not isinstance(data, dict) or data.get("inputs") != names:
         raise InputError(f"the model has time-varying inputs ({', '.join(names)}): the counterexample "
                          "needs their input_signal", field="input_signal")
     try:
         step = float(data["step"])
-        values = np.asarray(data["values"], dtype=float).reshape(-1, len(names))
+        values = np.asarray(data["values"], dtype=float)
+        switch = None if data.get("switch") is None else np.asarray(data["switch"], dtype=int)
     except (KeyError, TypeError, ValueError):
         raise InputError("input_signal needs step and a list of values per piece", field="input_signal") from None
+    if values.ndim != 2 or values.shape[1] != len(names) or values.shape[0] == 0 or values.shape[0] > 1_000_000:
+        raise InputError(f"input_signal: expected a list of pieces of {len(names)} values", field="input_signal")
+    if switch is not None and (switch.shape != values.shape[:1] or np.any((switch != 0) & (switch != 1))):
+        raise InputError("input_signal: switch needs one 0 or 1 per piece", field="input_signal")
     lo = np.array([u.low for u in model.varying_inputs])
     hi = np.array([u.high for u in model.varying_inputs])
-    if not (step > 0 and np.isfinite(step)) or values.shape[0] == 0 or values.shape[0] > 10_000_000 // len(names):
-        raise InputError("input_signal: bad step or number of pieces", field="input_signal")
+    if not (step > 0 and np.isfinite(step)):
+        raise InputError("input_signal: the step must be a positive number", field="input_signal")
     if np.any(values < lo) or np.any(values > hi) or not np.all(np.isfinite(values)):
         raise InputError("input_signal: a value outside the input's range", field="input_signal")
-    return step, values[None, :, :]
+    return step, values[None, :, :], None if switch is None else switch[None, :].astype(bool)
+
+
+def signal_record(model: HybridAutomaton, signal, row: int) -> dict | None:
+    """The counterexample form of run ``row``'s signal."""
+    if signal is None:
+        return None
+    out = {"step": float(signal[0]), "inputs": [u.name for u in model.varying_inputs],
+           "values": signal[1][row].tolist()}
+    if len(signal) > 2 and signal[2] is not None:
+        out["switch"] = signal[2][row].astype(int).tolist()
+    return out
 
 
 def _replay_result(model, monitor, traj, sim, x0, switch_time) -> "Replay":
@@ -317,12 +336,21 @@ class MonteCarloBackend:
         Xs, taus = structured_plan(model, window, rng=rng)
         Xr, taur = random_plan(model, window, opts.samples, rng)
         signal = None
-        if model.varying_inputs:            # each structured state with every constant extreme, and bang-bang
+        mays = any(sim.exits.values())      # may-transitions with general guards
+        if model.varying_inputs or mays:
             step = input_step(model, sim.dt, opts.input_step)
-            Vs, repeat = structured_signals(model, Xs.shape[0], step, rng)
-            Xs = np.repeat(Xs, repeat, axis=0)
-            taus = None if taus is None else np.repeat(taus, repeat)
-            signal = (step, np.concatenate([Vs, input_signals(model, Xr.shape[0], step, rng)]))
+            if model.varying_inputs:        # each structured state with every constant extreme, and bang-bang
+                Vs, repeat = structured_signals(model, Xs.shape[0], step, rng)
+                Xs = np.repeat(Xs, repeat, axis=0)
+                taus = None if taus is None else np.repeat(taus, repeat)
+            else:
+                Vs = input_signals(model, Xs.shape[0], step, rng)
+            values = np.concatenate([Vs, input_signals(model, Xr.shape[0], step, rng)])
+            switch = None
+            if mays:                        # structured runs stay as long as they can, random ones
+                switch = np.zeros(values.shape[:2], dtype=bool)           # switch at random piece starts
+                switch[Xs.shape[0]:] = rng.random((Xr.shape[0], values.shape[1])) < SWITCH_PROBABILITY
+            signal = (step, values, switch)
         X = np.concatenate([Xs, Xr])
         tau = None if window is None else np.concatenate([taus, taur])
         n_structured = Xs.shape[0]
@@ -352,9 +380,7 @@ class MonteCarloBackend:
                 label, Xk, tauk, _, sig = rounds[k]
                 t = None if tauk is None or np.isnan(tauk[i]) else float(tauk[i])
                 if model.disturbance is None:
-                    rep = replay(model, prop, Xk[i], t, sim.dt, None if sig is None else {
-                        "step": sig[0], "inputs": [u.name for u in model.varying_inputs],
-                        "values": sig[1][i].tolist()})
+                    rep = replay(model, prop, Xk[i], t, sim.dt, signal_record(model, sig, i))
                     if rep.violated:
                         details["found_in"] = label
                         result = Result(NAME, model.name, prop.id, Status.UNSAFE, details=details,
@@ -385,11 +411,15 @@ class MonteCarloBackend:
             if sampler is not None:
                 X = sampler.pull_inside(X)
             signal = None
-            if model.varying_inputs:
+            if rounds[0][4] is not None:
                 step = rounds[0][4][0]
                 V_all = np.concatenate([r[4][1] for r in rounds])[pick]
                 V = np.clip(V_all + rng.normal(size=V_all.shape) * (uhi - ulo) * scale, ulo, uhi)
-                signal = (step, V)
+                S = None
+                if rounds[0][4][2] is not None:         # flip some switching decisions
+                    S_all = np.concatenate([r[4][2] for r in rounds])[pick]
+                    S = S_all ^ (rng.random(S_all.shape) < SWITCH_PROBABILITY * scale)
+                signal = (step, V, S)
             tau = None
             if window is not None:
                 lo, hi, _ = window

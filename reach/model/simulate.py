@@ -212,9 +212,11 @@ class Simulator:
 
         ``observers``: callables ``f(t, X, mode_index, rows)`` (``t`` per row) called with the
         visited states. ``kicks(k, count) -> (count, n)``: disturbance added at ``k * step``.
-        ``signal = (step, values)``: the varying bounded inputs (``model.varying_inputs``) are
-        piecewise constant, ``values[r, k]`` on ``[k step, (k+1) step)`` for run ``r``
-        (``values`` is (N, K, m); the last piece lasts to the horizon).
+        ``signal = (step, values[, switch])``: the varying bounded inputs (``model.varying_inputs``)
+        are piecewise constant, ``values[r, k]`` on ``[k step, (k+1) step)`` for run ``r``
+        (``values`` is (N, K, m); the last piece lasts to the horizon); with ``switch`` (N, K)
+        booleans, run ``r`` also takes, at ``k step`` (k >= 1) where ``switch[r, k]``, the first
+        may-transition with a general guard that is enabled there (if any).
         """
         X = np.array(x0, dtype=float).reshape(-1, self.n).copy()
         N = X.shape[0]
@@ -224,14 +226,20 @@ class Simulator:
         t = np.zeros(N)
         blocked_at = np.full(N, np.nan)
         kick_step = self.model.disturbance.step if (kicks is not None and self.model.disturbance) else None
+        jumped: list = []                           # runs that took a may-transition at a piece start
         if signal is not None:
             if kick_step:
                 raise ValueError("input signals and disturbance kicks together are not supported")
             kick_step, values = float(signal[0]), np.asarray(signal[1], dtype=float)
-            columns = np.array([u.index for u in self.model.varying_inputs])
+            switch = None if len(signal) < 3 or signal[2] is None else np.asarray(signal[2], dtype=bool)
+            columns = np.array([u.index for u in self.model.varying_inputs], dtype=int)
 
             def kicks(k, sel):
-                X[np.ix_(sel, columns)] = values[sel, min(k, values.shape[1] - 1)]
+                piece = min(k, values.shape[1] - 1)
+                if columns.size:
+                    X[np.ix_(sel, columns)] = values[sel, piece]
+                if switch is not None and k > 0:
+                    jumped.append(self._take_may(X, mode, sel[switch[sel, piece]]))
 
             kicks(0, np.arange(N))
         elif kick_step:
@@ -257,13 +265,14 @@ class Simulator:
             if kick_step:   # disturbance kicks due now
                 due = active[np.abs(next_kick[active] - t[active]) <= 1e-9 * max(1.0, horizon)]
                 if due.size:
+                    before = mode[due].copy()
+                    jumped.clear()
                     for k in np.unique(kick_count[due]):
                         kicks(int(k), due[kick_count[due] == k])
                     kick_count[due] += 1
                     next_kick[due] = kick_count[due] * kick_step
-                    before = mode[due].copy()
                     self._urgent_now(X, mode, due)       # a kick may land a run inside a guard
-                    moved = due[mode[due] != before]
+                    moved = due[(mode[due] != before) | np.isin(due, np.concatenate(jumped or [[]]))]
                     if moved.size:
                         for f in watchers:
                             f(t[moved], X[moved], mode[moved], moved)
@@ -311,6 +320,23 @@ class Simulator:
                             moved = True
             if not moved:
                 return
+
+    def _take_may(self, X, mode, rows) -> np.ndarray:
+        """Each run of ``rows`` takes the first enabled may-transition with a general guard;
+        returns the runs that did."""
+        taken = []
+        for m_index in np.unique(mode[rows]):
+            todo = rows[mode[rows] == m_index]
+            for tr, guard in self.exits[self.mode_names[m_index]]:
+                if todo.size == 0:
+                    break
+                tol = INVARIANT_TOLERANCE * (1.0 + np.abs(X[todo]).max(axis=1))
+                ok = np.all(guard(X[todo]) <= tol[:, None], axis=1)
+                if ok.any():
+                    self._jump(tr, X, mode, todo[ok])
+                    taken.append(todo[ok])
+                    todo = todo[~ok]
+        return np.concatenate(taken) if taken else np.zeros(0, dtype=int)
 
     def _jump(self, tr, X, mode, rows):
         mode[rows] = self.mode_names.index(tr.target)
