@@ -15,7 +15,9 @@ together:
   is taken exactly at ``tau``; a may-transition with a general guard is taken when a run would
   leave the source invariant, if its guard holds there (the exit instant, by bisection: one
   of the automaton's runs, the one that stays longest); Gaussian kicks (if asked for) are
-  applied at ``k * step``, and so are the pieces of a time-varying input signal; an urgent transition whose guard holds right after a kick is taken at that instant;
+  applied at ``k * step``, and so are the pieces of a time-varying input signal (and its
+  switching decisions); an urgent transition whose guard holds right after a kick is taken
+  at that instant;
 * a run found outside its mode's invariant at a grid point with no transition taken is
   *blocked* (it has no continuation in the automaton's semantics) and stops there.
 

@@ -16,7 +16,7 @@ from reach.model.spaceex.cfg import Config, read_cfg
 from reach.model.spaceex.components import read_document
 from reach.model.spaceex.compose import compose, instantiate
 from reach.model.spaceex.convert import DocumentBuilder, Documents
-from reach.model.spaceex.formula import Loc, parse_formula
+from reach.model.spaceex.formula import Loc
 from reach.model.spaceex.xmltree import read_xml
 
 

@@ -21,7 +21,7 @@ import re
 from dataclasses import dataclass, field
 
 from reach.errors import InputError
-from reach.model.spaceex.components import Base, Document, Location, Network, Text, Transition
+from reach.model.spaceex.components import Base, Document, Location, Text, Transition
 
 MAX_DEPTH = 16
 MAX_INSTANCES = 256
@@ -71,7 +71,6 @@ class ProductLocation:
     invariants: list[Part]
     flows: list[Part]
     line: int
-    file: str = ""
 
 
 @dataclass

@@ -31,7 +31,7 @@ from reach.errors import InputError, Where
 from reach.model.constraints import affine_coefficients
 from reach.model.expr import CONSTANTS, FUNCTIONS, parse_expr
 from reach.model.spaceex.compose import Flat, Instance, Part
-from reach.model.spaceex.formula import (Const, FormulaError, Loc, Relation, conjunction, formula_error,
+from reach.model.spaceex.formula import (Const, FormulaError, Loc, Relation, Token, conjunction, formula_error,
                                          is_primed_name, names_in, parse_formula, to_python)
 
 RESERVED = set(FUNCTIONS) | set(CONSTANTS) | {"true", "false", "loc"}
@@ -82,7 +82,6 @@ class Converter:
         return out
 
     def _globalise(self, rel: Relation, instance: Instance, line: int) -> Relation:
-        from reach.model.spaceex.formula import Token
         parts = []
         for tokens in rel.parts:
             new = []
@@ -608,7 +607,6 @@ class DocumentBuilder(Converter):
             if len(missing) < len(set(names)):
                 raise InputError(f"{where_key}: unknown name '{missing[0]}'", self.cfg.file, line=line)
             return None
-        from reach.model.spaceex.formula import Token
         parts = [[Token("name", resolved[t.text]) if t.kind == "name" and t.text in resolved else t for t in p]
                  for p in rel.parts]
         return self.relation_texts(Relation(parts, rel.ops), key, line)
