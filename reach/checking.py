@@ -16,7 +16,7 @@ from __future__ import annotations
 import difflib
 
 from reach.backends import registry, validate_options
-from reach.backends.base import run, unsupported
+from reach.backends.base import input_reason, run, unsupported
 from reach.errors import InputError
 from reach.model import load_model
 from reach.result import Result, Status
@@ -97,7 +97,7 @@ def check_model(backend, model, bound: list, options: dict | None = None) -> lis
                                             f"not applicable: the model has no mode {', '.join(absent)}")
             results[id(prop)].details["not_applicable"] = True
             continue
-        reason = backend.supports(model, prop)
+        reason = input_reason(backend, model) or backend.supports(model, prop)
         if reason is not None:
             results[id(prop)] = unsupported(backend.name, model, prop, reason)
         else:
@@ -112,3 +112,27 @@ def check_model(backend, model, bound: list, options: dict | None = None) -> lis
         if getattr(prop, "at_least", None) is not None:
             results[id(prop)].details.setdefault("at_least", float(prop.at_least))
     return [results[id(p)] for p in bound]
+
+
+def is_spaceex(path) -> bool:
+    return str(path).lower().endswith(".xml")
+
+
+def check_spaceex(xml_path, cfg_path, backend_name: str, options: dict | None = None):
+    """Check a SpaceEx model against its cfg's forbidden set: one property whose id is the cfg's
+    file name and whose unsafe set is the union of the forbidden terms. Returns
+    ``(results, model, documents, {id: bound property})`` (no result when the cfg forbids nothing)."""
+    from reach.model.spaceex import load_spaceex
+    from reach.spec.properties import BoundSafety
+
+    backend = resolve_backend(backend_name)
+    validate_options(backend_name, options)
+    model, props, docs = load_spaceex(xml_path, cfg_path)
+    if not props:
+        return [], model, docs, {}
+    bound = [bind(p, model) for p in props]
+    modes = [m for m in model.modes if any(m in b.modes for b in bound)]
+    pieces = {m: [piece for b in bound for piece in b.pieces.get(m, [])] for m in modes}
+    merged = BoundSafety(docs.property_id, modes, pieces, model.symbols, str(cfg_path),
+                         f"forbidden set of {cfg_path}")
+    return check_model(backend, model, [merged], options), model, docs, {merged.id: merged}

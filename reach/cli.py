@@ -7,6 +7,8 @@
     reach bench [--suite suite.yaml] [--backend B] [--instance I] [-j N] [--scheduler ADDR]
     reach sweep MODEL PROPS [--radius R] [--cells N]
     reach compare OLD.json NEW.json
+    reach import MODEL.xml [CONFIG.cfg] --out DIR   (SpaceEx -> models/ and properties/ YAML)
+    reach check MODEL.xml CONFIG.cfg ...           (a SpaceEx model against its cfg's forbidden set)
 
 Exit codes (``check``, ``replay``, ``bench``; see :mod:`reach.checking`):
 
@@ -64,11 +66,13 @@ def _parse_options(pairs: list[str]) -> dict:
 
 
 def cmd_check(args) -> int:
-    from reach.checking import check_files, exit_code
+    from reach.checking import check_files, exit_code, is_spaceex
     from reach.model import load_model
     from reach.report import json_row
     from reach.spec import bind, load_properties
 
+    if is_spaceex(args.model):
+        return cmd_check_spaceex(args)
     if args.verbose:
         logging.basicConfig(stream=sys.stderr, format="%(name)s: %(message)s")
         logging.getLogger("reach").setLevel(logging.INFO)
@@ -100,6 +104,72 @@ def cmd_check(args) -> int:
         if r.property in saved:
             print(printable(f"  {'':<16} counterexample: {saved[r.property]}  (reach replay {saved[r.property]})"))
     return exit_code(results)
+
+
+def cmd_check_spaceex(args) -> int:
+    """``reach check MODEL.xml CONFIG.cfg``: the cfg's forbidden set is the property; a
+    counterexample is saved with the imported YAML beside it, so ``reach replay`` reads it."""
+    from reach.checking import check_spaceex
+    from reach.model.spaceex import write_yaml
+
+    if args.verbose:
+        logging.basicConfig(stream=sys.stderr, format="%(name)s: %(message)s")
+        logging.getLogger("reach").setLevel(logging.INFO)
+    from reach.checking import exit_code
+    from reach.report import json_row
+
+    results, model, docs, bound = check_spaceex(args.model, args.properties, args.backend,
+                                                _parse_options(args.option))
+    for finding in model.lints:
+        print(printable(f"warning: {finding}"), file=sys.stderr)
+    saved = {}
+    for r in results:
+        if r.counterexample is not None and args.counterexamples:
+            model_file, prop_file = write_yaml(docs, args.counterexamples)
+            cex = r.counterexample
+            cex.model_file, cex.property_file = str(model_file), str(prop_file)
+            # the YAML property file names each forbidden term; replay the one that was hit
+            cex.property = _term_hit(docs, model, cex)
+            path = Path(args.counterexamples) / (safe_name(f"{model_file.stem}_{r.backend}") + ".json")
+            cex.save(path)
+            saved[r.property] = str(path)
+    if args.json:
+        print(json.dumps([json_row(r, bound.get(r.property), model, saved.get(r.property)) for r in results],
+                         indent=1))
+        return exit_code(results)
+    print(printable(f"{model.name} with {args.backend}:"))
+    if not results:
+        print(printable(f"  {args.properties} forbids nothing: nothing to check"))
+    for r in results:
+        print(printable(f"  {r.property:<16} {r.status.value:<11} {r.seconds:8.2f} s  "
+                        f"{summary(r, bound.get(r.property), model)}"))
+        if r.property in saved:
+            print(printable(f"  {'':<16} counterexample: {saved[r.property]}  (reach replay {saved[r.property]})"))
+    return exit_code(results)
+
+
+def _term_hit(docs, model, cex) -> str:
+    """The id, in the imported property file, of a forbidden term the violation state is in."""
+    from reach.spec import bind
+    from reach.spec.properties import properties_from_doc
+    from reach.yamlio import Doc
+    import numpy as np
+
+    props = properties_from_doc(Doc(docs.properties, docs.property_lines, cex.property_file))
+    for p in props:
+        b = bind(p, model)
+        test = b.violation(cex.violation_mode) if cex.violation_mode in b.modes else None
+        if test is not None and test(np.array([cex.violation_state]))[0][0]:
+            return p.id
+    return props[0].id
+
+
+def cmd_import(args) -> int:
+    from reach.model.spaceex import documents, write_yaml
+
+    model_file, prop_file = write_yaml(documents(args.model, args.config), args.out)
+    print(f"wrote {model_file}" + (f" and {prop_file}" if prop_file else " (the cfg forbids nothing)"))
+    return 0
 
 
 def _writable(path: Path, option: str) -> None:
@@ -152,7 +222,7 @@ def cmd_replay(args) -> int:
         raise InputError(f"initial_state has {len(cex.initial_state)} values, the model {model.n}",
                          args.counterexample, "initial_state")
     prop = bind(props[0], model)
-    rep = replay(model, prop, cex.initial_state, cex.switch_time, cex.dt or None)
+    rep = replay(model, prop, cex.initial_state, cex.switch_time, cex.dt or None, cex.input_signal)
     state = ", ".join(f"{n}={v:.6g}" for n, v in zip(model.state, rep.state))
     if rep.violated:
         print(printable(f"replayed: {model.name} violates '{prop.id}' at t={rep.time:.6g} in mode {rep.mode} "
@@ -312,6 +382,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("old")
     p.add_argument("new")
     p.set_defaults(func=cmd_compare)
+    p = sub.add_parser("import", help="write a SpaceEx model (.xml + .cfg) as model and property YAML")
+    p.add_argument("model", help="SpaceEx model (.xml)")
+    p.add_argument("config", nargs="?", help="SpaceEx configuration (.cfg; default: MODEL's name with .cfg)")
+    p.add_argument("--out", required=True, metavar="DIR", help="writes DIR/models/NAME.yaml, DIR/properties/NAME.yaml")
+    p.set_defaults(func=cmd_import)
     return parser
 
 

@@ -46,6 +46,7 @@ class Counterexample:
     dt: float
     trajectory: dict = field(default_factory=dict)   # {"t": [...], "mode": [...], "x": [[...]]}
     found_by: str = ""
+    input_signal: dict | None = None   # {"step": h, "inputs": [names], "values": [[...] per piece]}
 
     def to_dict(self) -> dict:
         return _plain(asdict(self))

@@ -8,6 +8,15 @@ Safety properties. Runs are drawn in three rounds, each one numpy batch:
 3. *search*: a cross-entropy falsifier that resamples around the runs that came closest to
    the unsafe set (``search_rounds`` generations).
 
+A polytopic initial set is sampled by its vertices, facet points and centre (structured) and
+uniformly by hit-and-run (random); time-varying bounded inputs are piecewise-constant signals
+with pieces of ``input_step`` (default horizon / 20): constant extremes and bang-bang signals
+in the structured round, uniform pieces in the random one, perturbed by the search
+(:mod:`reach.backends.initial_sampling`). May-transitions with general guards are taken where a
+run would leave its invariant, and, in the random and search rounds, also at piece starts
+where the run's switching signal says so and a guard holds (each with probability
+``SWITCH_PROBABILITY``). A counterexample carries its input and switching signal.
+
 Every visited state is checked against every unsafe piece of the property. A violation is
 replayed alone (:func:`replay`) and returned as UNSAFE with its counterexample. Otherwise the
 answer is UNKNOWN with the closest approach (depth) found and a one-sided 95 % Clopper-Pearson
@@ -29,7 +38,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from reach.backends.event_sampling import check_events, replay_event
+from reach.backends.initial_sampling import PolytopeSampler, input_signals, input_step, structured_signals
 from reach.backends.options import parse_options, ranged
+from reach.errors import InputError
 from reach.model.automaton import HybridAutomaton
 from reach.model.constraints import lambdify_margins
 from reach.model.simulate import Simulator
@@ -38,6 +49,7 @@ from reach.spec.properties import BoundEvent, BoundReach, BoundReachAvoid, Bound
 from reach.stats import clopper_pearson_upper, wilson
 
 NAME = "montecarlo"
+SWITCH_PROBABILITY = 0.3       # chance that a random run takes an enabled may-transition at a piece start
 
 
 @dataclass
@@ -48,6 +60,7 @@ class Options:
     seed: int = 0
     dt: float | None = None        # simulator grid step (model default if None)
     batch: int = ranged(20000, 1, 1_000_000)            # runs per numpy batch for stochastic estimates
+    input_step: float | None = None  # piece length of sampled input signals (horizon/20 if None)
 
     @classmethod
     def from_dict(cls, options: dict | None) -> "Options":
@@ -128,6 +141,7 @@ class Replay:
     switch_time: float | None
     dt: float
     trajectory: dict = field(default_factory=dict)
+    input_signal: dict | None = None
 
     def counterexample(self, model: HybridAutomaton, prop, found_by: str) -> Counterexample:
         return Counterexample(
@@ -136,20 +150,72 @@ class Replay:
             switch_time=None if self.switch_time is None else float(self.switch_time),
             violation_time=float(self.time), violation_mode=self.mode,
             violation_state=list(map(float, self.state)), dt=self.dt,
-            trajectory=self.trajectory, found_by=found_by)
+            trajectory=self.trajectory, found_by=found_by, input_signal=self.input_signal)
 
 
 def replay(model: HybridAutomaton, prop: BoundSafety, initial_state, switch_time: float | None,
-           dt: float | None = None) -> Replay:
-    """Simulate exactly one run (abort at ``switch_time``) and check ``prop`` along it (an event
-    property: its extremum along the run, :func:`reach.backends.event_sampling.replay_event`)."""
+           dt: float | None = None, input_signal: dict | None = None) -> Replay:
+    """Simulate exactly one run (abort at ``switch_time``, inputs ``input_signal``) and check
+    ``prop`` along it (an event property: its extremum along the run,
+    :func:`reach.backends.event_sampling.replay_event`)."""
     if isinstance(prop, BoundEvent):
         return replay_event(model, prop, initial_state, dt)
     sim = Simulator(model, dt)
     x0 = np.asarray(initial_state, dtype=float).reshape(1, -1)
     tau = None if switch_time is None else np.array([float(switch_time)])
     monitor = SafetyMonitor(model, prop, 1)
-    traj = sim.run(x0, tau, record=True, observers=[monitor])
+    signal = _signal_of(model, input_signal)
+    if not model.initial.is_box:
+        init = model.initial
+        if not PolytopeSampler(init.polytope, init.low, init.high).contains(x0)[0]:
+            return Replay(False, float("nan"), "", np.full(model.n, np.nan), float("inf"), x0[0], switch_time,
+                          sim.dt, {"note": "the initial state is outside the initial polytope"})
+    traj = sim.run(x0, tau, record=True, observers=[monitor], signal=signal)
+    rep = _replay_result(model, monitor, traj, sim, x0, switch_time)
+    rep.input_signal = signal_record(model, signal, 0)
+    return rep
+
+
+def _signal_of(model: HybridAutomaton, data: dict | None):
+    """``(step, values (1, K, m), switch (1, K) or None)`` from a counterexample's input
+    signal, checked; None when the run needs none."""
+    names = [u.name for u in model.varying_inputs]
+    if data is None and not names:
+        return None
+    if not isinstance(data, dict) or data.get("inputs") != names:
+        raise InputError(f"the model has time-varying inputs ({', '.join(names)}): the counterexample "
+                         "needs their input_signal", field="input_signal")
+    try:
+        step = float(data["step"])
+        values = np.asarray(data["values"], dtype=float)
+        switch = None if data.get("switch") is None else np.asarray(data["switch"], dtype=int)
+    except (KeyError, TypeError, ValueError):
+        raise InputError("input_signal needs step and a list of values per piece", field="input_signal") from None
+    if values.ndim != 2 or values.shape[1] != len(names) or values.shape[0] == 0 or values.shape[0] > 1_000_000:
+        raise InputError(f"input_signal: expected a list of pieces of {len(names)} values", field="input_signal")
+    if switch is not None and (switch.shape != values.shape[:1] or np.any((switch != 0) & (switch != 1))):
+        raise InputError("input_signal: switch needs one 0 or 1 per piece", field="input_signal")
+    lo = np.array([u.low for u in model.varying_inputs])
+    hi = np.array([u.high for u in model.varying_inputs])
+    if not (step > 0 and np.isfinite(step)):
+        raise InputError("input_signal: the step must be a positive number", field="input_signal")
+    if np.any(values < lo) or np.any(values > hi) or not np.all(np.isfinite(values)):
+        raise InputError("input_signal: a value outside the input's range", field="input_signal")
+    return step, values[None, :, :], None if switch is None else switch[None, :].astype(bool)
+
+
+def signal_record(model: HybridAutomaton, signal, row: int) -> dict | None:
+    """The counterexample form of run ``row``'s signal."""
+    if signal is None:
+        return None
+    out = {"step": float(signal[0]), "inputs": [u.name for u in model.varying_inputs],
+           "values": signal[1][row].tolist()}
+    if len(signal) > 2 and signal[2] is not None:
+        out["switch"] = signal[2][row].astype(int).tolist()
+    return out
+
+
+def _replay_result(model, monitor, traj, sim, x0, switch_time) -> "Replay":
     names = list(model.modes)
     violated = bool(np.isfinite(monitor.violation_time[0]))
     times, modes, states = traj.path[0]
@@ -165,12 +231,15 @@ def replay(model: HybridAutomaton, prop: BoundSafety, initial_state, switch_time
 # ------------------------------------------------------------------ sampling plans
 
 def structured_plan(model: HybridAutomaton, window, max_corners: int = 256, rng=None):
-    """Corners, face centres and centre of the initial box x {window ends, middle}."""
+    """Corners, face centres and centre of the initial box (a polytope: vertices, facet points,
+    centre) x {window ends, middle}."""
     low, high = model.initial.low, model.initial.high
     free = np.flatnonzero(high > low)
     centre = (low + high) / 2
     points = [centre]
-    if free.size:
+    if not model.initial.is_box:
+        points = list(PolytopeSampler(model.initial.polytope, low, high).structured()[:4 * max_corners])
+    elif free.size:
         if 2 ** free.size <= max_corners:
             signs = np.array(list(itertools.product([0, 1], repeat=free.size)))
         else:
@@ -197,7 +266,10 @@ def structured_plan(model: HybridAutomaton, window, max_corners: int = 256, rng=
 
 def random_plan(model: HybridAutomaton, window, count: int, rng):
     low, high = model.initial.low, model.initial.high
-    X = low + (high - low) * rng.random((count, model.n))
+    if model.initial.is_box:
+        X = low + (high - low) * rng.random((count, model.n))
+    else:
+        X = PolytopeSampler(model.initial.polytope, low, high).uniform(count, rng)
     if window is None:
         return X, None
     lo, hi, forced = window
@@ -211,14 +283,15 @@ def random_plan(model: HybridAutomaton, window, count: int, rng):
 
 class MonteCarloBackend:
     name = NAME
+    varying_inputs = True          # sampled as piecewise-constant signals
 
     def supports(self, model: HybridAutomaton, prop) -> str | None:
         try:
             switch_window(model)
         except ValueError as exc:
             return str(exc)
-        if any(not tr.urgent and tr.window is None for tr in model.transitions):
-            return "a may-transition whose guard is not a window on a clock cannot be sampled"
+        if model.varying_inputs and (model.disturbance is not None or not isinstance(prop, BoundSafety)):
+            return "time-varying inputs are sampled for safety properties of models without disturbance"
         if isinstance(prop, BoundEvent) and switch_window(model) is not None:
             return "sampling an event property with an abort window is not implemented"
         if isinstance(prop, (BoundReach, BoundReachAvoid)) and model.disturbance is None:
@@ -262,16 +335,32 @@ class MonteCarloBackend:
         kicks = _kicks(model, rng)
         Xs, taus = structured_plan(model, window, rng=rng)
         Xr, taur = random_plan(model, window, opts.samples, rng)
+        signal = None
+        mays = any(sim.exits.values())      # may-transitions with general guards
+        if model.varying_inputs or mays:
+            step = input_step(model, sim.dt, opts.input_step)
+            if model.varying_inputs:        # each structured state with every constant extreme, and bang-bang
+                Vs, repeat = structured_signals(model, Xs.shape[0], step, rng)
+                Xs = np.repeat(Xs, repeat, axis=0)
+                taus = None if taus is None else np.repeat(taus, repeat)
+            else:
+                Vs = input_signals(model, Xs.shape[0], step, rng)
+            values = np.concatenate([Vs, input_signals(model, Xr.shape[0], step, rng)])
+            switch = None
+            if mays:                        # structured runs stay as long as they can, random ones
+                switch = np.zeros(values.shape[:2], dtype=bool)           # switch at random piece starts
+                switch[Xs.shape[0]:] = rng.random((Xr.shape[0], values.shape[1])) < SWITCH_PROBABILITY
+            signal = (step, values, switch)
         X = np.concatenate([Xs, Xr])
         tau = None if window is None else np.concatenate([taus, taur])
         n_structured = Xs.shape[0]
         monitors = [SafetyMonitor(model, p, X.shape[0]) for p in props]
-        traj = sim.run(X, tau, observers=monitors, kicks=kicks)
+        traj = sim.run(X, tau, observers=monitors, kicks=kicks, signal=signal)
         shared = (time.perf_counter() - start) / len(props)
         results = []
         for prop, monitor in zip(props, monitors):
             begin = time.perf_counter()
-            rounds = [("structured+random", X, tau, monitor)]
+            rounds = [("structured+random", X, tau, monitor, signal)]
             details = {"dt": sim.dt, "seed": opts.seed, "structured_runs": int(n_structured),
                        "random_runs": int(opts.samples),
                        "blocked_runs": int(np.count_nonzero(np.isfinite(traj.blocked_at))),
@@ -288,10 +377,10 @@ class MonteCarloBackend:
             result = Result(NAME, model.name, prop.id, Status.UNKNOWN, details=details)
             if found is not None:
                 k, i = found
-                label, Xk, tauk, _ = rounds[k]
+                label, Xk, tauk, _, sig = rounds[k]
                 t = None if tauk is None or np.isnan(tauk[i]) else float(tauk[i])
                 if model.disturbance is None:
-                    rep = replay(model, prop, Xk[i], t, sim.dt)
+                    rep = replay(model, prop, Xk[i], t, sim.dt, signal_record(model, sig, i))
                     if rep.violated:
                         details["found_in"] = label
                         result = Result(NAME, model.name, prop.id, Status.UNSAFE, details=details,
@@ -309,6 +398,9 @@ class MonteCarloBackend:
         """Cross-entropy falsification: resample around the runs closest to the unsafe set."""
         low, high = model.initial.low, model.initial.high
         span = np.where(high > low, high - low, 0.0)
+        sampler = None if model.initial.is_box else PolytopeSampler(model.initial.polytope, low, high)
+        ulo = np.array([u.low for u in model.varying_inputs])
+        uhi = np.array([u.high for u in model.varying_inputs])
         for g in range(opts.search_rounds):
             X_all = np.concatenate([r[1] for r in rounds])
             d_all = np.concatenate([r[3].min_depth for r in rounds])
@@ -316,6 +408,18 @@ class MonteCarloBackend:
             scale = 0.25 * 0.6 ** g
             pick = rng.choice(elite, opts.search_size)
             X = np.clip(X_all[pick] + rng.normal(size=(opts.search_size, model.n)) * span * scale, low, high)
+            if sampler is not None:
+                X = sampler.pull_inside(X)
+            signal = None
+            if rounds[0][4] is not None:
+                step = rounds[0][4][0]
+                V_all = np.concatenate([r[4][1] for r in rounds])[pick]
+                V = np.clip(V_all + rng.normal(size=V_all.shape) * (uhi - ulo) * scale, ulo, uhi)
+                S = None
+                if rounds[0][4][2] is not None:         # flip some switching decisions
+                    S_all = np.concatenate([r[4][2] for r in rounds])[pick]
+                    S = S_all ^ (rng.random(S_all.shape) < SWITCH_PROBABILITY * scale)
+                signal = (step, V, S)
             tau = None
             if window is not None:
                 lo, hi, _ = window
@@ -323,8 +427,8 @@ class MonteCarloBackend:
                 base = np.where(np.isnan(base), (lo + hi) / 2, base)
                 tau = np.clip(base + rng.normal(size=opts.search_size) * (hi - lo) * scale, lo, hi)
             monitor = SafetyMonitor(model, prop, opts.search_size)
-            sim.run(X, tau, observers=[monitor])
-            rounds.append((f"search{g + 1}", X, tau, monitor))
+            sim.run(X, tau, observers=[monitor], signal=signal)
+            rounds.append((f"search{g + 1}", X, tau, monitor, signal))
             i = monitor.first_violation()
             if i is not None:
                 return len(rounds) - 1, i

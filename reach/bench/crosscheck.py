@@ -25,7 +25,8 @@ def _replays(row) -> bool:
     cex = row["counterexample"]
     model = load_model(cex["model_file"])
     prop = next(p for p in load_properties(cex["property_file"]) if p.id == cex["property"])
-    return replay(model, bind(prop, model), cex["initial_state"], cex["switch_time"], cex["dt"]).violated
+    return replay(model, bind(prop, model), cex["initial_state"], cex["switch_time"], cex["dt"],
+                  cex.get("input_signal")).violated
 
 
 def cross_check(rows: list[dict]) -> list[dict]:

@@ -1,6 +1,6 @@
 """The hybrid automaton every back-end reads: modes with closed-loop flows, invariants,
-transitions (urgent, or may-transitions over a clock window), an initial box, a horizon
-and an optional Gaussian disturbance.
+transitions (urgent, or may-transitions over a clock window or a general guard), an initial
+box or polytope, bounded nondeterministic inputs, a horizon and an optional Gaussian disturbance.
 
 All expressions are over the state symbols only: a mode's control law has already been
 substituted into its flow (``flow``) and is kept apart in ``control`` for properties that
@@ -43,6 +43,7 @@ class Mode:
     invariant: list[Constraint]
     controller: Controller | None = None
     where: Where | None = None
+    timeless: bool = False                    # no time may pass here (SpaceEx flow ``false``)
 
     def __getstate__(self):
         """Pickled without the compiled functions (each is rebuilt on first use)."""
@@ -115,12 +116,45 @@ class Transition:
 
 
 @dataclass
+class LinearSet:
+    """The polyhedron ``{x : A x <= b, E x == f}`` (``E`` may have no rows)."""
+
+    A: np.ndarray
+    b: np.ndarray
+    E: np.ndarray
+    f: np.ndarray
+
+
+@dataclass
 class InitialSet:
-    """The initial mode and a box ``low <= x <= high`` (equal bounds: a fixed value)."""
+    """The initial mode and set: the box ``low <= x <= high`` (equal bounds: a fixed value), or,
+    when ``polytope`` is given, exactly that polytope; ``low, high`` are then its tight bounding
+    box and the box rows are among ``polytope.A, b``."""
 
     mode: str
     low: np.ndarray
     high: np.ndarray
+    polytope: LinearSet | None = None
+
+    @property
+    def is_box(self) -> bool:
+        return self.polytope is None
+
+
+@dataclass
+class BoundedInput:
+    """A nondeterministic input with values in ``[low, high]``, carried as state ``index``.
+
+    The state has flow 0 in every mode and is never reset, so a constant input
+    (``varying=False``) is exactly a state with zero derivative; a varying one is any
+    measurable signal ``u(t)`` in ``[low, high]`` and appears in no guard or invariant.
+    """
+
+    name: str
+    index: int
+    low: float
+    high: float
+    varying: bool
 
 
 @dataclass
@@ -153,7 +187,50 @@ class HybridAutomaton:
     horizon: float
     disturbance: Disturbance | None = None
     clocks: list[int] = field(default_factory=list)   # states with rate 1 in every mode
+    bounded_inputs: list[BoundedInput] = field(default_factory=list)
     dimensions: DimensionSystem | None = None          # None: the model declares no units
+
+    @property
+    def varying_inputs(self) -> list[BoundedInput]:
+        return [u for u in self.bounded_inputs if u.varying]
+
+    @property
+    def global_clock(self) -> int | None:
+        """A state that measures elapsed time: rate 1 everywhere, starts at 0, never reset."""
+        reset = {i for tr in self.transitions for i in tr.reset}
+        for i in self.clocks:
+            if i not in reset and self.initial.low[i] == 0 == self.initial.high[i]:
+                return i
+        return None
+
+    def with_global_clock(self) -> tuple["HybridAutomaton", int]:
+        """``(self, i)`` if state ``i`` is a global clock, else a copy with a state ``_time``
+        appended (flow 1 in every mode, initial 0, never reset, in no guard) and its index."""
+        clock = self.global_clock
+        if clock is not None:
+            return self, clock
+        t = sympy.Symbol("_time", real=True)
+        symbols = self.symbols + [t]
+        modes = {}
+        for name, m in self.modes.items():
+            modes[name] = Mode(m.name, symbols, list(m.flow) + [sympy.Integer(1)], m.control,
+                               m.invariant, m.controller, m.where, m.timeless)
+        init = self.initial
+        polytope = None
+        if init.polytope is not None:
+            P = init.polytope
+            polytope = LinearSet(np.hstack([P.A, np.zeros((P.A.shape[0], 1))]), P.b,
+                                 np.vstack([np.hstack([P.E, np.zeros((P.E.shape[0], 1))]),
+                                            np.eye(1, self.n + 1, self.n)]),
+                                 np.append(P.f, 0.0))
+        initial = InitialSet(init.mode, np.append(init.low, 0.0), np.append(init.high, 0.0), polytope)
+        transitions = [Transition(tr.name, tr.source, tr.target, tr.guard, tr.urgent, dict(tr.reset),
+                                  tr.window, tr.where) for tr in self.transitions]
+        copy = HybridAutomaton(self.name, self.description, self.file, self.units, self.constants,
+                               self.state + ["_time"], self.inputs, modes, transitions, initial,
+                               self.horizon, self.disturbance, self.clocks + [self.n],
+                               bounded_inputs=list(self.bounded_inputs), dimensions=self.dimensions)
+        return copy, self.n
 
     def dimension_of(self, name: str):
         """The dimension of a state, input or constant, or None if not known."""

@@ -19,8 +19,14 @@ Format (all expressions are strings parsed by :mod:`reach.model.expr`)::
       dock: {from: approach, to: rendezvous, guard: [...], urgent: true}
       abort: {from: [approach, rendezvous], to: passive, guard: ["t >= 120", "t <= 125"]}
     initial: {mode: approach, box: {x: [-925, -875], vx: 0, ...}}
+    # or a polytope: {mode: M, box: {...} (optional, partial), constraints: ["x + y == 1", ...]}
+    bounded_inputs: {u: {range: [0.8, 1], varying: true}}   # nondeterministic inputs
     horizon: 240
     disturbance: {gaussian: {mean: [0, 0], cov: [[..]]}, enters: [vx, vy], step: 10}
+
+A mode's ``flow: false`` means no time may pass in it. Bounded inputs are appended to the
+state (flow 0, initial interval = their range, never reset): see
+:class:`reach.model.automaton.BoundedInput`.
 
 Every error names file, line and field: ``models/x.yaml:14: modes.approach.flow.vx: unknown
 name 'vyy'``.
@@ -40,22 +46,25 @@ equations for the property files.
 from __future__ import annotations
 
 import ast
+import copy
 from pathlib import Path
 
 import numpy as np
 import sympy
 
+from reach import lp
 from reach.errors import InputError, Where
-from reach.model.automaton import Controller, Disturbance, HybridAutomaton, InitialSet, Mode, Transition
+from reach.model.automaton import (BoundedInput, Controller, Disturbance, HybridAutomaton, InitialSet,
+                                   LinearSet, Mode, Transition)
 from reach.model.constraints import affine_coefficients, from_comparisons
 from reach.model.controllers import build_law, build_network_law
-from reach.model.expr import (CONSTANTS, FUNCTIONS, DimensionContext, parse_comparison,
+from reach.model.expr import (CONSTANTS, FUNCTIONS, DimensionContext, parse_comparison, parse_expr,
                                parse_quantity, parse_unit, side_text)
 from reach.model.units import TIME, DimensionSystem, Form, UnitSystem, check_base
 from reach.yamlio import Doc, load, merge
 
 TOP_FIELDS = {"name", "extends", "description", "units", "constants", "state", "inputs", "modes",
-              "transitions", "initial", "horizon", "disturbance", "notes"}
+              "transitions", "initial", "horizon", "disturbance", "notes", "bounded_inputs"}
 MODE_FIELDS = {"flow", "control", "invariant", "description"}
 TRANSITION_FIELDS = {"from", "to", "guard", "urgent", "reset", "description"}
 RESERVED = set(FUNCTIONS) | set(CONSTANTS)
@@ -87,6 +96,12 @@ def load_model(path) -> HybridAutomaton:
     path = Path(path)
     doc = read_with_templates(path)
     return _Builder(doc, str(path)).build()
+
+
+def model_from_doc(doc: Doc) -> HybridAutomaton:
+    """Build and check a model from a document made elsewhere (the SpaceEx import); the
+    document is left as it was (the builder fills in zero flows of bounded inputs)."""
+    return _Builder(Doc(copy.deepcopy(doc.data), doc.lines, doc.file), doc.file).build()
 
 
 class _Builder:
@@ -176,14 +191,17 @@ class _Builder:
         if clash:
             raise self.where("inputs").error(f"'{sorted(clash)[0]}' is both a state and an input")
         self.constants = self.read_constants()
+        bounded = self.read_bounded_inputs()       # appends the bounded inputs to self.state
         self.symbols = [sympy.Symbol(s, real=True) for s in self.state]
         self.input_symbols = [sympy.Symbol(f"__input_{u}") for u in self.inputs]
         self.names = dict(self.constant_names)
         self.names.update(zip(self.state, self.symbols))
         self.names.update(zip(self.inputs, self.input_symbols))
         modes = self.read_modes()
+        for timeless in self.timeless:
+            modes[timeless].timeless = True
         transitions = self.read_transitions(modes)
-        initial = self.read_initial(modes)
+        initial = self.read_initial_set(modes, bounded)
         horizon = self.number(self.need("horizon"), self.where("horizon"), dimension=TIME, what="the horizon")
         if horizon <= 0:
             raise self.where("horizon").error("horizon must be positive")
@@ -195,8 +213,9 @@ class _Builder:
             name=name.strip(), description=str(self.data.get("description", "")).strip(),
             file=self.file, units=self.units, constants=self.constants, state=self.state,
             inputs=self.inputs, modes=modes, transitions=transitions, initial=initial,
-            horizon=horizon, disturbance=self.read_disturbance(), clocks=clocks,
+            horizon=horizon, disturbance=self.read_disturbance(), clocks=clocks, bounded_inputs=bounded,
             dimensions=None if self.dims is None else self.dims.system)
+        self.check_bounded_inputs(model)
         return model
 
     def read_units(self) -> UnitSystem:
@@ -488,6 +507,167 @@ class _Builder:
         if step <= 0:
             raise self.where("disturbance", "step").error("step must be positive")
         return Disturbance(mean, cov, [self.state.index(e) for e in enters], step)
+
+    # ------------------------------------------- polytopic initial sets, bounded inputs, timeless modes
+    def read_bounded_inputs(self) -> list[BoundedInput]:
+        """``bounded_inputs: {u: {range: [lo, hi], varying: bool}}``: appended to the state.
+
+        Also prepares the raw modes so that the unchanged mode reader sees a zero flow for every
+        bounded input and for every state of a ``flow: false`` mode (recorded in ``timeless``).
+        """
+        raw = self.data.get("bounded_inputs", {})
+        if not isinstance(raw, dict):
+            raise self.where("bounded_inputs").error("expected {name: {range: [low, high], varying: true/false}}")
+        out = []
+        if self.dims is not None:              # their dimensions are unknowns like the states'
+            self.dims.names = self.dims.names | {k for k in raw if isinstance(k, str)}
+        for name, spec in raw.items():
+            w = self.where("bounded_inputs", name)
+            if not isinstance(name, str) or not name.isidentifier() or name.startswith("_") or name in RESERVED:
+                raise w.error(f"'{name}' is not a valid name")
+            if name in self.state or name in self.inputs or name in self.constants:
+                raise w.error(f"bounded input '{name}' clashes with a state, input or constant")
+            if not isinstance(spec, dict) or "range" not in spec or set(spec) - {"range", "varying", "description"}:
+                raise w.error("expected {range: [low, high], varying: true/false}")
+            bounds = spec["range"]
+            if not isinstance(bounds, list) or len(bounds) != 2:
+                raise self.where("bounded_inputs", name, "range").error("expected [low, high]")
+            wr = self.where("bounded_inputs", name, "range")
+            low, high = (self.number(v, wr, dimension=Form.name(name), what=name) for v in bounds)
+            if low > high:
+                raise wr.error(f"empty interval [{low:g}, {high:g}]")
+            varying = spec.get("varying", False)
+            if not isinstance(varying, bool):
+                raise self.where("bounded_inputs", name, "varying").error("expected true or false")
+            out.append(BoundedInput(name, len(self.state) + len(out), low, high, varying))
+        declared = list(self.state)
+        self.state = declared + [u.name for u in out]
+        self.timeless = []
+        modes = self.data.get("modes")
+        if isinstance(modes, dict):
+            for mname, spec in modes.items():
+                if not isinstance(spec, dict):
+                    continue
+                if spec.get("flow") is False:
+                    spec["flow"] = {v: 0 for v in declared}
+                    self.timeless.append(mname)
+                flow = spec.get("flow")
+                if isinstance(flow, dict):
+                    for u in out:
+                        if u.name in flow:
+                            raise self.where("modes", mname, "flow", u.name).error(
+                                f"'{u.name}' is a bounded input: it has no flow")
+                        flow[u.name] = 0
+        return out
+
+    def read_initial_set(self, modes, bounded: list[BoundedInput]) -> InitialSet:
+        """A box (the classic form) or a polytope ``box ∩ constraints``; bounded inputs start
+        anywhere in their range. The polytope must be non-empty and bounded in every state."""
+        raw = self.need("initial")
+        if not isinstance(raw, dict) or "constraints" not in raw:
+            if isinstance(raw, dict) and isinstance(raw.get("box"), dict):
+                for u in bounded:
+                    if u.name in raw["box"]:
+                        raise self.where("initial", "box", u.name).error(
+                            f"'{u.name}' is a bounded input: it starts anywhere in its range")
+                    raw["box"][u.name] = [u.low, u.high]
+            return self.read_initial(modes)
+        extra = set(raw) - {"mode", "box", "constraints"}
+        if extra:
+            raise self.where("initial", sorted(extra)[0]).error(f"unknown field '{sorted(extra)[0]}'")
+        if raw.get("mode") not in modes:
+            raise self.where("initial", "mode").error(f"unknown mode '{raw.get('mode')}'")
+        n = len(self.state)
+        rows, rhs, eq_rows, eq_rhs = [], [], [], []
+        box = raw.get("box", {})
+        if not isinstance(box, dict):
+            raise self.where("initial", "box").error("expected {var: [low, high] or value}")
+        for var, value in box.items():
+            w = self.where("initial", "box", var)
+            if var not in self.state:
+                raise w.error(f"'{var}' is not a state variable")
+            if any(u.name == var for u in bounded):
+                raise w.error(f"'{var}' is a bounded input: it starts anywhere in its range")
+            e = np.eye(n)[self.state.index(var)]
+            pair = value if isinstance(value, list) else [value, value]
+            if len(pair) != 2:
+                raise w.error("expected [low, high]")
+            lo, hi = (self.number(v, w, dimension=Form.name(var), what=var) for v in pair)
+            rows += [-e, e]
+            rhs += [-lo, hi]
+        for u in bounded:
+            e = np.eye(n)[u.index]
+            rows += [-e, e]
+            rhs += [-u.low, u.high]
+        state_names = {k: v for k, v in self.names.items() if v not in self.input_symbols}
+        for j, text in enumerate(self.text_list(raw["constraints"], ("initial", "constraints"))):
+            w = self.where("initial", "constraints", j)
+            for kind, g in _linear_relations(text, state_names, w, self.units, self.dims):
+                coeffs = affine_coefficients(g, self.symbols)
+                if coeffs is None:
+                    raise w.error(f"'{text}' is not linear in the state")
+                if any(coeffs[0][u.index] for u in bounded):
+                    raise w.error("a bounded input starts anywhere in its range; do not constrain it here")
+                (eq_rows if kind == "==" else rows).append(coeffs[0])
+                (eq_rhs if kind == "==" else rhs).append(-coeffs[1])
+        P = LinearSet(np.array(rows, float).reshape(-1, n), np.array(rhs, float),
+                      np.array(eq_rows, float).reshape(-1, n), np.array(eq_rhs, float))
+        low, high = _bounding_box(P, self.state, self.where("initial"))
+        axis_aligned = all(np.count_nonzero(r) <= 1 for r in np.vstack([P.A, P.E]))
+        return InitialSet(raw["mode"], low, high, None if axis_aligned else P)
+
+    def check_bounded_inputs(self, model: HybridAutomaton) -> None:
+        """No reset of any bounded input; a varying one in no guard or invariant."""
+        for tr in model.transitions:
+            for u in model.bounded_inputs:
+                if u.index in tr.reset:
+                    raise tr.where.error(f"'{u.name}' is a bounded input and cannot be reset")
+        for u in model.varying_inputs:
+            sym = model.symbols[u.index]
+            for m in model.modes.values():
+                if any(sym in c.g.free_symbols for c in m.invariant):
+                    raise m.where.error(f"the varying input '{u.name}' appears in an invariant "
+                                        "(its bounds are its range)")
+            for tr in model.transitions:
+                if any(sym in c.g.free_symbols for c in tr.guard):
+                    raise tr.where.error(f"the varying input '{u.name}' appears in a guard")
+
+
+def _linear_relations(text, names, where: Where, units, dims=None):
+    """``lhs == rhs`` as ``[("==", lhs - rhs)]``; any other comparison (chains too) as
+    ``[("<=", g), ...]`` with ``g <= 0`` (strictness is dropped: the set is closed)."""
+    stripped = str(text).strip()
+    try:
+        tree = ast.parse(stripped, mode="eval").body
+    except (SyntaxError, ValueError, RecursionError):
+        tree = None
+    if isinstance(tree, ast.Compare) and len(tree.ops) == 1 and isinstance(tree.ops[0], ast.Eq):
+        lhs = ast.get_source_segment(stripped, tree.left)
+        rhs = ast.get_source_segment(stripped, tree.comparators[0])
+        g = parse_expr(f"({lhs}) - ({rhs})", names, where, units, dims)
+        return [("==", sympy.expand(g))]
+    return [("<=", c.g) for c in from_comparisons(parse_comparison(stripped, names, where, units, dims),
+                                                   stripped, where)]
+
+
+def _bounding_box(P: LinearSet, state: list[str], where: Where):
+    """Tight bounds of every coordinate over ``P`` by LP; empty or unbounded is bad input."""
+    n = len(state)
+    A_eq = P.E if P.E.shape[0] else None
+    b_eq = P.f if P.E.shape[0] else None
+    A_ub = P.A if P.A.shape[0] else None
+    b_ub = P.b if P.A.shape[0] else None
+    if lp.feasible_point(A_ub, b_ub, A_eq=A_eq, b_eq=b_eq, n=n) is None:
+        raise where.error("the initial set is empty")
+    low, high = np.zeros(n), np.zeros(n)
+    for i in range(n):
+        e = np.eye(n)[i]
+        hi = lp.maximize(e, A_ub, b_ub, A_eq=A_eq, b_eq=b_eq)
+        lo = lp.minimize(e, A_ub, b_ub, A_eq=A_eq, b_eq=b_eq)
+        if not (hi.optimal and lo.optimal):
+            raise where.error(f"the initial set is unbounded in '{state[i]}'")
+        low[i], high[i] = lo.value, hi.value
+    return low, np.maximum(high, low)
 
 
 def _dependency_order(raw: dict, where) -> list[str]:

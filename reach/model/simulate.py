@@ -12,8 +12,12 @@ together:
   of the group has met an event;
 * an urgent transition is taken at the first instant its guard holds, located by bisection
   inside the grid interval where it first holds (to ``dt * 2**-40``); the window transition
-  is taken exactly at ``tau``; Gaussian kicks (if asked for) are applied at ``k * step``, and
-  an urgent transition whose guard holds right after a kick is taken at that instant;
+  is taken exactly at ``tau``; a may-transition with a general guard is taken when a run would
+  leave the source invariant, if its guard holds there (the exit instant, by bisection: one
+  of the automaton's runs, the one that stays longest); Gaussian kicks (if asked for) are
+  applied at ``k * step``, and so are the pieces of a time-varying input signal (and its
+  switching decisions); an urgent transition whose guard holds right after a kick is taken
+  at that instant;
 * a run found outside its mode's invariant at a grid point with no transition taken is
   *blocked* (it has no continuation in the automaton's semantics) and stops there.
 
@@ -118,11 +122,14 @@ class Simulator:
                 self.powers[name] = _Powers(scipy.linalg.expm(M * self.dt), self.steps + 1)
         self.urgent = {m: [] for m in model.modes}
         self.window = {m: None for m in model.modes}
+        self.exits = {m: [] for m in model.modes}         # may-transitions taken at invariant exit
         for tr in model.transitions:
             if tr.urgent:
                 self.urgent[tr.source].append((tr, lambdify_margins(tr.guard, model.symbols)))
             elif tr.window is not None:
                 self.window[tr.source] = tr
+            else:
+                self.exits[tr.source].append((tr, lambdify_margins(tr.guard, model.symbols)))
         self.resets = {tr.name: _reset_function(tr, model) for tr in model.transitions if tr.reset}
 
     # --------------------------------------------------------------- propagation
@@ -186,13 +193,32 @@ class Simulator:
             lo = np.where(inside, lo, mid)
         return hi
 
+    def _last_inside(self, mode: str, X: np.ndarray, h: np.ndarray) -> np.ndarray:
+        """Latest time in ``[0, h)`` at which the runs are still inside the invariant
+        (inside at 0, outside at ``h``), by bisection."""
+        inv = self.model.modes[mode].invariant_margins
+        lo, hi = np.zeros_like(h), h.copy()
+        for _ in range(BISECTION_STEPS):
+            mid = 0.5 * (lo + hi)
+            Z = self.propagate(mode, X, mid)
+            tol = INVARIANT_TOLERANCE * (1.0 + np.abs(Z).max(axis=1))
+            inside = np.all(inv(Z) <= tol[:, None], axis=1)
+            lo = np.where(inside, mid, lo)
+            hi = np.where(inside, hi, mid)
+        return lo
+
     # --------------------------------------------------------------- runs
     def run(self, x0: np.ndarray, switch_times: np.ndarray | None = None, record: bool = False,
-            observers=(), kicks=None) -> Trajectories:
+            observers=(), kicks=None, signal=None) -> Trajectories:
         """Simulate runs from ``x0`` (N, n) with window switch instants ``switch_times`` (N,).
 
         ``observers``: callables ``f(t, X, mode_index, rows)`` (``t`` per row) called with the
         visited states. ``kicks(k, count) -> (count, n)``: disturbance added at ``k * step``.
+        ``signal = (step, values[, switch])``: the varying bounded inputs (``model.varying_inputs``)
+        are piecewise constant, ``values[r, k]`` on ``[k step, (k+1) step)`` for run ``r``
+        (``values`` is (N, K, m); the last piece lasts to the horizon); with ``switch`` (N, K)
+        booleans, run ``r`` also takes, at ``k step`` (k >= 1) where ``switch[r, k]``, the first
+        may-transition with a general guard that is enabled there (if any).
         """
         X = np.array(x0, dtype=float).reshape(-1, self.n).copy()
         N = X.shape[0]
@@ -202,6 +228,27 @@ class Simulator:
         t = np.zeros(N)
         blocked_at = np.full(N, np.nan)
         kick_step = self.model.disturbance.step if (kicks is not None and self.model.disturbance) else None
+        jumped: list = []                           # runs that took a may-transition at a piece start
+        if signal is not None:
+            if kick_step:
+                raise ValueError("input signals and disturbance kicks together are not supported")
+            kick_step, values = float(signal[0]), np.asarray(signal[1], dtype=float)
+            switch = None if len(signal) < 3 or signal[2] is None else np.asarray(signal[2], dtype=bool)
+            columns = np.array([u.index for u in self.model.varying_inputs], dtype=int)
+
+            def kicks(k, sel):
+                piece = min(k, values.shape[1] - 1)
+                if columns.size:
+                    X[np.ix_(sel, columns)] = values[sel, piece]
+                if switch is not None and k > 0:
+                    jumped.append(self._take_may(X, mode, sel[switch[sel, piece]]))
+
+            kicks(0, np.arange(N))
+        elif kick_step:
+            disturbance = kicks
+
+            def kicks(k, sel):
+                X[sel] += disturbance(k, sel.size)
         next_kick = np.zeros(N) if kick_step else np.full(N, np.inf)
         kick_count = np.zeros(N, dtype=int)
         recorder = _Recorder() if record else None
@@ -220,14 +267,14 @@ class Simulator:
             if kick_step:   # disturbance kicks due now
                 due = active[np.abs(next_kick[active] - t[active]) <= 1e-9 * max(1.0, horizon)]
                 if due.size:
+                    before = mode[due].copy()
+                    jumped.clear()
                     for k in np.unique(kick_count[due]):
-                        sel = due[kick_count[due] == k]
-                        X[sel] += kicks(int(k), sel.size)
+                        kicks(int(k), due[kick_count[due] == k])
                     kick_count[due] += 1
                     next_kick[due] = kick_count[due] * kick_step
-                    before = mode[due].copy()
                     self._urgent_now(X, mode, due)       # a kick may land a run inside a guard
-                    moved = due[mode[due] != before]
+                    moved = due[(mode[due] != before) | np.isin(due, np.concatenate(jumped or [[]]))]
                     if moved.size:
                         for f in watchers:
                             f(t[moved], X[moved], mode[moved], moved)
@@ -253,7 +300,7 @@ class Simulator:
         steps = int(np.ceil(self.model.horizon / self.dt - 1e-9))    # the horizon may have been cut
         for k in range(steps):
             if kick_every and k % kick_every == 0:
-                X += kicks(k // kick_every, X.shape[0])
+                kicks(k // kick_every, rows)
             h = min(self.dt, self.model.horizon - k * self.dt)
             X[:] = X @ Phi + phi if h == self.dt else self.propagate(name, X, h)
             t[:] = k * self.dt + h
@@ -275,6 +322,23 @@ class Simulator:
                             moved = True
             if not moved:
                 return
+
+    def _take_may(self, X, mode, rows) -> np.ndarray:
+        """Each run of ``rows`` takes the first enabled may-transition with a general guard;
+        returns the runs that did."""
+        taken = []
+        for m_index in np.unique(mode[rows]):
+            todo = rows[mode[rows] == m_index]
+            for tr, guard in self.exits[self.mode_names[m_index]]:
+                if todo.size == 0:
+                    break
+                tol = INVARIANT_TOLERANCE * (1.0 + np.abs(X[todo]).max(axis=1))
+                ok = np.all(guard(X[todo]) <= tol[:, None], axis=1)
+                if ok.any():
+                    self._jump(tr, X, mode, todo[ok])
+                    taken.append(todo[ok])
+                    todo = todo[~ok]
+        return np.concatenate(taken) if taken else np.zeros(0, dtype=int)
 
     def _jump(self, tr, X, mode, rows):
         mode[rows] = self.mode_names.index(tr.target)
@@ -346,6 +410,23 @@ class Simulator:
         outside = np.any(M > INVARIANT_TOLERANCE * scale, axis=2) & valid & (grid_t < event_time[:, None])
         blocked = outside.any(axis=1)
         block_j = outside.argmax(axis=1)
+        if self.exits[name] and blocked.any():
+            # a may-transition enabled where the run leaves the invariant is taken there
+            b = np.flatnonzero(blocked)
+            prev_t = np.where(block_j[b] == 0, t0[b], grid_t[b, np.maximum(block_j[b] - 1, 0)])
+            prev_x = np.where((block_j[b] == 0)[:, None], X[rows[b]], Y[b, np.maximum(block_j[b] - 1, 0)])
+            s = self._last_inside(name, prev_x, grid_t[b, block_j[b]] - prev_t)
+            x_exit = self.propagate(name, prev_x, s)
+            tol = INVARIANT_TOLERANCE * (1.0 + np.abs(x_exit).max(axis=1))
+            for j_tr, (tr, guard) in enumerate(self.exits[name]):
+                free = np.flatnonzero(blocked[b])
+                ok = free[np.all(guard(x_exit[free]) <= tol[free, None], axis=1)]
+                if ok.size:
+                    candidates_exit = len(guards) + 1 + j_tr
+                    event_time[b[ok]] = prev_t[ok] + s[ok]
+                    event_tr[b[ok]] = candidates_exit
+                    blocked[b[ok]] = False
+            outside &= blocked[:, None]
         limit = np.where(blocked, grid_t[np.arange(n_rows), block_j], np.minimum(event_time, stop_at))
         seen = valid & (grid_t <= limit[:, None]) & (grid_t < event_time[:, None])
         r_idx, j_idx = np.nonzero(seen)
@@ -359,6 +440,7 @@ class Simulator:
         blocked_at[rows[b]] = limit[b]
         # runs with an event: go to it exactly, jump
         e = np.flatnonzero(~blocked & (event_tr >= 0) & (event_time <= end))
+        candidates += [tr for tr, _ in self.exits[name]]
         if e.size:
             last = np.where(seen[e].any(axis=1), (seen[e] * np.arange(count)).max(axis=1), -1)
             base_t = np.where(last >= 0, grid_t[e, np.maximum(last, 0)], t0[e])

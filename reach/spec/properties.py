@@ -182,7 +182,11 @@ class BoundEvent:
 
 def load_properties(path) -> list[Property]:
     """Read a property file and check its structure (expressions are parsed by :func:`bind`)."""
-    doc = load(path)
+    return properties_from_doc(load(path))
+
+
+def properties_from_doc(doc: Doc) -> list[Property]:
+    """The properties of a document read elsewhere (a SpaceEx cfg's forbidden set)."""
     data = doc.data
     if not isinstance(data, dict) or "properties" not in data:
         raise InputError("a property file needs a top-level 'properties:' list", doc.file, line=1)

@@ -1,0 +1,97 @@
+"""SpaceEx import (sspaceex 0.2 XML + .cfg, the ARCH-COMP AFF interchange format).
+
+The XML is read safely with its lines (:mod:`.xmltree`), into components (:mod:`.components`);
+the cfg's system is instantiated and composed (:mod:`.compose`), and converted into the same
+plain documents the YAML loaders read (:mod:`.convert`). The ordinary loaders then build and
+check the :class:`~reach.model.automaton.HybridAutomaton` and the property, so an imported model
+and its YAML export are the same automaton by construction.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from reach.errors import InputError
+from reach.model.spaceex.cfg import Config, read_cfg
+from reach.model.spaceex.components import read_document
+from reach.model.spaceex.compose import compose, instantiate
+from reach.model.spaceex.convert import DocumentBuilder, Documents
+from reach.model.spaceex.formula import Loc
+from reach.model.spaceex.xmltree import read_xml
+
+
+def default_cfg(xml_path) -> Path:
+    """The cfg next to the model with the same stem (``bball.xml`` -> ``bball.cfg``)."""
+    path = Path(xml_path).with_suffix(".cfg")
+    if not path.is_file():
+        raise InputError("no .cfg given and none with the same name next to the model "
+                         "(the cfg holds the system, initial set and horizon)", str(xml_path))
+    return path
+
+
+def documents(xml_path, cfg_path=None, name: str | None = None) -> Documents:
+    """The model and property documents of a SpaceEx model and its cfg."""
+    xml_path = Path(xml_path)
+    cfg_path = Path(cfg_path) if cfg_path is not None else default_cfg(xml_path)
+    cfg = read_cfg(cfg_path)
+    doc = read_document(read_xml(xml_path), str(xml_path))
+    system = (cfg.text("system") or "").strip()
+    if not system:
+        raise InputError("no 'system'", str(cfg_path), line=1)
+    flat = instantiate(doc, system, cfg.line("system"), cfg.file)
+    builder = DocumentBuilder(flat, str(xml_path), cfg, name or _name(cfg_path))
+    compose(flat, _initial_locations(builder, cfg), cfg.file)
+    return builder.build()
+
+
+def _initial_locations(builder: DocumentBuilder, cfg: Config):
+    """Allowed location names per instance from the ``loc()`` terms of ``initially``."""
+    allowed = [None] * len(builder.flat.instances)
+    for term in builder.cfg_formula("initially", required=True)[:1]:
+        for atom in term:
+            if isinstance(atom, Loc):
+                i = builder.instance_of(atom.component, "initially")
+                if i is not None:
+                    allowed[i] = (allowed[i] or {atom.location}) & {atom.location}
+    return allowed
+
+
+def _name(cfg_path: Path) -> str:
+    return cfg_path.stem
+
+
+def load_spaceex(xml_path, cfg_path=None):
+    """``(model, properties)``: the HybridAutomaton and the list of bound-ready properties
+    (``reach.spec`` Property objects) of the cfg's forbidden set (empty if it has none)."""
+    from reach.model.loader import model_from_doc
+    from reach.spec.properties import properties_from_doc
+    from reach.yamlio import Doc
+
+    docs = documents(xml_path, cfg_path)
+    model = model_from_doc(Doc(docs.model, docs.model_lines, str(xml_path)))
+    props = []
+    if docs.properties is not None:
+        props = properties_from_doc(Doc(docs.properties, docs.property_lines, str(cfg_path or default_cfg(xml_path))))
+    return model, props, docs
+
+
+def write_yaml(docs: Documents, out_dir) -> tuple[Path, Path | None]:
+    """Write ``out_dir/models/NAME.yaml`` and ``out_dir/properties/NAME.yaml`` (if the cfg
+    forbids anything); NAME is the cfg's file name, sanitised."""
+    import yaml
+
+    from reach.paths import safe_name
+
+    safe = safe_name(str(docs.model["name"]), "model")
+    out = Path(out_dir)
+    model_path = out / "models" / f"{safe}.yaml"
+    model_path.parent.mkdir(parents=True, exist_ok=True)
+    header = f"# {docs.model['description']}\n"
+    model_path.write_text(header + yaml.safe_dump(docs.model, sort_keys=False, width=120))
+    prop_path = None
+    if docs.properties is not None:
+        prop_path = out / "properties" / f"{safe}.yaml"
+        prop_path.parent.mkdir(parents=True, exist_ok=True)
+        prop_path.write_text(f"# the forbidden set of {docs.model['notes']['config']}\n"
+                             + yaml.safe_dump(docs.properties, sort_keys=False, width=120))
+    return model_path, prop_path

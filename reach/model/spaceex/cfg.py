@@ -1,0 +1,89 @@
+"""SpaceEx configuration files (``.cfg``): ``key = value`` lines, ``#`` comments, quoted values.
+
+Read: ``system`` (the component to analyse), ``initially`` and ``forbidden`` (formulas),
+``time-horizon``, ``iter-max`` and ``sampling-time`` (a step hint). The other keys are options of
+SpaceEx's own algorithms (scenario, directions, tolerances, output) and are kept but unused.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from reach.errors import InputError
+from reach.paths import read_text
+
+MAX_BYTES = 1_000_000
+
+
+@dataclass
+class Config:
+    file: str
+    values: dict = field(default_factory=dict)     # key -> (text, line)
+
+    def text(self, key: str) -> str | None:
+        return self.values[key][0] if key in self.values else None
+
+    def line(self, key: str) -> int | None:
+        return self.values[key][1] if key in self.values else None
+
+    def number(self, key: str) -> float | None:
+        if key not in self.values:
+            return None
+        text, line = self.values[key]
+        try:
+            value = float(text)
+        except ValueError:
+            raise InputError(f"{key}: expected a number, got '{text}'", self.file, line=line) from None
+        if value != value or value in (float("inf"), float("-inf")):
+            raise InputError(f"{key}: expected a finite number", self.file, line=line)
+        return value
+
+
+def parse_cfg(text: str, file: str) -> Config:
+    if len(text) > MAX_BYTES:
+        raise InputError(f"file larger than {MAX_BYTES} bytes", file)
+    cfg = Config(file)
+    i, line, n = 0, 1, len(text)
+    while i < n:
+        # one logical line: key = value (a quoted value may span lines)
+        start_line = line
+        j = text.find("\n", i)
+        j = n if j < 0 else j
+        raw = text[i:j]
+        stripped = raw.split("#", 1)[0].strip() if '"' not in raw.split("#", 1)[0] else raw.strip()
+        if not stripped or stripped.startswith("#"):
+            i, line = j + 1, line + 1
+            continue
+        if "=" not in stripped:
+            raise InputError(f"expected 'key = value', got '{stripped[:40]}'", file, line=start_line)
+        eq = text.index("=", i)
+        key = text[i:eq].strip()
+        k = eq + 1
+        while k < n and text[k] in " \t":
+            k += 1
+        if k < n and text[k] == '"':
+            close = text.find('"', k + 1)
+            if close < 0:
+                raise InputError(f"{key}: unterminated quoted value", file, line=start_line)
+            value = text[k + 1:close]
+            line += text.count("\n", i, close)
+            rest_end = text.find("\n", close)
+            rest_end = n if rest_end < 0 else rest_end
+            rest = text[close + 1:rest_end].split("#", 1)[0].strip()
+            if rest:
+                raise InputError(f"{key}: unexpected text after the quoted value", file, line=line)
+            i = rest_end + 1
+        else:
+            value = text[k:j].split("#", 1)[0].strip()
+            i = j + 1
+        line += 1
+        if not key or not all(c.isalnum() or c in "-_" for c in key):
+            raise InputError(f"'{key}' is not a cfg key", file, line=start_line)
+        if key in cfg.values:
+            raise InputError(f"duplicate key '{key}'", file, line=start_line)
+        cfg.values[key] = (value, start_line)
+    return cfg
+
+
+def read_cfg(path) -> Config:
+    return parse_cfg(read_text(path, (".cfg",), "SpaceEx configuration", MAX_BYTES), str(path))

@@ -1,0 +1,778 @@
+"""A composed SpaceEx network and its cfg as the plain model and property documents the YAML
+loaders read, so that the normal loader and its checks build the automaton.
+
+Variables. A real with a flow in some location is a state. A real with no flow anywhere is
+* an alias when a location's invariant defines it, ``y == e`` (``e`` free of ``y``): ``y`` is
+  replaced by ``e`` there (outputs such as Building's ``y1 == x25``);
+* a varying bounded input when the invariants only bound it by numbers (``0.8 <= u <= 1``), the
+  same interval in every location where it occurs;
+* otherwise bad input (an unbounded input).
+A state with flow 0 in every location that no transition assigns, the cfg's initial set does not
+mention, and the invariants only bound by the same interval everywhere, is a constant bounded
+input (Building BLDC01's ``u1' == 0``). Constants bound to numbers are substituted.
+
+Initial set (SpaceEx semantics): the cfg's ``initially`` intersected with the invariant of the
+initial location; without ``loc()`` the initial location is the one location combination
+whose invariant meets the set (an LP), and several such is bad input. Terms of ``initially``
+or ``forbidden`` over names the system lacks only are dropped if satisfiable (the constraint
+``t == 0`` on a variable that does not exist is existentially true), with a note.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+
+import numpy as np
+import sympy
+
+from reach import lp
+from reach.errors import InputError, Where
+from reach.model.constraints import affine_coefficients
+from reach.model.expr import CONSTANTS, FUNCTIONS, parse_expr
+from reach.model.spaceex.compose import Flat, Instance, Part
+from reach.model.spaceex.formula import (Const, FormulaError, Loc, Relation, Token, conjunction, formula_error,
+                                         is_primed_name, names_in, parse_formula, to_python)
+
+RESERVED = set(FUNCTIONS) | set(CONSTANTS) | {"true", "false", "loc"}
+
+
+@dataclass
+class Atoms:
+    """A conjunction read from one instance's text, names already global."""
+
+    relations: list[tuple[Relation, Instance]] = field(default_factory=list)
+    false: bool = False
+
+
+class Converter:
+    def __init__(self, flat: Flat, xml_file: str):
+        self.flat = flat
+        self.file = xml_file
+        self.lines: dict[tuple, tuple[str, int]] = {}
+        self.notes: list[str] = []
+
+    # ------------------------------------------------------------------ names
+    def global_of(self, instance: Instance, local: str, line: int) -> str:
+        """The global name behind ``local`` in ``instance`` (numbers come back as ``#value``)."""
+        b = instance.binding.get(local)
+        if b is None:
+            # a name the component does not declare: SpaceEx treats it as a param of the
+            # component; here that is a typo more often than not
+            raise InputError(f"component '{instance.component.id}': unknown name '{local}' "
+                             "(not a param of the component)", self.file, line=line)
+        if b.number is not None:
+            return "#" + b.number
+        return b.name
+
+    def parse(self, part: Part, what: str) -> Atoms:
+        text = part.text
+        try:
+            atoms = conjunction(text.text)
+        except FormulaError as exc:
+            raise formula_error(exc, what, text.text, self.file, text.line) from None
+        out = Atoms()
+        for atom in atoms:
+            if isinstance(atom, Const):
+                out.false |= not atom.value
+            elif isinstance(atom, Loc):
+                raise InputError(f"{what}: construct loc() is only allowed in the cfg", self.file, line=text.line)
+            else:
+                out.relations.append((self._globalise(atom, part.instance, text.line), part.instance))
+        return out
+
+    def _globalise(self, rel: Relation, instance: Instance, line: int) -> Relation:
+        parts = []
+        for tokens in rel.parts:
+            new = []
+            for i, t in enumerate(tokens):
+                called = i + 1 < len(tokens) and tokens[i + 1].text == "("
+                if t.kind == "name" and not called:
+                    if t.text in RESERVED and t.text not in instance.binding:
+                        new.append(t)
+                        continue
+                    g = self.global_of(instance, t.text, line)
+                    new.append(Token("num", f"({g[1:]})") if g.startswith("#") else Token("name", g))
+                else:
+                    new.append(t)
+            parts.append(new)
+        return Relation(parts, rel.ops)
+
+
+def yaml_names(used: list[str]) -> dict[str, str]:
+    """Identifiers for global names: the last dotted part if unique, else the path with ``_``."""
+    last = {}
+    for g in used:
+        last.setdefault(g.split(".")[-1], []).append(g)
+    out, taken = {}, set()
+    for g in sorted(used, key=lambda s: (s.count("."), s)):
+        short = g.split(".")[-1]
+        name = short if len(last[short]) == 1 else g.replace(".", "_")
+        name = re.sub(r"\W", "_", name)
+        if not name.isidentifier() or name.startswith("_"):
+            name = "v_" + name.lstrip("_")
+        while name in RESERVED or name in taken:
+            name += "_"
+        out[g] = name
+        taken.add(name)
+    return out
+
+
+def identifier(text: str, taken: set[str]) -> str:
+    name = re.sub(r"\W", "_", text) or "m"
+    if not name.isidentifier():
+        name = "m_" + name
+    base, k = name, 2
+    while name in taken:
+        name = f"{base}_{k}"
+        k += 1
+    taken.add(name)
+    return name
+
+
+def number_of(text: str) -> float | None:
+    """The value of a constant expression text, or None if it has names."""
+    try:
+        value = parse_expr(text, {}, Where())
+    except InputError:
+        return None
+    if not value.is_number:
+        return None
+    value = complex(value)
+    return value.real if value.imag == 0 and np.isfinite(value.real) else None
+
+
+def linear_rows(texts_eq: list[tuple[str, str]], names: dict[str, sympy.Symbol], symbols):
+    """``(A, b, E, f)`` of relations given as ``(kind, "lhs - rhs")`` (kind ``<=`` or ``==``),
+    or None if one is not linear."""
+    A, b, E, f = [], [], [], []
+    for kind, text in texts_eq:
+        try:
+            g = sympy.expand(parse_expr(text, names, Where()))
+        except InputError:
+            return None
+        coeffs = affine_coefficients(g, symbols)
+        if coeffs is None:
+            return None
+        (E if kind == "==" else A).append(coeffs[0])
+        (f if kind == "==" else b).append(-coeffs[1])
+    n = len(symbols)
+    return (np.array(A, float).reshape(-1, n), np.array(b, float), np.array(E, float).reshape(-1, n),
+            np.array(f, float))
+
+
+def feasible(rows, n) -> bool:
+    A, b, E, f = rows
+    point = lp.feasible_point(A if len(b) else None, b if len(b) else None,
+                              A_eq=E if len(f) else None, b_eq=f if len(f) else None, n=n)
+    return point is not None
+
+
+# ---------------------------------------------------------------------- the documents
+@dataclass
+class Documents:
+    """The model and property documents (plain data) with the line of each field."""
+
+    model: dict
+    model_lines: dict
+    properties: dict | None
+    property_lines: dict
+    property_id: str | None
+
+
+def _pairs(rel: Relation):
+    """Consecutive comparisons of a chain: ``[(lhs, op, rhs), ...]``."""
+    return [(rel.parts[i], rel.ops[i], rel.parts[i + 1]) for i in range(len(rel.ops))]
+
+
+def _only_name(tokens) -> str | None:
+    return tokens[0].text if len(tokens) == 1 and tokens[0].kind == "name" else None
+
+
+def _numeric(tokens) -> float | None:
+    if names_in(tokens):
+        return None
+    return number_of(to_python(tokens, lambda n: n))
+
+
+def _bound_of(rel: Relation, var: str):
+    """``(lo, hi)`` if ``rel`` only bounds ``var`` by numbers (a chain like ``a <= var <= b``)."""
+    if any(set(names_in(p)) - {var} for p in rel.parts) or not any(names_in(p) for p in rel.parts):
+        return None
+    lo, hi = -np.inf, np.inf
+    for lhs, op, rhs in _pairs(rel):
+        if op not in ("<=", "<", ">=", ">"):
+            return None
+        if op in (">=", ">"):
+            lhs, rhs = rhs, lhs
+        a, b = _only_name(lhs), _only_name(rhs)
+        if a == var and b is None:
+            value = _numeric(rhs)
+            if value is None:
+                return None
+            hi = min(hi, value)
+        elif b == var and a is None:
+            value = _numeric(lhs)
+            if value is None:
+                return None
+            lo = max(lo, value)
+        else:
+            return None
+    return lo, hi
+
+
+def _alias_of(rel: Relation, var: str):
+    """The defining side ``e`` of ``var == e`` (``e`` free of ``var``), else None."""
+    if rel.ops != ["=="] and rel.ops != ["="]:
+        return None
+    lhs, rhs = rel.parts
+    if _only_name(lhs) == var and var not in names_in(rhs):
+        return rhs
+    if _only_name(rhs) == var and var not in names_in(lhs):
+        return lhs
+    return None
+
+
+class DocumentBuilder(Converter):
+    """Builds :class:`Documents` from a composed network and its cfg (see the module docstring)."""
+
+    def __init__(self, flat: Flat, xml_file: str, cfg, name: str):
+        super().__init__(flat, xml_file)
+        self.cfg = cfg
+        self.name = name
+
+    # -------------------------------------------------------------- reading
+    def read_locations(self):
+        self.flows, self.invariants, self.timeless = {}, {}, set()
+        for key, loc in self.flat.locations.items():
+            flows = {}
+            for part in loc.flows:
+                atoms = self.parse(part, f"location '{loc.names}' flow")
+                if atoms.false:
+                    self.timeless.add(key)
+                for rel, _ in atoms.relations:
+                    var = is_primed_name(rel.parts[0]) if rel.ops in (["=="], ["="]) else None
+                    if var is None:
+                        raise InputError(f"flow: construct '{self._show(rel)}' is not supported "
+                                         "(expected x' == expression)", self.file, line=part.text.line)
+                    if var in flows:
+                        raise InputError(f"flow: two derivatives given for '{var}'", self.file, line=part.text.line)
+                    flows[var] = (rel.parts[1], part.text.line)
+            self.flows[key] = flows
+            invariant = []
+            for part in loc.invariants:
+                atoms = self.parse(part, "invariant")
+                if atoms.false:
+                    raise InputError("invariant: construct 'false' (an empty location) is not supported",
+                                     self.file, line=part.text.line)
+                invariant += [(rel, part.text.line) for rel, _ in atoms.relations]
+            self.invariants[key] = invariant
+        self.guards, self.assignments = [], []
+        for tr in self.flat.transitions:
+            guard = []
+            for part in tr.guards:
+                atoms = self.parse(part, "guard")
+                if atoms.false:
+                    guard = None
+                    break
+                guard += [(rel, part.text.line) for rel, _ in atoms.relations]
+            assign = {}
+            for part in tr.assignments:
+                for rel, _ in self.parse(part, "assignment").relations:
+                    lhs = rel.parts[0]
+                    var = _only_name(lhs) or is_primed_name(lhs)
+                    if len(rel.ops) != 1 or rel.ops[0] not in (":=", "==", "=") or var is None:
+                        raise InputError(f"assignment: construct '{self._show(rel)}' is not supported "
+                                         "(expected x := expression)", self.file, line=part.text.line)
+                    if var in assign:
+                        raise InputError(f"assignment: '{var}' assigned twice", self.file, line=part.text.line)
+                    assign[var] = (rel.parts[1], part.text.line)
+            self.guards.append(guard)
+            self.assignments.append(assign)
+
+    def _show(self, rel: Relation) -> str:
+        text = " ".join(" ".join(t.text for t in p) + (f" {rel.ops[i]}" if i < len(rel.ops) else "")
+                        for i, p in enumerate(rel.parts))
+        return text if len(text) <= 60 else text[:57] + "..."
+
+    # -------------------------------------------------------------- variables
+    def classify(self, cfg_names: set[str]):
+        """States, bounded inputs (varying and constant) and aliases (see the module docstring)."""
+        states = set()
+        for flows in self.flows.values():
+            states |= set(flows)
+        used_where: dict[str, set] = {}
+        for key in self.flat.locations:
+            for rel, _ in self.invariants[key]:
+                for p in rel.parts:
+                    for n in names_in(p):
+                        used_where.setdefault(n, set()).add(key)
+            for tokens, _ in self.flows[key].values():
+                for n in names_in(tokens):
+                    used_where.setdefault(n, set()).add(key)
+        for tr, guard, assign in zip(self.flat.transitions, self.guards, self.assignments):
+            for rel, line in guard or []:
+                for p in rel.parts:
+                    for n in names_in(p):
+                        used_where.setdefault(n, set()).add(tr.source)
+            for var, (tokens, line) in assign.items():
+                if var not in states:
+                    raise InputError(f"assignment: '{var}' has no flow anywhere (only states can be assigned)",
+                                     self.file, line=line)
+                for n in names_in(tokens):
+                    used_where.setdefault(n, set()).add(tr.source)
+        self.aliases: dict[tuple, dict[str, list]] = {key: {} for key in self.flat.locations}
+        self.inputs: dict[str, tuple[float, float, bool]] = {}
+        self.dropped: dict[tuple, set[int]] = {key: set() for key in self.flat.locations}
+        for var in sorted(set(used_where) - states):
+            self._classify_free(var, used_where[var])
+        for var in sorted(states):
+            self._maybe_constant_input(var, cfg_names)
+        self.states = [g for g in self._order() if g in states and g not in self.inputs]
+
+    def _order(self) -> list[str]:
+        """Variables in declaration order (the system's params first, then instance locals)."""
+        return list(self.flat.globals) + sorted(set(v for f in self.flows.values() for v in f)
+                                                 - set(self.flat.globals))
+
+    def _classify_free(self, var: str, where: set):
+        line = None
+        if self.flat.globals.get(var) == "const":
+            raise InputError(f"the constant '{var}' has no value (map it to a number in a bind)",
+                             self.file, line=self._line_of(var))
+        aliased = {}
+        bounds = {}
+        for key in where:
+            for j, (rel, line) in enumerate(self.invariants[key]):
+                e = _alias_of(rel, var)
+                if e is not None and key not in aliased:
+                    aliased[key] = e
+                    self.dropped[key].add(j)
+                    continue
+                b = _bound_of(rel, var)
+                if b is not None:
+                    bounds.setdefault(key, []).append((j, b))
+        if aliased and set(aliased) == where:
+            for key, e in aliased.items():
+                self.aliases[key][var] = e
+            return
+        uses_outside_flows = any(
+            var in names_in(p) and j not in {i for i, _ in bounds.get(key, [])}
+            for key in where for j, (rel, _) in enumerate(self.invariants[key]) for p in rel.parts)
+        if bounds and not aliased and not uses_outside_flows:
+            intervals = set()
+            for key in where:
+                if key not in bounds:
+                    raise InputError(f"'{var}' has no flow and is unbounded in location "
+                                     f"'{'__'.join(self.flat.locations[key].names)}' (an unbounded input is "
+                                     "not supported)", self.file, line=self.flat.locations[key].line)
+                lo, hi = -np.inf, np.inf
+                for j, (a, b) in bounds[key]:
+                    lo, hi = max(lo, a), min(hi, b)
+                    self.dropped[key].add(j)
+                intervals.add((lo, hi))
+            if len(intervals) != 1:
+                raise InputError(f"the input '{var}' has different bounds in different locations "
+                                 "(not supported)", self.file, line=line)
+            (lo, hi), = intervals
+            if not (np.isfinite(lo) and np.isfinite(hi)) or lo > hi:
+                raise InputError(f"the input '{var}' needs finite bounds low <= {var} <= high", self.file, line=line)
+            self.inputs[var] = (lo, hi, True)
+            return
+        raise InputError(f"'{var}' has no flow and is neither bounded by numbers in the invariants nor "
+                         f"defined by an equality (construct not supported)", self.file,
+                         line=line or self._line_of(var))
+
+    def _maybe_constant_input(self, var: str, cfg_names: set[str]):
+        if var in cfg_names or any(var in a for a in self.assignments):
+            return
+        if any(self.flows[key].get(var) is None or _numeric(self.flows[key][var][0]) != 0
+               for key in self.flat.locations):
+            return
+        if any(var in names_in(p) for g in self.guards for rel, _ in (g or []) for p in rel.parts):
+            return
+        intervals, marks = set(), []
+        for key in self.flat.locations:
+            lo, hi = -np.inf, np.inf
+            for j, (rel, _) in enumerate(self.invariants[key]):
+                if not any(var in names_in(p) for p in rel.parts):
+                    continue
+                b = _bound_of(rel, var)
+                if b is None:
+                    return
+                lo, hi = max(lo, b[0]), min(hi, b[1])
+                marks.append((key, j))
+            intervals.add((lo, hi))
+        if len(intervals) != 1:
+            return
+        (lo, hi), = intervals
+        if not (np.isfinite(lo) and np.isfinite(hi) and lo <= hi):
+            return
+        for key, j in marks:
+            self.dropped[key].add(j)
+        self.inputs[var] = (lo, hi, False)
+
+    def _line_of(self, var: str) -> int | None:
+        for inst in self.flat.instances:
+            for p in inst.component.params.values():
+                if inst.binding.get(p.name) and inst.binding[p.name].name == var:
+                    return p.line
+        return None
+
+    # -------------------------------------------------------------- rendering
+    def render(self, tokens, key, line: int | None, depth: int = 0) -> str:
+        def rename(g: str) -> str:
+            if key is not None and g in self.aliases.get(key, {}):
+                if depth > 8:
+                    raise InputError(f"aliases nest too deeply at '{g}'", self.file, line=line)
+                return "(" + self.render(self.aliases[key][g], key, line, depth + 1) + ")"
+            if g in self.yaml:
+                return self.yaml[g]
+            raise InputError(f"'{g}' is used where it has no value (no flow, bound or definition)",
+                             self.file, line=line)
+        try:
+            return to_python(tokens, rename)
+        except FormulaError as exc:
+            raise InputError(f"construct not supported: {exc}", self.file, line=line) from None
+
+    def relation_texts(self, rel: Relation, key, line) -> list[tuple[str, str]]:
+        """``[(kind, text)]``: ``("<=", "a <= b")`` per comparison, ``("==", "a == b")``."""
+        out = []
+        for lhs, op, rhs in _pairs(rel):
+            a, b = self.render(lhs, key, line), self.render(rhs, key, line)
+            if op in (":=",):
+                raise InputError("construct ':=' outside an assignment", self.file, line=line)
+            out.append(("==", f"{a} == {b}") if op in ("==", "=") else ("<=", f"{a} {op} {b}"))
+        return out
+
+    @staticmethod
+    def as_constraints(pairs) -> list[str]:
+        """Texts the constraint parser reads: ``a == b`` becomes ``a <= b`` and ``a >= b``."""
+        out = []
+        for kind, text in pairs:
+            if kind == "==":
+                a, b = text.split(" == ", 1)
+                out += [f"{a} <= {b}", f"{a} >= {b}"]
+            else:
+                out.append(text)
+        return out
+
+    # -------------------------------------------------------------- the model document
+    def build(self) -> Documents:
+        cfg = self.cfg
+        init_terms = self.cfg_formula("initially", required=True)
+        if len(init_terms) != 1:
+            raise InputError("initially: construct '|' (a union of initial sets) is not supported",
+                             cfg.file, line=cfg.line("initially"))
+        init_atoms = init_terms[0]
+        cfg_rel = [a for a in init_atoms if isinstance(a, Relation)]
+        cfg_names = {self.resolve(n) for r in cfg_rel for p in r.parts for n in names_in(p)} - {None}
+        self.read_locations()
+        self.classify(cfg_names)
+        self.yaml = yaml_names(self.states + list(self.inputs))
+        taken: set[str] = set()
+        self.mode_of = {key: identifier("__".join(loc.names), taken) for key, loc in self.flat.locations.items()}
+        data: dict = {"name": self.name}
+        lines = self.lines
+        lines[()] = (self.file, 1)
+        data["description"] = f"imported from the SpaceEx model {self.file} (system '{cfg.text('system')}')"
+        data["state"] = [self.yaml[s] for s in self.states]
+        lines[("state",)] = (self.file, 1)
+        if self.inputs:
+            data["bounded_inputs"] = {self.yaml[v]: {"range": [lo, hi], "varying": varying}
+                                      for v, (lo, hi, varying) in self.inputs.items()}
+            for v in self.inputs:
+                lines[("bounded_inputs", self.yaml[v])] = (self.file, self._line_of(v) or 1)
+        data["modes"] = {}
+        for key, loc in self.flat.locations.items():
+            m = self.mode_of[key]
+            lines[("modes", m)] = (self.file, loc.line)
+            spec: dict = {}
+            if key in self.timeless:
+                spec["flow"] = False
+            else:
+                flow = {}
+                for s in self.states:
+                    if s not in self.flows[key]:
+                        raise InputError(f"location '{'__'.join(loc.names)}': no flow for '{s}' (SpaceEx "
+                                         "leaves it free there; not supported)", self.file, line=loc.line)
+                    tokens, line = self.flows[key][s]
+                    flow[self.yaml[s]] = self.render(tokens, key, line)
+                    lines[("modes", m, "flow", self.yaml[s])] = (self.file, line)
+                spec["flow"] = flow
+            invariant = []
+            for j, (rel, line) in enumerate(self.invariants[key]):
+                if j in self.dropped[key]:
+                    continue
+                for text in self.as_constraints(self.relation_texts(rel, key, line)):
+                    lines[("modes", m, "invariant", len(invariant))] = (self.file, line)
+                    invariant.append(text)
+            if invariant:
+                spec["invariant"] = invariant
+            data["modes"][m] = spec
+        self.transitions_out = self.transitions_doc()
+        self.extra_modes: dict = {}
+        data["initial"] = self.initial_doc(init_atoms)
+        data["modes"].update(self.extra_modes)
+        data["transitions"] = self.transitions_out
+        horizon = cfg.number("time-horizon")
+        if horizon is None:
+            raise InputError("no 'time-horizon'", cfg.file, line=1)
+        data["horizon"] = horizon
+        lines[("horizon",)] = (cfg.file, cfg.line("time-horizon"))
+        notes = {"source": self.file, "config": cfg.file}
+        for key in ("sampling-time", "iter-max"):
+            if cfg.text(key) is not None:
+                notes[key] = cfg.number(key)
+        if self.notes:
+            notes["dropped"] = list(self.notes)
+        data["notes"] = notes
+        props, plines, pid = self.forbidden_doc()
+        return Documents(data, lines, props, plines, pid)
+
+    def transitions_doc(self) -> dict:
+        out, taken = {}, set()
+        for tr, guard, assign in zip(self.flat.transitions, self.guards, self.assignments):
+            if guard is None:
+                continue                      # a guard 'false' never fires
+            src, dst = self.mode_of[tr.source], self.mode_of[tr.target]
+            base = tr.label.split(".")[-1] if tr.label else f"{src}_to_{dst}"
+            name = identifier(base, taken)
+            path = ("transitions", name)
+            self.lines[path] = (self.file, tr.line)
+            spec: dict = {"from": src, "to": dst}
+            texts = []
+            for rel, line in guard:
+                for text in self.as_constraints(self.relation_texts(rel, tr.source, line)):
+                    self.lines[path + ("guard", len(texts))] = (self.file, line)
+                    texts.append(text)
+            if texts:
+                spec["guard"] = texts
+            if assign:
+                reset = {}
+                for var, (tokens, line) in assign.items():
+                    if var in self.inputs:
+                        raise InputError(f"assignment: '{var}' is an input and cannot be assigned",
+                                         self.file, line=line)
+                    reset[self.yaml[var]] = self.render(tokens, tr.source, line)
+                    self.lines[path + ("reset", self.yaml[var])] = (self.file, line)
+                spec["reset"] = reset
+            if tr.asap:
+                spec["urgent"] = True
+            out[name] = spec
+        return out
+
+    # -------------------------------------------------------------- the cfg
+    def cfg_formula(self, key: str, required: bool = False):
+        text = self.cfg.text(key)
+        if text is None or not text.strip():
+            if required:
+                raise InputError(f"no '{key}'", self.cfg.file, line=self.cfg.line(key) or 1)
+            return []
+        try:
+            return parse_formula(text)
+        except FormulaError as exc:
+            raise formula_error(exc, key, text, self.cfg.file, self.cfg.line(key)) from None
+
+    def resolve(self, name: str) -> str | None:
+        """A cfg name as a global name: exact, else the unique global with that dotted suffix."""
+        known = set(self.flat.globals) | {v for f in getattr(self, "flows", {}).values() for v in f}
+        if name in known:
+            return name
+        matches = [g for g in known if g.endswith("." + name)]
+        return matches[0] if len(matches) == 1 else None
+
+    def instance_of(self, comp: str | None, where_key: str) -> int | None:
+        inst = self.flat.instances
+        if comp is None:
+            if len(inst) != 1:
+                raise InputError(f"{where_key}: loc() without a component in a network of {len(inst)} "
+                                 "components", self.cfg.file, line=self.cfg.line(where_key))
+            return 0
+        matches = [i for i, x in enumerate(inst) if x.path == comp or x.path.endswith("." + comp)
+                   or (x.path == "" and x.component.id == comp)]
+        if len(matches) > 1:
+            raise InputError(f"{where_key}: loc({comp}) is ambiguous", self.cfg.file, line=self.cfg.line(where_key))
+        return matches[0] if matches else None
+
+    def cfg_relation(self, rel: Relation, key, where_key: str):
+        """The texts of a cfg relation, or None if it only names variables the system lacks
+        (then it must be satisfiable on its own, and is dropped with a note)."""
+        line = self.cfg.line(where_key)
+        names = [n for p in rel.parts for n in names_in(p)]
+        resolved = {n: self.resolve(n) for n in names}
+        missing = [n for n, g in resolved.items() if g is None or (g not in self.yaml and g not in
+                                                                   self.aliases.get(key, {}))]
+        if missing:
+            if len(missing) < len(set(names)):
+                raise InputError(f"{where_key}: unknown name '{missing[0]}'", self.cfg.file, line=line)
+            return None
+        parts = [[Token("name", resolved[t.text]) if t.kind == "name" and t.text in resolved else t for t in p]
+                 for p in rel.parts]
+        return self.relation_texts(Relation(parts, rel.ops), key, line)
+
+    def _dropped_satisfiable(self, rels: list[Relation], where_key: str) -> bool:
+        """Are relations over names the system lacks satisfiable together (linear ones by LP)?"""
+        names = sorted({n for r in rels for p in r.parts for n in names_in(p)})
+        symbols = [sympy.Symbol(f"v{i}", real=True) for i in range(len(names))]
+        table = dict(zip([n.replace(".", "_") for n in names], symbols))
+        pairs = []
+        for r in rels:
+            for lhs, op, rhs in _pairs(r):
+                try:
+                    a = to_python(lhs, lambda n: n.replace(".", "_"))
+                    b = to_python(rhs, lambda n: n.replace(".", "_"))
+                except FormulaError as exc:
+                    raise InputError(f"{where_key}: construct not supported: {exc}", self.cfg.file,
+                                     line=self.cfg.line(where_key)) from None
+                kind = "==" if op in ("==", "=") else "<="
+                if op in (">=", ">"):
+                    a, b = b, a
+                pairs.append((kind, f"({a}) - ({b})"))
+        rows = linear_rows(pairs, table, symbols)
+        if rows is None:
+            raise InputError(f"{where_key}: a nonlinear constraint on names the system lacks",
+                             self.cfg.file, line=self.cfg.line(where_key))
+        return feasible(rows, len(symbols))
+
+    def initial_doc(self, atoms) -> dict:
+        allowed: dict[int, set] = {}
+        unknown: list[Relation] = []
+        for a in atoms:
+            if isinstance(a, Loc):
+                i = self.instance_of(a.component, "initially")
+                if i is None:
+                    self.notes.append(f"initially: loc({a.component}) == {a.location} (no such component)")
+                    continue
+                allowed[i] = allowed.get(i, {a.location}) & {a.location}
+            elif isinstance(a, Const) and not a.value:
+                raise InputError("initially: the initial set is 'false' (empty)", self.cfg.file,
+                                 line=self.cfg.line("initially"))
+        candidates = [key for key, loc in self.flat.locations.items()
+                      if all(loc.names[i] in names for i, names in allowed.items())]
+        if not candidates:
+            raise InputError("initially: no location matches the loc() terms", self.cfg.file,
+                             line=self.cfg.line("initially"))
+        symbols = [sympy.Symbol(self.yaml[g], real=True) for g in self.states + list(self.inputs)]
+        table = {s.name: s for s in symbols}
+        choice = []
+        for key in candidates:
+            texts, unknown = [], []
+            for a in atoms:
+                if isinstance(a, Relation):
+                    t = self.cfg_relation(a, key, "initially")
+                    if t is None:
+                        unknown.append(a)
+                    else:
+                        texts += t
+            for j, (rel, line) in enumerate(self.invariants[key]):
+                if j not in self.dropped[key]:
+                    inv = self.relation_texts(rel, key, line)
+                    if linear_rows([(k, _difference(t, k)) for k, t in inv], table, symbols) is not None:
+                        texts += inv
+            rows = linear_rows([(k, _difference(t, k)) for k, t in texts], table, symbols)
+            bounds = [("<=", f"({self.yaml[v]}) - ({hi})") for v, (lo, hi, _) in self.inputs.items()] + \
+                     [("<=", f"({lo}) - ({self.yaml[v]})") for v, (lo, hi, _) in self.inputs.items()]
+            if rows is None or feasible(linear_rows([(k, _difference(t, k)) for k, t in texts] + bounds,
+                                                    table, symbols), len(symbols)):
+                choice.append((key, texts))
+        if unknown:
+            if not self._dropped_satisfiable(unknown, "initially"):
+                raise InputError("initially: the initial set is empty", self.cfg.file, line=self.cfg.line("initially"))
+            self.notes += [f"initially: {self._show(r)} (names the system lacks)" for r in unknown]
+        if not choice:
+            raise InputError("initially: the initial set meets no location's invariant", self.cfg.file,
+                             line=self.cfg.line("initially"))
+        self.lines[("initial",)] = (self.cfg.file, self.cfg.line("initially"))
+        if len(choice) > 1:
+            return self._start_mode(choice, atoms)
+        key, texts = choice[0]
+        return {"mode": self.mode_of[key], "constraints": [t for _, t in texts]}
+
+    def _start_mode(self, choice, atoms) -> dict:
+        """Several initial locations: a timeless mode ``start`` holding the cfg's set, with an
+        urgent jump into each location whose (linear) invariant it meets. Properties do not
+        look at ``start``: its states are checked where they land."""
+        start = identifier("start", set(self.mode_of.values()) | set(self.extra_modes))
+        self.extra_modes[start] = {"flow": False}
+        self.lines[("modes", start)] = (self.cfg.file, self.cfg.line("initially"))
+        texts = []
+        for a in atoms:
+            if isinstance(a, Relation):
+                texts += self.cfg_relation(a, choice[0][0], "initially") or []
+        taken = set(self.transitions_out)
+        # a simulator takes the first enabled urgent jump: locations where time passes first
+        for key, _ in sorted(choice, key=lambda c: c[0] in self.timeless):
+            guard = []
+            for j, (rel, line) in enumerate(self.invariants[key]):
+                if j not in self.dropped[key]:
+                    guard += self.as_constraints(self.relation_texts(rel, key, line))
+            name = identifier(f"{start}_to_{self.mode_of[key]}", taken)
+            self.transitions_out[name] = {"from": start, "to": self.mode_of[key], "urgent": True,
+                                          **({"guard": guard} if guard else {})}
+            self.lines[("transitions", name)] = (self.cfg.file, self.cfg.line("initially"))
+        return {"mode": start, "constraints": [t for _, t in texts]}
+
+    def forbidden_doc(self):
+        terms = self.cfg_formula("forbidden")
+        stem = self.cfg.file.replace("\\", "/").rsplit("/", 1)[-1]
+        stem = stem[:-4] if stem.endswith(".cfg") else stem
+        pid = re.sub(r"[^A-Za-z0-9_-]", "_", stem) or "forbidden"     # a property id is a name
+        line = self.cfg.line("forbidden")
+        props, plines = [], {}
+        for term in terms:
+            if any(isinstance(a, Const) and not a.value for a in term):
+                continue
+            modes = set(self.mode_of.values())
+            for a in term:
+                if isinstance(a, Loc):
+                    i = self.instance_of(a.component, "forbidden")
+                    if i is None:
+                        raise InputError(f"forbidden: loc({a.component}): no such component", self.cfg.file, line=line)
+                    modes &= {self.mode_of[k] for k, loc in self.flat.locations.items() if loc.names[i] == a.location}
+            if not modes:
+                continue
+            avoid, unknown = [], []
+            for a in term:
+                if isinstance(a, Relation):
+                    texts = None
+                    for key in self.flat.locations:          # aliases: the same text in every location
+                        t = self.cfg_relation(a, key, "forbidden")
+                        if texts is not None and t != texts:
+                            raise InputError("forbidden: a name defined differently in different locations",
+                                             self.cfg.file, line=line)
+                        texts = t
+                    if texts is None:
+                        unknown.append(a)
+                    else:
+                        avoid += self.as_constraints(texts)
+            if unknown and not self._dropped_satisfiable(unknown, "forbidden"):
+                continue
+            self.notes += [f"forbidden: {self._show(r)} (names the system lacks)" for r in unknown]
+            k = len(props)
+            order = [m for m in self.mode_of.values() if m in modes]
+            prop = {"id": pid, "kind": "safety", "modes": order}
+            if avoid:
+                prop["avoid"] = avoid
+            else:
+                prop["require"] = ["0 <= -1"]         # the whole of these modes is forbidden
+            props.append(prop)
+            plines[("properties", k)] = (self.cfg.file, line)
+        if not props:
+            return None, {}, pid
+        if len(props) > 1:
+            for k, p in enumerate(props, start=1):
+                p["id"] = f"{pid}-{k}"
+        return {"properties": props}, plines, pid
+
+
+def _difference(text: str, kind: str) -> str:
+    """``a op b`` as the text ``(a) - (b)`` with ``<= 0`` (or ``== 0``) meaning the relation."""
+    if kind == "==":
+        a, b = text.split(" == ", 1)
+        return f"({a}) - ({b})"
+    for op in (" <= ", " < ", " >= ", " > "):
+        if op in text:
+            a, b = text.split(op, 1)
+            return f"({a}) - ({b})" if op.strip() in ("<=", "<") else f"({b}) - ({a})"
+    raise ValueError(text)

@@ -1,0 +1,506 @@
+"""SpaceEx import: the published files, hand-written constructs, malformed input, round trip."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from reach.cli import main
+from reach.errors import InputError
+from reach.model import load_model
+from reach.model.simulate import Simulator
+from reach.model.spaceex import documents, load_spaceex, write_yaml
+
+ROOT = Path(__file__).resolve().parents[1] / "models" / "spaceex"
+
+# (xml, cfg, states, modes, transitions, bounded inputs, forbidden terms): counted from the files
+# (Building: 48 states + t + the input u1, output y1 is an alias; Gearbox: 5 + clock, the two
+# locations plus a start mode because the initial set lies in both, 2 impacts + 4 meshings + 2
+# start jumps; Platoon: 9 + the input aL (+ clocks); filtered oscillator 4th order: 2 + 4 filter
+# states, 4 locations in a cycle; drivetrain: 11 + t, 5 locations, 5 transitions).
+PUBLISHED = [
+    ("Building/BLDC01.xml", "Building/BLDC01-BDS01.cfg", 50, 1, 0, 1, 1),
+    ("Building/BLDC01.xml", "Building/BLDC01-BDU02.cfg", 50, 1, 0, 1, 1),
+    ("Building/BLDF01.xml", "Building/BLDF01-BDS01.cfg", 50, 1, 0, 1, 1),
+    ("Building/BLDF01.xml", "Building/BLDF01-BDU01.cfg", 50, 1, 0, 1, 1),
+    ("Building/BLDF01.xml", "Building/BLDF01-BDU02.cfg", 50, 1, 0, 1, 1),
+    ("Gearbox/GRBX01-MES01.xml", "Gearbox/GRBX01-MES01.cfg", 6, 3, 8, 0, 2),
+    ("Platoon/PLAA01-BND.xml", "Platoon/PLAA01-BND.cfg", 10, 2, 2, 1, 0),
+    ("Platoon/PLAD01-BND.xml", "Platoon/PLAD01-BND30.cfg", 12, 2, 2, 1, 0),
+    ("Platoon/PLAD01-BND.xml", "Platoon/PLAD01-BND42.cfg", 12, 2, 2, 1, 0),
+    ("Platoon/PLAN01-UNB.xml", "Platoon/PLAN01-UNB50.cfg", 11, 2, 2, 1, 0),
+    ("FilteredOscillator/filtered_oscillator.xml", "FilteredOscillator/filtered_oscillator.cfg", 6, 4, 4, 0, 0),
+    ("BouncingBall/bball.xml", "BouncingBall/bball.cfg", 2, 1, 1, 0, 0),
+    ("BouncingBall/bball_flattened.xml", "BouncingBall/bball_flattened.cfg", 2, 1, 1, 0, 0),
+    ("Powertrain/drivetrain_2theta_30percent.xml", "Powertrain/drivetrain_2theta_30percent.cfg", 12, 5, 5, 0, 1),
+    ("Rendezvous_ARCH18/SRA01-SR0_.xml", "Rendezvous_ARCH18/SRA01-SR0_-LOS.cfg", 5, 3, 3, 0, 3),
+    ("Rendezvous_ARCH18/SRA01-SR0_.xml", "Rendezvous_ARCH18/SRA01-SR0_-collision.cfg", 5, 3, 3, 0, 1),
+    ("Rendezvous_ARCH18/SRNA01-SR0_.xml", "Rendezvous_ARCH18/SRNA01-SR0_-LOS.cfg", 5, 2, 1, 0, 3),
+]
+
+
+@pytest.mark.parametrize("xml,cfg,n,modes,transitions,inputs,terms", PUBLISHED)
+def test_published_files_import_with_the_expected_structure(xml, cfg, n, modes, transitions, inputs, terms):
+    model, props, _ = load_spaceex(ROOT / xml, ROOT / cfg)
+    assert (model.n, len(model.modes), len(model.transitions), len(model.bounded_inputs)) == \
+        (n, modes, transitions, inputs)
+    assert len(props) == terms
+
+
+def test_building_details():
+    model, props, _ = load_spaceex(ROOT / "Building/BLDF01.xml", ROOT / "Building/BLDF01-BDU02.cfg")
+    (u,) = model.bounded_inputs
+    assert (u.name, u.low, u.high, u.varying) == ("u1", 0.8, 1.0, True)
+    assert "y1" not in model.state                       # the output is an alias of x25
+    assert model.horizon == 20.1                          # time-horizon of BDU02.cfg
+    assert props[0].raw["avoid"] == ["x25 < -0.00078", "t <= 20", "t >= 20"]
+    constant, _, _ = load_spaceex(ROOT / "Building/BLDC01.xml", ROOT / "Building/BLDC01-BDS01.cfg")
+    assert constant.bounded_inputs[0].varying is False     # u1' == 0 in BLDC01
+
+
+def test_powertrain_initial_set_is_the_published_segment():
+    model, props, _ = load_spaceex(ROOT / "Powertrain/drivetrain_2theta_30percent.xml",
+                                   ROOT / "Powertrain/drivetrain_2theta_30percent.cfg")
+    P = model.initial.polytope
+    assert P is not None
+    i = model.state.index
+    # x4 in [27, 33]; x1 = 0.00056 x4 - 0.06; x7 = 12 x4
+    assert model.initial.low[i("x4")] == pytest.approx(27) and model.initial.high[i("x4")] == pytest.approx(33)
+    for x4 in (27.0, 30.0, 33.0):
+        x = np.zeros(model.n)
+        x[i("x4")] = x4
+        x[i("x1")] = 0.00056 * x4 - 0.01512 - 0.04488
+        x[i("x2")] = 0.467 * x4 - 12.609 - 12.401
+        x[i("x6")] = x[i("x9")] = x[i("x11")] = x4
+        x[i("x7")] = 12 * x4
+        x[i("x8")] = x[i("x10")] = 0.00006 * x4 - 0.00162 - 0.0015
+        assert np.all(P.A @ x <= P.b + 1e-9) and np.allclose(P.E @ x, P.f, atol=1e-9)
+    assert props[0].raw["modes"] == ["error"]
+
+
+@pytest.mark.parametrize("xml,cfg", [
+    ("BouncingBall/bball.xml", "BouncingBall/bball.cfg"),
+    ("FilteredOscillator/filtered_oscillator.xml", "FilteredOscillator/filtered_oscillator.cfg"),
+    ("Building/BLDC01.xml", "Building/BLDC01-BDS01.cfg"),
+    ("Building/BLDF01.xml", "Building/BLDF01-BDU01.cfg"),
+    ("Gearbox/GRBX01-MES01.xml", "Gearbox/GRBX01-MES01.cfg"),
+    ("Platoon/PLAD01-BND.xml", "Platoon/PLAD01-BND42-forbidden.cfg"),
+    ("Powertrain/drivetrain_2theta_30percent.xml", "Powertrain/drivetrain_2theta_30percent.cfg"),
+    ("Rendezvous_ARCH18/SRA01-SR0_.xml", "Rendezvous_ARCH18/SRA01-SR0_-LOS.cfg"),
+])
+def test_simulated_runs_agree_with_solve_ivp(xml, cfg):
+    """The first stretch of a run in one mode (after jumps at t = 0), simulated, against scipy's
+    solve_ivp of the same right-hand side; time-varying inputs held at their upper bound."""
+    model, _, _ = load_spaceex(ROOT / xml, ROOT / cfg)
+    model.horizon = min(model.horizon, 0.2)
+    x0 = (model.initial.low + model.initial.high) / 2
+    if not model.initial.is_box:
+        from reach.backends.initial_sampling import PolytopeSampler
+        x0 = PolytopeSampler(model.initial.polytope, model.initial.low, model.initial.high).structured()[-1]
+    signal = None
+    if model.varying_inputs:
+        values = np.array([[[u.high for u in model.varying_inputs]]])
+        signal = (model.horizon, values)
+        for u in model.varying_inputs:
+            x0[u.index] = u.high
+    sim = Simulator(model, dt=model.horizon / 200)
+    t, m, X = sim.run(x0[None, :], record=True, signal=signal).path[0]
+    start = int(np.flatnonzero(t == 0)[-1])
+    jump = (m[start + 1:] != m[start]) | (np.diff(t[start:]) <= 0)     # a mode change or a self-loop
+    stop = start + 1 + (int(np.argmax(jump)) if jump.any() else len(t) - start - 1)
+    assert t[stop - 1] > 0.005
+    mode = model.modes[list(model.modes)[m[start]]]
+    if mode.linear is not None:
+        A, b = mode.linear
+        f = lambda s, y: A @ y + b                  # noqa: E731
+    else:
+        f = lambda s, y: mode.rhs(y[None, :])[0]    # noqa: E731
+    ref = solve_ivp(f, (0, t[stop - 1]), X[start], t_eval=t[start:stop], rtol=1e-10, atol=1e-12, method="LSODA")
+    scale = 1 + np.abs(ref.y.T).max()
+    assert np.max(np.abs(ref.y.T - X[start:stop])) < 1e-6 * scale
+
+
+def test_rendezvous_file_is_the_suites_sra01():
+    """The benchmark authors' SpaceEx SRA01 and the suite's own models/SRA01.yaml: same flows."""
+    imported, _, _ = load_spaceex(ROOT / "Rendezvous_ARCH18/SRA01-SR0_.xml",
+                                  ROOT / "Rendezvous_ARCH18/SRA01-SR0_-LOS.cfg")
+    own = load_model(ROOT.parent / "SRA01.yaml")
+    order = [imported.state.index(s) for s in own.state]
+    for mine, theirs in (("approach", "P2"), ("rendezvous", "P3"), ("passive", "Passive")):
+        A, b = imported.modes[theirs].linear
+        A_own, b_own = own.modes[mine].linear
+        assert np.allclose(A[np.ix_(order, order)], A_own, atol=1e-9) and np.allclose(b[order], b_own)
+    assert np.array_equal(imported.initial.low[order], own.initial.low)
+
+
+def test_bouncing_ball_bounces_at_the_ground():
+    """The may-transition is taken where the run leaves x >= 0: v flips with factor 0.75."""
+    model, _, _ = load_spaceex(ROOT / "BouncingBall/bball.xml", ROOT / "BouncingBall/bball.cfg")
+    model.horizon = 6.0
+    runs = Simulator(model, dt=0.01).run(np.array([[10.0, 0.0]]), record=True)
+    t, m, X = runs.path[0]
+    assert np.isnan(runs.blocked_at[0])
+    impact = np.sqrt(20.0)                               # x = 10 - t^2/2 hits 0
+    k = np.flatnonzero(np.diff(X[:, 1]) > 1.0)[0]
+    assert t[k] == pytest.approx(impact, abs=1e-6)
+    assert X[k + 1, 1] == pytest.approx(0.75 * impact, rel=1e-6)
+
+
+def test_check_and_import_give_the_same_verdicts(tmp_path, capsys):
+    xml, cfg = ROOT / "Gearbox/GRBX01-MES01.xml", ROOT / "Gearbox/GRBX01-MES01.cfg"
+    assert main(["import", str(xml), str(cfg), "--out", str(tmp_path)]) == 0
+    yaml_model = load_model(tmp_path / "models" / "GRBX01-MES01.yaml")
+    direct, _, _ = load_spaceex(xml, cfg)
+    assert yaml_model.state == direct.state and list(yaml_model.modes) == list(direct.modes)
+    for name, mode in direct.modes.items():
+        assert [str(f) for f in yaml_model.modes[name].flow] == [str(f) for f in mode.flow]
+        assert mode.timeless == yaml_model.modes[name].timeless
+    assert np.array_equal(yaml_model.initial.low, direct.initial.low)
+    code = main(["check", str(xml), str(cfg), "-b", "montecarlo", "-o", "samples=40", "-o", "search_rounds=0"])
+    yaml_code = main(["check", str(tmp_path / "models" / "GRBX01-MES01.yaml"),
+                      str(tmp_path / "properties" / "GRBX01-MES01.yaml"), "-b", "montecarlo",
+                      "-o", "samples=40", "-o", "search_rounds=0"])
+    out = capsys.readouterr().out
+    assert code == yaml_code == 3                       # undecided: Monte Carlo never says SAFE
+    assert "GRBX01-MES01 " in out and "UNKNOWN" in out and "UNSAFE" not in out
+
+
+# ---------------------------------------------------------------- hand-written cases
+HEADER = '<?xml version="1.0"?>\n<sspaceex xmlns="http://www-verimag.imag.fr/xml-namespaces/sspaceex" version="0.2">\n'
+
+
+def write(tmp_path, body: str, cfg: str):
+    (tmp_path / "m.xml").write_text(HEADER + body + "</sspaceex>\n")
+    (tmp_path / "m.cfg").write_text(cfg)
+    return tmp_path / "m.xml", tmp_path / "m.cfg"
+
+
+NETWORK = '''<component id="a">
+ <param name="x" type="real" local="false" dynamics="any"/>
+ <param name="k" type="real" local="false" dynamics="const"/>
+ <param name="go" type="label" local="false"/>
+ <location id="1" name="off"><invariant>x &lt;= 1</invariant><flow>x' == k</flow></location>
+ <location id="2" name="on"><invariant>true</invariant><flow>x' == -k*x</flow></location>
+ <transition source="1" target="2"><label>go</label><guard>x &gt;= 1</guard><assignment>x := 2*x</assignment></transition>
+</component>
+<component id="b">
+ <param name="y" type="real" local="false" dynamics="any"/>
+ <param name="go" type="label" local="false"/>
+ <location id="1" name="idle"><flow>y' == 0</flow></location>
+ <location id="2" name="busy"><flow>y' == 1</flow></location>
+ <location id="3" name="never"><flow>y' == 2</flow></location>
+ <transition source="1" target="2" asap="true"><label>go</label></transition>
+</component>
+<component id="sys">
+ <param name="x" type="real" local="false" dynamics="any"/>
+ <param name="y" type="real" local="false" dynamics="any"/>
+ <param name="go" type="label" local="false"/>
+ <bind component="a" as="A"><map key="x">x</map><map key="k">0.5</map><map key="go">go</map></bind>
+ <bind component="b" as="B"><map key="y">y</map><map key="go">go</map></bind>
+</component>
+'''
+
+
+def test_network_synchronises_on_labels_and_keeps_reachable_locations(tmp_path):
+    xml, cfg = write(tmp_path, NETWORK, 'system = sys\ninitially = "loc(A)==off & loc(B)==idle & '
+                     '0 <= x <= 0.5 & y == 0"\nforbidden = "loc(B) == busy & y >= 3"\ntime-horizon = 4\n')
+    model, props, _ = load_spaceex(xml, cfg)
+    assert list(model.modes) == ["off__idle", "on__busy"]           # 'never' is unreachable
+    (tr,) = model.transitions
+    assert (tr.source, tr.target, tr.urgent, str(tr.reset[0])) == ("off__idle", "on__busy", True, "2*x")
+    assert float(model.modes["off__idle"].flow[0]) == 0.5
+    assert props[0].raw == {"id": "m", "kind": "safety", "modes": ["on__busy"], "avoid": ["y >= 3"]}
+
+
+def test_unknown_names_in_initially_are_dropped_when_satisfiable(tmp_path):
+    xml, cfg = write(tmp_path, NETWORK, 'system = sys\ninitially = "loc(A)==off & loc(B)==idle & '
+                     'x == 0 & y == 0 & t == 0 & loc(C) == c"\ntime-horizon = 1\n')
+    _, _, docs = load_spaceex(xml, cfg)
+    assert len(docs.model["notes"]["dropped"]) == 2
+
+
+@pytest.mark.parametrize("body,cfg,needle", [
+    (NETWORK.replace("x' == k", "x' == k | x' == 1"), "", "disjunction"),
+    (NETWORK.replace("x' == k", "x' &gt;= k"), "", "flow: construct"),
+    (NETWORK.replace("x := 2*x", "x + 1 := 2"), "", "assignment: construct"),
+    (NETWORK.replace('<location id="3"', '<foo/><location id="3"'), "", "construct <foo>"),
+    (NETWORK.replace('type="label" local="false"/>\n <location id="1" name="idle"',
+                     'type="int" local="false"/>\n <location id="1" name="idle"'), "", 'type="int"'),
+    (NETWORK.replace("x' == k", "x' == foo(k)"), "", "function 'foo'"),
+    (NETWORK.replace("x' == k", "x' == k @ 2"), "", "unexpected character"),
+    (NETWORK.replace('<map key="k">0.5</map>', ''), "", "constant 'A.k' has no value"),
+    (NETWORK, 'initially = "x == 0 | x == 1"\n', "union of initial sets"),
+    (NETWORK, 'initially = "x == 0 & y == 0"\nforbidden = "x <= "\n', "empty side"),
+    (NETWORK.replace("</component>\n<component id=\"b\">", "<bogus>", 1), "", "invalid XML"),
+])
+def test_constructs_outside_scope_name_the_construct_and_line(tmp_path, capsys, body, cfg, needle):
+    text = 'system = sys\ntime-horizon = 1\n' + (cfg or 'initially = "loc(A)==off & loc(B)==idle & x == 0 & y == 0"\n')
+    xml, cfgp = write(tmp_path, body, text)
+    assert main(["check", str(xml), str(cfgp), "-b", "montecarlo"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and needle in err[0]
+    assert err[0].startswith("reach: ") and (":" in err[0].split(" ", 1)[1])
+    assert any(ch.isdigit() for ch in err[0].split(":")[2]) or "cfg" in err[0]
+
+
+def test_entity_declarations_are_refused(tmp_path, capsys):
+    (tmp_path / "m.xml").write_text('<?xml version="1.0"?>\n<!DOCTYPE x [<!ENTITY a "aaaaaaaaaa">'
+                                    '<!ENTITY b "&a;&a;&a;&a;&a;&a;&a;&a;">]>\n<sspaceex>&b;</sspaceex>\n')
+    (tmp_path / "m.cfg").write_text("system = s\n")
+    assert main(["import", str(tmp_path / "m.xml"), str(tmp_path / "m.cfg"), "--out", str(tmp_path)]) == 2
+    assert "document type declarations" in capsys.readouterr().err
+
+
+def test_missing_cfg_is_bad_input(tmp_path):
+    (tmp_path / "m.xml").write_text(HEADER + NETWORK + "</sspaceex>\n")
+    with pytest.raises(InputError, match="no .cfg"):
+        documents(tmp_path / "m.xml")
+
+
+def test_write_yaml_sanitises_the_name(tmp_path):
+    xml, cfg = write(tmp_path, NETWORK, 'system = sys\ninitially = "loc(A)==off & loc(B)==idle & x == 0 & y == 0"\n'
+                     'time-horizon = 1\n')
+    docs = documents(xml, cfg, name="../../evil name")
+    model_path, prop_path = write_yaml(docs, tmp_path / "out")
+    assert model_path.parent == tmp_path / "out" / "models" and prop_path is None
+
+
+THERMOSTAT = '''<component id="heater">
+ <param name="T" type="real" local="false" dynamics="any"/>
+ <param name="d" type="real" local="false" dynamics="any" controlled="false"/>
+ <location id="1" name="on"><invariant>T &lt;= 21 &amp; -0.2 &lt;= d &lt;= 0.2</invariant>
+  <flow>T' == -0.1*(T - 10) + 3 + d</flow></location>
+ <location id="2" name="off"><invariant>T &gt;= 19 &amp;&amp; -0.2 &lt;= d &amp; d &lt;= 0.2</invariant>
+  <flow>T' == -0.1*(T - 10) + d</flow></location>
+ <transition source="1" target="2"><guard>T &gt;= 21</guard></transition>
+ <transition source="2" target="1"><guard>T &lt;= 19</guard></transition>
+</component>
+'''
+
+
+def test_thermostat_violation_is_found_saved_and_replayed(tmp_path, capsys):
+    """Hysteresis thermostat with a disturbance input: T <= 20.5 is violated (it heats to 21)."""
+    xml, cfg = write(tmp_path, THERMOSTAT, 'system = heater\ninitially = "loc(heater) == on & T == 20"\n'
+                     'forbidden = "T >= 20.5"\ntime-horizon = 60\n')
+    model, props, _ = load_spaceex(xml, cfg)
+    assert model.varying_inputs[0].name == "d" and len(model.transitions) == 2
+    out = tmp_path / "cex"
+    assert main(["check", str(xml), str(cfg), "-b", "montecarlo", "--counterexamples", str(out)]) == 1
+    text = capsys.readouterr().out
+    assert "UNSAFE" in text
+    (saved,) = out.glob("*.json")
+    assert main(["replay", str(saved)]) == 1                    # it violates the property
+    assert "replayed" in capsys.readouterr().out
+    # independent: no run heats faster than with d = 0.2, whose T' = -0.1 (T - 10) + 3.2 reaches
+    # 20.5 at t = 10 ln((42 - 20) / (42 - 20.5)) (closed form of the linear ODE)
+    import json
+    data = json.loads(saved.read_text())
+    assert data["violation_time"] >= 10 * np.log(22 / 21.5) - 1e-9
+    assert data["violation_state"][0] >= 20.5 and data["input_signal"]["inputs"] == ["d"]
+
+
+# ---------------------------------------------------------------- the formula parser
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+import sympy  # noqa: E402
+
+from reach.errors import Where  # noqa: E402
+from reach.model.expr import parse_expr  # noqa: E402
+from reach.model.spaceex.formula import Relation, parse_formula, to_python  # noqa: E402
+
+ATOMS = st.tuples(st.sampled_from(["x", "y", "x + y", "2*x - y"]), st.sampled_from(["<=", "<", ">=", ">"]),
+                  st.integers(-3, 3))
+
+
+def formulas(depth=3):
+    leaf = ATOMS.map(lambda a: (f"{a[0]} {a[1]} {a[2]}", lambda x, y, a=a: _cmp(eval_expr(a[0], x, y), a[1], a[2])))
+    return st.recursive(leaf, lambda sub: st.tuples(sub, st.sampled_from(["&", "&&", "|"]), sub).map(_join),
+                        max_leaves=8)
+
+
+def eval_expr(text, x, y):
+    return {"x": x, "y": y, "x + y": x + y, "2*x - y": 2 * x - y}[text]
+
+
+def _cmp(a, op, b):
+    return {"<=": a <= b, "<": a < b, ">=": a >= b, ">": a > b}[op]
+
+
+def _join(t):
+    (ta, fa), op, (tb, fb) = t
+    if op == "|":
+        return f"({ta}) | ({tb})", lambda x, y: fa(x, y) or fb(x, y)
+    return f"({ta}) {op} ({tb})", lambda x, y: fa(x, y) and fb(x, y)
+
+
+@settings(max_examples=60, deadline=None)
+@given(formulas(), st.lists(st.tuples(st.integers(-4, 4), st.integers(-4, 4)), min_size=5, max_size=10))
+def test_formulas_become_an_equivalent_dnf(formula, points):
+    text, truth = formula
+    dnf = parse_formula(text)
+    for x, y in points:
+        def holds(rel: Relation):
+            a = to_python(rel.parts[0], str)
+            b = to_python(rel.parts[1], str)
+            env = {"x": sympy.Integer(x), "y": sympy.Integer(y)}
+            return _cmp(float(parse_expr(a, env, Where())), rel.ops[0], float(parse_expr(b, env, Where())))
+        assert any(all(holds(r) for r in term) for term in dnf) == truth(x, y)
+
+
+def test_dotted_cfg_name_gives_a_valid_property_id_and_json(tmp_path, capsys):
+    xml, cfg = write(tmp_path, NETWORK, 'system = sys\ninitially = "loc(A)==off & loc(B)==idle & x == 0 & y == 0"\n'
+                     'forbidden = "x >= 5"\ntime-horizon = 1\n')
+    dotted = tmp_path / "m.4th_order.cfg"
+    dotted.write_text(cfg.read_text())
+    assert main(["check", str(xml), str(dotted), "-b", "montecarlo", "--json", "-o", "samples=20"]) == 3
+    import json
+    (row,) = json.loads(capsys.readouterr().out)
+    assert row["property"] == "m_4th_order" and row["status"] == "unknown"
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.data())
+def test_mangled_models_are_bad_input_or_load(tmp_path_factory, data):
+    """Cut, duplicate or replace a span of a valid XML or cfg: it loads or is one InputError."""
+    tmp = tmp_path_factory.mktemp("mangled")
+    xml_text = HEADER + NETWORK + "</sspaceex>\n"
+    cfg_text = ('system = sys\ninitially = "loc(A)==off & loc(B)==idle & 0 <= x <= 0.5 & y == 0"\n'
+                'forbidden = "loc(B) == busy & y >= 3 | x >= 4"\ntime-horizon = 4\n')
+    which = data.draw(st.sampled_from(["xml", "cfg"]))
+    text = xml_text if which == "xml" else cfg_text
+    i = data.draw(st.integers(0, len(text) - 1))
+    j = data.draw(st.integers(i, min(len(text), i + 12)))
+    piece = data.draw(st.sampled_from(["", text[i:j] * 2, "&", "(", ")", "'", "<", "==", "loc(", "|", "\"", "x"]))
+    text = text[:i] + piece + text[j:]
+    (tmp / "m.xml").write_text(xml_text if which == "cfg" else text)
+    (tmp / "m.cfg").write_text(cfg_text if which == "xml" else text)
+    try:
+        load_spaceex(tmp / "m.xml", tmp / "m.cfg")
+    except InputError as exc:
+        assert str(exc).count("\n") == 0
+
+
+def _same_automaton(a, b):
+    assert a.state == b.state and list(a.modes) == list(b.modes) and a.horizon == b.horizon
+    for name, mode in a.modes.items():
+        other = b.modes[name]
+        assert [sympy.srepr(f) for f in mode.flow] == [sympy.srepr(f) for f in other.flow]
+        assert [(sympy.srepr(c.g), c.strict) for c in mode.invariant] == \
+            [(sympy.srepr(c.g), c.strict) for c in other.invariant]
+        assert mode.timeless == other.timeless
+    assert [(t.name, t.source, t.target, t.urgent, [sympy.srepr(c.g) for c in t.guard],
+             {k: sympy.srepr(v) for k, v in t.reset.items()}) for t in a.transitions] == \
+        [(t.name, t.source, t.target, t.urgent, [sympy.srepr(c.g) for c in t.guard],
+          {k: sympy.srepr(v) for k, v in t.reset.items()}) for t in b.transitions]
+    assert a.initial.mode == b.initial.mode
+    assert np.array_equal(a.initial.low, b.initial.low) and np.array_equal(a.initial.high, b.initial.high)
+    assert (a.initial.polytope is None) == (b.initial.polytope is None)
+    assert a.bounded_inputs == b.bounded_inputs
+
+
+@pytest.mark.parametrize("xml,cfg", [
+    ("Gearbox/GRBX01-MES01.xml", "Gearbox/GRBX01-MES01.cfg"),
+    ("Powertrain/drivetrain_2theta_30percent.xml", "Powertrain/drivetrain_2theta_30percent.cfg"),
+    ("Platoon/PLAD01-BND.xml", "Platoon/PLAD01-BND42-forbidden.cfg"),
+    ("FilteredOscillator/filtered_oscillator.xml", "FilteredOscillator/filtered_oscillator.4th_order.cfg"),
+    ("Rendezvous_ARCH18/SRA01-SR0_.xml", "Rendezvous_ARCH18/SRA01-SR0_-LOS.cfg"),
+    ("Building/BLDF01.xml", "Building/BLDF01-BDU02.cfg"),
+])
+def test_import_round_trip_is_the_same_automaton_and_property(tmp_path, xml, cfg):
+    from reach.spec import bind, load_properties
+    direct, props, docs = load_spaceex(ROOT / xml, ROOT / cfg)
+    model_file, prop_file = write_yaml(docs, tmp_path)
+    again = load_model(model_file)
+    _same_automaton(direct, again)
+    if prop_file is not None:
+        reread = load_properties(prop_file)
+        assert [p.id for p in reread] == [p.id for p in props]
+        for p, q in zip(props, reread):
+            bp, bq = bind(p, direct), bind(q, again)
+            assert bp.modes == bq.modes
+            assert {m: [[sympy.srepr(c.g) for c in piece] for piece in bp.pieces[m]] for m in bp.modes} == \
+                {m: [[sympy.srepr(c.g) for c in piece] for piece in bq.pieces[m]] for m in bq.modes}
+
+
+def test_folders_and_wrong_suffixes_are_bad_input(tmp_path, capsys):
+    (tmp_path / "m.xml").mkdir()
+    (tmp_path / "m.txt").write_text("system = s\n")
+    assert main(["import", str(tmp_path / "m.xml"), str(tmp_path / "m.txt"), "--out", str(tmp_path)]) == 2
+    assert ".cfg" in capsys.readouterr().err
+    (tmp_path / "m.cfg").write_text("system = s\n")
+    assert main(["import", str(tmp_path / "m.xml"), str(tmp_path / "m.cfg"), "--out", str(tmp_path)]) == 2
+    assert "not a regular file" in capsys.readouterr().err
+
+
+NESTED = '''<component id="lag">
+ <param name="u" type="real" local="false" dynamics="any"/>
+ <param name="z" type="real" local="true" dynamics="any"/>
+ <param name="y" type="real" local="false" dynamics="any"/>
+ <param name="c" type="real" local="false" dynamics="const"/>
+ <location id="1" name="run"><flow>z' == c*(u - z) &amp; y' == z - y</flow></location>
+</component>
+<component id="pair">
+ <param name="u" type="real" local="false" dynamics="any"/>
+ <param name="y" type="real" local="false" dynamics="any"/>
+ <param name="mid" type="real" local="true" dynamics="any"/>
+ <bind component="lag" as="first"><map key="u">u</map><map key="y">mid</map><map key="c">2</map></bind>
+ <bind component="lag" as="second"><map key="u">first.z</map><map key="y">y</map><map key="c">3</map></bind>
+</component>
+<component id="top">
+ <param name="y" type="real" local="false" dynamics="any"/>
+ <param name="s" type="real" local="false" dynamics="any"/>
+ <location id="1" name="idle"><flow>s' == 1</flow></location>
+</component>
+<component id="sys">
+ <param name="y" type="real" local="false" dynamics="any"/>
+ <param name="s" type="real" local="false" dynamics="any"/>
+ <bind component="pair" as="p"><map key="u">s</map><map key="y">y</map></bind>
+ <bind component="top" as="clock"><map key="s">s</map><map key="y">y</map></bind>
+</component>
+'''
+
+
+def test_nested_binds_rename_locals_per_instance_and_map_dotted_names(tmp_path):
+    xml, cfg = write(tmp_path, NESTED, 'system = sys\ninitially = "y == 0 & s == 0 & p.mid == 0 & '
+                     'first.z == 0 & p.second.z == 1"\nforbidden = "second.z >= 2"\ntime-horizon = 1\n')
+    model, props, _ = load_spaceex(xml, cfg)
+    # y, s (the system's), then the instance locals: p.mid, p.first.z, p.second.z
+    assert sorted(model.state) == ["mid", "p_first_z", "p_second_z", "s", "y"]   # z: unique by path
+    flows = {name: str(f) for name, f in zip(model.state, model.modes["run__run__idle"].flow)}
+    assert flows["p_first_z"] == "-2*p_first_z + 2*s"            # u of 'first' is the system's s
+    assert flows["p_second_z"] == "3*p_first_z - 3*p_second_z"   # u of 'second' is first.z (dotted map)
+    assert flows["mid"] == "-mid + p_first_z" and flows["y"] == "p_second_z - y"
+    i = model.state.index("p_second_z")
+    assert model.initial.low[i] == model.initial.high[i] == 1
+    assert props[0].raw["avoid"] == ["p_second_z >= 2"]
+
+
+def test_cfg_values_comments_quotes_and_lines():
+    from reach.model.spaceex.cfg import parse_cfg
+    cfg = parse_cfg('# analysis\nsystem = "sys"\ninitially = "x >= 1 &\n  y == 2"  # two lines\n'
+                    '\nforbidden = x >= 3 # a comment\ntime-horizon = 2.5\n', "a.cfg")
+    assert cfg.text("system") == "sys" and cfg.text("initially") == "x >= 1 &\n  y == 2"
+    assert (cfg.line("forbidden"), cfg.text("forbidden"), cfg.number("time-horizon")) == (6, "x >= 3", 2.5)
+    assert cfg.line("time-horizon") == 7
+    with pytest.raises(InputError, match="duplicate key"):
+        parse_cfg("a = 1\na = 2\n", "b.cfg")
+    with pytest.raises(InputError, match="unterminated"):
+        parse_cfg('a = "1\n', "c.cfg")
+    with pytest.raises(InputError, match="expected a number") as info:
+        parse_cfg("time-horizon = soon\n", "d.cfg").number("time-horizon")
+    assert info.value.line == 1
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.dictionaries(st.from_regex(r"[a-z][a-z0-9-]{0,8}", fullmatch=True),
+                       st.from_regex(r"[A-Za-z0-9 <>=&|.()+*-]{0,30}", fullmatch=True), max_size=6),
+       st.booleans())
+def test_cfg_reads_back_what_was_written(values, quoted):
+    from reach.model.spaceex.cfg import parse_cfg
+    text = "".join(f'{k} = "{v}"\n' if quoted else f"{k} = {v}\n" for k, v in values.items())
+    cfg = parse_cfg(text, "e.cfg")
+    assert {k: cfg.text(k) for k in values} == {k: (v if quoted else v.strip()) for k, v in values.items()}
