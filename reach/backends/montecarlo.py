@@ -204,6 +204,15 @@ def _signal_of(model: HybridAutomaton, data: dict | None):
     return step, values[None, :, :], None if switch is None else switch[None, :].astype(bool)
 
 
+def constant_signal(model: HybridAutomaton, x0) -> dict | None:
+    """The counterexample form of time-varying inputs held at their values in ``x0`` (their state
+    coordinates) over the whole horizon; None for a model without such inputs."""
+    if not model.varying_inputs:
+        return None
+    values = [[float(np.clip(x0[u.index], u.low, u.high)) for u in model.varying_inputs]]
+    return {"step": float(model.horizon), "inputs": [u.name for u in model.varying_inputs], "values": values}
+
+
 def signal_record(model: HybridAutomaton, signal, row: int) -> dict | None:
     """The counterexample form of run ``row``'s signal."""
     if signal is None:

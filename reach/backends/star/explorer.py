@@ -501,12 +501,12 @@ class _Explorer:
         if not self.opt.replay or self.stats.replays >= self.opt.max_replays:
             return
         try:
-            from reach.backends.montecarlo import replay
+            from reach.backends.montecarlo import constant_signal, replay
         except ImportError:
             return
         self.stats.replays += 1
         x0, switch = self.initial_point(witness)
-        run = replay(self.model, self.prop, x0, switch, self.opt.replay_dt)
+        run = replay(self.model, self.prop, x0, switch, self.opt.replay_dt, constant_signal(self.model, x0))
         self.replayed.append({"initial_state": x0.tolist(), "switch_time": switch,
                               "violated": bool(run.violated)})
         if run.violated:
