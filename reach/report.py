@@ -196,6 +196,8 @@ def line(result, prop, model) -> str:
         parts.append(str(d["method"]))
     if "remainder" in d:
         parts.append(f"remainder {d['remainder']}")
+    if result.status == Status.UNKNOWN and d.get("reason"):
+        parts.append(f"undecided: {d['reason']}")
     return "; ".join(parts)
 
 

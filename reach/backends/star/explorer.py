@@ -12,7 +12,7 @@ import numpy as np
 from reach.backends.star.aggregation import _Aggregate, interval_hull
 from reach.backends.star.flowpipe import (_block_spreads, _chain_abs_bounds, _chain_bounds, _depth,
                                           _plus_box, _segment, _tightened)
-from reach.backends.star.options import (ERROR_RATIO, MAX_CHAIN_BYTES, NAME, PROGRESS_SECONDS,
+from reach.backends.star.options import (ERROR_RATIO, MAX_CELLS, MAX_CHAIN_BYTES, NAME, PROGRESS_SECONDS,
                                          STALL_JUMPS, TIGHT_RATIO, StarOptions)
 from reach.backends.star.transitions import (_LinearModel, _modes_leading_to, _Piece,
                                              _unsafe_pieces, kept_rows)
@@ -109,6 +109,10 @@ class _Explorer:
         self.n, self.clock = data.n, data.clock
         self.horizon = float(model.horizon)
         self.h = float(options.step) if options.step else self.horizon / 60.0
+        if self.horizon / self.h > MAX_CELLS:
+            from reach.errors import InputError
+            raise InputError(f"{model.name}: horizon {self.horizon:g} / step {self.h:g} = {self.horizon / self.h:.3g} "
+                             f"cells; at most {MAX_CELLS:.0e} (use a larger step)", field="options.star.step")
         self.flows, self.invariants, self.jumps = data.flows, data.invariants, data.fired
         self.max_jumps = np.inf if options.max_jumps is None else options.max_jumps
         from reach.model.lint import zero_dwell_cycles

@@ -26,6 +26,7 @@ HIGHS_DEFAULT_TOLERANCE = 1e-7
 #: in a model that may have a zero-dwell cycle, this many jumps on a path while its
 #: earliest clock advances by less than one time step end the check (UNKNOWN)
 STALL_JUMPS = 10
+MAX_CELLS = 1_000_000             # grid cells over the horizon (horizon / step) a check may start with
 
 
 #: the grid stacks of one chain may take at most this many bytes (memory guard)
