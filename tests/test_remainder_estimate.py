@@ -1,0 +1,96 @@
+"""The truncation-remainder estimates of the Taylor back-end against the true truncation error
+of functions whose series are known in closed form, from below as well as from above.
+
+Over the scaled deviation ``xi in [-1, 1]`` of ``x = c + w xi``:
+
+* ``1/(1 - x)`` has coefficients ``S_k = w^k / (1 - c)^(k + 1)``, a geometric sequence of ratio
+  ``r = w / (1 - c)``. The fit of eq. (20) is then exact, so eq. (28) gives the first neglected
+  term ``S_(n+1)``; the true error is the whole tail, largest at ``xi = 1``:
+  ``sum_(k > n) S_k = S_(n+1) / (1 - r)``. The estimate is exactly ``1 - r`` times the truth,
+  and the next-order remainder ``S_(n+1) (1 + r / (1 - r))`` equals it.
+* ``1/(1 - x - y)`` in two variables: the order-``k`` size is ``(w_x + w_y)^k / (1 - c)^(k+1)``
+  (the multinomial coefficients of ``(x + y)^k`` summed), geometric again.
+* ``exp`` and ``log(1 + x)``: no closed form for the estimate, but the decay is regular, and the
+  estimate must lie within a factor of four of the true error, sampled on a fine grid from the
+  closed-form coefficients ``e^c w^k / k!`` and ``(-1)^(k+1) w^k / (k (1 + c)^k)``.
+
+A remainder that is too small by a constant factor (or too large) fails the lower (upper) side.
+"""
+
+from math import factorial
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from reach.backends.taylor.ads import truncation_estimate
+from reach.backends.taylor.bound import enclose, estimated_remainder, next_order_remainder, truncate
+from reach.backends.taylor.da import DA, algebra
+
+XI = np.linspace(-1.0, 1.0, 4001)
+
+
+def true_error(f, coefficients, c, w):
+    """``max |f(c + w xi) - sum_k a_k xi^k|`` over the grid ``XI`` (no DA involved)."""
+    poly = np.polyval(np.asarray(coefficients)[::-1], XI)
+    return float(np.max(np.abs(f(c + w * XI) - poly)))
+
+
+@given(c=st.floats(-0.5, 0.5), ratio=st.floats(0.05, 0.8), order=st.integers(2, 8))
+@settings(max_examples=40)
+def test_geometric_series_estimate_is_the_first_neglected_term(c, ratio, order):
+    w = ratio * (1.0 - c)
+    p = 1.0 / (1.0 - DA.var(algebra(order, 1), 0, c, w))
+    first_neglected = w ** (order + 1) / (1.0 - c) ** (order + 2)
+    tail = first_neglected / (1.0 - ratio)
+    assert float(estimated_remainder(p)) == pytest.approx(first_neglected, rel=1e-6)
+    assert truncation_estimate(p)[0] == pytest.approx(first_neglected, rel=1e-6)
+    high = 1.0 / (1.0 - DA.var(algebra(order + 1, 1), 0, c, w))
+    assert float(next_order_remainder(high)) == pytest.approx(tail, rel=1e-6)
+    # the tail is the true error (at xi = 1), computed without the DA
+    coefficients = [w ** k / (1.0 - c) ** (k + 1) for k in range(order + 1)]
+    assert true_error(lambda x: 1.0 / (1.0 - x), coefficients, c, w) == pytest.approx(tail, rel=1e-6)
+
+
+def test_two_variable_geometric_series():
+    c, wx, wy, order = 0.1, 0.2, 0.25, 5
+    x, y = DA.variables(algebra(order, 2), [c, 0.0], [wx, wy])
+    p = 1.0 / (1.0 - x - y)
+    r = (wx + wy) / (1.0 - c)
+    first_neglected = (wx + wy) ** (order + 1) / (1.0 - c) ** (order + 2)
+    assert float(estimated_remainder(p)) == pytest.approx(first_neglected, rel=1e-6)
+    # true error at the corner xi = (1, 1), from the one-variable series of 1/(1 - c - s)
+    corner = 1.0 / (1.0 - c - wx - wy) - float(p(np.array([[1.0, 1.0]]))[0])
+    assert corner == pytest.approx(first_neglected / (1.0 - r), rel=1e-9)
+
+
+CASES = {
+    "exp": (np.exp, lambda c, w, k: np.exp(c) * w ** k / factorial(k), lambda v: v.exp()),
+    "log1p": (np.log1p, lambda c, w, k: np.log1p(c) if k == 0 else (-1) ** (k + 1) * w ** k / (k * (1 + c) ** k),
+              lambda v: (1.0 + v).log()),
+}
+
+
+@pytest.mark.parametrize("name", sorted(CASES))
+@pytest.mark.parametrize("c, w", [(0.0, 0.2), (0.1, 0.4), (-0.2, 0.5)])
+@pytest.mark.parametrize("order", [3, 4, 5, 6])
+def test_estimate_is_within_a_factor_of_four_of_the_true_error(name, c, w, order):
+    f, coefficient, of_da = CASES[name]
+    p = of_da(DA.var(algebra(order, 1), 0, c, w))
+    truth = true_error(f, [coefficient(c, w, k) for k in range(order + 1)], c, w)
+    estimate = float(estimated_remainder(p))
+    assert truth / 4 <= estimate <= 4 * truth
+
+
+def test_enclosure_with_the_estimate_is_tight_and_contains_the_function():
+    """``I_P +- R`` of eq. (28) for ``1/(1 - x)`` on ``[0.1, 0.5]``: it contains the function's
+    range (closed form, monotone) and is no wider than the range plus twice the true error."""
+    c, w, order = 0.3, 0.2, 4
+    p = truncate(1.0 / (1.0 - DA.var(algebra(order + 1, 1), 0, c, w)), order)
+    lo, hi = enclose(p, next_order_remainder(1.0 / (1.0 - DA.var(algebra(order + 1, 1), 0, c, w))))
+    f_lo, f_hi = 1.0 / (1.0 - (c - w)), 1.0 / (1.0 - (c + w))
+    assert lo <= f_lo and f_hi <= hi
+    tail = w ** (order + 1) / (1.0 - c) ** (order + 2) / (1.0 - w / (1.0 - c))
+    # eq. 27 bounds each monomial separately, so the polynomial part may exceed the range a little
+    assert (hi - lo) <= 1.5 * (f_hi - f_lo) + 2 * tail
