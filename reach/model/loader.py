@@ -62,6 +62,8 @@ def read_with_templates(path: Path, depth: int = 0, chain=()) -> Doc:
     if not isinstance(parent, str):
         raise where.error("expected a file name")
     parent_path = (path.parent / parent).resolve()
+    if not parent_path.is_file():
+        raise where.error(f"no such file '{parent}'")
     if parent_path in chain or depth >= MAX_EXTENDS:
         raise where.error("'extends' forms a cycle or is nested too deeply")
     base = read_with_templates(parent_path, depth + 1, chain + (path.resolve(),))
@@ -281,7 +283,7 @@ class _Builder:
                     raise w.error(f"missing '{k}'")
             sources = spec["from"] if isinstance(spec["from"], list) else [spec["from"]]
             for s in sources + [spec["to"]]:
-                if s not in modes:
+                if not isinstance(s, str) or s not in modes:
                     field = "from" if s in sources else "to"
                     raise self.where(*path, field).error(f"unknown mode '{s}'")
             urgent = spec.get("urgent", False)
@@ -341,7 +343,7 @@ class _Builder:
         extra = set(raw) - {"mode", "box"}
         if extra:
             raise self.where("initial", sorted(extra)[0]).error(f"unknown field '{sorted(extra)[0]}'")
-        if raw["mode"] not in modes:
+        if not isinstance(raw["mode"], str) or raw["mode"] not in modes:
             raise self.where("initial", "mode").error(f"unknown mode '{raw['mode']}'")
         box = raw["box"]
         if not isinstance(box, dict):
