@@ -17,24 +17,16 @@ aborts and replays.
 """
 
 import numpy as np
-import pytest
 import scipy.linalg
 from scipy.integrate import solve_ivp
 
+from arch import A_CL1, CORNERS, docking_event
 from reach.backends.montecarlo import BACKEND as MONTECARLO
 from reach.backends.montecarlo import replay, switch_window
 from reach.backends.star import BACKEND as STAR
 from reach.model import load_model
 from reach.result import Status
 from reach.spec import bind, load_properties
-
-N, MC = 0.00438138, 500.0
-K1 = np.array([[-28.82867767694, 0.1004799482599, -1449.975419853, 0.004624472318875],
-               [-0.08701567868523, -33.25619924505, 0.004624472318875, -1451.501346434]])
-A_CWH = np.array([[0, 0, 1, 0], [0, 0, 0, 1], [3 * N * N, 0, 0, 2 * N], [0, 0, -2 * N, 0]])
-B = np.array([[0, 0], [0, 0], [1 / MC, 0], [0, 1 / MC]])
-A_CL = A_CWH + B @ K1
-CORNERS = [np.array([x, y, 0.0, 0.0]) for x in (-925.0, -875.0) for y in (-425.0, -375.0)]
 
 PROPERTIES = """description: mode 1 ends before the chaser comes within 150 m
 properties:
@@ -65,12 +57,10 @@ def early_abort(tmp_path, deadline=True):
 
 def test_the_reference_trajectories():
     for t in np.linspace(0.0, 80.0, 81):
-        E = scipy.linalg.expm(A_CL * t)
+        E = scipy.linalg.expm(A_CL1 * t)
         assert max((E @ c)[0] for c in CORNERS) < -177.0
-    docking = lambda t, s: s[0] + 100.0
-    docking.terminal, docking.direction = True, 1
     for c in CORNERS:
-        sol = solve_ivp(lambda t, s: A_CL @ s, [0, 200], c, events=docking, rtol=1e-10, atol=1e-9)
+        sol = solve_ivp(lambda t, s: A_CL1 @ s, [0, 200], c, events=docking_event, rtol=1e-10, atol=1e-9)
         assert 108.0 < sol.t_events[0][0] < 112.0
 
 

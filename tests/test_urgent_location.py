@@ -21,6 +21,7 @@ from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
+from arch import A_CL1, K1, MC, docking_event
 from reach.model import load_model
 from reach.model.simulate import Simulator
 
@@ -46,11 +47,6 @@ initial:
 horizon: {HORIZON}
 """
 
-K1 = np.array([[-28.82867767694, 0.1004799482599, -1449.975419853, 0.004624472318875],
-               [-0.08701567868523, -33.25619924505, 0.004624472318875, -1451.501346434]])
-MC, N = 500.0, 0.00438138
-A_CL = np.array([[0, 0, 1, 0], [0, 0, 0, 1], [3 * N * N, 0, 0, 2 * N], [0, 0, -2 * N, 0]]) \
-    + np.array([[0, 0], [0, 0], [1 / MC, 0], [0, 1 / MC]]) @ K1
 MU, R = 3.986e14 * 3600.0, 42164e3        # m^3/min^2, m
 
 
@@ -101,7 +97,7 @@ def test_docking_instant_of_the_linear_arch_model():
     traj = sim.run(x0, np.full(len(x0), 120.0), record=True)
     for i, start in enumerate(x0[:, :4]):
         when, before, after = first_switch(traj.path[i])
-        truth = brentq(lambda t: (scipy.linalg.expm(A_CL * t) @ start)[0] + 100.0, 50.0, 120.0, xtol=1e-12)
+        truth = brentq(lambda t: (scipy.linalg.expm(A_CL1 * t) @ start)[0] + 100.0, 50.0, 120.0, xtol=1e-12)
         assert when == pytest.approx(truth, abs=1e-6)
         assert before[0] == pytest.approx(-100.0, abs=1e-6) and after[0] == pytest.approx(-100.0, abs=1e-6)
 
@@ -110,10 +106,8 @@ def test_docking_instant_of_the_nonlinear_arch_model():
     sim = Simulator(load_model("models/SRNA01.yaml"))
     x0 = np.array([[x, y, 0.0, 0.0, 0.0] for x, y in INITIAL])
     traj = sim.run(x0, record=True)
-    docking = lambda t, s: s[0] + 100.0
-    docking.terminal, docking.direction = True, 1
     for i, start in enumerate(x0[:, :4]):
         when, before, _ = first_switch(traj.path[i])
-        sol = solve_ivp(orbital, [0, 200], start, method="DOP853", events=docking, rtol=1e-12, atol=1e-10)
+        sol = solve_ivp(orbital, [0, 200], start, method="DOP853", events=docking_event, rtol=1e-12, atol=1e-10)
         assert when == pytest.approx(sol.t_events[0][0], abs=1e-6)
         np.testing.assert_allclose(before[:2], sol.y_events[0][0][:2], atol=1e-4)
