@@ -153,3 +153,20 @@ def test_replays_use_the_counterexample_grid(tmp_path):
     assert failures([r]) == []
     assert failures([{**r, "counterexample": {**cex, "dt": None}}]) == [
         "I/slab: montecarlo says UNSAFE without a counterexample that replays"]
+
+
+def test_messages_without_a_source_and_with_several_refuting_back_ends():
+    assert failures([simple("star", "safe", expected="unsafe")]) == ["I/p: star says SAFE, expected unsafe ()"]
+    unsafe = dict(instance="SRA01-7N", prop="thrust_7N", counterexample=counterexample(VIOLATING))
+    assert failures([simple("montecarlo", "unsafe", expected="safe", **unsafe)]) == [
+        "SRA01-7N/thrust_7N: montecarlo says UNSAFE, expected safe ()"]
+    found = failures([simple("montecarlo", "unsafe", **unsafe), simple("taylor", "unsafe", **unsafe),
+                      simple("star", "safe", instance="SRA01-7N", prop="thrust_7N")])
+    assert found == ["SRA01-7N/thrust_7N: star says SAFE but montecarlo, taylor found a counterexample that replays"]
+
+
+@pytest.mark.parametrize("order", [0, 1])
+def test_intervals_exactly_the_rounding_allowance_apart_overlap(order):
+    """[0, 0] and [1e-9, 0.5]: ``1e-9 - 1e-9 == 0.0`` exactly, the limiting case that still overlaps."""
+    rows = [simple("fsr", "unknown", probability=[0.0, 0.0]), simple("montecarlo", "unknown", probability=[1e-9, 0.5])]
+    assert failures(rows[::-1] if order else rows) == []

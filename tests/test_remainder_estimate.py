@@ -25,7 +25,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from reach.backends.taylor.ads import truncation_estimate
-from reach.backends.taylor.bound import enclose, estimated_remainder, next_order_remainder, truncate
+from reach.backends.taylor.bound import (enclose, estimated_remainder, next_order_remainder, polynomial_range,
+                                         truncate)
 from reach.backends.taylor.da import DA, algebra
 
 XI = np.linspace(-1.0, 1.0, 4001)
@@ -94,3 +95,92 @@ def test_enclosure_with_the_estimate_is_tight_and_contains_the_function():
     tail = w ** (order + 1) / (1.0 - c) ** (order + 2) / (1.0 - w / (1.0 - c))
     # eq. 27 bounds each monomial separately, so the polynomial part may exceed the range a little
     assert (hi - lo) <= 1.5 * (f_hi - f_lo) + 2 * tail
+
+
+# ---------------------------------------------------------------- exact small cases (eqs. 20, 27, 28)
+
+def da(order, coefficients):
+    """A one-variable DA ``sum_k a_k xi^k`` from its coefficients."""
+    alg = algebra(order, 1)
+    c = np.zeros(alg.size)
+    for k, a in enumerate(coefficients):
+        c[alg.index[(k,)]] = a
+    return DA(alg, c)
+
+
+def test_polynomial_range_is_eq_27_with_the_sharper_even_terms():
+    """``1 + 0.5 xi - xi^2`` on [-1, 1]: eq. 27 gives [1 - 0.5 - 1, 1 + 0.5 + 0] = [-0.5, 1.5]
+    (the true range is [-0.5, 1.0625]); the enclosure adds the remainder on both sides."""
+    p = da(3, [1.0, 0.5, -1.0])
+    lo, hi = polynomial_range(p)
+    assert (float(lo), float(hi)) == (-0.5, 1.5)
+    assert tuple(map(float, enclose(p, np.float64(0.25)))) == (-0.75, 1.75)
+    lo, hi = polynomial_range(da(4, [0.0, 0.0, 0.0, 0.0, 2.0]))       # 2 xi^4: [0, 2]
+    assert (float(lo), float(hi)) == (0.0, 2.0)
+
+
+def test_single_orders_and_constants():
+    """Fewer than two non-zero orders: a constant or an exact low-order polynomial has no
+    remainder; a lone top order is carried over as its own size."""
+    assert float(estimated_remainder(da(4, [3.0]))) == 0.0
+    assert float(estimated_remainder(da(4, [1.0, 0.5]))) == 0.0
+    assert float(estimated_remainder(da(4, [1.0, 0.0, 0.0, 0.0, 0.3]))) == pytest.approx(0.3)
+    assert float(next_order_remainder(da(5, [1.0, 0.5]))) == 0.0                     # top order empty
+    assert float(next_order_remainder(da(3, [1.0, 0.0, 0.0, 0.3]))) == np.inf        # one order only
+
+
+def test_next_order_tail_from_two_orders_and_growing_sizes():
+    """Sizes 0.5, 0.1: ratio 0.2, tail ``0.1 (1 + 0.2 / 0.8) = 0.125``; sizes growing by 1.5
+    have no geometric tail (infinite)."""
+    assert float(next_order_remainder(da(2, [1.0, 0.5, 0.1]))) == pytest.approx(0.125, rel=1e-12)
+    assert float(next_order_remainder(da(3, [1.0, 0.1, 0.15, 0.225]))) == np.inf
+
+
+@pytest.mark.parametrize("scale", [1e-13, 1.0, 1e8])
+def test_the_estimates_scale_with_the_function(scale):
+    """Eq. 20 fits log sizes, so scaling the map scales the estimate (the negligible-size rule is
+    relative to the largest size, whatever the units)."""
+    alg = algebra(6, 1)
+    p = (DA.var(alg, 0, 0.1, 0.4)).exp()
+    assert float(estimated_remainder(scale * p)) == pytest.approx(scale * float(estimated_remainder(p)), rel=1e-9)
+    high = (DA.var(algebra(7, 1), 0, 0.1, 0.4)).exp()
+    assert float(next_order_remainder(scale * high)) == pytest.approx(scale * float(next_order_remainder(high)),
+                                                                       rel=1e-9)
+
+
+@pytest.mark.parametrize("scale", [1.0, 1e8])
+def test_an_order_negligible_against_the_largest_is_left_out_of_the_fit(scale):
+    """A geometric series ``r^k`` whose order 3 is 1e-17 of the rest: the fit over the other
+    orders is exact, so the estimate is ``r^(n+1)`` (times the scale)."""
+    r, n = 0.5, 6
+    sizes = [r ** k for k in range(n + 1)]
+    sizes[3] = 1e-17
+    assert float(estimated_remainder(da(n, [scale * s for s in sizes]))) == pytest.approx(scale * r ** (n + 1),
+                                                                                         rel=1e-9)
+    high = [scale * r ** k for k in range(n + 2)]
+    high[3] = scale * 1e-17
+    assert float(next_order_remainder(da(n + 1, high))) == pytest.approx(scale * r ** (n + 1) / (1 - r), rel=1e-9)
+
+
+def test_vectors_are_estimated_component_by_component():
+    """A stacked DA (a state) gets each component's own estimate; the first component being an
+    exact polynomial does not stop the others."""
+    c, w, order = 0.1, 0.3, 5
+    alg, high_alg = algebra(order, 1), algebra(order + 1, 1)
+    parts = [lambda v: 1.0 + 0.5 * (v - c), lambda v: 1.0 / (1.0 - v), lambda v: v.exp()]
+    low = [f(DA.var(alg, 0, c, w)) for f in parts]
+    high = [f(DA.var(high_alg, 0, c, w)) for f in parts]
+    np.testing.assert_allclose(estimated_remainder(DA.stack(low)), [float(estimated_remainder(p)) for p in low])
+    np.testing.assert_allclose(next_order_remainder(DA.stack(high)), [float(next_order_remainder(p)) for p in high])
+    lo, hi = polynomial_range(DA.stack(low))
+    np.testing.assert_allclose(lo, [float(polynomial_range(p)[0]) for p in low])
+    np.testing.assert_allclose(hi, [float(polynomial_range(p)[1]) for p in low])
+    assert truncation_estimate(DA.stack(low))[0] == max(truncation_estimate(p)[0] for p in low)
+
+
+def test_the_split_variable_is_the_one_carrying_the_truncation_error():
+    alg = algebra(5, 2)
+    x, y = DA.variables(alg, [0.0, 0.0], [0.5, 0.5])
+    assert truncation_estimate(1.0 / (1.0 - x) + 0.1 * y)[1] == 0
+    assert truncation_estimate(0.1 * x + 1.0 / (1.0 - y))[1] == 1
+    assert truncation_estimate((0.2 * x).exp() * (1.0 / (1.0 - y)))[1] == 1
