@@ -82,7 +82,24 @@ TARGETS = {
 }
 
 # Survivors judged equivalent after reading their diffs (mutant name -> why).
-EQUIVALENT: dict[str, str] = {}
+_SIGN = "sign is +1 or -1: only its sign is used"
+_RESHAPE = "numpy reads any negative size in reshape as the inferred one"
+_TIE = "differs only when a size equals the negligible threshold exactly"
+_DTYPE = "order norms are float arrays already"
+EQUIVALENT: dict[str, str] = {
+    "reach.backends.taylor.bound.x_contenders__mutmut_4": _SIGN,
+    "reach.backends.taylor.bound.x_contenders__mutmut_9": _SIGN,
+    "reach.backends.taylor.bound.x_contenders__mutmut_21": _SIGN,
+    "reach.backends.taylor.bound.x_estimated_remainder__mutmut_7": _RESHAPE,
+    "reach.backends.taylor.bound.x_next_order_remainder__mutmut_7": _RESHAPE,
+    "reach.backends.taylor.bound.x_next_order_remainder__mutmut_18": _TIE,
+    "reach.backends.taylor.bound.x_next_order_remainder__mutmut_26": _TIE,
+    "reach.backends.taylor.bound.x_next_order_remainder__mutmut_68": "at ratio 1 both give inf (S / 0)",
+    "reach.backends.taylor.ads.x_truncation_estimate__mutmut_7": _RESHAPE,
+    "reach.backends.taylor.ads.x_extrapolate__mutmut_3": _DTYPE,
+    "reach.backends.taylor.ads.x_extrapolate__mutmut_5": _DTYPE,
+    "reach.backends.taylor.ads.x_extrapolate__mutmut_20": _TIE,
+}
 
 STATUS = {1: "killed", 3: "killed", -24: "timeout", 24: "timeout", 36: "timeout", 152: "timeout",
           0: "survived", 33: "no tests", 34: "skipped", 5: "no tests"}
