@@ -60,7 +60,8 @@ TARGETS = {
                              "_drift_segment", "_block_spreads", "_depth"),
                             ("tests/test_star.py", "tests/test_star_verdicts.py", "tests/test_abort_deadline.py")),
     "chord_hull": Target("reach/sets/star.py", ("chord_hull",), ("tests/test_sets.py", "tests/test_star.py")),
-    "fsr_intervals": Target("reach/backends/fsr.py", ("reach", "reach_avoid"), ("tests/test_fsr.py",)),
+    "fsr_intervals": Target("reach/backends/fsr.py", ("reach", "reach_avoid", "_sequential", "_verdict", "leave_bound"),
+                            ("tests/test_fsr.py",)),
     "taylor_remainder": Target("reach/backends/taylor/bound.py",
                                ("polynomial_range", "_parity", "estimated_remainder", "truncate",
                                 "next_order_remainder", "enclose", "contenders"),
@@ -196,7 +197,10 @@ def write_report(out: Path, store: dict):
                         f"{c.get('survived', 0)} | {c.get('no tests', 0)} | {c.get('equivalent', 0)} | "
                         f"{rate:.0f} % | {r['seconds'] / 60:.1f} |")
         text.append("")
-    out.write_text("\n".join(text) + "\n")
+    notes = ""
+    if out.exists() and "\n## Notes" in out.read_text():
+        notes = out.read_text()[out.read_text().index("\n## Notes"):]     # hand-written, kept
+    out.write_text("\n".join(text) + notes.rstrip("\n") + "\n")
     lines = ["# Surviving mutants", ""]
     for label, rows in store.items():
         for name, r in rows.items():
@@ -232,7 +236,8 @@ def main(argv=None) -> int:
     with open(args.workdir / f"mutmut_{args.label}.log", "a") as log:
         for name in names:
             previous = store.get(args.label, {}).get(name, {})
-            row = run_target(name, TARGETS[name], args.rev, args.workdir, args.jobs, log, args.collect)
+            row = run_target(name, TARGETS[name], args.rev, args.workdir / args.label, args.jobs, log,
+                             args.collect)
             if args.collect:
                 row["seconds"] = previous.get("seconds", row["seconds"])
             row["rev"] = args.rev or "working tree"

@@ -111,3 +111,37 @@ def test_docking_instant_of_the_nonlinear_arch_model():
         sol = solve_ivp(orbital, [0, 200], start, method="DOP853", events=docking_event, rtol=1e-12, atol=1e-10)
         assert when == pytest.approx(sol.t_events[0][0], abs=1e-6)
         np.testing.assert_allclose(before[:2], sol.y_events[0][0][:2], atol=1e-4)
+
+
+def test_runs_that_start_inside_a_guard_jump_at_once(tmp_path):
+    """At t = 0, on the guard's boundary (x = 0, v < 0) and inside it, a ball launched by
+    ``v := 5`` jumps at once; above the floor it does not. Several runs in one call; the
+    horizon (0.5 s) ends before any later bounce (the flight lasts 2 * 5 / g = 1.02 s)."""
+    path = tmp_path / "launch.yaml"
+    path.write_text(BALL.replace('"-0.5*v"', '"5"').replace("horizon: 2.5", "horizon: 0.5"))
+    sim = Simulator(load_model(path))
+    x0 = np.array([[0.0, -1.0], [1.0, 0.0], [-0.5, -2.0], [6.0, -1.0]])
+    traj = sim.run(x0, record=True)
+    first = np.array([traj.path[i][2][0] for i in range(len(x0))])
+    np.testing.assert_array_equal(first[:, 1], [5.0, 0.0, 5.0, -1.0])
+    assert all(traj.path[i][0][0] == 0.0 for i in range(len(x0)))
+    np.testing.assert_allclose(traj.final_state[[0, 2], 1], 5.0 - G * 0.5)
+
+
+def test_urgent_transitions_chain_at_the_same_instant(tmp_path):
+    """``a -> b -> c`` with guards that already hold: the run is in ``c`` at t = 0, and its clock
+    then runs from there (``x = 0.5 + t``)."""
+    path = tmp_path / "chain.yaml"
+    path.write_text("name: chain\nstate: [x]\n"
+                    "modes: {a: {flow: {x: 1}}, b: {flow: {x: 1}}, c: {flow: {x: 1}}}\n"
+                    "transitions:\n"
+                    "  ab: {from: a, to: b, urgent: true, guard: ['x >= 0']}\n"
+                    "  bc: {from: b, to: c, urgent: true, guard: ['x >= 0']}\n"
+                    "initial: {mode: a, box: {x: 0.5}}\nhorizon: 1\n")
+    model = load_model(path)
+    traj = Simulator(model).run(np.array([[0.5], [0.5]]), record=True)
+    c = list(model.modes).index("c")
+    assert list(traj.final_mode) == [c, c]
+    t, mode, X = traj.path[0]
+    assert mode[0] == c and t[0] == 0.0
+    np.testing.assert_allclose(traj.final_state[:, 0], 1.5)
