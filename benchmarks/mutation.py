@@ -79,14 +79,15 @@ TARGETS = {
     "constraints": Target("reach/model/constraints.py",
                           ("Constraint.negated", "from_comparisons", "affine_coefficients", "halfspaces",
                            "lambdify_margins", "violation_test"),
-                          ("tests/test_expr.py", "tests/test_loader.py", "tests/test_invariants.py")),
+                          ("tests/test_expr.py", "tests/test_loader.py", "tests/test_invariants.py",
+                           "tests/test_constraint_margins.py")),
 }
 
 # Survivors judged equivalent after reading their diffs (mutant name -> why).
 _SIGN = "sign is +1 or -1: only its sign is used"
 _RESHAPE = "numpy reads any negative size in reshape as the inferred one"
 _TIE = "differs only when a size equals the negligible threshold exactly"
-_DTYPE = "order norms are float arrays already"
+_DTYPE = "the values are float arrays already"
 EQUIVALENT: dict[str, str] = {
     "reach.backends.taylor.bound.x_contenders__mutmut_4": _SIGN,
     "reach.backends.taylor.bound.x_contenders__mutmut_9": _SIGN,
@@ -100,6 +101,16 @@ EQUIVALENT: dict[str, str] = {
     "reach.backends.taylor.ads.x_extrapolate__mutmut_3": _DTYPE,
     "reach.backends.taylor.ads.x_extrapolate__mutmut_5": _DTYPE,
     "reach.backends.taylor.ads.x_extrapolate__mutmut_20": _TIE,
+    "reach.model.constraints.x_affine_coefficients__mutmut_3": "an unknown name then fails float(c)",
+    "reach.model.constraints.x_halfspaces__mutmut_19": _DTYPE,
+    "reach.model.constraints.x_halfspaces__mutmut_21": _DTYPE,
+    "reach.model.constraints.x_halfspaces__mutmut_23": _RESHAPE,
+    "reach.model.constraints.x_halfspaces__mutmut_25": _DTYPE,
+    "reach.model.constraints.x_halfspaces__mutmut_27": _DTYPE,
+    "reach.model.constraints.x_lambdify_margins__mutmut_6": "the general path gives the same values",
+    "reach.model.constraints.x_lambdify_margins__mutmut_18": "lambdify's default modules include numpy",
+    "reach.model.constraints.x_lambdify_margins__mutmut_21": "lambdify's default modules include numpy",
+    "reach.model.constraints.x_violation_test__mutmut_27": "a tie with the allowance only",
 }
 
 STATUS = {1: "killed", 3: "killed", -24: "timeout", 24: "timeout", 36: "timeout", 152: "timeout",

@@ -55,17 +55,19 @@ def test_linear_margins_and_no_constraints():
     assert inside.all() and np.all(depth == -np.inf)
 
 
-@pytest.mark.parametrize("scale", [1.0, 1e6])
-def test_inside_only_beyond_the_relative_rounding_allowance(scale):
-    """``x <= c`` at points ``c - f * 1e-9 (1 + |x|)``: inside for f = 2, not for f = 0.5 or 0."""
-    c = scale
+@pytest.mark.parametrize("c", [0.0, 1.0, 1e6])
+def test_inside_only_beyond_the_relative_rounding_allowance(c):
+    """``x <= c`` at points ``c - f * 1e-9 (1 + |x|)``: inside for f = 2 and 1.2, not for f = 0.5
+    or 0; each point's allowance is its own (a far point in the same call changes nothing)."""
     rows = from_comparisons(parse_comparison(f"x <= {c!r}", NAMES, W), "x <= c", W)
     test = violation_test(rows, [x, y])
     allowance = 1e-9 * (1.0 + c)
-    pts = np.array([[c - 2 * allowance, 0.0], [c - 0.5 * allowance, 0.0], [c, 0.0], [c + allowance, 0.0]])
+    pts = np.array([[c - f * allowance, 0.0] for f in (2.0, 1.2, 0.5, 0.0, -1.0)])
     inside, depth = test(pts)
-    assert list(inside) == [True, False, False, False]
+    assert list(inside) == [True, True, False, False, False]
     np.testing.assert_allclose(depth, pts[:, 0] - c, rtol=1e-6, atol=0)
+    inside, _ = test(np.vstack([pts, [[c - 10.0, 1e9]]]))            # its own allowance: about 1
+    assert list(inside) == [True, True, False, False, False, True]
 
 
 def test_affine_coefficients_refuse_unknown_names_and_non_finite_values():
