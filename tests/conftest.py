@@ -1,9 +1,56 @@
+"""Shared test set-up: the repository root as working directory, and the hypothesis profiles.
+
+Profiles (``HYPOTHESIS_PROFILE`` picks one; default ``ci`` when ``CI`` is set, else ``dev``):
+
+* ``ci``: derandomised (each test's examples follow from its own source, so a CI run is
+  repeatable), no example database, no deadline, failing examples printed with their blob;
+* ``dev``: random exploration from one seed for the whole run, printed in the report header;
+  ``HYPOTHESIS_SEED=N`` repeats a run.
+
+Every test also runs under pytest-timeout (``[tool.pytest.ini_options]`` in pyproject.toml),
+so a hang fails with the stacks of all threads instead of stalling the suite.
+"""
+
 import os
+import random
 from pathlib import Path
 
+import hypothesis
 import pytest
+from hypothesis import settings
 
 ROOT = Path(__file__).resolve().parent.parent
+
+settings.register_profile("ci", derandomize=True, database=None, deadline=None, print_blob=True)
+settings.register_profile("dev", deadline=None, print_blob=True)
+PROFILE = os.environ.get("HYPOTHESIS_PROFILE") or ("ci" if os.environ.get("CI") else "dev")
+settings.load_profile(PROFILE)
+SEED = None if settings.default.derandomize else int(os.environ.get("HYPOTHESIS_SEED") or random.getrandbits(32))
+
+
+def hypothesis_line() -> str:
+    if SEED is None:
+        return f"hypothesis: profile {PROFILE!r}, derandomized (examples fixed by each test's source)"
+    return f"hypothesis: profile {PROFILE!r}, seed {SEED} (HYPOTHESIS_SEED={SEED} repeats this run)"
+
+
+def pytest_report_header(config):
+    return hypothesis_line()
+
+
+def pytest_terminal_summary(terminalreporter):
+    """The profile and seed again at the end, where ``-q`` still shows it."""
+    terminalreporter.write_line(hypothesis_line())
+
+
+def pytest_collection_modifyitems(config, items):
+    """Seed every hypothesis test with the run's seed (an explicit --hypothesis-seed wins)."""
+    if SEED is None or config.getoption("hypothesis_seed", None) is not None:
+        return
+    for item in items:
+        function = getattr(item, "function", None)
+        if function is not None and hypothesis.is_hypothesis_test(function):
+            hypothesis.seed(SEED)(function)
 
 
 @pytest.fixture(autouse=True)

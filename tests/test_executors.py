@@ -1,7 +1,10 @@
-"""Executors: local processes and a real Dask LocalCluster give the same results."""
+"""Executors: local processes and a real Dask LocalCluster give the same results, and the
+results are right (closed-form thrust, a solve_ivp replay of the passive collision)."""
 
+import numpy as np
 import pytest
 
+from arch import K1, NEWTON, closest_passive_approach
 from reach.executors import DaskExecutor, LocalExecutor
 from reach.bench.runner import run_unit
 
@@ -27,7 +30,11 @@ def test_local_processes_and_dask_local_cluster_agree():
         dask = _essence(DaskExecutor(client).map_unordered(run_unit, UNITS))
     serial = _essence(LocalExecutor(jobs=1).map_unordered(run_unit, UNITS))
     assert local == dask == serial
-    assert local[0][0][1] == "unsafe" and local[1][0][1] == "unsafe"
+    (thrust,), (collision,), safe = local[0], local[1], local[2]
+    assert thrust[1] == "unsafe" and collision[1] == "unsafe"
+    assert np.abs(K1 @ np.array(thrust[3][:4])).max() / NEWTON > 7.0        # 7 N at t = 0
+    assert closest_passive_approach(collision[3], 260.0, 300.0) <= 0.2   # the 0.2 m box
+    assert {status for _, status, _, _ in safe} == {"unknown"}   # ARCH safe: no counterexample
 
 
 def test_time_limit_stops_a_unit():

@@ -73,12 +73,53 @@ def test_negation_is_the_complement():
 
 @settings(max_examples=300, deadline=None)
 @given(st.text(alphabet="xyk0123456789+-*/().,[]<=> _abcdefgimnoqrstuvw'\"", max_size=40))
-def test_random_text_never_crashes(text):
-    """Any text either parses to sympy or raises InputError; nothing else escapes."""
+def test_random_text_parses_to_an_expression_in_the_known_names_or_is_one_located_line(text):
+    """Any text either parses to a sympy expression over the known names only, or raises an
+    InputError of the form ``file:line: field: message`` on a single line; nothing else escapes."""
     try:
-        parse_expr(text, NAMES, W)
-    except InputError:
-        pass
+        e = parse_expr(text, NAMES, W)
+    except InputError as err:
+        message = str(err)
+        assert message.startswith("m.yaml:3: modes.a.flow.x: ") and "\n" not in message
+        assert len(message) > len("m.yaml:3: modes.a.flow.x: ")
+        return
+    assert isinstance(e, sympy.Basic) and e.free_symbols <= {x, y}
+
+
+FUNCTIONS_1 = {"sin": math.sin, "cos": math.cos, "exp": math.exp, "atan": math.atan, "abs": abs,
+               "tanh": math.tanh}
+POINT = {"x": 1.3, "y": -0.7, "k": 2.0}
+
+
+def _compound(sub):
+    return st.one_of(
+        st.tuples(sub, st.sampled_from(["+", "-", "*", "/"]), sub).map(lambda t: f"({t[0]} {t[1]} {t[2]})"),
+        st.tuples(st.sampled_from(sorted(FUNCTIONS_1)), sub).map(lambda t: f"{t[0]}({t[1]})"),
+        st.tuples(sub, st.sampled_from(["2", "3"])).map(lambda t: f"({t[0]})**{t[1]}"),
+        st.tuples(st.sampled_from(["min", "max", "atan2"]), sub, sub).map(lambda t: f"{t[0]}({t[1]}, {t[2]})"),
+        sub.map(lambda t: f"-{t}"))
+
+
+# no ``pi`` among the leaves: ``sin(pi)`` is exactly 0 to sympy but 1.2e-16 to Python
+EXPRESSIONS = st.recursive(st.sampled_from(["x", "y", "k", "2", "0.5", "3"]), _compound, max_leaves=8)
+
+
+@settings(max_examples=200, deadline=None)
+@given(EXPRESSIONS)
+def test_random_expressions_evaluate_like_python(text):
+    """Reference: Python's own evaluation of the same text with the math module."""
+    namespace = {"__builtins__": {}, "pi": math.pi, "min": min, "max": max, "atan2": math.atan2,
+                 **FUNCTIONS_1, **POINT}
+    try:
+        expected = eval(text, namespace)           # the text comes from the grammar above only
+    except (ZeroDivisionError, OverflowError, ValueError):
+        return
+    value = complex(parse_expr(text, NAMES, W).subs({x: POINT["x"], y: POINT["y"]}).evalf(30))
+    if value != value:                  # atan2(0, 0): undefined to sympy, 0 to Python
+        assert "atan2" in text
+        return
+    assert value.imag == pytest.approx(0.0, abs=1e-9 * (1 + abs(expected)))
+    assert value.real == pytest.approx(expected, rel=1e-9, abs=1e-9)
 
 
 @settings(max_examples=200, deadline=None)

@@ -333,11 +333,33 @@ def test_tight_corridor_methods_agree():
     assert genz.details["dropped"] > 0 and genz.details["boole"] <= 3e-4
 
 
-def test_uniform_initial_box_uses_the_fourier_path():
+def test_uniform_initial_box_matches_the_quadrature_of_its_closed_form():
+    """Uniform burn error and Gaussian kicks: the position at 500 s is ``d vy0 + g`` with ``vy0``
+    uniform (the initial box) and ``g ~ N(0, S)``, ``S = sum_k G_k Q G_k^T`` over the kicks at
+    ``0, 10, ..., 490`` s. P(box) is the average over ``vy0`` (Gauss-Legendre) of scipy's normal
+    box probabilities, about 0.698; the Fourier interval must contain it and be no wider than
+    twice the requested error."""
+    from scipy.stats import multivariate_normal
+
     m, props = load("fsr_burn_uniform", "fsr_burn")
     result = BACKEND.check(m, props["arrive"], {"abs_error": 1e-2})
     assert result.details["method"] == "fourier"
-    assert 0 < result.probability[0] <= result.probability[1] < 1
+    A, _ = m.modes["coast"].linear
+    d = scipy.linalg.expm(A * 500.0)[:3, 4]
+    S = sum(G @ m.disturbance.cov @ G.T for G in
+            (scipy.linalg.expm(A * (500.0 - t))[:3, 3:] for t in np.arange(0.0, 500.0, 10.0)))
+    centre = np.array([-125.3607, -206.7841, 0.0]) * 1e-3                 # km, the property's box
+    lo, hi = centre - 0.025, centre + 0.025
+    a, b = m.initial.low[4], m.initial.high[4]
+    nodes, weights = np.polynomial.legendre.leggauss(64)
+    xy = multivariate_normal(np.zeros(2), S[:2, :2])
+    pz = ndtr(0.025 / np.sqrt(S[2, 2])) - ndtr(-0.025 / np.sqrt(S[2, 2]))
+    exact = sum(w / 2 * pz * xy.cdf(hi[:2] - d[:2] * v, lower_limit=lo[:2] - d[:2] * v)
+                for v, w in zip((a + b) / 2 + (b - a) / 2 * nodes, weights))
+    assert 0.69 < exact < 0.71
+    assert result.probability[0] <= exact <= result.probability[1]
+    assert result.probability[1] - result.probability[0] <= 2e-2
+    assert result.status is Status.SAFE                                  # at least 0.6
     assert run(BACKEND, m, props["arrive_safe"]).status is Status.UNSUPPORTED
 
 

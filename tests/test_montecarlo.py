@@ -51,10 +51,33 @@ def test_late_abort_collides_with_the_0p2_box_and_misses_the_0p1_box():
     assert 0.15 < 0.1 + miss.details["closest_depth"] < 0.2     # closest max-norm distance, metres
 
 
-def test_same_seed_same_answer():
-    a = check_files("models/SRA02.yaml", "properties/rendezvous.yaml", "montecarlo", FAST, only=["velocity"])[0]
-    b = check_files("models/SRA02.yaml", "properties/rendezvous.yaml", "montecarlo", FAST, only=["velocity"])[0]
-    assert a.details["closest_depth"] == b.details["closest_depth"]
+def test_same_seed_same_answer_and_the_seed_draws_uniform_runs():
+    """The seed fixes the answer; another seed draws other runs. The draws themselves are
+    uniform on the initial box and the abort window (Kolmogorov-Smirnov against scipy's
+    uniform law), and a tenth of the runs of an unforced window never switch (binomial)."""
+    from reach.backends.montecarlo import random_plan, switch_window
+
+    def depth(seed):
+        (r,) = check_files("models/SRA02.yaml", "properties/rendezvous.yaml", "montecarlo",
+                           {**FAST, "seed": seed}, only=["velocity"])
+        assert r.status == Status.UNKNOWN and r.details["seed"] == seed
+        return r.details["closest_depth"]
+
+    assert depth(0) == depth(0) != depth(1)
+    model = load_model("models/SRA07.yaml")
+    window = switch_window(model)
+    assert window == (50.0, 150.0, True)
+    X, tau = random_plan(model, window, 4000, np.random.default_rng(3))
+    X2, tau2 = random_plan(model, window, 4000, np.random.default_rng(3))
+    assert np.array_equal(X, X2) and np.array_equal(tau, tau2)
+    low, high = model.initial.low, model.initial.high
+    for i in np.flatnonzero(high > low):
+        assert stats.kstest(X[:, i], stats.uniform(low[i], high[i] - low[i]).cdf).pvalue > 1e-4
+    assert np.all(X[:, high == low] == low[high == low])
+    assert stats.kstest(tau, stats.uniform(50.0, 100.0).cdf).pvalue > 1e-4
+    _, tau = random_plan(model, (50.0, 150.0, False), 4000, np.random.default_rng(4))
+    never = int(np.isnan(tau).sum())
+    assert stats.binomtest(never, 4000, 0.1).pvalue > 1e-4
 
 
 def test_nonlinear_model_runs_on_its_own_dynamics():

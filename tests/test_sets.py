@@ -94,6 +94,11 @@ def star_as_polygon(star: Star) -> HPolytope:
     return HPolytope(pred.A @ Vinv, pred.b + pred.A @ Vinv @ star.center)
 
 
+def star_predicate_polygon(star: Star) -> HPolytope:
+    """The coefficients ``a`` of a star: its predicate together with its box."""
+    return star.predicate.intersection(star.box.to_hpolytope())
+
+
 def random_star(rng) -> Star:
     basis = rng.normal(size=(2, 2)) + 2 * np.eye(2)
     star = Star(rng.normal(size=2), basis, box=Box([-1, -1], [1, 1]))
@@ -156,11 +161,12 @@ def test_chord_hull_contains_interpolants_and_is_the_convex_hull(seed):
     c1, V1 = M @ start.center + 1.0, M @ start.basis
     error = rng.uniform(0, 0.3, 2)
     seg = chord_hull(start, c1, V1, error)
-    P = start.predicate                     # the cut may leave little or nothing of the box
-    draws = rng.uniform(-1, 1, (20000, 2))
-    alphas = draws[np.all(draws @ P.A.T <= P.b + 1e-9 * (1 + np.abs(P.b)), axis=1)][:5]
-    assume(len(alphas) == 5)
-    for a in alphas:
+    # coefficients drawn as convex combinations of the brute-force vertices of the predicate
+    # (with its box): always inside, with no rejection loop; an empty star has nothing to check
+    corners = star_predicate_polygon(start).vertices_2d()
+    assume(len(corners) > 0)
+    weights = rng.dirichlet(np.ones(len(corners)), 5)
+    for a in weights @ corners:
         lam = rng.uniform()
         e = rng.uniform(-1, 1, 2) * 4 * lam * (1 - lam) * error
         x = (1 - lam) * start.point(a) + lam * (c1 + V1 @ a) + e

@@ -83,6 +83,8 @@ def read_with_templates(path: Path, depth: int = 0, chain=()) -> Doc:
     if not isinstance(parent, str):
         raise where.error("expected a file name")
     parent_path = (path.parent / parent).resolve()
+    if not parent_path.is_file():
+        raise where.error(f"no such file '{parent}'")
     if parent_path in chain or depth >= MAX_EXTENDS:
         raise where.error("'extends' forms a cycle or is nested too deeply")
     base = read_with_templates(parent_path, depth + 1, chain + (path.resolve(),))
