@@ -194,7 +194,7 @@ VALUES = st.one_of(st.none(), st.booleans(), st.integers(-10**6, 10**6),
                                     "/dev/zero", "../../etc/passwd", "on", "[1, 2]", "(" * 200]))
 
 
-@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(changes=st.dictionaries(st.sampled_from(FIELDS), VALUES, min_size=1, max_size=3),
        backend=st.sampled_from(["star", "montecarlo"]))
 def test_generated_models_keep_the_contract(changes, backend, tmp_path_factory):

@@ -19,7 +19,10 @@ together:
   switching decisions); an urgent transition whose guard holds right after a kick is taken
   at that instant;
 * a run found outside its mode's invariant at a grid point with no transition taken is
-  *blocked* (it has no continuation in the automaton's semantics) and stops there.
+  *blocked* (it has no continuation in the automaton's semantics) and stops there;
+* a run that takes more than ``MAX_PASSES_PER_STEP`` events inside one grid step is Zeno (its
+  jumps accumulate before the horizon, as a bouncing ball's with restitution below 1): it is
+  stopped there and counted as blocked, so a simulation always ends.
 
 Observers see every state a run visits (grid points and event instants) together with the
 run's mode, in time order per run; properties are monitored this way without storing paths.
@@ -39,6 +42,7 @@ BISECTION_STEPS = 40
 INVARIANT_TOLERANCE = 1e-7
 CHUNK_VALUES = 4_000_000          # states x steps x dims held at once in a linear segment
 MAX_STEPS = 5_000_000             # grid steps over the horizon (horizon / dt)
+MAX_PASSES_PER_STEP = 50          # events of one run inside one grid step before it counts as Zeno
 MEMORY_BUDGET = 4 * 2 ** 30       # bytes the simulator may plan to hold at once
 RUN_BYTES_PER_VALUE = 8 * 24      # per run and state value: the arrays a batch of runs carries
 
@@ -260,10 +264,22 @@ class Simulator:
             self._step_eventless(X, mode, t, kicks if kick_step else None, kick_step, watchers)
             return Trajectories(X, mode, blocked_at, recorder.paths(N) if recorder else {})
         horizon = self.model.horizon
+        cell = np.full(N, -1.0)                # grid cell of each run's time at the last pass
+        burst = np.zeros(N, dtype=int)         # passes without leaving that cell
         while True:
             active = np.flatnonzero((t < horizon - 1e-12) & np.isnan(blocked_at))
             if active.size == 0:
                 break
+            now = np.floor(t[active] / self.dt)
+            stuck = now == cell[active]
+            burst[active] = np.where(stuck, burst[active] + 1, 0)
+            cell[active] = now
+            zeno = active[burst[active] > MAX_PASSES_PER_STEP]
+            if zeno.size:                      # a Zeno run: jumps accumulate inside one step
+                blocked_at[zeno] = t[zeno]
+                active = np.setdiff1d(active, zeno)
+                if active.size == 0:
+                    break
             if kick_step:   # disturbance kicks due now
                 due = active[np.abs(next_kick[active] - t[active]) <= 1e-9 * max(1.0, horizon)]
                 if due.size:
