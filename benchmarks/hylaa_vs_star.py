@@ -1,4 +1,4 @@
-"""Hylaa against the star back-end on the same rendezvous instances, in the same run.
+"""Hylaa against the star back-end on the same automata, in the same run.
 
 Hylaa (PyPI ``hylaa``, generalized star sets, discrete time) is not a dependency of reach:
 install it into a separate virtual environment and point ``--hylaa-python`` at it::
@@ -6,6 +6,8 @@ install it into a separate virtual environment and point ``--hylaa-python`` at i
     python3 -m venv /work/hylaa-venv && /work/hylaa-venv/bin/pip install hylaa "swiglpk==5.0.10"
     python benchmarks/hylaa_vs_star.py                       # SRA01, SRA08, SRU02
     python benchmarks/hylaa_vs_star.py SRA02 --hylaa-repeat 3
+
+    python benchmarks/hylaa_vs_star.py BLDC01-BDS01 GRBX01-MES01  # imported SpaceEx (table AFF)
 
 (swiglpk 5.0.12 and 5.0.13 break Hylaa 2.0.2: GLPK aborts in ``glp_set_mat_row`` with "column
 index out of range"; 5.0.10 works.)
@@ -21,6 +23,15 @@ wall-clock seconds of the verification calls only (model loading and imports exc
 the median over ``--hylaa-repeat`` / ``--star-repeat`` runs (the first star run on a model
 also extracts its matrices from the symbolic model; later runs reuse them, as Hylaa is
 handed matrices directly); the ratio is Hylaa / star.
+
+The imported ARCH AFF instances (``AFF``: models/spaceex/ files through
+``reach.model.spaceex.load_spaceex``) reach Hylaa through :func:`automaton_spec`, which reads
+only the HybridAutomaton (flows' ``A, b``, invariant and guard half-spaces, affine resets,
+initial box or polytope, bounded inputs) and the cfg's forbidden set; star checks the same
+automaton against the same forbidden set (one merged property, as ``reach check MODEL.xml
+CFG``). Hylaa's semantics differ in two ways the table should be read with: it decides at
+its time steps only (star covers the continuous time between them), and its inputs are held
+constant over a step; its transitions are may-transitions.
 
 This file has two roles: run with the project's Python it is the driver; run by the Hylaa
 interpreter with ``--hylaa-worker SPEC.json`` it builds and runs one Hylaa automaton and

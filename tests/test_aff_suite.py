@@ -141,3 +141,28 @@ def test_star_bouncing_ball_verdicts_match_the_closed_form():
     x0 = cex.initial_state[model.state.index("x")]
     assert np.sqrt(2 * x0) >= 4.5 - 1e-6
     assert replay(model, prop, cex.initial_state, cex.switch_time, cex.dt, cex.input_signal).violated
+
+
+def test_hylaa_automaton_of_the_imported_bouncing_ball():
+    """benchmarks/hylaa_vs_star.py turns the imported automaton into Hylaa's matrices over
+    (x, v, 1): x' = v, v' = -1; the bounce guard x <= 0, v <= 0 (closed) and reset v := -0.75 v;
+    the forbidden v <= -4.5 as a guard into the error mode; the initial box with 1 == 1."""
+    import importlib.util
+
+    spec_ = importlib.util.spec_from_file_location("hylaa_vs_star", ROOT / "benchmarks" / "hylaa_vs_star.py")
+    bench = importlib.util.module_from_spec(spec_)
+    spec_.loader.exec_module(bench)
+    model, prop = _ball("bball-speed")
+    assert model.state == ["x", "v"]
+    spec = bench.automaton_spec(model, prop, 0.1)
+    assert np.allclose(spec["modes"]["always"]["A"], [[0, 1, 0], [0, 0, -1], [0, 0, 0]])
+    (tr,) = spec["transitions"]
+    assert np.allclose(tr["R"], [[1, 0, 0], [0, -0.75, 0], [0, 0, 1]])
+    guard = {tuple(np.append(row, g)) for row, g in zip(tr["H"], tr["g"])}
+    assert guard == {(1.0, 0.0, 0.0, 0.0), (0.0, 1.0, 0.0, 0.0)}
+    (err,) = spec["errors"]
+    assert np.allclose(err["H"], [[0, 1, 0]]) and np.allclose(err["g"], [-4.5])
+    (init,) = spec["initial"]
+    H, g = np.array(init["H"]), np.array(init["g"])
+    for point, inside in (([10.1, 0, 1], True), ([10.3, 0, 1], False), ([10.1, 0, 0], False)):
+        assert bool(np.all(H @ point <= g + 1e-12)) is inside
