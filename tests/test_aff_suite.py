@@ -166,3 +166,14 @@ def test_hylaa_automaton_of_the_imported_bouncing_ball():
     H, g = np.array(init["H"]), np.array(init["g"])
     for point, inside in (([10.1, 0, 1], True), ([10.3, 0, 1], False), ([10.1, 0, 0], False)):
         assert bool(np.all(H @ point <= g + 1e-12)) is inside
+
+
+def test_bench_plots_a_one_state_suite_model(tmp_path):
+    """`reach bench` plots every suite model; the thermostat has the single state T."""
+    from reach.bench.plots import plot_model_runs
+
+    model = load_model(ROOT / "models" / "thermostat.yaml")
+    assert model.state == ["T"]
+    target = tmp_path / "thermostat_runs.png"
+    plot_model_runs(model, target, runs=4)
+    assert target.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
