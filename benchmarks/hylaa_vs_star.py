@@ -1,4 +1,4 @@
-"""Hylaa against the star back-end on the same rendezvous instances, in the same run.
+"""Hylaa against the star back-end on the same automata, in the same run.
 
 Hylaa (PyPI ``hylaa``, generalized star sets, discrete time) is not a dependency of reach:
 install it into a separate virtual environment and point ``--hylaa-python`` at it::
@@ -6,6 +6,8 @@ install it into a separate virtual environment and point ``--hylaa-python`` at i
     python3 -m venv /work/hylaa-venv && /work/hylaa-venv/bin/pip install hylaa "swiglpk==5.0.10"
     python benchmarks/hylaa_vs_star.py                       # SRA01, SRA08, SRU02
     python benchmarks/hylaa_vs_star.py SRA02 --hylaa-repeat 3
+
+    python benchmarks/hylaa_vs_star.py BLDC01-BDS01 GRBX01-MES01  # imported SpaceEx (table AFF)
 
 (swiglpk 5.0.12 and 5.0.13 break Hylaa 2.0.2: GLPK aborts in ``glp_set_mat_row`` with "column
 index out of range"; 5.0.10 works.)
@@ -21,6 +23,15 @@ wall-clock seconds of the verification calls only (model loading and imports exc
 the median over ``--hylaa-repeat`` / ``--star-repeat`` runs (the first star run on a model
 also extracts its matrices from the symbolic model; later runs reuse them, as Hylaa is
 handed matrices directly); the ratio is Hylaa / star.
+
+The imported ARCH AFF instances (``AFF``: models/spaceex/ files through
+``reach.model.spaceex.load_spaceex``) reach Hylaa through :func:`automaton_spec`, which reads
+only the HybridAutomaton (flows' ``A, b``, invariant and guard half-spaces, affine resets,
+initial box or polytope, bounded inputs) and the cfg's forbidden set; star checks the same
+automaton against the same forbidden set (one merged property, as ``reach check MODEL.xml
+CFG``). Hylaa's semantics differ in two ways the table should be read with: it decides at
+its time steps only (star covers the continuous time between them), and its inputs are held
+constant over a step; its transitions are may-transitions.
 
 This file has two roles: run with the project's Python it is the driver; run by the Hylaa
 interpreter with ``--hylaa-worker SPEC.json`` it builds and runs one Hylaa automaton and
@@ -54,6 +65,9 @@ def hylaa_worker(spec_file: str) -> None:
     from hylaa.stateset import StateSet
 
     spec = json.loads(Path(spec_file).read_text())
+    if spec.get("kind") == "automaton":
+        hylaa_automaton_worker(spec)
+        return
     lo, hi = spec["window"]
     if lo == hi:
         lo = hi = hi + 1e-4        # as the example: switch at a single step, not at two
@@ -112,7 +126,163 @@ def hylaa_worker(spec_file: str) -> None:
                       "aggregated_error": bool(result.has_aggregated_error)}))
 
 
+def hylaa_automaton_worker(spec: dict) -> None:
+    """Build and run the Hylaa automaton of :func:`automaton_spec` (plain matrices)."""
+    import numpy as np
+    from hylaa import lputil
+    from hylaa.core import Core
+    from hylaa.hybrid_automaton import HybridAutomaton
+    from hylaa.settings import HylaaSettings, PlotSettings
+    from hylaa.stateset import StateSet
+
+    ha = HybridAutomaton(spec["name"])
+    modes = {}
+    for name, m in spec["modes"].items():
+        mode = modes[name] = ha.new_mode(name)
+        mode.set_dynamics(np.array(m["A"], dtype=float))
+        if spec["inputs"]:
+            mode.set_inputs(np.array(m["B"], dtype=float), spec["inputs"]["C"], spec["inputs"]["d"])
+        if m["inv_g"]:
+            mode.set_invariant(np.array(m["inv_H"], dtype=float), m["inv_g"])
+    error = ha.new_mode("error")
+    for k, t in enumerate(spec["transitions"]):
+        tr = ha.new_transition(modes[t["source"]], modes[t["target"]], f"t{k}")
+        tr.set_guard(np.array(t["H"], dtype=float), t["g"])
+        tr.set_reset(np.array(t["R"], dtype=float))
+    for k, e in enumerate(spec["errors"]):
+        ha.new_transition(modes[e["source"]], error, f"e{k}").set_guard(np.array(e["H"], dtype=float), e["g"])
+    init = [StateSet(lputil.from_constraints(np.array(i["H"], dtype=float), i["g"], modes[i["mode"]]),
+                     modes[i["mode"]]) for i in spec["initial"]]
+    settings = HylaaSettings(spec["step"], spec["horizon"])
+    settings.plot.plot_mode = PlotSettings.PLOT_NONE
+    settings.stdout = HylaaSettings.STDOUT_NONE
+    settings.stop_on_aggregated_error = False
+
+    start = time.perf_counter()
+    result = Core(ha, settings).run(init)
+    seconds = time.perf_counter() - start
+    print(json.dumps({"seconds": seconds, "concrete_error": bool(result.has_concrete_error),
+                      "aggregated_error": bool(result.has_aggregated_error)}))
+
+
 # ---------------------------------------------------------------------- driver
+
+class Inexpressible(Exception):
+    """The automaton uses something Hylaa 2.0.2 has no counterpart for."""
+
+
+def automaton_spec(model, prop, step: float) -> dict:
+    """Hylaa's automaton for an imported linear ``model`` and a bound safety ``prop``.
+
+    Coordinates: the model's states without its time-varying bounded inputs, plus a constant
+    ``1`` last (Hylaa's flows are ``x' = A x``: an affine flow ``A x + b`` becomes the column
+    ``b`` against that constant, as in Hylaa's examples). A varying input ``u_j in [l, h]``
+    becomes a Hylaa input with ``B = A[:, j]`` and constraints ``l <= u_j <= h``; a constant
+    input stays a state with zero flow (exact). Invariants and guards are the constraints'
+    half-spaces (strict ones closed); resets ``x := R x + c`` are the matrix ``[[R, c], [0, 1]]``.
+    The unsafe pieces become guards into one ``error`` mode. A timeless initial mode (SpaceEx
+    flow ``false``) is passed over: its successors (initial set and guard) start in the
+    targets. Another timeless mode gets the flow ``0``: while Hylaa's steps pass its states stay
+    the entry states, which is the set a timeless mode reaches. Raises :class:`Inexpressible`
+    otherwise.
+    """
+    import numpy as np
+    from reach.model.constraints import affine_coefficients, halfspaces
+
+    n_all = len(model.state)
+    varying = [u.index for u in model.varying_inputs]
+    keep = [i for i in range(n_all) if i not in varying]
+    n = len(keep) + 1
+
+    def lift(H):                    # rows over all states -> rows over kept states and the constant
+        H = np.asarray(H, dtype=float).reshape(-1, n_all)
+        if varying and np.any(H[:, varying]):
+            raise Inexpressible("a constraint on a time-varying input")
+        return np.hstack([H[:, keep], np.zeros((len(H), 1))])
+
+    def rows(constraints):
+        hs = halfspaces(constraints, model.symbols)
+        if hs is None:
+            raise Inexpressible("a nonlinear constraint")
+        return lift(hs[0]), hs[1]
+
+    start = model.initial.mode
+    skipped = start if model.modes[start].timeless else None
+    unsafe_modes = set(prop.pieces)
+    modes = {}
+    for name, mode in model.modes.items():
+        if name == skipped:
+            continue
+        lin = (np.zeros((n_all, n_all)), np.zeros(n_all)) if mode.timeless else mode.linear
+        if lin is None:
+            raise Inexpressible(f"mode {name}: nonlinear flow")
+        A, b = lin
+        full = np.zeros((n, n))
+        full[:-1, :-1] = A[np.ix_(keep, keep)]
+        full[:-1, -1] = b[keep]
+        H, g = rows(mode.invariant)
+        modes[name] = {"A": full.tolist(), "B": np.vstack([A[np.ix_(keep, varying)], np.zeros((1, len(varying)))]).tolist(),
+                       "inv_H": H.tolist(), "inv_g": g.tolist()}
+
+    def reset_matrix(tr):
+        R = np.eye(n)
+        for i, expr in tr.reset.items():
+            coeffs = affine_coefficients(expr, model.symbols)
+            if coeffs is None:
+                raise Inexpressible(f"transition {tr.source} -> {tr.target}: nonlinear reset")
+            R[keep.index(i)] = np.append(lift(coeffs[0])[0, :-1], coeffs[1])
+        return R
+
+    transitions = []
+    for tr in model.transitions:
+        if tr.source == skipped:
+            continue
+        if tr.target == skipped:
+            raise Inexpressible(f"a transition into the timeless initial mode {skipped}")
+        if tr.window is not None:
+            raise Inexpressible("a switching-time window")
+        H, g = rows(tr.guard)
+        transitions.append({"source": tr.source, "target": tr.target, "H": H.tolist(), "g": g.tolist(),
+                            "R": reset_matrix(tr).tolist()})
+
+    errors = []
+    for mode in unsafe_modes:
+        pieces = prop.halfspace_pieces(mode)
+        if pieces is None:
+            raise Inexpressible("a nonlinear unsafe set")
+        if mode == skipped:
+            raise Inexpressible(f"an unsafe set in the timeless initial mode {mode}")
+        errors += [{"source": mode, "H": lift(H).tolist(), "g": np.asarray(g).tolist()} for H, g in pieces]
+
+    P = model.initial.polytope
+    if P is None:
+        H0 = np.vstack([np.eye(n_all), -np.eye(n_all)])
+        g0 = np.concatenate([model.initial.high, -model.initial.low])
+    else:
+        H0 = np.vstack([P.A, P.E, -P.E])
+        g0 = np.concatenate([P.b, P.f, -P.f])
+    one = np.zeros((2, n))
+    one[0, -1], one[1, -1] = 1.0, -1.0
+    inner = np.any(H0[:, keep] != 0, axis=1)       # the rows of the varying inputs' bounds go
+    H0 = np.vstack([np.hstack([H0[inner][:, keep], np.zeros((inner.sum(), 1))]), one])
+    g0 = np.concatenate([g0[inner], [1.0, -1.0]])
+    initial = []
+    if skipped:
+        for tr in model.outgoing(start):
+            if tr.reset or tr.target == start:
+                raise Inexpressible(f"a reset or a self-loop out of the timeless initial mode {start}")
+            H, g = rows(tr.guard)
+            initial.append({"mode": tr.target, "H": np.vstack([H0, H]).tolist(), "g": np.concatenate([g0, g]).tolist()})
+    else:
+        initial.append({"mode": start, "H": H0.tolist(), "g": g0.tolist()})
+    inputs = None
+    if varying:
+        lo = [u.low for u in model.varying_inputs]
+        hi = [u.high for u in model.varying_inputs]
+        inputs = {"C": np.vstack([np.eye(len(varying)), -np.eye(len(varying))]).tolist(), "d": hi + [-v for v in lo]}
+    return {"kind": "automaton", "name": model.name, "modes": modes, "transitions": transitions,
+            "errors": errors, "initial": initial, "inputs": inputs, "step": step, "horizon": float(model.horizon)}
+
 
 def hylaa_spec(model, step: float) -> dict:
     """The instance as plain numbers for the worker (closed loops, window, box, horizon)."""
@@ -160,11 +330,68 @@ def hylaa_verdict(result: dict) -> str:
     return "SAFE"
 
 
+#: imported SpaceEx instances under models/spaceex/: (model, cfg, Hylaa time step); the cfgs give
+#: no usable sampling time, so the steps are those of the ARCH-COMP AFF reports' Hylaa runs
+#: (0.01 s for Building) and 1/500 of the horizon for Gearbox.
+AFF = {
+    "BLDC01-BDS01": ("Building/BLDC01.xml", "Building/BLDC01-BDS01.cfg", 0.01),
+    "BLDF01-BDS01": ("Building/BLDF01.xml", "Building/BLDF01-BDS01.cfg", 0.01),
+    "BLDF01-BDU01": ("Building/BLDF01.xml", "Building/BLDF01-BDU01.cfg", 0.01),
+    "BLDC01-BDU02": ("Building/BLDC01.xml", "Building/BLDC01-BDU02.cfg", 0.01),
+    "BLDF01-BDU02": ("Building/BLDF01.xml", "Building/BLDF01-BDU02.cfg", 0.01),
+    "GRBX01-MES01": ("Gearbox/GRBX01-MES01.xml", "Gearbox/GRBX01-MES01.cfg", 0.001),
+}
+
+
+def load_aff(name: str):
+    """The imported automaton and its cfg's forbidden set as one bound property (as ``reach check``)."""
+    from reach.model.spaceex import load_spaceex
+    from reach.spec import bind
+    from reach.spec.properties import BoundSafety
+
+    xml, cfg, _ = AFF[name]
+    xml, cfg = ROOT / "models/spaceex" / xml, ROOT / "models/spaceex" / cfg
+    model, props, docs = load_spaceex(xml, cfg)
+    bound = [bind(p, model) for p in props]
+    modes = [m for m in model.modes if any(m in b.modes for b in bound)]
+    pieces = {m: [piece for b in bound for piece in b.pieces.get(m, [])] for m in modes}
+    return model, BoundSafety(docs.property_id, modes, pieces, model.symbols, str(cfg), f"forbidden set of {cfg}")
+
+
+def compare_aff(name: str, args) -> str:
+    """One table line: Hylaa and star on the imported automaton ``name``."""
+    model, prop = load_aff(name)
+    try:
+        spec = automaton_spec(model, prop, args.hylaa_step or AFF[name][2])
+    except Inexpressible as exc:
+        hylaa_runs = [{"error": f"Hylaa cannot express it: {exc}"}]
+    else:
+        hylaa_runs = [run_hylaa(args.hylaa_python, spec, args.timeout) for _ in range(args.hylaa_repeat)]
+    star_runs = [run_star(model, [prop], {}) for _ in range(args.star_repeat)]
+    return line(name, hylaa_runs, star_runs)
+
+
+def median(values):
+    values = sorted(values)
+    return values[len(values) // 2]
+
+
+def line(name, hylaa_runs, star_runs) -> str:
+    star_s = median([r["seconds"] for r in star_runs])
+    verdicts = " ".join(f"{k}={v}" for k, v in star_runs[0]["verdicts"].items())
+    ok = [r for r in hylaa_runs if "error" not in r]
+    if not ok:
+        return f"{name:12} {'-':>9} {star_s:8.2f} {'-':>7}  {hylaa_verdict(hylaa_runs[0])} | {verdicts}"
+    hylaa_s = median([r["seconds"] for r in ok])
+    return f"{name:12} {hylaa_s:9.2f} {star_s:8.2f} {hylaa_s / star_s:7.1f}  {hylaa_verdict(ok[0])} | {verdicts}"
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("instances", nargs="*", default=["SRA01", "SRA08", "SRU02"])
     parser.add_argument("--hylaa-python", default="/work/hylaa-venv/bin/python")
-    parser.add_argument("--hylaa-step", type=float, default=0.1)
+    parser.add_argument("--hylaa-step", type=float, default=None,
+                        help="Hylaa time step (default: 0.1 min for rendezvous, the table AFF for imported instances)")
     parser.add_argument("--hylaa-repeat", type=int, default=1, help="Hylaa runs (median reported)")
     parser.add_argument("--star-repeat", type=int, default=3, help="star runs (median reported)")
     parser.add_argument("--timeout", type=float, default=1800.0, help="seconds per Hylaa run")
@@ -175,28 +402,18 @@ def main(argv=None) -> int:
     from reach.model.loader import load_model
     from reach.spec import bind, load_properties
 
-    def median(values):
-        values = sorted(values)
-        return values[len(values) // 2]
-
-    print(f"{'instance':9} {'hylaa s':>9} {'star s':>8} {'ratio':>7}  hylaa verdict | star verdicts")
+    print(f"{'instance':12} {'hylaa s':>9} {'star s':>8} {'ratio':>7}  hylaa verdict | star verdicts")
     for name in args.instances:
+        if name in AFF:
+            print(compare_aff(name, args), flush=True)
+            continue
         model = load_model(ROOT / "models" / f"{name}.yaml")
         props = [bind(p, model) for file, pid in STAR_PROPERTIES
                  for p in load_properties(ROOT / file) if p.id == pid]
-        hylaa_runs = [run_hylaa(args.hylaa_python, hylaa_spec(model, args.hylaa_step), args.timeout)
+        hylaa_runs = [run_hylaa(args.hylaa_python, hylaa_spec(model, args.hylaa_step or 0.1), args.timeout)
                       for _ in range(args.hylaa_repeat)]
         star_runs = [run_star(model, props, {}) for _ in range(args.star_repeat)]
-        star_s = median([r["seconds"] for r in star_runs])
-        verdicts = " ".join(f"{k}={v}" for k, v in star_runs[0]["verdicts"].items())
-        ok = [r for r in hylaa_runs if "error" not in r]
-        if ok:
-            hylaa_s = median([r["seconds"] for r in ok])
-            print(f"{name:9} {hylaa_s:9.2f} {star_s:8.2f} {hylaa_s / star_s:7.1f}  "
-                  f"{hylaa_verdict(ok[0])} | {verdicts}", flush=True)
-        else:
-            print(f"{name:9} {'-':>9} {star_s:8.2f} {'-':>7}  {hylaa_verdict(hylaa_runs[0])} | {verdicts}",
-                  flush=True)
+        print(line(name, hylaa_runs, star_runs), flush=True)
     return 0
 
 

@@ -19,7 +19,7 @@ def _pyplot():
 
 def plot_model_runs(model, out: Path, runs: int = 20, seed: int = 0) -> None:
     """Sample runs (corners of the initial box and random ones): the first two states against
-    each other, and every state against time, coloured by mode."""
+    each other (the only state against time), and every state against time, coloured by mode."""
     plt = _pyplot()
     rng = np.random.default_rng(seed)
     window = switch_window(model)
@@ -40,12 +40,13 @@ def plot_model_runs(model, out: Path, runs: int = 20, seed: int = 0) -> None:
             sel = modes == m_index
             if not np.any(sel):
                 continue
-            plane.plot(states[sel, 0], states[sel, 1], ".", ms=1, color=colours[name])
+            across = states[sel, 1] if n > 1 else t[sel]          # one state: against time
+            plane.plot(states[sel, 0], across, ".", ms=1, color=colours[name])
             for k in range(n):
                 ax = axes[1 + k // 2, k % 2]
                 ax.plot(t[sel], states[sel, k], ".", ms=1, color=colours[name])
     plane.set_xlabel(model.state[0])
-    plane.set_ylabel(model.state[1])
+    plane.set_ylabel(model.state[1] if n > 1 else f"time [{model.units.time}]")
     plane.set_title(f"{model.name}: {len(traj.path)} runs")
     for name in names:
         plane.plot([], [], "-", color=colours[name], label=name)

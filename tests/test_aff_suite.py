@@ -1,0 +1,179 @@
+"""The ARCH AFF instances of suite.yaml: the imported YAML is what the published SpaceEx files
+import to, the models load, the Building BDU02 verdicts follow from closed forms, and star's
+verdicts on the bouncing ball agree with the ball's closed form."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.linalg as sl
+import yaml
+from scipy.integrate import solve_ivp
+
+from reach.backends.montecarlo import replay
+from reach.backends.star import BACKEND as STAR
+from reach.bench.suite import load_suite
+from reach.model import load_model
+from reach.model.spaceex import documents, load_spaceex
+from reach.spec import bind, load_properties
+
+ROOT = Path(__file__).resolve().parent.parent
+SPACEEX = ROOT / "models" / "spaceex"
+IMPORTED = SPACEEX / "imported"
+#: suite instance -> (published model, cfg) under models/spaceex/
+SOURCES = {
+    "BLDC01-BDS01": ("Building/BLDC01.xml", "Building/BLDC01-BDS01.cfg"),
+    "BLDF01-BDS01": ("Building/BLDF01.xml", "Building/BLDF01-BDS01.cfg"),
+    "BLDF01-BDU01": ("Building/BLDF01.xml", "Building/BLDF01-BDU01.cfg"),
+    "BLDC01-BDU02": ("Building/BLDC01.xml", "Building/BLDC01-BDU02.cfg"),
+    "BLDF01-BDU02": ("Building/BLDF01.xml", "Building/BLDF01-BDU02.cfg"),
+    "GRBX01-MES01": ("Gearbox/GRBX01-MES01.xml", "Gearbox/GRBX01-MES01.cfg"),
+    "bball-height": ("BouncingBall/bball.xml", "BouncingBall/bball-height.cfg"),
+    "bball-speed": ("BouncingBall/bball.xml", "BouncingBall/bball-speed.cfg"),
+    "PLAD01-BND42": ("Platoon/PLAD01-BND.xml", "Platoon/PLAD01-BND42-forbidden.cfg"),
+}
+#: the imported file's name where it is not the instance's
+FILE = {"PLAD01-BND42": "PLAD01-BND42-forbidden"}
+THRESHOLD = -0.00078                     # BDU02: forbidden x25 < -7.8e-4 at t = 20
+T_END = 20.0
+
+
+def test_suite_lists_every_imported_instance_with_its_files():
+    suite = {inst.id: inst for inst in load_suite(ROOT / "suite.yaml").instances}
+    for name in SOURCES:
+        inst = suite[name]
+        assert inst.model == IMPORTED / "models" / f"{FILE.get(name, name)}.yaml"
+        assert inst.properties == IMPORTED / "properties" / f"{FILE.get(name, name)}.yaml"
+        ids = {p.id for p in load_properties(inst.properties)}
+        assert set(inst.expect) == ids
+
+
+@pytest.mark.parametrize("name", sorted(SOURCES))
+def test_imported_yaml_is_a_fresh_import_of_the_published_files(name, monkeypatch):
+    xml, cfg = SOURCES[name]
+    monkeypatch.chdir(ROOT)                  # the import notes the paths it was given
+    docs = documents(f"models/spaceex/{xml}", f"models/spaceex/{cfg}")
+    name = FILE.get(name, name)
+    assert yaml.safe_load((IMPORTED / "models" / f"{name}.yaml").read_text()) == docs.model
+    assert yaml.safe_load((IMPORTED / "properties" / f"{name}.yaml").read_text()) == docs.properties
+
+
+@pytest.fixture(scope="module")
+def building():
+    """The BDU02 automata as imported (constant input: BLDC01; time-varying: BLDF01)."""
+    return {name: load_spaceex(SPACEEX / SOURCES[name][0], SPACEEX / SOURCES[name][1])[0]
+            for name in ("BLDC01-BDU02", "BLDF01-BDU02")}
+
+
+def _split(model):
+    """``(A, B, b, keep, u)``: ``x' = A x + B u + b`` over the states without the input u1."""
+    (A, b), u = model.modes["Model"].linear, model.bounded_inputs[0].index
+    keep = [i for i in range(len(model.state)) if i != u]
+    return A[np.ix_(keep, keep)], A[keep, u], b[keep], keep, model.bounded_inputs[0]
+
+
+def _x25_row(model, duration):
+    """x25(duration) = c . (x0, u1, 1) for a constant input, from expm of the augmented system."""
+    n = len(model.state)
+    A, b = model.modes["Model"].linear
+    M = np.zeros((n + 1, n + 1))
+    M[:n, :n], M[:n, n] = A, b
+    return sl.expm(duration * M)[model.state.index("x25")]
+
+
+def test_bldc01_bdu02_exact_range_of_x25_at_20_misses_the_forbidden_set(building):
+    model = building["BLDC01-BDU02"]
+    u1 = model.bounded_inputs[0]
+    assert not u1.varying and (u1.low, u1.high) == (0.8, 1.0) and model.initial.polytope is None
+    row = _x25_row(model, T_END)
+    c, c0 = row[:-1], row[-1]
+    lo, hi = model.initial.low, model.initial.high
+    low = c0 + np.minimum(c * lo, c * hi).sum()         # extremes of a linear form over a box
+    high = c0 + np.maximum(c * lo, c * hi).sum()
+    assert -1.9e-6 < low < -1.8e-6 and 4.3e-7 < high < 4.5e-7
+    assert low > THRESHOLD * 100                         # far from -7.8e-4
+    # the minimising vertex, integrated independently, lands where the closed form says
+    vertex = np.where(c > 0, lo, hi)
+    sol = solve_ivp(lambda t, x: model.modes["Model"].linear[0] @ x + model.modes["Model"].linear[1],
+                    (0, T_END), vertex, method="LSODA", rtol=1e-10, atol=1e-13)
+    assert sol.y[model.state.index("x25"), -1] == pytest.approx(low, abs=5e-9)
+
+
+def test_bldf01_bdu02_bang_bang_input_reaches_the_forbidden_set(building):
+    """With u1(t) time-varying, x25(20) = c . x0 + int_0^20 g(20 - s) u1(s) ds with
+    g(r) = [expm(r A) B]_x25; the input 0.8 where g > 0 and 1 where g < 0 minimises it."""
+    model = building["BLDF01-BDU02"]
+    A, B, b, keep, u1 = _split(model)
+    assert u1.varying and (u1.low, u1.high) == (0.8, 1.0)
+    k, steps = keep.index(model.state.index("x25")), 2000
+    h = T_END / steps
+    step, v, low = sl.expm(h * A), sl.expm(h / 2 * A) @ B, 0.0
+    for _ in range(steps):                                # midpoint rule in r = 20 - s
+        g = v[k] * h
+        low += min(u1.low * g, u1.high * g)
+        v = step @ v
+    n = len(keep)
+    M = np.zeros((n + 1, n + 1))
+    M[:n, :n], M[:n, n] = A, b
+    c = sl.expm(T_END * M)[k, :n]
+    lo, hi = model.initial.low[keep], model.initial.high[keep]
+    low += sl.expm(T_END * M)[k, n] + np.minimum(c * lo, c * hi).sum()
+    assert low < THRESHOLD - 1e-5                         # about -7.99e-4
+
+
+def _ball(name):
+    model = load_model(IMPORTED / "models" / f"{name}.yaml")
+    prop = bind(load_properties(IMPORTED / "properties" / f"{name}.yaml")[0], model)
+    return model, prop
+
+
+def test_star_bouncing_ball_verdicts_match_the_closed_form():
+    """Dropped from x0 (v = 0, g = 1) the ball lands with v = -sqrt(2 x0), then each bounce
+    keeps the energy x + v^2/2 at most 0.75^2 times its value, so x <= x0 <= 10.2 always
+    (x >= 10.5 unreachable) and v <= -4.5 happens exactly when x0 >= 10.125."""
+    model, prop = _ball("bball-height")
+    assert model.initial.high[model.state.index("x")] == 10.2
+    assert STAR.check(model, prop, {}).status.value == "SAFE"
+    model, prop = _ball("bball-speed")
+    result = STAR.check(model, prop, {})
+    assert result.status.value == "UNSAFE"
+    cex = result.counterexample
+    x0 = cex.initial_state[model.state.index("x")]
+    assert np.sqrt(2 * x0) >= 4.5 - 1e-6
+    assert replay(model, prop, cex.initial_state, cex.switch_time, cex.dt, cex.input_signal).violated
+
+
+def test_hylaa_automaton_of_the_imported_bouncing_ball():
+    """benchmarks/hylaa_vs_star.py turns the imported automaton into Hylaa's matrices over
+    (x, v, 1): x' = v, v' = -1; the bounce guard x <= 0, v <= 0 (closed) and reset v := -0.75 v;
+    the forbidden v <= -4.5 as a guard into the error mode; the initial box with 1 == 1."""
+    import importlib.util
+
+    spec_ = importlib.util.spec_from_file_location("hylaa_vs_star", ROOT / "benchmarks" / "hylaa_vs_star.py")
+    bench = importlib.util.module_from_spec(spec_)
+    spec_.loader.exec_module(bench)
+    model, prop = _ball("bball-speed")
+    assert model.state == ["x", "v"]
+    spec = bench.automaton_spec(model, prop, 0.1)
+    assert np.allclose(spec["modes"]["always"]["A"], [[0, 1, 0], [0, 0, -1], [0, 0, 0]])
+    (tr,) = spec["transitions"]
+    assert np.allclose(tr["R"], [[1, 0, 0], [0, -0.75, 0], [0, 0, 1]])
+    guard = {tuple(np.append(row, g)) for row, g in zip(tr["H"], tr["g"])}
+    assert guard == {(1.0, 0.0, 0.0, 0.0), (0.0, 1.0, 0.0, 0.0)}
+    (err,) = spec["errors"]
+    assert np.allclose(err["H"], [[0, 1, 0]]) and np.allclose(err["g"], [-4.5])
+    (init,) = spec["initial"]
+    H, g = np.array(init["H"]), np.array(init["g"])
+    for point, inside in (([10.1, 0, 1], True), ([10.3, 0, 1], False), ([10.1, 0, 0], False)):
+        assert bool(np.all(H @ point <= g + 1e-12)) is inside
+
+
+def test_bench_plots_a_one_state_suite_model(tmp_path):
+    """`reach bench` plots every suite model; the thermostat has the single state T."""
+    from reach.bench.plots import plot_model_runs
+
+    model = load_model(ROOT / "models" / "thermostat.yaml")
+    assert model.state == ["T"]
+    target = tmp_path / "thermostat_runs.png"
+    plot_model_runs(model, target, runs=4)
+    assert target.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
