@@ -45,7 +45,8 @@ class Parameterisation:
         self.model = model
         low, high = model.initial.low, model.initial.high
         self.low, self.high = low, high
-        self.free = np.flatnonzero(high > low)
+        varying = [u.index for u in model.varying_inputs]          # set by the signal instead
+        self.free = np.setdiff1d(np.flatnonzero(high > low), varying)
         self.sampler = None if model.initial.is_box else PolytopeSampler(model.initial.polytope, low, high)
         self.window = window
         self.ulo = np.array([u.low for u in model.varying_inputs])
