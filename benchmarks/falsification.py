@@ -1,6 +1,7 @@
 """Falsification table: thin violations found by sampling alone and with the optimiser.
 
     python benchmarks/falsification.py [--models SRA01 ...] [--out results/falsification]
+    python benchmarks/falsification.py --merge part1.json part2.json   # one table of several runs
 
 For each ARCH rendezvous model (SRA01-SRA08, SRNA01) and requirement of
 properties/rendezvous.yaml (thrust, LOS, velocity octagon, collision where there is a Passive
@@ -139,7 +140,11 @@ def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--models", nargs="*", default=MODELS)
     parser.add_argument("--out", default="results/falsification")
+    parser.add_argument("--merge", nargs="*", help="only write the table of these .json outputs")
     args = parser.parse_args()
+    if args.merge:
+        write([row for f in args.merge for row in json.loads(Path(f).read_text())], Path(args.out))
+        return
     rows = []
     for name in args.models:
         model = load_model(f"models/{name}.yaml")
@@ -168,7 +173,10 @@ def main() -> None:
             print(f"{name:7s} {prop.id:10s} d*={d:12.6g}  sampling {row['sampling']['status']:8s} "
                   f"{row['sampling']['seconds']:6.2f} s  optimiser {row['optimiser']['status']:8s} "
                   f"{row['optimiser']['seconds']:6.2f} s", flush=True)
-    out = Path(args.out)
+        write(rows, Path(args.out))
+
+
+def write(rows: list, out: Path) -> None:
     out.with_suffix(".json").write_text(json.dumps(rows, indent=1, default=str) + "\n")
     lines = ["# Falsification table: thin violations, sampling alone vs with the optimiser", "",
              "Each unsafe set enlarged by the true smallest depth d* (solve_ivp reference, "
