@@ -51,7 +51,7 @@ class Parameterisation:
         self.window = window
         self.ulo = np.array([u.low for u in model.varying_inputs])
         self.uhi = np.array([u.high for u in model.varying_inputs])
-        self.step, self.pieces, self.switching = step, pieces if self.ulo.size else 0, switching
+        self.step, self.pieces, self.switching = step, pieces, switching
         self.dim = self.free.size + (window is not None) + self.pieces * self.ulo.size
 
     def runs(self, U: np.ndarray):
@@ -71,8 +71,7 @@ class Parameterisation:
         signal = None
         if self.step is not None:
             m = self.ulo.size
-            V = self.ulo + U[:, f:].reshape(S, self.pieces, m) * (self.uhi - self.ulo) if m else \
-                np.zeros((S, self.pieces, 0))
+            V = self.ulo + U[:, f:].reshape(S, self.pieces, m) * (self.uhi - self.ulo)
             switch = np.zeros((S, self.pieces), dtype=bool) if self.switching else None
             signal = (self.step, V, switch)
         return X, tau, signal
