@@ -6,7 +6,10 @@ Safety properties. Runs are drawn in three rounds, each one numpy batch:
    ends and middle of the abort window;
 2. *random*: ``samples`` i.i.d. uniform initial states and switch instants;
 3. *search*: a cross-entropy falsifier that resamples around the runs that came closest to
-   the unsafe set (``search_rounds`` generations).
+   the unsafe set (``search_rounds`` generations);
+4. *optimiser* (``optimise``, deterministic models): the robustness (smallest depth) minimised
+   over the initial state, the switch instant and the input values by differential evolution
+   seeded with the closest runs so far, then Nelder-Mead (:mod:`reach.backends.falsify`).
 
 A polytopic initial set is sampled by its vertices, facet points and centre (structured) and
 uniformly by hit-and-run (random); time-varying bounded inputs are piecewise-constant signals
@@ -38,6 +41,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from reach.backends.event_sampling import check_events, replay_event
+from reach.backends.falsify import Budget, falsify
 from reach.backends.initial_sampling import PolytopeSampler, input_signals, input_step, structured_signals
 from reach.backends.options import parse_options, ranged
 from reach.errors import InputError
@@ -61,6 +65,10 @@ class Options:
     dt: float | None = None        # simulator grid step (model default if None)
     batch: int = ranged(20000, 1, 1_000_000)            # runs per numpy batch for stochastic estimates
     input_step: float | None = None  # piece length of sampled input signals (horizon/20 if None)
+    optimise: bool = True          # falsification by optimisation after the search (reach.backends.falsify)
+    generations: int = ranged(20, 0, 100_000)     # differential evolution generations
+    population: int = ranged(40, 5, 1_000_000)    # runs per generation
+    polish: int = ranged(60, 0, 1_000_000)        # Nelder-Mead runs from the best point
 
     @classmethod
     def from_dict(cls, options: dict | None) -> "Options":
@@ -381,7 +389,10 @@ class MonteCarloBackend:
             found = None if found is None else (0, found)
             if found is None and model.disturbance is None:
                 found = self._search(model, prop, window, sim, rounds, opts, rng)
-            details["search_runs"] = int(sum(r[1].shape[0] for r in rounds[1:]))
+            if found is None and model.disturbance is None and opts.optimise:
+                found = self._optimise(model, prop, window, sim, rounds, opts)
+                details["optimiser_runs"] = int(rounds[-1][3].runs)
+            details["search_runs"] = int(sum(r[1].shape[0] for r in rounds[1:] if r[0] != "optimiser"))
             details["closest_depth"] = min(float(np.min(r[3].min_depth)) for r in rounds)
             result = Result(NAME, model.name, prop.id, Status.UNKNOWN, details=details)
             if found is not None:
@@ -442,6 +453,26 @@ class MonteCarloBackend:
             if i is not None:
                 return len(rounds) - 1, i
         return None
+
+    def _optimise(self, model, prop, window, sim, rounds, opts: Options):
+        """Differential evolution and Nelder-Mead on the robustness, seeded with the closest runs;
+        appends the best run as the round ``optimiser`` (its monitor carries ``runs``, the cost)."""
+        X_all = np.concatenate([r[1] for r in rounds])
+        d_all = np.concatenate([r[3].min_depth for r in rounds])
+        elite = np.argsort(d_all, kind="stable")[:opts.population // 2]
+        tau_all = None if window is None else np.concatenate([r[2] for r in rounds])
+        signal = rounds[0][4]
+        elite_signal, step, pieces, switching = None, None, 0, False
+        if signal is not None:
+            step, pieces, switching = signal[0], signal[1].shape[1], signal[2] is not None
+            elite_signal = (step, np.concatenate([r[4][1] for r in rounds])[elite], None)
+        out = falsify(model, prop, window, sim, lambda count: SafetyMonitor(model, prop, count),
+                      (X_all[elite], None if tau_all is None else tau_all[elite], elite_signal),
+                      Budget(opts.generations, opts.population, opts.polish), opts.seed,
+                      step, pieces, switching)
+        out.monitor.runs = out.runs
+        rounds.append(("optimiser", out.X, out.tau, out.monitor, out.signal))
+        return (len(rounds) - 1, 0) if out.violated else None
 
     # ---------------------------------------------------------- reach / reach-avoid
     def _probability(self, model, prop, opts: Options) -> Result:

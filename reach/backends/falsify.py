@@ -1,0 +1,184 @@
+"""Falsification by optimisation: minimise the robustness of a safety property over the run's
+free parameters, as S-TaLiRo and Breach do.
+
+The robustness of one run is its smallest depth ``rho = min_t depth(x(t))`` into the unsafe set
+(:class:`reach.backends.montecarlo.SafetyMonitor`; positive is a margin, at most 0 a violation).
+A run is fixed by a point ``u`` of the unit cube ``[0, 1]^d``, the concatenation of
+
+* the free initial coordinates, ``x0_i = low_i + u_i (high_i - low_i)`` (a polytopic initial set:
+  the point of its bounding box pulled inside the polytope);
+* the switch instant of the may-transition window, ``tau = lo + u (hi - lo)``;
+* the values of the time-varying inputs on each piece ``[k step, (k+1) step)`` of the signal,
+  ``v_kj = ulo_j + u (uhi_j - ulo_j)``.
+
+``rho(u)`` is minimised by differential evolution (``scipy.optimize.differential_evolution``,
+vectorised: a whole generation is one :meth:`Simulator.run`), its initial population the runs
+closest to the unsafe set so far plus a Latin hypercube, then polished by Nelder-Mead from the
+best point. The search stops at the first violating run. A violation found here is only a
+candidate: the back-end replays it alone before it reports UNSAFE.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.optimize
+import scipy.stats
+
+from reach.backends.initial_sampling import PolytopeSampler
+
+NO_VISIT = 1e12        # robustness of a run that never enters a mode of the property
+
+
+@dataclass
+class Budget:
+    generations: int = 20      # differential evolution generations
+    population: int = 40       # candidates per generation
+    polish: int = 60           # Nelder-Mead evaluations (single runs)
+
+
+class Parameterisation:
+    """The map ``u in [0, 1]^d -> (x0, tau, input values)`` of the module docstring."""
+
+    def __init__(self, model, window, step: float | None, pieces: int, switching: bool):
+        self.model = model
+        low, high = model.initial.low, model.initial.high
+        self.low, self.high = low, high
+        varying = [u.index for u in model.varying_inputs]          # set by the signal instead
+        self.free = np.setdiff1d(np.flatnonzero(high > low), varying)
+        self.sampler = None if model.initial.is_box else PolytopeSampler(model.initial.polytope, low, high)
+        self.window = window
+        self.ulo = np.array([u.low for u in model.varying_inputs])
+        self.uhi = np.array([u.high for u in model.varying_inputs])
+        self.step, self.pieces, self.switching = step, pieces, switching
+        self.dim = self.free.size + (window is not None) + self.pieces * self.ulo.size
+
+    def runs(self, U: np.ndarray):
+        """``(X0 (S, n), tau (S,) or None, signal or None)`` of the rows of ``U`` (S, d)."""
+        U = np.clip(np.atleast_2d(U), 0.0, 1.0)
+        S = U.shape[0]
+        X = np.tile((self.low + self.high) / 2, (S, 1))
+        f = self.free.size
+        X[:, self.free] = self.low[self.free] + U[:, :f] * (self.high - self.low)[self.free]
+        if self.sampler is not None:
+            X = self.sampler.pull_inside(X)
+        tau = None
+        if self.window is not None:
+            lo, hi, _ = self.window
+            tau = lo + U[:, f] * (hi - lo)
+            f += 1
+        signal = None
+        if self.step is not None:
+            m = self.ulo.size
+            V = self.ulo + U[:, f:].reshape(S, self.pieces, m) * (self.uhi - self.ulo)
+            switch = np.zeros((S, self.pieces), dtype=bool) if self.switching else None
+            signal = (self.step, V, switch)
+        return X, tau, signal
+
+    def encode(self, X: np.ndarray, tau, signal) -> np.ndarray:
+        """The unit-cube points of runs given as initial states, switch instants and signals
+        (a run that never switches is put at the middle of the window)."""
+        parts = [(X[:, self.free] - self.low[self.free]) / (self.high - self.low)[self.free]]
+        if self.window is not None:
+            lo, hi, _ = self.window
+            t = np.where(np.isnan(tau), (lo + hi) / 2, tau)
+            parts.append(((t - lo) / (hi - lo) if hi > lo else np.zeros_like(t))[:, None])
+        if self.pieces and self.ulo.size:
+            V = signal[1][:, :self.pieces]
+            parts.append(((V - self.ulo) / np.where(self.uhi > self.ulo, self.uhi - self.ulo, 1.0))
+                         .reshape(X.shape[0], -1))
+        return np.clip(np.concatenate(parts, axis=1), 0.0, 1.0)
+
+
+@dataclass
+class Outcome:
+    """The optimiser's best run (the first violating one if any) and what it cost."""
+
+    X: np.ndarray                 # (1, n)
+    tau: np.ndarray | None        # (1,)
+    signal: tuple | None          # one run's signal
+    monitor: object               # its SafetyMonitor
+    violated: bool
+    runs: int
+
+
+def falsify(model, prop, window, sim, monitor_factory, elite, budget: Budget, seed: int,
+            step: float | None = None, pieces: int = 0, switching: bool = False) -> Outcome:
+    """Minimise the robustness of ``prop`` (see the module docstring).
+
+    ``monitor_factory(count)`` makes a SafetyMonitor for ``count`` runs; ``elite`` is
+    ``(X, tau, signal)`` of the runs closest to the unsafe set so far (seeds of the population).
+    """
+    param = Parameterisation(model, window, step, pieces, switching)
+    best = {"depth": np.inf, "run": None, "violated": False, "runs": 0}
+
+    def evaluate(U: np.ndarray) -> np.ndarray:
+        X, tau, signal = param.runs(U)
+        monitor = monitor_factory(X.shape[0])
+        sim.run(X, tau, observers=[monitor], signal=signal)
+        best["runs"] += X.shape[0]
+        hit = monitor.first_violation()
+        i = hit if hit is not None else int(np.argmin(monitor.min_depth))
+        if (hit is not None and not best["violated"]) or monitor.min_depth[i] < best["depth"]:
+            if not best["violated"]:
+                best.update(depth=float(monitor.min_depth[i]), violated=hit is not None,
+                            run=(X[i:i + 1], None if tau is None else tau[i:i + 1], _row(signal, i), monitor, i))
+        return np.where(np.isfinite(monitor.min_depth), monitor.min_depth, NO_VISIT)
+
+    if param.dim == 0:
+        evaluate(np.zeros((1, 0)))
+        return _outcome(best)
+    rng = np.random.default_rng(seed)
+    size = max(5, budget.population)
+    seeds = param.encode(*elite)[: size // 2]
+    fill = scipy.stats.qmc.LatinHypercube(d=param.dim, seed=rng).random(size - seeds.shape[0])
+    init = np.concatenate([seeds, fill])
+    scipy.optimize.differential_evolution(
+        lambda U: evaluate(U.T), [(0.0, 1.0)] * param.dim, init=init, maxiter=budget.generations,
+        vectorized=True, updating="deferred", polish=False, tol=0.0, seed=rng,
+        callback=lambda intermediate_result: best["violated"])
+    if not best["violated"] and budget.polish > 0:
+        start = param.encode(best["run"][0], best["run"][1], best["run"][2])[0]
+        try:
+            scipy.optimize.minimize(
+                lambda u: _stop_at_violation(best, evaluate(u[None, :]))[0], start, method="Nelder-Mead",
+                bounds=[(0.0, 1.0)] * param.dim,
+                options={"maxfev": budget.polish, "xatol": 1e-9, "fatol": 0.0,
+                         "initial_simplex": _simplex(start)})
+        except _Found:
+            pass
+    return _outcome(best)
+
+
+class _Found(Exception):
+    """Ends the polish at the first violating run."""
+
+
+def _stop_at_violation(best, values):
+    if best["violated"]:
+        raise _Found
+    return values
+
+
+def _simplex(start: np.ndarray, size: float = 0.05) -> np.ndarray:
+    """A simplex of edge ``size`` at ``start`` inside the unit cube (each vertex steps inwards)."""
+    d = start.size
+    S = np.tile(start, (d + 1, 1))
+    for j in range(d):
+        S[j + 1, j] += size if start[j] + size <= 1.0 else -size
+    return S
+
+
+def _row(signal, i: int):
+    if signal is None:
+        return None
+    step, V, switch = signal
+    return step, V[i:i + 1], None if switch is None else switch[i:i + 1]
+
+
+def _outcome(best) -> Outcome:
+    X, tau, signal, monitor, i = best["run"]
+    one = type(monitor).__new__(type(monitor))        # the chosen run's row of the batch monitor
+    one.__dict__.update({k: (v[i:i + 1] if isinstance(v, np.ndarray) else v) for k, v in monitor.__dict__.items()})
+    return Outcome(X, tau, signal, one, best["violated"], best["runs"])

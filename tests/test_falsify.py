@@ -1,0 +1,165 @@
+"""Falsification by optimisation (reach.backends.falsify through the Monte Carlo back-end).
+
+References are independent of the simulator: the SRA08 closed loop is integrated by solve_ivp
+from the ARCH matrices written out here, the Passive drift is the exact CWH map ``expm(A s)``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.linalg
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.integrate import solve_ivp
+
+from reach.backends.falsify import Parameterisation
+from reach.backends.montecarlo import BACKEND, replay, switch_window
+from reach.model import load_model
+from reach.result import Status
+from reach.spec import bind, load_properties
+
+ROOT = Path(__file__).resolve().parent.parent
+DATA = ROOT / "tests" / "data"
+
+N_ORBIT, MC = 0.00438138, 500.0
+A_CWH = np.array([[0, 0, 1, 0], [0, 0, 0, 1], [3 * N_ORBIT ** 2, 0, 0, 2 * N_ORBIT], [0, 0, -2 * N_ORBIT, 0]])
+B_CWH = np.array([[0, 0], [0, 0], [1 / MC, 0], [0, 1 / MC]])
+K1 = np.array([[-28.82867767694, 0.1004799482599, -1449.975419853, 0.004624472318875],
+               [-0.08701567868523, -33.25619924505, 0.004624472318875, -1451.501346434]])
+K2 = np.array([[-288.0287662715, 0.1312430397158, -9614.989795432, -3.41199964983e-07],
+               [-0.1312430403689, -287.9999700959, -3.41199964983e-07, -9614.988297970]])
+
+
+def closed_loop(x0, until):
+    """The ARCH closed loop (approach, then rendezvous once inside the octagon) to ``until``."""
+    def octagon(t, z):
+        x, y = z[0], z[1]
+        return max(abs(x) - 100, abs(y) - 100, abs(x + y) - 141.1, abs(x - y) - 141.1)
+    octagon.terminal, octagon.direction = True, -1
+    A1, A2 = A_CWH + B_CWH @ K1, A_CWH + B_CWH @ K2
+    s1 = solve_ivp(lambda t, z: A1 @ z, (0, until), x0, events=octagon, rtol=1e-11, atol=1e-10)
+    if s1.t[-1] >= until:
+        return s1.y[:, -1]
+    s2 = solve_ivp(lambda t, z: A2 @ z, (s1.t[-1], until), s1.y[:, -1], rtol=1e-11, atol=1e-10)
+    return s2.y[:, -1]
+
+
+def passive_approach(x0, tau, horizon=240.0, h=0.01):
+    """Smallest max(|x|, |y|) of the Passive drift from the abort at ``tau`` to the horizon."""
+    z = closed_loop(np.asarray(x0, float), tau)
+    steps = int(np.floor((horizon - tau) / h))
+    E = scipy.linalg.expm(A_CWH * h)
+    best = max(abs(z[0]), abs(z[1]))
+    for _ in range(steps):
+        z = E @ z
+        best = min(best, max(abs(z[0]), abs(z[1])))
+    end = scipy.linalg.expm(A_CWH * (horizon - tau - steps * h)) @ z
+    return min(best, max(abs(end[0]), abs(end[1])))
+
+
+def sra08_thin():
+    model = load_model(ROOT / "models" / "SRA08.yaml")
+    prop = bind(load_properties(DATA / "sra08_collision_thin.yaml")[0], model)
+    return model, prop
+
+
+@pytest.fixture(scope="module")
+def sra08_results():
+    model, prop = sra08_thin()
+    return (model, prop, BACKEND.check(model, prop, {"optimise": False}), BACKEND.check(model, prop),
+            BACKEND.check(model, prop))
+
+
+def test_the_thin_sra08_box_is_violated_by_the_reference():
+    """The 0.70 m box is violated: the reference drift from the corner (-875, -375) aborted near
+    t = 212 min passes within 0.70 m; and only just: a coarse scan of the abort instants of every
+    corner stays above 0.69 m."""
+    taus = np.arange(211.90, 212.06, 0.02)
+    best = min(passive_approach([-875, -375, 0, 0], tau) for tau in taus)
+    assert best < 0.70
+    coarse = min(passive_approach([x, y, 0, 0], tau) for x in (-925, -875) for y in (-425, -375)
+                 for tau in (180.0, 200.0, 212.0, 225.0, 240.0))
+    assert coarse > 0.69
+
+
+def test_sampling_alone_misses_the_thin_violation(sra08_results):
+    _, _, sampled, _, _ = sra08_results
+    assert sampled.status is Status.UNKNOWN
+    assert sampled.details["closest_depth"] > 0
+
+
+def test_the_optimiser_finds_it_and_the_counterexample_replays(sra08_results):
+    model, prop, _, optimised, _ = sra08_results
+    assert optimised.status is Status.UNSAFE
+    assert optimised.details["found_in"] == "optimiser"
+    cex = optimised.counterexample
+    rep = replay(model, prop, cex.initial_state, cex.switch_time, cex.dt)
+    assert rep.violated and rep.depth < 0
+    # the violating state, independently: closed loop to the abort, then the exact drift
+    z = closed_loop(np.array(cex.initial_state[:4]), cex.switch_time)
+    z = scipy.linalg.expm(A_CWH * (cex.violation_time - cex.switch_time)) @ z
+    assert np.allclose(z, cex.violation_state[:4], rtol=1e-6, atol=1e-6)
+    assert max(abs(z[0]), abs(z[1])) < 0.70
+
+
+def test_the_optimiser_is_deterministic_for_a_seed(sra08_results):
+    _, _, _, first, second = sra08_results
+    assert first.counterexample.initial_state == second.counterexample.initial_state
+    assert first.counterexample.switch_time == second.counterexample.switch_time
+    assert first.details == second.details
+
+
+def test_the_optimiser_searches_input_signals():
+    """x' = u, u in [-1, 1]: only signals of a precise mean reach the thin box at the horizon;
+    the optimiser finds one, and x(10) = x0 + sum of pieces x step, recomputed by hand."""
+    model = load_model(DATA / "steered.yaml")
+    prop = bind(load_properties(DATA / "steered_target.yaml")[0], model)
+    assert BACKEND.check(model, prop, {"optimise": False}).status is Status.UNKNOWN
+    result = BACKEND.check(model, prop)
+    assert result.status is Status.UNSAFE
+    cex = result.counterexample
+    signal = cex.input_signal
+    values = np.array(signal["values"])[:, 0]
+    assert np.all(np.abs(values) <= 1)
+    t = cex.violation_time
+    full = int(np.floor(t / signal["step"] + 1e-9))
+    x = cex.initial_state[0] + signal["step"] * values[:full].sum() + (t - full * signal["step"]) * values[full]
+    assert 2.2699 <= x <= 2.2701
+    assert replay(model, prop, cex.initial_state, None, cex.dt, signal).violated
+
+
+def test_no_false_alarm_where_the_properties_hold():
+    """SRA02's four rendezvous requirements hold (star proves them, test_star.py); the optimiser
+    must not report any of them violated."""
+    model = load_model(ROOT / "models" / "SRA02.yaml")
+    props = [p for p in (bind(q, model) for q in load_properties(ROOT / "properties" / "rendezvous.yaml")) if p.modes]
+    results = BACKEND.check_many(model, props, {"samples": 200, "search_rounds": 1, "generations": 8})
+    assert [r.status for r in results] == [Status.UNKNOWN] * len(props)
+    assert all(r.details["optimiser_runs"] > 0 for r in results)
+
+
+SRA08 = load_model(ROOT / "models" / "SRA08.yaml")
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(st.floats(0, 1), min_size=3, max_size=3))
+def test_the_unit_cube_map_round_trips(u):
+    """encode(runs(u)) = u on SRA08: two free initial coordinates and the abort instant."""
+    model = SRA08
+    param = Parameterisation(model, switch_window(model), None, 0, False)
+    assert param.dim == 3
+    X, tau, _ = param.runs(np.array([u]))
+    assert np.all(X >= model.initial.low) and np.all(X <= model.initial.high)
+    assert np.allclose(param.encode(X, tau, None), [u], atol=1e-12)
+
+
+def test_a_model_without_free_parameters_is_one_optimiser_run():
+    """A single initial state, no window, no inputs: the optimiser has nothing to vary."""
+    model = load_model(DATA / "tank.yaml")
+    model.initial.low = model.initial.high.copy()
+    prop = bind(load_properties(DATA / "tank_level.yaml")[0], model)
+    result = BACKEND.check(model, prop, {"samples": 5})
+    assert result.status is Status.UNKNOWN and result.details["optimiser_runs"] == 1
