@@ -54,6 +54,7 @@ import sympy
 
 from reach import lp
 from reach.errors import InputError, Where
+from reach.paths import printable
 from reach.model.automaton import (BoundedInput, Controller, Disturbance, HybridAutomaton, InitialSet,
                                    LinearSet, Mode, Transition)
 from reach.model.constraints import affine_coefficients, from_comparisons
@@ -83,8 +84,10 @@ def read_with_templates(path: Path, depth: int = 0, chain=()) -> Doc:
     if not isinstance(parent, str):
         raise where.error("expected a file name")
     parent_path = (path.parent / parent).resolve()
+    if not parent_path.exists():
+        raise where.error(f"no such file '{printable(parent)}'")
     if not parent_path.is_file():
-        raise where.error(f"no such file '{parent}'")
+        raise where.error(f"'{printable(parent)}' is not a regular file (a template must be a plain YAML file)")
     if parent_path in chain or depth >= MAX_EXTENDS:
         raise where.error("'extends' forms a cycle or is nested too deeply")
     base = read_with_templates(parent_path, depth + 1, chain + (path.resolve(),))
