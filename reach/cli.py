@@ -66,16 +66,13 @@ def _parse_options(pairs: list[str]) -> dict:
 
 
 def cmd_check(args) -> int:
-    from reach.checking import check_files, exit_code, is_spaceex
+    from reach.checking import check_files, is_spaceex
     from reach.model import load_model
-    from reach.report import json_row
     from reach.spec import bind, load_properties
 
     if is_spaceex(args.model):
         return cmd_check_spaceex(args)
-    if args.verbose:
-        logging.basicConfig(stream=sys.stderr, format="%(name)s: %(message)s")
-        logging.getLogger("reach").setLevel(logging.INFO)
+    _verbose(args)
     model_path = find_model(args.model)
     model = load_model(model_path)
     for finding in model.lints:
@@ -93,11 +90,28 @@ def cmd_check(args) -> int:
                 _writable(path, "--counterexamples")
                 r.counterexample.save(path)
                 saved[r.property] = str(path)
+    return _report(args, results, bound, model, saved, results[0].model if results else args.model)
+
+
+def _verbose(args) -> None:
+    """``-v``: the back-ends' progress on stderr."""
+    if args.verbose:
+        logging.basicConfig(stream=sys.stderr, format="%(name)s: %(message)s")
+        logging.getLogger("reach").setLevel(logging.INFO)
+
+
+def _report(args, results, bound: dict, model, saved: dict, title: str, empty: str | None = None) -> int:
+    """Print the results (text or ``--json``) in the requirement's units; the exit code."""
+    from reach.checking import exit_code
+    from reach.report import json_row
+
     if args.json:
         rows = [json_row(r, bound.get(r.property), model, saved.get(r.property)) for r in results]
         print(json.dumps(rows, indent=1))
         return exit_code(results)
-    print(printable(f"{results[0].model if results else args.model} with {args.backend}:"))
+    print(printable(f"{title} with {args.backend}:"))
+    if not results and empty:
+        print(printable(f"  {empty}"))
     for r in results:
         print(printable(f"  {r.property:<16} {r.status.value:<11} {r.seconds:8.2f} s  "
                         f"{summary(r, bound.get(r.property), model)}"))
@@ -112,12 +126,7 @@ def cmd_check_spaceex(args) -> int:
     from reach.checking import check_spaceex
     from reach.model.spaceex import write_yaml
 
-    if args.verbose:
-        logging.basicConfig(stream=sys.stderr, format="%(name)s: %(message)s")
-        logging.getLogger("reach").setLevel(logging.INFO)
-    from reach.checking import exit_code
-    from reach.report import json_row
-
+    _verbose(args)
     results, model, docs, bound = check_spaceex(args.model, args.properties, args.backend,
                                                 _parse_options(args.option))
     for finding in model.lints:
@@ -133,19 +142,7 @@ def cmd_check_spaceex(args) -> int:
             path = Path(args.counterexamples) / (safe_name(f"{model_file.stem}_{r.backend}") + ".json")
             cex.save(path)
             saved[r.property] = str(path)
-    if args.json:
-        print(json.dumps([json_row(r, bound.get(r.property), model, saved.get(r.property)) for r in results],
-                         indent=1))
-        return exit_code(results)
-    print(printable(f"{model.name} with {args.backend}:"))
-    if not results:
-        print(printable(f"  {args.properties} forbids nothing: nothing to check"))
-    for r in results:
-        print(printable(f"  {r.property:<16} {r.status.value:<11} {r.seconds:8.2f} s  "
-                        f"{summary(r, bound.get(r.property), model)}"))
-        if r.property in saved:
-            print(printable(f"  {'':<16} counterexample: {saved[r.property]}  (reach replay {saved[r.property]})"))
-    return exit_code(results)
+    return _report(args, results, bound, model, saved, model.name, f"{args.properties} forbids nothing: nothing to check")
 
 
 def _term_hit(docs, model, cex) -> str:

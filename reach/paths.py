@@ -23,9 +23,9 @@ MAX_BYTES = 5_000_000
 YAML_SUFFIXES = (".yaml", ".yml")
 
 
-def read_text(path, suffixes: tuple[str, ...] | None = None, what: str = "file",
-              max_bytes: int = MAX_BYTES) -> str:
-    """The UTF-8 text of a regular file of at most ``max_bytes`` bytes (an InputError otherwise)."""
+def read_bytes(path, suffixes: tuple[str, ...] | None = None, what: str = "file",
+               max_bytes: int = MAX_BYTES) -> bytes:
+    """The bytes of a regular file of at most ``max_bytes`` bytes (an InputError otherwise)."""
     path = Path(path)
     shown = printable(str(path))
     if suffixes is not None and path.suffix.lower() not in suffixes:
@@ -47,6 +47,14 @@ def read_text(path, suffixes: tuple[str, ...] | None = None, what: str = "file",
         raise InputError(f"cannot read file: {exc.__class__.__name__}", shown) from None
     if len(data) > max_bytes:
         raise InputError(f"file larger than {max_bytes} bytes", shown)
+    return data
+
+
+def read_text(path, suffixes: tuple[str, ...] | None = None, what: str = "file",
+              max_bytes: int = MAX_BYTES) -> str:
+    """The UTF-8 text of a regular file (:func:`read_bytes`), refusing NUL bytes."""
+    data = read_bytes(path, suffixes, what, max_bytes)
+    shown = printable(str(path))
     if b"\x00" in data:
         raise InputError(f"contains NUL bytes: not a text {what}", shown)
     try:

@@ -8,14 +8,11 @@ fetches external resources.
 
 from __future__ import annotations
 
-import os
-import stat
 from dataclasses import dataclass, field
-from pathlib import Path
 from xml.parsers import expat
 
 from reach.errors import InputError
-from reach.paths import printable
+from reach.paths import printable, read_bytes
 
 MAX_BYTES = 5_000_000
 MAX_ELEMENTS = 200_000
@@ -91,21 +88,5 @@ def parse_xml(data: bytes, file: str) -> Node:
 
 def read_xml(path) -> Node:
     """The root element of a regular file of at most ``MAX_BYTES`` (not a FIFO, device or folder)."""
-    path = Path(path)
-    shown = printable(str(path))
-    try:
-        info = os.stat(path)
-    except FileNotFoundError:
-        raise InputError("no such file", shown) from None
-    except (OSError, ValueError) as exc:
-        raise InputError(f"cannot read file: {exc.__class__.__name__}", shown) from None
-    if not stat.S_ISREG(info.st_mode):
-        raise InputError("not a regular file (a SpaceEx model must be a plain file)", shown)
-    if info.st_size > MAX_BYTES:
-        raise InputError(f"file larger than {MAX_BYTES} bytes", shown)
-    try:
-        with open(path, "rb") as handle:
-            data = handle.read(MAX_BYTES + 1)
-    except OSError as exc:
-        raise InputError(f"cannot read file: {exc.__class__.__name__}", shown) from None
-    return parse_xml(data, shown)
+    data = read_bytes(path, None, "SpaceEx model", MAX_BYTES)
+    return parse_xml(data, printable(str(path)))
