@@ -121,7 +121,9 @@ def is_spaceex(path) -> bool:
 def check_spaceex(xml_path, cfg_path, backend_name: str, options: dict | None = None):
     """Check a SpaceEx model against its cfg's forbidden set: one property whose id is the cfg's
     file name and whose unsafe set is the union of the forbidden terms. Returns
-    ``(results, model, documents, {id: bound property})`` (no result when the cfg forbids nothing)."""
+    ``(results, model, documents, {id: bound property})``. A cfg that forbids nothing is bad
+    input (a run would prove nothing). For star the cfg's ``sampling-time`` and ``iter-max``
+    become option defaults (:func:`reach.backends.star.options.cfg_hints`)."""
     from reach.model.spaceex import load_spaceex
     from reach.spec.properties import BoundSafety
 
@@ -129,7 +131,15 @@ def check_spaceex(xml_path, cfg_path, backend_name: str, options: dict | None = 
     validate_options(backend_name, options)
     model, props, docs = load_spaceex(xml_path, cfg_path)
     if not props:
-        return [], model, docs, {}
+        from reach.errors import InputError
+        from reach.model.spaceex import read_cfg
+        cfg = read_cfg(cfg_path)
+        raise InputError("the cfg forbids nothing: there is no property to check (add a forbidden "
+                         "set; 'reach import' converts the model alone)", str(cfg_path),
+                         "forbidden", cfg.line("forbidden") or 1)
+    if backend_name == "star":
+        from reach.backends.star.options import cfg_hints
+        options = cfg_hints(docs.model.get("notes", {}), model.horizon, options)
     bound = [bind(p, model) for p in props]
     modes = [m for m in model.modes if any(m in b.modes for b in bound)]
     pieces = {m: [piece for b in bound for piece in b.pieces.get(m, [])] for m in modes}

@@ -113,3 +113,49 @@ def feasible_point(A_ub=None, b_ub=None, *, A_eq=None, b_eq=None, bounds=None, n
         n = np.shape(A_ub)[1] if A_ub is not None else np.shape(A_eq)[1]
     res = minimize(np.zeros(n), A_ub, b_ub, A_eq=A_eq, b_eq=b_eq, bounds=bounds)
     return res.x if res.optimal else None
+
+
+def maximize_many(C, A_ub, b_ub, bounds) -> np.ndarray:
+    """``max_x C_k . x`` over ``{A_ub x <= b_ub, lo <= x <= hi}`` for every row ``C_k``:
+    one HiGHS model (highspy), re-solved from the previous basis with each objective (the
+    polyhedron is passed once; a row the warm start leaves undecided is solved afresh). ``bounds``: a pair of arrays ``(lo, hi)``. Values are read as support
+    functions: ``-inf`` for all rows if the polyhedron is empty, ``+inf`` where unbounded;
+    any other stop raises :class:`LPError`."""
+    from highspy import _core as highspy     # the bare solver: the wrapper class prints a banner
+
+    C = np.atleast_2d(np.asarray(C, dtype=float))
+    A = np.asarray(A_ub, dtype=float).reshape(-1, C.shape[1])
+    b = np.asarray(b_ub, dtype=float).reshape(-1)
+    lo, hi = (np.where(np.isfinite(v), v, s * highspy.kHighsInf) for v, s in
+              ((np.asarray(bounds[0], dtype=float), -1), (np.asarray(bounds[1], dtype=float), 1)))
+    n = C.shape[1]
+    solver = highspy._Highs()
+    solver.setOptionValue("output_flag", False)
+    solver.addVars(n, lo, hi)
+    if A.shape[0]:
+        nz = A != 0
+        starts = np.concatenate([[0], np.cumsum(nz.sum(axis=1))[:-1]]).astype(np.int32)
+        cols = np.nonzero(nz)[1].astype(np.int32)
+        solver.addRows(A.shape[0], np.full(A.shape[0], -highspy.kHighsInf), b, int(nz.sum()),
+                       starts, cols, A[nz])
+    solver.changeObjectiveSense(highspy.ObjSense.kMaximize)
+    index = np.arange(n, dtype=np.int32)
+    values = np.empty(C.shape[0])
+    status = highspy.HighsModelStatus
+    for k, c in enumerate(C):
+        solver.changeColsCost(n, index, c)
+        solver.run()
+        s = solver.getModelStatus()
+        if s == status.kOptimal:
+            values[k] = solver.getInfo().objective_function_value
+        elif s == status.kInfeasible:
+            return np.full(C.shape[0], -np.inf)
+        elif s == status.kUnbounded:
+            values[k] = np.inf
+        else:       # e.g. "unknown" after an unbounded direction: solve this row afresh
+            res = maximize(c, A if A.shape[0] else None, b if A.shape[0] else None,
+                           bounds=(np.asarray(bounds[0], float), np.asarray(bounds[1], float)))
+            if res.infeasible:
+                return np.full(C.shape[0], -np.inf)
+            values[k] = res.support_value()
+    return values

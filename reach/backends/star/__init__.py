@@ -203,7 +203,8 @@ def _run_details(explorer: _Explorer) -> dict:
     if explorer.data.varying:
         soundness += ("; time-varying inputs " + ", ".join(u.name for u in explorer.data.varying)
                       + ": their effect on a cell [t_j, t_j+1] bounded by the box "
-                        "sum_{i<=j} |Phi^i| h e^{|A|h} |B| u_r (any measurable signal in the input box)")
+                        "h sum_{i<=j} (|Phi^i B| + |Phi^i| (e^{|A|h} - I) |B|) u_r (any measurable signal "
+                        "in the input box)")
     if s.aggregated:
         soundness += (f"; {s.aggregated} aggregates: interval hulls of the successor stars they "
                       f"replace ({s.deaggregated} refined back into their members)")

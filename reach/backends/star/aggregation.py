@@ -8,6 +8,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from reach import lp
 from reach.sets import Box, Star
 
 if TYPE_CHECKING:
@@ -27,7 +28,7 @@ class _Aggregate:
 
 
 def interval_hull(members, invariant, count_lps):
-    """``(hull, kept)``: the interval hull of the member stars (``2 n`` LPs each, reported to
+    """``(hull, kept)``: the interval hull of the member stars (``2 n`` supports each, reported to
     ``count_lps``; every bound pushed out by a relative 1e-9 against rounding) intersected with
     ``invariant = (H, g)``, a box star with fresh coefficients, and the non-empty members.
     ``hull`` is None when a member is unbounded. The hull contains every member: everything
@@ -35,14 +36,12 @@ def interval_hull(members, invariant, count_lps):
     cells came before."""
     bounds, kept = [], []
     for star, path in members:
-        eye = np.eye(star.dim)
-        count_lps(2 * star.dim)
-        high = np.array([star.support(e) for e in eye])
+        low, high = _interval(star, count_lps)
         if np.any(high == -np.inf):
             continue                                           # an empty member
         kept.append((star, path))
-        if bounds is not None and np.all(np.isfinite(high)):
-            bounds.append((np.array([-star.support(-e) for e in eye]), high))
+        if bounds is not None and np.all(np.isfinite(high)) and np.all(np.isfinite(low)):
+            bounds.append((low, high))
         else:
             bounds = None
     if not kept or bounds is None:
@@ -53,3 +52,19 @@ def interval_hull(members, invariant, count_lps):
         return None, kept
     pad = 1e-9 * (1.0 + np.maximum(np.abs(low), np.abs(high)))
     return Star.from_box(Box(low - pad, high + pad)).intersect_halfspaces(*invariant), kept
+
+
+def _interval(star: Star, count_lps):
+    """``(low, high)``: the exact interval hull of ``star``, ``2 n`` supports on one LP model
+    (:func:`reach.lp.maximize_many`); from the coefficient box alone, with no LP, when the
+    star has no predicate rows (the box then is the whole coefficient set). All ``-inf`` in
+    ``high`` if the star is empty."""
+    eye = np.eye(star.dim)
+    W = np.vstack([eye, -eye])
+    if not star.predicate.A.shape[0]:
+        values = star.support_bounds(W)
+    else:
+        count_lps(2 * star.dim)
+        values = lp.maximize_many(W @ star.basis, star.predicate.A, star.predicate.b,
+                                  (star.box.low, star.box.high)) + W @ star.center
+    return -values[star.dim:], values[:star.dim]

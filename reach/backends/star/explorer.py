@@ -178,7 +178,8 @@ class _Explorer:
         if point is None:
             return
         if path.jumps > self.max_jumps:
-            raise _Stop(Status.UNKNOWN, f"more than {self.max_jumps} discrete jumps on a path")
+            raise _Stop(Status.UNKNOWN, f"more than {self.max_jumps} discrete jumps on a path "
+                                        f"(option max_jumps; a SpaceEx cfg's iter-max sets it)")
         if path.stalled > self.stall_limit:
             raise _Stop(Status.UNKNOWN, f"{path.stalled} jumps within one time step "
                                         f"(possible zero-dwell cycle)")
@@ -409,6 +410,9 @@ class _Explorer:
         horizon_row = np.eye(self.n)[self.clock][None]
         blocks, open_ = path.blocks + (block,), path.open + (own_open,)
         for piece in self.pieces.get(mode, []):
+            if not piece.H.shape[0]:
+                self._check_whole_mode(mode, seg, path, blocks, open_, piece)
+                continue
             lower = -seg.support_bounds(-piece.H)
             if np.any(lower > piece.g):
                 continue
@@ -433,18 +437,40 @@ class _Explorer:
             tight = np.isfinite(piece.inradius) and removable < TIGHT_RATIO * piece.inradius
             if blame is None or depth > removable or tight:
                 self._try_replay(witness)
-            if blame is not None:
-                raise _Refine(witness, blame)
-            if self.sweep:
-                self.cutoff = min(self.cutoff, self._failure_time(witness, seg))
-                continue
-            if path.origin is not None and self.stats.deaggregated < self.opt.max_deaggregations:
-                raise _Deaggregate(witness, path.origin)
-            self.unresolved.append(witness)
-            if len(self.unresolved) >= self.opt.max_unresolved:
-                raise _Stop(Status.UNKNOWN, f"{len(self.unresolved)} cells still meet an unsafe "
-                                            f"piece after refinement; no witness replayed",
-                            witness=self.unresolved[0])
+            self._unresolved(witness, blame, seg)
+
+    def _check_whole_mode(self, mode: str, seg: Star, path: _Path, blocks, open_, piece):
+        """A piece without rows: the whole of ``mode`` is unsafe (a SpaceEx ``loc() == error``),
+        so any point of the segment before the horizon violates (depth unbounded). The
+        witness is replayed at once; if the run does not reach the mode, the cell that fired
+        the latest open jump on the path is blamed (the segment's own cell cannot help: the
+        segment is non-empty however it is cut)."""
+        self._lp_budget()
+        alpha = seg.intersect_halfspaces(np.eye(self.n)[self.clock][None],
+                                         np.array([self.horizon])).feasible_alpha()
+        if alpha is None:
+            return
+        witness = _Witness(mode, piece.label, np.inf, alpha, seg.point(alpha), path)
+        self._try_replay(witness)
+        refinable = [b for b, o in zip(blocks[:-1], open_[:-1]) if o]
+        self._unresolved(witness, refinable[-1] if refinable else None, seg)
+
+    def _unresolved(self, witness: _Witness, blame, seg: Star):
+        """A segment meets a piece and no replay violated: refine ``blame`` (a block), or
+        lower the sweep's cutoff, refine an aggregate, or record the cell as unresolved."""
+        if blame is not None:
+            raise _Refine(witness, blame)
+        if self.sweep:
+            self.cutoff = min(self.cutoff, self._failure_time(witness, seg))
+            return
+        path = witness.path
+        if path.origin is not None and self.stats.deaggregated < self.opt.max_deaggregations:
+            raise _Deaggregate(witness, path.origin)
+        self.unresolved.append(witness)
+        if len(self.unresolved) >= self.opt.max_unresolved:
+            raise _Stop(Status.UNKNOWN, f"{len(self.unresolved)} cells still meet an unsafe "
+                                        f"piece after refinement; no witness replayed",
+                        witness=self.unresolved[0])
 
     def _failure_time(self, witness: _Witness, seg: Star) -> float:
         """Earliest time from which the runs behind a failing segment may violate: the

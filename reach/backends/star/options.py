@@ -96,3 +96,19 @@ class StarOptions:
         if isinstance(options, StarOptions):
             return options
         return cls(**parse_options(cls, options, "star"))
+
+
+def cfg_hints(notes: dict, horizon: float, options: dict | None) -> dict:
+    """Star options from a SpaceEx cfg (``notes`` of the imported model) where the user set
+    none: ``sampling-time`` bounds the step from above (``step = min(sampling-time,
+    horizon / 60)``: a finer step costs time, never soundness), and ``iter-max`` (when not
+    negative: SpaceEx's "no bound") becomes ``max_jumps``, so a path with more jumps ends the
+    check in UNKNOWN, never in SAFE."""
+    options = dict(options or {})
+    sampling = notes.get("sampling-time")
+    if "step" not in options and sampling is not None and 0 < sampling < horizon / 60.0:
+        options["step"] = float(sampling)
+    iterations = notes.get("iter-max")
+    if "max_jumps" not in options and iterations is not None and iterations >= 0:
+        options["max_jumps"] = int(iterations)
+    return options
