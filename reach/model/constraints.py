@@ -62,8 +62,14 @@ def affine_coefficients(expr: sympy.Expr, symbols: Sequence[sympy.Symbol]):
     unknown = expr.free_symbols - set(symbols)
     if unknown:
         return None
+    fast = _affine_terms(expr, symbols)
+    if fast is not None:
+        return fast
     a = np.zeros(len(symbols))
+    present = expr.free_symbols
     for i, s in enumerate(symbols):
+        if s not in present:            # the coefficient of an absent symbol is 0
+            continue
         d = sympy.diff(expr, s)
         if d.free_symbols:
             return None
@@ -72,9 +78,28 @@ def affine_coefficients(expr: sympy.Expr, symbols: Sequence[sympy.Symbol]):
         except (TypeError, ValueError):
             return None
     try:
-        c = float(expr.subs({s: 0 for s in symbols}))
+        c = float(expr.subs({s: 0 for s in symbols if s in present}))
     except (TypeError, ValueError):
         return None
+    if not (np.all(np.isfinite(a)) and np.isfinite(c)):
+        return None
+    return a, c
+
+
+def _affine_terms(expr: sympy.Expr, symbols: Sequence[sympy.Symbol]):
+    """:func:`affine_coefficients` read off the terms of ``expr`` (a sum of numbers times single
+    symbols, and a number), or None when a term is anything else (the general path decides)."""
+    index = {s: i for i, s in enumerate(symbols)}
+    a, c = np.zeros(len(symbols)), 0.0
+    for term, coefficient in expr.as_coefficients_dict().items():
+        if not coefficient.is_Number:
+            return None
+        if term is sympy.S.One:
+            c += float(coefficient)
+        elif term in index:
+            a[index[term]] += float(coefficient)
+        else:
+            return None
     if not (np.all(np.isfinite(a)) and np.isfinite(c)):
         return None
     return a, c
