@@ -332,7 +332,7 @@ def hylaa_verdict(result: dict) -> str:
 
 #: imported SpaceEx instances under models/spaceex/: (model, cfg, Hylaa time step); the cfgs give
 #: no usable sampling time, so the steps are those of the ARCH-COMP AFF reports' Hylaa runs
-#: (0.01 s for Building) and 1/500 of the horizon for Gearbox.
+#: (0.01 s for Building), 1/500 of the horizon for Gearbox and 1/1000 for the drivetrain.
 AFF = {
     "BLDC01-BDS01": ("Building/BLDC01.xml", "Building/BLDC01-BDS01.cfg", 0.01),
     "BLDF01-BDS01": ("Building/BLDF01.xml", "Building/BLDF01-BDS01.cfg", 0.01),
@@ -340,11 +340,14 @@ AFF = {
     "BLDC01-BDU02": ("Building/BLDC01.xml", "Building/BLDC01-BDU02.cfg", 0.01),
     "BLDF01-BDU02": ("Building/BLDF01.xml", "Building/BLDF01-BDU02.cfg", 0.01),
     "GRBX01-MES01": ("Gearbox/GRBX01-MES01.xml", "Gearbox/GRBX01-MES01.cfg", 0.001),
+    "DTN-2theta-30": ("Powertrain/drivetrain_2theta_30percent.xml",
+                      "Powertrain/drivetrain_2theta_30percent.cfg", 0.002),
 }
 
 
 def load_aff(name: str):
-    """The imported automaton and its cfg's forbidden set as one bound property (as ``reach check``)."""
+    """The imported automaton, its cfg's forbidden set as one bound property and star's options
+    from the cfg's hints (as ``reach check``)."""
     from reach.model.spaceex import load_spaceex
     from reach.spec import bind
     from reach.spec.properties import BoundSafety
@@ -355,19 +358,21 @@ def load_aff(name: str):
     bound = [bind(p, model) for p in props]
     modes = [m for m in model.modes if any(m in b.modes for b in bound)]
     pieces = {m: [piece for b in bound for piece in b.pieces.get(m, [])] for m in modes}
-    return model, BoundSafety(docs.property_id, modes, pieces, model.symbols, str(cfg), f"forbidden set of {cfg}")
+    from reach.backends.star.options import cfg_hints
+    return (model, BoundSafety(docs.property_id, modes, pieces, model.symbols, str(cfg), f"forbidden set of {cfg}"),
+            cfg_hints(docs.model.get("notes", {}), model.horizon, {}))
 
 
 def compare_aff(name: str, args) -> str:
     """One table line: Hylaa and star on the imported automaton ``name``."""
-    model, prop = load_aff(name)
+    model, prop, options = load_aff(name)
     try:
         spec = automaton_spec(model, prop, args.hylaa_step or AFF[name][2])
     except Inexpressible as exc:
         hylaa_runs = [{"error": f"Hylaa cannot express it: {exc}"}]
     else:
         hylaa_runs = [run_hylaa(args.hylaa_python, spec, args.timeout) for _ in range(args.hylaa_repeat)]
-    star_runs = [run_star(model, [prop], {}) for _ in range(args.star_repeat)]
+    star_runs = [run_star(model, [prop], options) for _ in range(args.star_repeat)]
     return line(name, hylaa_runs, star_runs)
 
 

@@ -118,9 +118,11 @@ def feasible_point(A_ub=None, b_ub=None, *, A_eq=None, b_eq=None, bounds=None, n
 def maximize_many(C, A_ub, b_ub, bounds) -> np.ndarray:
     """``max_x C_k . x`` over ``{A_ub x <= b_ub, lo <= x <= hi}`` for every row ``C_k``:
     one HiGHS model (highspy), re-solved from the previous basis with each objective (the
-    polyhedron is passed once; a row the warm start leaves undecided is solved afresh). ``bounds``: a pair of arrays ``(lo, hi)``. Values are read as support
-    functions: ``-inf`` for all rows if the polyhedron is empty, ``+inf`` where unbounded;
-    any other stop raises :class:`LPError`."""
+    polyhedron is passed once). ``bounds``: a pair of arrays ``(lo, hi)``. Values are read
+    as support functions: ``-inf`` for all rows if the polyhedron is empty, ``+inf`` where
+    unbounded. A row the warm start does not decide as optimal or unbounded is solved again
+    from scratch (an infeasible verdict is trusted only then); ``nan`` where that decides
+    nothing either (the caller falls back to a bound it can argue without the LP)."""
     from highspy import _core as highspy     # the bare solver: the wrapper class prints a banner
 
     C = np.atleast_2d(np.asarray(C, dtype=float))
@@ -142,20 +144,22 @@ def maximize_many(C, A_ub, b_ub, bounds) -> np.ndarray:
     index = np.arange(n, dtype=np.int32)
     values = np.empty(C.shape[0])
     status = highspy.HighsModelStatus
-    for k, c in enumerate(C):
-        solver.changeColsCost(n, index, c)
+    k, fresh = 0, False
+    while k < C.shape[0]:
+        solver.changeColsCost(n, index, C[k])
         solver.run()
         s = solver.getModelStatus()
         if s == status.kOptimal:
             values[k] = solver.getInfo().objective_function_value
-        elif s == status.kInfeasible:
-            return np.full(C.shape[0], -np.inf)
         elif s == status.kUnbounded:
             values[k] = np.inf
-        else:       # e.g. "unknown" after an unbounded direction: solve this row afresh
-            res = maximize(c, A if A.shape[0] else None, b if A.shape[0] else None,
-                           bounds=(np.asarray(bounds[0], float), np.asarray(bounds[1], float)))
-            if res.infeasible:
-                return np.full(C.shape[0], -np.inf)
-            values[k] = res.support_value()
+        elif not fresh:         # anything else (infeasible too) once more, from scratch
+            solver.clearSolver()
+            fresh = True
+            continue
+        elif s == status.kInfeasible:
+            return np.full(C.shape[0], -np.inf)
+        else:
+            values[k] = np.nan
+        k, fresh = k + 1, False
     return values

@@ -57,7 +57,8 @@ def interval_hull(members, invariant, count_lps):
 def _interval(star: Star, count_lps):
     """``(low, high)``: the exact interval hull of ``star``, ``2 n`` supports on one LP model
     (:func:`reach.lp.maximize_many`); from the coefficient box alone, with no LP, when the
-    star has no predicate rows (the box then is the whole coefficient set). All ``-inf`` in
+    star has no predicate rows (the box then is the whole coefficient set), and for a
+    direction whose LP fails (the box bound contains the star's support). All ``-inf`` in
     ``high`` if the star is empty."""
     eye = np.eye(star.dim)
     W = np.vstack([eye, -eye])
@@ -67,4 +68,6 @@ def _interval(star: Star, count_lps):
         count_lps(2 * star.dim)
         values = lp.maximize_many(W @ star.basis, star.predicate.A, star.predicate.b,
                                   (star.box.low, star.box.high)) + W @ star.center
+        undecided = np.isnan(values)                  # the LP failed: the box's bound (outer)
+        values[undecided] = star.support_bounds(W[undecided])
     return -values[star.dim:], values[:star.dim]
