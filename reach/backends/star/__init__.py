@@ -81,10 +81,18 @@ of strict inequalities (the negation of ``x >= -100``) counts as entered only ab
 from ``-tol``; the details state the largest ``tol`` used. An LP failure answers UNKNOWN.
 
 Inputs. A time-varying bounded input (``model.bounded_inputs`` with ``varying``) is taken out
-of the flow: the run is the input-free run (input at the box centre) plus a deviation bounded
-per cell by a box (:class:`.flowpipe.AffineFlow`), added to every segment; invariants are
-relaxed by it on the input-free grid stars and applied exactly to the segments. A polytopic
-initial set (``initial.polytope``) cuts the initial star.
+of the flow: the run is the input-free run (input at the box centre) plus a deviation ``d``
+bounded per cell by a box, added to every segment; invariants are relaxed by it on the
+input-free grid stars and applied exactly to the segments. The box is the exact support of
+``d(t)`` over all measurable signals, ``int_0^t |e^{A s} B| u_r ds`` per component, bounded
+from above on sub-cells by the chord of ``e^{A s} B`` plus a closure bound on its curvature
+(:class:`.flowpipe.AffineFlow`; sound between grid points, within ``O(delta^2)`` of exact).
+A polytopic initial set (``initial.polytope``) cuts the initial star.
+
+Forbidden locations. A piece with no rows (SpaceEx ``loc() == error``) makes its whole mode
+unsafe: any point of a segment there before the horizon is a witness, replayed at once; if
+the replay does not reach the mode, the cell that fired the latest refinable jump on the
+path is bisected, and UNKNOWN follows when nothing is left to refine.
 
 Layout: :mod:`.options` (settings, constants), :mod:`.flowpipe` (flows, segments, bounds),
 :mod:`.transitions` (the automaton as matrices), :mod:`.explorer` (the exploration),
