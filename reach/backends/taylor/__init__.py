@@ -41,7 +41,8 @@ from reach.backends.taylor import units
 from reach.backends.taylor.problem import EventProblem, global_clock
 from reach.backends.taylor.units import expand_box, sweep_box
 from reach.result import Result, Status
-from reach.spec.properties import BoundEvent
+from reach.backends.taylor.safety import check_safety, margins
+from reach.spec.properties import BoundEvent, BoundSafety
 
 
 log = logging.getLogger(__name__)
@@ -71,8 +72,15 @@ class TaylorBackend:
     name = "taylor"
 
     def supports(self, model, prop) -> str | None:
+        if isinstance(prop, BoundSafety):
+            for part in margins(model, prop):
+                if part.event is not None:
+                    reason = self.supports(model, part.event)
+                    if reason is not None:
+                        return f"{part.text}: {reason}"
+            return None
         if not isinstance(prop, BoundEvent):
-            return "taylor checks event properties (extremum of a quantity along the run) only"
+            return "taylor checks safety and event properties only"
         if model.disturbance is not None:
             return "stochastic models are not handled (the flow must be deterministic)"
         for tr in model.transitions:
@@ -88,7 +96,12 @@ class TaylorBackend:
         return None
 
     def check(self, model, prop, options=None) -> Result:
+        if isinstance(prop, BoundSafety):
+            return check_safety(self, model, prop, options)
         opts = Options.from_dict(options)
+        avoid = isinstance(next(iter(prop.quantity.values())), tuple)
+        if avoid:       # a non-smooth margin: bounded by the verified sweep only
+            opts.remainder = "rigorous"
         problem = units.problem(model, prop)
         e_tol = opts.e_tol if opts.e_tol is not None else 1e-4 * (1.0 + abs(prop.value))
         u = problem.uncertain
@@ -111,8 +124,11 @@ class TaylorBackend:
             """The ADS measure of a box: its candidates that can hold the extremum, stacked."""
             return stack(list(contenders(result[0], prop.sense).values()))
 
-        subdomains = split_domain(None, problem.low[u], problem.high[u], e_tol, opts.max_splits,
-                                  measure=measure, map_boxes=expand_level)
+        if avoid:
+            subdomains = [Subdomain(problem.low[u], problem.high[u], None, 0.0, 0, True)]
+        else:
+            subdomains = split_domain(None, problem.low[u], problem.high[u], e_tol, opts.max_splits,
+                                      measure=measure, map_boxes=expand_level)
         pick = max if prop.sense == "max" else min
 
         def evaluate(subs) -> list[dict]:
@@ -125,6 +141,10 @@ class TaylorBackend:
                 log.info("rigorous sweeps of %d subdomains in %.1f s", len(subs), time.perf_counter() - started)
             out = []
             for sub, sweep in zip(subs, sweeps):
+                if sub.poly is None:       # no candidate maps (avoid set)
+                    out.append({"low": sub.low, "high": sub.high, "splits": sub.splits, "truncation_estimate": None,
+                                "converged": True, "candidates": {}, "bound": sweep["bound"], "verified": sweep})
+                    continue
                 polys, full = sub.poly
                 bounds = {}
                 for name, p in polys.items():
@@ -159,11 +179,14 @@ class TaylorBackend:
                 left_hi, right_lo = r["high"].copy(), r["low"].copy()
                 left_hi[k], right_lo[k] = mid, mid
                 halves += [(r["low"], left_hi, r["splits"] + 1), (right_lo, r["high"], r["splits"] + 1)]
-            results = expand_level([(0.5 * (lo + hi), 0.5 * (hi - lo)) for lo, hi, _ in halves])
-            children = []
-            for (lo, hi, depth), result in zip(halves, results):
-                error, _ = truncation_estimate(measure(result))
-                children.append(Subdomain(lo, hi, result, error, depth, error <= e_tol))
+            if avoid:
+                children = [Subdomain(lo, hi, None, 0.0, depth, True) for lo, hi, depth in halves]
+            else:
+                results = expand_level([(0.5 * (lo + hi), 0.5 * (hi - lo)) for lo, hi, _ in halves])
+                children = []
+                for (lo, hi, depth), result in zip(halves, results):
+                    error, _ = truncation_estimate(measure(result))
+                    children.append(Subdomain(lo, hi, result, error, depth, error <= e_tol))
             rows = [r for r in rows if decided(r)] + evaluate(children)
         rows.sort(key=lambda r: tuple(r["low"]))
         volume = np.prod(problem.high[u] - problem.low[u])
