@@ -42,6 +42,7 @@ from reach.backends.taylor.problem import EventProblem, global_clock
 from reach.backends.taylor.units import expand_box, sweep_box
 from reach.result import Result, Status
 from reach.backends.taylor.safety import check_safety, margins
+from reach.backends.taylor.window import unsupported_window, with_switch_time
 from reach.spec.properties import BoundEvent, BoundSafety
 
 
@@ -83,10 +84,10 @@ class TaylorBackend:
             return "taylor checks safety and event properties only"
         if model.disturbance is not None:
             return "stochastic models are not handled (the flow must be deterministic)"
-        for tr in model.transitions:
-            if not tr.urgent and (tr.window is None or tr.window[1] < model.horizon):
-                return (f"the may-transition '{tr.name}' switches at a nondeterministic instant inside "
-                        "the horizon (only urgent switches are followed)")
+        reason = unsupported_window(model)
+        if reason is not None:
+            return reason
+        model, _ = with_switch_time(model)
         if prop.modes != [model.initial.mode] and global_clock(model) is None:
             return "events after a mode switch need a global clock state (rate 1, starting at 0)"
         try:
@@ -99,6 +100,7 @@ class TaylorBackend:
         if isinstance(prop, BoundSafety):
             return check_safety(self, model, prop, options)
         opts = Options.from_dict(options)
+        model, _ = with_switch_time(model)
         avoid = isinstance(next(iter(prop.quantity.values())), tuple)
         if avoid:       # a non-smooth margin: bounded by the verified sweep only
             opts.remainder = "rigorous"

@@ -30,6 +30,7 @@ import numpy as np
 import sympy
 
 from reach.model.constraints import affine_coefficients
+from reach.result import Result, Status
 from reach.spec.properties import BoundEvent, BoundSafety
 
 STRICT_ZERO = float(np.finfo(float).tiny)   # "> 0" written as ">= the smallest positive number"
@@ -108,9 +109,7 @@ def check_safety(backend, model, prop: BoundSafety, options: dict | None):
     """Check every margin event of ``prop`` and combine: SAFE when each is SAFE (a rigorous
     lower end of the margin above the requirement) or implied by invariants; otherwise UNKNOWN
     with the margin bounds (estimated ones say so)."""
-    from reach.result import Result, Status
-
-    rows, statuses, lows, highs = [], [], [], []
+    rows, statuses, lows, highs, counterexample = [], [], [], [], None
     for part in margins(model, prop):
         if part.event is None:
             rows.append({"constraint": part.text, "status": "SAFE",
@@ -119,6 +118,8 @@ def check_safety(backend, model, prop: BoundSafety, options: dict | None):
             continue
         result = backend.check(model, part.event, options)
         lo, hi = result.bound
+        if result.status != Status.SAFE and counterexample is None:
+            counterexample = _witness(model, prop, result)
         lows.append(lo)
         highs.append(hi)
         statuses.append(result.status)
@@ -128,6 +129,8 @@ def check_safety(backend, model, prop: BoundSafety, options: dict | None):
                      "subdomain_count": d["subdomain_count"], "share_meeting_requirement": d["share_meeting_requirement"],
                      **({"avoid": True} if part.avoid else {})})
     status = Status.SAFE if all(s == Status.SAFE for s in statuses) else Status.UNKNOWN
+    if counterexample is not None:
+        status = Status.UNSAFE
     details = {"constraints": rows,
                "method": "margin of every unsafe piece bounded along the run (min over the listed modes)"}
     if lows:
@@ -144,5 +147,46 @@ def check_safety(backend, model, prop: BoundSafety, options: dict | None):
     else:
         open_rows = [r["constraint"] for r in rows if r["status"] != "SAFE"]
         details["reason"] = "margin not proved for " + "; ".join(open_rows)
+    if counterexample is not None:
+        details["argument"] = ("a subdomain whose margin bound lies below zero, mapped back to its centre "
+                               "(initial state and switch time) and replayed by the simulator")
+        details.pop("reason", None)
     coverage = 1.0 if status == Status.SAFE else 0.0
-    return Result(backend.name, model.name, prop.id, status, coverage=coverage, details=details)
+    return Result(backend.name, model.name, prop.id, status, coverage=coverage, details=details,
+                  counterexample=counterexample)
+
+
+WITNESSES = 4      # subdomain centres replayed per margin
+
+
+def _witness(model, prop: BoundSafety, result):
+    """A replayed counterexample from the subdomains with the lowest margin bounds (upper end
+    below zero first): each centre is an initial state (and switch time, the state after the
+    model's own) that the simulator runs alone; None if none violates."""
+    from reach.backends.montecarlo import replay
+
+    rows = [r for r in result.details.get("subdomains", []) if np.isfinite(r["bound"][1])]
+    rows.sort(key=lambda r: r["bound"][1])
+    names = result.details["variables"]
+    for row in rows[:WITNESSES]:
+        if row["bound"][0] > 0:
+            break
+        x = 0.5 * (model.initial.low + model.initial.high)
+        tau = None
+        for name, value in zip(names, 0.5 * (np.asarray(row["low"]) + np.asarray(row["high"]))):
+            if name in model.state:
+                x[model.state.index(name)] = value
+            else:
+                tau = float(value)
+        if tau is None and any(not tr.urgent for tr in model.transitions):
+            tau = _fixed_switch(model)
+        rep = replay(model, prop, x, tau)
+        if rep.violated:
+            return rep.counterexample(model, prop, "taylor (subdomain centre, replayed)")
+    return None
+
+
+def _fixed_switch(model) -> float:
+    """The switch time of a window of one instant (no switch-time variable)."""
+    _, lo, hi = next(tr.window for tr in model.transitions if not tr.urgent)
+    return float(min(lo, model.horizon))
