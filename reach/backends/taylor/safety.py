@@ -148,21 +148,21 @@ def check_safety(backend, model, prop: BoundSafety, options: dict | None):
         open_rows = [r["constraint"] for r in rows if r["status"] != "SAFE"]
         details["reason"] = "margin not proved for " + "; ".join(open_rows)
     if counterexample is not None:
-        details["argument"] = ("a subdomain whose margin bound lies below zero, mapped back to its centre "
-                               "(initial state and switch time) and replayed by the simulator")
+        details["argument"] = ("a point of a subdomain whose margin bound reaches below zero (its centre or a "
+                               "corner), mapped back to an initial state and switch time and replayed by the simulator")
         details.pop("reason", None)
     coverage = 1.0 if status == Status.SAFE else 0.0
     return Result(backend.name, model.name, prop.id, status, coverage=coverage, details=details,
                   counterexample=counterexample)
 
 
-WITNESSES = 4      # subdomain centres replayed per margin
+WITNESSES = 4      # subdomains whose centre and corners are replayed, per margin
 
 
 def _witness(model, prop: BoundSafety, result):
-    """A replayed counterexample from the subdomains with the lowest margin bounds (upper end
-    below zero first): each centre is an initial state (and switch time, the state after the
-    model's own) that the simulator runs alone; None if none violates."""
+    """A replayed counterexample from the subdomains with the lowest margin bounds: their
+    centres and corners, each an initial state (and switch time, the state after the model's
+    own) that the simulator runs alone; None if none violates."""
     from reach.backends.montecarlo import replay
 
     rows = [r for r in result.details.get("subdomains", []) if np.isfinite(r["bound"][1])]
@@ -171,19 +171,28 @@ def _witness(model, prop: BoundSafety, result):
     for row in rows[:WITNESSES]:
         if row["bound"][0] > 0:
             break
-        x = 0.5 * (model.initial.low + model.initial.high)
-        tau = None
-        for name, value in zip(names, 0.5 * (np.asarray(row["low"]) + np.asarray(row["high"]))):
-            if name in model.state:
-                x[model.state.index(name)] = value
-            else:
-                tau = float(value)
-        if tau is None and any(not tr.urgent for tr in model.transitions):
-            tau = _fixed_switch(model)
-        rep = replay(model, prop, x, tau)
-        if rep.violated:
-            return rep.counterexample(model, prop, "taylor (subdomain centre, replayed)")
+        low, high = np.asarray(row["low"]), np.asarray(row["high"])
+        points = [0.5 * (low + high)] + [np.where(corner, high, low) for corner in _corners(len(low))]
+        for point in points:
+            x = 0.5 * (model.initial.low + model.initial.high)
+            tau = None
+            for name, value in zip(names, point):
+                if name in model.state:
+                    x[model.state.index(name)] = value
+                else:
+                    tau = float(value)
+            if tau is None and any(not tr.urgent for tr in model.transitions):
+                tau = _fixed_switch(model)
+            rep = replay(model, prop, x, tau)
+            if rep.violated:
+                return rep.counterexample(model, prop, "taylor (subdomain point, replayed)")
     return None
+
+
+def _corners(m: int, limit: int = 16) -> list[np.ndarray]:
+    """Up to ``limit`` corners of a box in ``m`` variables (as masks of the upper ends)."""
+    count = min(2 ** m, limit)
+    return [np.array([(k >> j) & 1 for j in range(m)], dtype=bool) for k in range(count)]
 
 
 def _fixed_switch(model) -> float:
