@@ -20,6 +20,11 @@ Bounds, by the ``remainder`` option:
   defect bound, logarithmic-norm Gronwall estimate), swept step by step for the extremum
   (:meth:`.problem.EventProblem.sweep`). It needs none of those assumptions, so a bound meeting
   the requirement on every subdomain is a proof: SAFE.
+
+Safety properties are read as the extremum of each unsafe piece's margin (:mod:`.safety`): a
+required constraint is an event, an ``avoid`` set is excluded step by step by the verified sweep;
+UNSAFE comes only with a subdomain point that the simulator replays. A may-transition window
+makes the switch time one more expansion variable (:mod:`.window`).
 """
 
 
@@ -34,7 +39,7 @@ import numpy as np
 from reach.backends.options import option_error, parse_options, ranged
 from reach.backends.taylor.ads import Subdomain, split_domain, truncation_estimate
 from reach.backends.taylor.bound import contenders, enclose, estimated_remainder, next_order_remainder
-from reach.backends.taylor.da import stack
+from reach.backends.taylor.da import DA, algebra, stack
 from reach.backends.taylor.flow import Unsmooth
 from reach.backends.taylor.keys import picklable
 from reach.backends.taylor import units
@@ -123,8 +128,10 @@ class TaylorBackend:
                                            *full_box(c, h)) for c, h in boxes])
 
         def measure(result):
-            """The ADS measure of a box: its candidates that can hold the extremum, stacked."""
-            return stack(list(contenders(result[0], prop.sense).values()))
+            """The ADS measure of a box: its candidates that can hold the extremum, stacked (zero
+            when the nominal run visits none of the listed modes: nothing to split for)."""
+            held = list(contenders(result[0], prop.sense).values())
+            return stack(held) if held else DA.const(algebra(opts.order, len(u)), 0.0)
 
         if avoid:
             subdomains = [Subdomain(problem.low[u], problem.high[u], None, 0.0, 0, True)]
@@ -154,7 +161,10 @@ class TaylorBackend:
                          else estimated_remainder(p))
                     lo, hi = enclose(p, R)
                     bounds[name] = (float(lo), float(hi), float(R))
-                estimated = (pick(b[0] for b in bounds.values()), pick(b[1] for b in bounds.values()))
+                if bounds:
+                    estimated = (pick(b[0] for b in bounds.values()), pick(b[1] for b in bounds.values()))
+                else:           # the nominal run visits no listed mode: the empty extremum
+                    estimated = (-np.inf, -np.inf) if prop.sense == "max" else (np.inf, np.inf)
                 row = {"low": sub.low, "high": sub.high, "splits": sub.splits,
                        "truncation_estimate": sub.error, "converged": sub.converged, "candidates": bounds,
                        "bound": sweep["bound"] if rigorous else estimated}
