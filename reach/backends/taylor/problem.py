@@ -164,6 +164,10 @@ class EventProblem:
         sign = 1.0 if self.prop.sense == "max" else -1.0
         for hop in range(MAX_SWITCHES + 1):
             code = self.code(mode)
+            if T - t0 <= 1e-12 * max(1.0, T):              # entered at the horizon: one instant
+                if code.q is not None:
+                    out[f"{mode}:entry"] = code.q(X)
+                return out
             x_nominal = np.array([x.cons for x in X])
             run = nominal(code.f_numeric, x_nominal, T - t0, tol, stop=code.stop(x_nominal))
             grid = run.grid()
@@ -252,6 +256,14 @@ class EventProblem:
             if hop > MAX_SWITCHES:
                 return _unbounded(f"more than {MAX_SWITCHES} mode switches")
             code = self.code(mode)
+            start = [TM(at_sigma(x, -1.0)) for x in x0]
+            if T - t_earliest <= 1e-12 * max(1.0, T):       # entered at the horizon: one instant
+                if code.q is not None:
+                    lo, hi = code.q(start).bound()
+                    outer = max(outer, hi if sign > 0 else -lo)
+                    if sure:
+                        inner = max(inner, lo if sign > 0 else -hi)
+                continue
             try:
                 enc = self._enclosure(code, x0, T - t_earliest, rel_tol, tol)
             except ArithmeticError as err:
@@ -261,7 +273,6 @@ class EventProblem:
             stretches += 1
             steps, error = steps + len(enc.steps), max(error, float(np.max(enc.error_box)))
             # the start counts for the inner end only if no run can switch at t = 0
-            start = [TM(at_sigma(x, -1.0)) for x in x0]
             certified = hop == 0 and code.inside(start, False) is None
             if code.q is not None and hop > 0 and sure:
                 lo, hi = code.q(start).bound()
