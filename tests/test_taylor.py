@@ -135,14 +135,20 @@ def test_nominal_run_stops_one_step_past_the_urgent_guard(srna, monkeypatch):
 
 def test_supports_names_what_it_cannot_do(srna):
     props = {p.id: bind(p, srna) for p in load_properties("properties/rendezvous.yaml")}
-    assert "event properties" in BACKEND.supports(srna, props["thrust"])
+    assert BACKEND.supports(srna, props["thrust"]) is None          # read as margin events
     ev = events(srna)["thrust_x_min"]
     assert BACKEND.supports(srna, ev) is None
     other = dataclasses.replace(ev, modes=["approach", "rendezvous"])
     assert BACKEND.supports(srna, other) is None
     assert "global clock" in BACKEND.supports(dataclasses.replace(srna, clocks=[]), other)
-    abort = load_model("models/SRA01.yaml")
-    assert "nondeterministic" in BACKEND.supports(abort, events(abort)["thrust_x_min"])
+    abort = load_model("models/SRA02.yaml")
+    assert BACKEND.supports(abort, events(abort)["thrust_x_min"]) is None   # switch time expanded
+    # without the invariant t <= 125 some runs never abort: not a switch-time variable
+    t = abort.symbols[abort.index("t")]
+    free = {name: dataclasses.replace(m, invariant=[c for c in m.invariant if t not in c.g.free_symbols])
+            for name, m in abort.modes.items()}
+    unforced = dataclasses.replace(abort, modes=free)
+    assert "does not force" in BACKEND.supports(unforced, events(unforced)["thrust_x_min"])
 
 
 def test_thrust_events_on_srna01_are_bounded_and_never_claimed_safe(srna):

@@ -20,6 +20,11 @@ Bounds, by the ``remainder`` option:
   defect bound, logarithmic-norm Gronwall estimate), swept step by step for the extremum
   (:meth:`.problem.EventProblem.sweep`). It needs none of those assumptions, so a bound meeting
   the requirement on every subdomain is a proof: SAFE.
+
+Safety properties are read as the extremum of each unsafe piece's margin (:mod:`.safety`): a
+required constraint is an event, an ``avoid`` set is excluded step by step by the verified sweep;
+UNSAFE comes only with a subdomain point that the simulator replays. A may-transition window
+makes the switch time one more expansion variable (:mod:`.window`).
 """
 
 
@@ -34,14 +39,16 @@ import numpy as np
 from reach.backends.options import option_error, parse_options, ranged
 from reach.backends.taylor.ads import Subdomain, split_domain, truncation_estimate
 from reach.backends.taylor.bound import contenders, enclose, estimated_remainder, next_order_remainder
-from reach.backends.taylor.da import stack
+from reach.backends.taylor.da import DA, algebra, stack
 from reach.backends.taylor.flow import Unsmooth
 from reach.backends.taylor.keys import picklable
 from reach.backends.taylor import units
 from reach.backends.taylor.problem import EventProblem, global_clock
 from reach.backends.taylor.units import expand_box, sweep_box
 from reach.result import Result, Status
-from reach.spec.properties import BoundEvent
+from reach.backends.taylor.safety import check_safety, margins
+from reach.backends.taylor.window import unsupported_window, with_switch_time
+from reach.spec.properties import BoundEvent, BoundSafety
 
 
 log = logging.getLogger(__name__)
@@ -71,14 +78,21 @@ class TaylorBackend:
     name = "taylor"
 
     def supports(self, model, prop) -> str | None:
+        if isinstance(prop, BoundSafety):
+            for part in margins(model, prop):
+                if part.event is not None:
+                    reason = self.supports(model, part.event)
+                    if reason is not None:
+                        return f"{part.text}: {reason}"
+            return None
         if not isinstance(prop, BoundEvent):
-            return "taylor checks event properties (extremum of a quantity along the run) only"
+            return "taylor checks safety and event properties only"
         if model.disturbance is not None:
             return "stochastic models are not handled (the flow must be deterministic)"
-        for tr in model.transitions:
-            if not tr.urgent and (tr.window is None or tr.window[1] < model.horizon):
-                return (f"the may-transition '{tr.name}' switches at a nondeterministic instant inside "
-                        "the horizon (only urgent switches are followed)")
+        reason = unsupported_window(model)
+        if reason is not None:
+            return reason
+        model, _ = with_switch_time(model)
         if prop.modes != [model.initial.mode] and global_clock(model) is None:
             return "events after a mode switch need a global clock state (rate 1, starting at 0)"
         try:
@@ -88,7 +102,13 @@ class TaylorBackend:
         return None
 
     def check(self, model, prop, options=None) -> Result:
+        if isinstance(prop, BoundSafety):
+            return check_safety(self, model, prop, options)
         opts = Options.from_dict(options)
+        model, _ = with_switch_time(model)
+        avoid = isinstance(next(iter(prop.quantity.values())), tuple)
+        if avoid:       # a non-smooth margin: bounded by the verified sweep only
+            opts.remainder = "rigorous"
         problem = units.problem(model, prop)
         e_tol = opts.e_tol if opts.e_tol is not None else 1e-4 * (1.0 + abs(prop.value))
         u = problem.uncertain
@@ -108,11 +128,16 @@ class TaylorBackend:
                                            *full_box(c, h)) for c, h in boxes])
 
         def measure(result):
-            """The ADS measure of a box: its candidates that can hold the extremum, stacked."""
-            return stack(list(contenders(result[0], prop.sense).values()))
+            """The ADS measure of a box: its candidates that can hold the extremum, stacked (zero
+            when the nominal run visits none of the listed modes: nothing to split for)."""
+            held = list(contenders(result[0], prop.sense).values())
+            return stack(held) if held else DA.const(algebra(opts.order, len(u)), 0.0)
 
-        subdomains = split_domain(None, problem.low[u], problem.high[u], e_tol, opts.max_splits,
-                                  measure=measure, map_boxes=expand_level)
+        if avoid:
+            subdomains = [Subdomain(problem.low[u], problem.high[u], None, 0.0, 0, True)]
+        else:
+            subdomains = split_domain(None, problem.low[u], problem.high[u], e_tol, opts.max_splits,
+                                      measure=measure, map_boxes=expand_level)
         pick = max if prop.sense == "max" else min
 
         def evaluate(subs) -> list[dict]:
@@ -125,6 +150,10 @@ class TaylorBackend:
                 log.info("rigorous sweeps of %d subdomains in %.1f s", len(subs), time.perf_counter() - started)
             out = []
             for sub, sweep in zip(subs, sweeps):
+                if sub.poly is None:       # no candidate maps (avoid set)
+                    out.append({"low": sub.low, "high": sub.high, "splits": sub.splits, "truncation_estimate": None,
+                                "converged": True, "candidates": {}, "bound": sweep["bound"], "verified": sweep})
+                    continue
                 polys, full = sub.poly
                 bounds = {}
                 for name, p in polys.items():
@@ -132,7 +161,10 @@ class TaylorBackend:
                          else estimated_remainder(p))
                     lo, hi = enclose(p, R)
                     bounds[name] = (float(lo), float(hi), float(R))
-                estimated = (pick(b[0] for b in bounds.values()), pick(b[1] for b in bounds.values()))
+                if bounds:
+                    estimated = (pick(b[0] for b in bounds.values()), pick(b[1] for b in bounds.values()))
+                else:           # the nominal run visits no listed mode: the empty extremum
+                    estimated = (-np.inf, -np.inf) if prop.sense == "max" else (np.inf, np.inf)
                 row = {"low": sub.low, "high": sub.high, "splits": sub.splits,
                        "truncation_estimate": sub.error, "converged": sub.converged, "candidates": bounds,
                        "bound": sweep["bound"] if rigorous else estimated}
@@ -159,11 +191,14 @@ class TaylorBackend:
                 left_hi, right_lo = r["high"].copy(), r["low"].copy()
                 left_hi[k], right_lo[k] = mid, mid
                 halves += [(r["low"], left_hi, r["splits"] + 1), (right_lo, r["high"], r["splits"] + 1)]
-            results = expand_level([(0.5 * (lo + hi), 0.5 * (hi - lo)) for lo, hi, _ in halves])
-            children = []
-            for (lo, hi, depth), result in zip(halves, results):
-                error, _ = truncation_estimate(measure(result))
-                children.append(Subdomain(lo, hi, result, error, depth, error <= e_tol))
+            if avoid:
+                children = [Subdomain(lo, hi, None, 0.0, depth, True) for lo, hi, depth in halves]
+            else:
+                results = expand_level([(0.5 * (lo + hi), 0.5 * (hi - lo)) for lo, hi, _ in halves])
+                children = []
+                for (lo, hi, depth), result in zip(halves, results):
+                    error, _ = truncation_estimate(measure(result))
+                    children.append(Subdomain(lo, hi, result, error, depth, error <= e_tol))
             rows = [r for r in rows if decided(r)] + evaluate(children)
         rows.sort(key=lambda r: tuple(r["low"]))
         volume = np.prod(problem.high[u] - problem.low[u])

@@ -99,6 +99,8 @@ def contenders(candidates: dict, sense: str) -> dict:
     with the eq. 28 remainder) reaches above the largest lower end (below the smallest upper end
     for a minimum). A dominated candidate changes neither end of the bound, so its truncation
     error need not drive the splitting."""
+    if not candidates:
+        return {}
     sign = 1.0 if sense == "max" else -1.0
     ends = {name: enclose(p, estimated_remainder(p)) for name, p in candidates.items()}
     ends = {name: (float(lo), float(hi)) if sign > 0 else (-float(hi), -float(lo))

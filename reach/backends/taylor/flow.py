@@ -237,7 +237,7 @@ def nominal(f_numeric, x0: np.ndarray, T: float, tol: float = 1e-9, refine: int 
         end = min(T, t[-1] + last_step)
         if end > t[-1]:
             rest = solve_ivp(fun, (t[-1], end), coarse.y[:, -1], method="DOP853", rtol=tol,
-                             atol=tol * scale, first_step=last_step)
+                             atol=tol * scale, first_step=min(last_step, end - t[-1]))
             t = np.concatenate([t, rest.t[1:]])
     dense = solve_ivp(fun, (0.0, end), x0, method="DOP853", rtol=1e-12, atol=1e-12 * scale,
                       dense_output=True)

@@ -64,7 +64,10 @@ class ModeCode:
             faces = [_first(compile_expressions([c.g], symbols)) for c in tr.guard]
             self.exits.append(Exit(tr, lambdify_margins(tr.guard, symbols), faces, reset))
         self.q = self.qdot = self.q_numeric = None
-        if quantity is not None:
+        if isinstance(quantity, tuple):           # avoid set: the margin max_j g_j (sweep only)
+            parts = compile_expressions(list(quantity), symbols)
+            self.q = lambda x: Largest(parts(x))
+        elif quantity is not None:
             quantity = sympy.sympify(quantity)
             rate = sum(sympy.diff(quantity, s) * f for s, f in zip(symbols, mode.flow))
             self.q = _first(compile_expressions([quantity], symbols))
@@ -94,6 +97,10 @@ class ModeCode:
 
         return margin if margin(x0) > 0 else None
 
+    def may_enter(self, ex: Exit, X) -> bool:
+        """Whether the guard of ``ex`` may hold for some deviation of the Taylor models ``X``."""
+        return all(face(X).bound()[0] <= 0 for face in ex.faces)
+
     def inside(self, X, certainly: bool) -> Exit | None:
         """An exit whose guard holds for the Taylor models ``X``: for every deviation
         (``certainly``) or possibly for some."""
@@ -102,6 +109,18 @@ class ModeCode:
             if all((hi if certainly else lo) <= 0 for lo, hi in bounds):
                 return ex
         return None
+
+
+class Largest:
+    """``max_j g_j`` of Taylor models, enclosed by ``[max_j lo_j, max_j hi_j]``: the depth to an
+    avoid set ``{g_j <= 0 for all j}`` (positive outside it)."""
+
+    def __init__(self, parts):
+        self.parts = parts
+
+    def bound(self):
+        ends = [p.bound() for p in self.parts]
+        return max(float(lo) for lo, _ in ends), max(float(hi) for _, hi in ends)
 
 
 def _first(fn):
@@ -145,6 +164,10 @@ class EventProblem:
         sign = 1.0 if self.prop.sense == "max" else -1.0
         for hop in range(MAX_SWITCHES + 1):
             code = self.code(mode)
+            if T - t0 <= 1e-12 * max(1.0, T):              # entered at the horizon: one instant
+                if code.q is not None:
+                    out[f"{mode}:entry"] = code.q(X)
+                return out
             x_nominal = np.array([x.cons for x in X])
             run = nominal(code.f_numeric, x_nominal, T - t0, tol, stop=code.stop(x_nominal))
             grid = run.grid()
@@ -211,37 +234,51 @@ class EventProblem:
         """Rigorous bounds of the extremum of ``q`` over the listed modes' stretches.
 
         In each mode the verified enclosure (:mod:`.verified`) runs until the step whose end lies
-        inside an urgent guard for every deviation (every run has switched by then) or the
+        inside one urgent guard for every deviation (every run has switched by then) or the
         horizon; runs that switched earlier are followed on with the mode's flow, which only
         enlarges the set. The upper end (for a maximum) is the largest Taylor-model bound of ``q``
-        over those steps. The states entering the next mode lie in the hull of the step boxes that
-        may meet the guard, clipped to the guard's single-variable bounds and mapped by the
-        reset; the next mode starts from that box (up to the horizon counted from its earliest
-        entry). The lower end is the best bound of ``q`` at the initial mode's step nodes that no
-        run can have left the mode before, or on an entry box."""
+        over those steps. For every exit whose guard some step may meet, the states entering
+        its target lie in the hull of those step boxes, clipped to the guard's single-variable
+        bounds and mapped by the reset; the target mode is swept from that box (up to the
+        horizon counted from its earliest entry), so a mode with several exits (a dock and an
+        abort) branches. Exits from which no listed mode can be reached are not followed. The
+        lower end is the best bound of ``q`` at the initial mode's step nodes that no run can
+        have left the mode before, or on an entry box that every run passes through (a chain
+        of exits, each the only one possible in its mode)."""
         T = self.model.horizon
         m = len(self.uncertain)
-        x0 = initial_state(algebra(order, m + 1), center, half_width, self.uncertain)
-        mode, t_earliest = self.model.initial.mode, 0.0
         sign = 1.0 if self.prop.sense == "max" else -1.0
-        outer, inner, steps, error, visited = -np.inf, -np.inf, 0, 0.0, set()
-        for hop in range(MAX_SWITCHES + 1):
+        outer, inner, steps, error, stretches = -np.inf, -np.inf, 0, 0.0, 0
+        x0 = initial_state(algebra(order, m + 1), center, half_width, self.uncertain)
+        branches = [(self.model.initial.mode, x0, 0.0, 0, True)]
+        while branches:
+            mode, x0, t_earliest, hop, sure = branches.pop()
+            if hop > MAX_SWITCHES:
+                return _unbounded(f"more than {MAX_SWITCHES} mode switches")
             code = self.code(mode)
-            if len(code.exits) > 1:
-                return _unbounded(f"mode '{mode}' has several urgent exits")
+            start = [TM(at_sigma(x, -1.0)) for x in x0]
+            if T - t_earliest <= 1e-12 * max(1.0, T):       # entered at the horizon: one instant
+                if code.q is not None:
+                    lo, hi = code.q(start).bound()
+                    outer = max(outer, hi if sign > 0 else -lo)
+                    if sure:
+                        inner = max(inner, lo if sign > 0 else -hi)
+                continue
             try:
                 enc = self._enclosure(code, x0, T - t_earliest, rel_tol, tol)
             except ArithmeticError as err:
                 return _unbounded(str(err))
             if enc is None:
                 return _unbounded(f"no verified enclosure in mode '{mode}'")
+            stretches += 1
             steps, error = steps + len(enc.steps), max(error, float(np.max(enc.error_box)))
             # the start counts for the inner end only if no run can switch at t = 0
-            start = [TM(at_sigma(x, -1.0)) for x in x0]
-            certified, exit_taken, entry = hop == 0 and code.inside(start, False) is None, None, []
-            if code.q is not None and hop > 0:
+            certified = hop == 0 and code.inside(start, False) is None
+            if code.q is not None and hop > 0 and sure:
                 lo, hi = code.q(start).bound()
                 inner = max(inner, lo if sign > 0 else -hi)
+            entry = {i: [] for i in range(len(code.exits))}
+            exit_taken = None
             for k in range(len(enc.steps)):
                 X = enc.tm(k)
                 if code.q is not None:
@@ -250,31 +287,49 @@ class EventProblem:
                     if certified:
                         lo0, hi0 = code.q([TM(at_sigma(x.poly, -1.0), x.lo, x.hi) for x in X]).bound()
                         inner = max(inner, lo0 if sign > 0 else -hi0)
-                if code.inside(X, False) is not None:
-                    certified = False
-                    entry.append(np.array([x.bound() for x in X]))
+                box = None
+                for i, ex in enumerate(code.exits):
+                    if code.may_enter(ex, X):
+                        certified = False
+                        box = np.array([x.bound() for x in X]) if box is None else box
+                        entry[i].append(box)
                 exit_taken = code.inside(enc.tm_at_end(k), True)
                 if exit_taken is not None:
                     break
             end = enc.steps[k].t0 + enc.steps[k].h
-            visited.add(mode)
-            if exit_taken is None:
-                if end < (T - t_earliest) * (1 - 1e-12):
-                    return _unbounded(f"could not prove that every run leaves '{mode}' (to t = {end:g})")
-                break
-            if visited >= set(self.prop.modes):
-                break
-            box = _entry_box(exit_taken, entry, self.model)
-            if exit_taken.reset is not None:
-                out = exit_taken.reset(Jet.seed(box[:, 0], box[:, 1]))
-                box = np.array([[o.lo, o.hi] if isinstance(o, Jet) else [o, o] for o in out], dtype=float)
-            if self.clock is None:
-                return _unbounded("events after a mode switch need a global clock state")
-            t_earliest, mode = box[self.clock, 0], exit_taken.transition.target
-            wide = [i for i in range(self.model.n) if box[i, 1] > box[i, 0]]
-            x0 = initial_state(algebra(order, len(wide) + 1), box.mean(axis=1), 0.5 * (box[:, 1] - box[:, 0]), wide)
+            if exit_taken is None and end < (T - t_earliest) * (1 - 1e-12):
+                return _unbounded(f"could not prove that every run leaves '{mode}' (to t = {end:g})")
+            possible = [i for i, boxes in entry.items() if boxes]
+            for i in possible:
+                ex = code.exits[i]
+                if not self._leads_to_property(ex.transition.target):
+                    continue
+                if self.clock is None:
+                    return _unbounded("events after a mode switch need a global clock state")
+                box = _entry_box(ex, entry[i], self.model)
+                if ex.reset is not None:
+                    out = ex.reset(Jet.seed(box[:, 0], box[:, 1]))
+                    box = np.array([[o.lo, o.hi] if isinstance(o, Jet) else [o, o] for o in out], dtype=float)
+                wide = [j for j in range(self.model.n) if box[j, 1] > box[j, 0]]
+                start_box = initial_state(algebra(order, len(wide) + 1), box.mean(axis=1),
+                                          0.5 * (box[:, 1] - box[:, 0]), wide)
+                branches.append((ex.transition.target, start_box, box[self.clock, 0], hop + 1,
+                                 sure and len(possible) == 1 and ex is exit_taken))
         bound = (inner, outer) if sign > 0 else (-outer, -inner)
-        return {"bound": tuple(float(v) for v in bound), "steps": steps, "error": error}
+        return {"bound": tuple(float(v) for v in bound), "steps": steps, "error": error,
+                "stretches": stretches}
+
+    def _leads_to_property(self, mode: str) -> bool:
+        """Whether a listed mode can be reached from ``mode`` through urgent switches."""
+        seen, todo = set(), [mode]
+        while todo:
+            name = todo.pop()
+            if name in self.prop.modes:
+                return True
+            if name not in seen:
+                seen.add(name)
+                todo += [tr.target for tr in self.model.outgoing(name) if tr.urgent]
+        return False
 
 
 def _unbounded(why: str) -> dict:

@@ -1,0 +1,201 @@
+"""Safety properties read as extrema of margins.
+
+A safety property's unsafe set in a mode is a union of pieces ``{g_j <= 0 for all j}``
+(:class:`~reach.spec.properties.BoundSafety`). For one piece the margin
+
+    d(x) = max_j g_j(x)
+
+is positive exactly outside it (for a ``require`` constraint ``c <= 0`` the piece is the single
+``-c < 0`` and ``d = -c``). The property holds iff ``min d > 0`` over the run in the listed modes
+(``>= 0`` when every ``g_j`` of the piece is strict), so each piece is one event "minimise ``d``,
+require ``>= 0``":
+
+* a required constraint is a smooth quantity, bounded through the event machinery (ADS, event
+  maps and, with ``remainder: rigorous``, the verified sweep);
+* an ``avoid`` set is the non-smooth ``max_j g_j``; its lower end over a step of the verified
+  sweep is ``max_j`` of the Taylor-model lower ends of the ``g_j``
+  (:class:`~reach.backends.taylor.problem.Largest`), so the set is excluded step by step through
+  the rigorous enclosures only.
+
+A required linear constraint implied in a mode by one of the mode's invariant constraints
+(``c = lambda c_inv + b`` with ``lambda > 0``, ``b <= 0``) holds there by the semantics of the
+automaton (a run stays inside the invariant of its mode) and is not bounded there.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import sympy
+
+from reach.model.constraints import affine_coefficients
+from reach.result import Result, Status
+from reach.spec.properties import BoundEvent, BoundSafety
+
+STRICT_ZERO = float(np.finfo(float).tiny)   # "> 0" written as ">= the smallest positive number"
+
+
+@dataclass
+class Margin:
+    """One unsafe piece as an event; ``event`` is None when invariants imply the constraint in
+    every listed mode."""
+
+    text: str
+    event: BoundEvent | None
+    implied_in: list[str]
+    avoid: bool
+
+
+def margins(model, prop: BoundSafety) -> list[Margin]:
+    """The margin events of a safety property, one per unsafe piece (pieces are listed in the
+    same order in every mode)."""
+    modes = [m for m in prop.modes if prop.pieces.get(m)]
+    if not modes:
+        return []
+    count = len(prop.pieces[modes[0]])
+    out = []
+    for j in range(count):
+        per_mode = {m: prop.pieces[m][j] for m in modes}
+        first = per_mode[modes[0]]
+        avoid = len(first) > 1 or not first[0].text.startswith("not (")
+        text = first[0].text[len("not ("):-1] if not avoid else " and ".join(c.text for c in first)
+        sides = [k for k in range(count) if prop.pieces[modes[0]][k][0].text == first[0].text]
+        if len(sides) > 1:        # abs(e) <= c: the constraints e <= c and -e <= c
+            text += f" (side {sides.index(j) + 1} of {len(sides)})"
+        implied = [] if avoid else [m for m in modes if _implied(model, m, per_mode[m][0])]
+        listed = [m for m in modes if m not in implied]
+        if not listed:
+            out.append(Margin(text, None, implied, avoid))
+            continue
+        if avoid:
+            quantity = {m: tuple(c.g for c in per_mode[m]) for m in listed}
+        else:
+            quantity = {m: per_mode[m][0].g for m in listed}
+        value = 0.0 if all(c.strict for c in first) else STRICT_ZERO
+        units = {c.unit for c in first}
+        event = BoundEvent(f"{prop.id}[{j}]", listed, "min", quantity, ">=", value, prop.symbols,
+                           prop.file, f"margin of {text}", text=f"margin of {text}",
+                           unit=units.pop() if len(units) == 1 else None)
+        out.append(Margin(text, event, implied, avoid))
+    return out
+
+
+def _implied(model, mode: str, piece) -> bool:
+    """Whether the required constraint ``-piece.g <= 0`` follows from one invariant constraint
+    of ``mode`` (both linear): ``-piece.g = lambda g_inv + b`` with ``lambda > 0``, ``b <= 0``."""
+    symbols = model.symbols
+    required = affine_coefficients(sympy.expand(-piece.g), symbols)
+    if required is None:
+        return False
+    a, b = required
+    for c in model.modes[mode].invariant:
+        coeffs = affine_coefficients(c.g, symbols)
+        if coeffs is None:
+            continue
+        a_inv, b_inv = coeffs
+        k = int(np.argmax(np.abs(a_inv)))
+        if a_inv[k] == 0:
+            continue
+        lam = a[k] / a_inv[k]
+        gap = b - lam * b_inv
+        if lam > 0 and np.allclose(a, lam * a_inv, rtol=1e-12, atol=0.0) and \
+                (gap < 0 or (gap == 0 and piece.strict and not c.strict) or (gap == 0 and c.strict)):
+            return True
+    return False
+
+
+def check_safety(backend, model, prop: BoundSafety, options: dict | None):
+    """Check every margin event of ``prop`` and combine: SAFE when each is SAFE (a rigorous
+    lower end of the margin above the requirement) or implied by invariants; otherwise UNKNOWN
+    with the margin bounds (estimated ones say so)."""
+    rows, statuses, lows, highs, counterexample = [], [], [], [], None
+    for part in margins(model, prop):
+        if part.event is None:
+            rows.append({"constraint": part.text, "status": "SAFE",
+                         "argument": f"implied by the invariant of {', '.join(part.implied_in)}"})
+            statuses.append(Status.SAFE)
+            continue
+        result = backend.check(model, part.event, options)
+        lo, hi = result.bound
+        if result.status != Status.SAFE and counterexample is None:
+            counterexample = _witness(model, prop, result)
+        lows.append(lo)
+        highs.append(hi)
+        statuses.append(result.status)
+        d = result.details
+        rows.append({"constraint": part.text, "status": result.status.value, "margin_bound": [lo, hi],
+                     "modes": part.event.modes, "implied_in": part.implied_in, "remainder": d["remainder"],
+                     "subdomain_count": d["subdomain_count"], "share_meeting_requirement": d["share_meeting_requirement"],
+                     **({"avoid": True} if part.avoid else {})})
+    status = Status.SAFE if all(s == Status.SAFE for s in statuses) else Status.UNKNOWN
+    if counterexample is not None:
+        status = Status.UNSAFE
+    details = {"constraints": rows,
+               "method": "margin of every unsafe piece bounded along the run (min over the listed modes)"}
+    if lows:
+        lo, hi = min(lows), min(highs)
+        details["margin_bound"] = [lo, hi]
+        details["method"] = f"smallest margin in [{lo:.6g}, {hi:.6g}] (model units)"
+        remainders = {r["remainder"] for r in rows if "remainder" in r}
+        details["remainder"] = ", ".join(sorted(remainders))
+    if status == Status.SAFE:
+        details["argument"] = (
+            "each required constraint (or the avoid set) has a margin whose verified lower bound over "
+            "every run in the listed modes is positive (taylor rigorous sweep), or is implied by a mode "
+            "invariant; see 'constraints'")
+    else:
+        open_rows = [r["constraint"] for r in rows if r["status"] != "SAFE"]
+        details["reason"] = "margin not proved for " + "; ".join(open_rows)
+    if counterexample is not None:
+        details["argument"] = ("a point of a subdomain whose margin bound reaches below zero (its centre or a "
+                               "corner), mapped back to an initial state and switch time and replayed by the simulator")
+        details.pop("reason", None)
+    coverage = 1.0 if status == Status.SAFE else 0.0
+    return Result(backend.name, model.name, prop.id, status, coverage=coverage, details=details,
+                  counterexample=counterexample)
+
+
+WITNESSES = 4      # subdomains whose centre and corners are replayed, per margin
+
+
+def _witness(model, prop: BoundSafety, result):
+    """A replayed counterexample from the subdomains with the lowest margin bounds: their
+    centres and corners, each an initial state (and switch time, the state after the model's
+    own) that the simulator runs alone; None if none violates."""
+    from reach.backends.montecarlo import replay
+
+    rows = [r for r in result.details.get("subdomains", []) if np.isfinite(r["bound"][1])]
+    rows.sort(key=lambda r: r["bound"][1])
+    names = result.details["variables"]
+    for row in rows[:WITNESSES]:
+        if row["bound"][0] > 0:
+            break
+        low, high = np.asarray(row["low"]), np.asarray(row["high"])
+        points = [0.5 * (low + high)] + [np.where(corner, high, low) for corner in _corners(len(low))]
+        for point in points:
+            x = 0.5 * (model.initial.low + model.initial.high)
+            tau = None
+            for name, value in zip(names, point):
+                if name in model.state:
+                    x[model.state.index(name)] = value
+                else:
+                    tau = float(value)
+            if tau is None and any(not tr.urgent for tr in model.transitions):
+                tau = _fixed_switch(model)
+            rep = replay(model, prop, x, tau)
+            if rep.violated:
+                return rep.counterexample(model, prop, "taylor (subdomain point, replayed)")
+    return None
+
+
+def _corners(m: int, limit: int = 16) -> list[np.ndarray]:
+    """Up to ``limit`` corners of a box in ``m`` variables (as masks of the upper ends)."""
+    count = min(2 ** m, limit)
+    return [np.array([(k >> j) & 1 for j in range(m)], dtype=bool) for k in range(count)]
+
+
+def _fixed_switch(model) -> float:
+    """The switch time of a window of one instant (no switch-time variable)."""
+    _, lo, hi = next(tr.window for tr in model.transitions if not tr.urgent)
+    return float(min(lo, model.horizon))

@@ -1,0 +1,139 @@
+"""taylor on safety properties (margins of the unsafe pieces) and through may-transition windows
+(the switch time as an expansion variable), against closed forms and replayed runs."""
+
+from __future__ import annotations
+
+import textwrap
+
+import numpy as np
+import pytest
+
+from reach.backends.montecarlo import replay
+from reach.backends.taylor import BACKEND
+from reach.backends.taylor.safety import margins
+from reach.backends.taylor.window import with_switch_time
+from reach.model.loader import load_model
+from reach.result import Status
+from reach.spec.properties import bind, load_properties
+
+RIGOROUS = {"remainder": "rigorous"}
+
+# x' = 1 until the abort at tau in [lo, hi] (forced by t <= hi), x' = -1 after it:
+# x(t) = x0 + 2 tau - t in passive.
+RAMP = """
+name: ramp
+state: [x, t]
+modes:
+  go:
+    flow: {{x: 1, t: 1}}
+    invariant: ["t <= {hi}"]
+  back:
+    flow: {{x: -1, t: 1}}
+transitions:
+  abort: {{from: go, to: back, guard: ["t >= {lo}", "t <= {hi}"]}}
+initial: {{mode: go, box: {{x: [2, 2.5], t: 0}}}}
+horizon: {horizon}
+"""
+
+# an undamped oscillator from x0 in [0.9, 1.1], v0 = 0: x(t) = x0 cos t, so max x = max x0
+SPRING = """
+name: spring
+state: [x, v, t]
+modes:
+  m:
+    flow: {x: v, v: -x, t: 1}
+initial: {mode: m, box: {x: [0.9, 1.1], v: 0, t: 0}}
+horizon: 4
+"""
+
+
+def _files(tmp_path, model_text, props_text):
+    model = tmp_path / "model.yaml"
+    model.write_text(textwrap.dedent(model_text))
+    props = tmp_path / "props.yaml"
+    props.write_text(textwrap.dedent(props_text))
+    m = load_model(str(model))
+    return m, {p.id: bind(p, m) for p in load_properties(str(props))}
+
+
+def test_required_constraint_margin_contains_the_closed_form_and_proves_safe(tmp_path):
+    model, props = _files(tmp_path, SPRING, """
+        properties:
+          - {id: low, kind: safety, require: ["x <= 1.2"]}
+          - {id: high, kind: safety, require: ["x <= 1.05"]}
+    """)
+    safe = BACKEND.check(model, props["low"], RIGOROUS)
+    assert safe.status is Status.SAFE
+    lo, hi = safe.details["margin_bound"]
+    assert 0 < lo <= 1.2 - 1.1 + 1e-12 <= hi + 1e-9        # min margin 1.2 - max x0 = 0.1
+    # the estimated remainder bounds the same margin but proves nothing
+    estimated = BACKEND.check(model, props["low"], {})
+    assert estimated.status is Status.UNKNOWN
+    assert estimated.details["margin_bound"][0] == pytest.approx(0.1, abs=1e-6)
+    # x0 = 1.1 reaches x = 1.1 > 1.05: a witness that replays
+    unsafe = BACKEND.check(model, props["high"], RIGOROUS)
+    assert unsafe.status is Status.UNSAFE
+    c = unsafe.counterexample
+    assert replay(model, props["high"], c.initial_state, c.switch_time).violated
+    assert c.initial_state[0] > 1.05
+
+
+def test_constraint_implied_by_the_mode_invariant_is_not_bounded(tmp_path):
+    srna = load_model("models/SRNA01.yaml")
+    los = {p.id: bind(p, srna) for p in load_properties("properties/rendezvous.yaml")}["los"]
+    parts = margins(srna, los)
+    assert [p.text for p in parts] == ["x >= -100[m]", "y >= x*tan(pi/6)", "-y >= x*tan(pi/6)"]
+    assert parts[0].event is None and parts[0].implied_in == ["rendezvous"]
+    assert all(p.event is not None and p.event.sense == "min" for p in parts[1:])
+    # the margin of y >= x tan(30 deg) is y - x tan(30 deg)
+    x, y = srna.symbols[0], srna.symbols[1]
+    g = parts[1].event.quantity["rendezvous"]
+    assert float(g.subs({x: -50.0, y: 10.0})) == pytest.approx(10.0 + 50.0 * np.tan(np.pi / 6))
+
+
+def test_switch_time_becomes_a_state_and_the_switch_is_urgent():
+    sra = load_model("models/SRA02.yaml")
+    aug, k = with_switch_time(sra)
+    assert k == sra.n and aug.state[-1] == "_switch_time"
+    assert (aug.initial.low[k], aug.initial.high[k]) == (120.0, 125.0)
+    assert all(tr.urgent for tr in aug.transitions)
+    assert all(m.flow[k] == 0 for m in aug.modes.values())
+
+
+@pytest.mark.parametrize("horizon, status", [(2.5, Status.SAFE), (5.0, Status.UNSAFE)])
+def test_avoid_set_after_a_window_against_the_closed_form(tmp_path, horizon, status):
+    """Passive x = x0 + 2 tau - t >= 2 + 2 - T: the box |x| <= 0.5 is missed by 1 for T = 2.5
+    (SAFE, proved step by step) and entered for T = 5 (a switch time and initial state that
+    replay)."""
+    model, props = _files(tmp_path, RAMP.format(lo=1.0, hi=1.5, horizon=horizon), """
+        properties:
+          - {id: hit, kind: safety, modes: [back], avoid: {box: {x: [-0.5, 0.5]}}}
+    """)
+    result = BACKEND.check(model, props["hit"], {"refine": 3})
+    assert result.status is status
+    lo, hi = result.details["margin_bound"]
+    if status is Status.SAFE:
+        # the closest approach: x0 = 2, tau = 1, t = T gives x = 1.5, margin x - 0.5 = 1
+        assert 0 < lo <= 1.0 + 1e-9 <= hi + 2e-9
+    else:
+        c = result.counterexample
+        assert 1.0 <= c.switch_time <= 1.5
+        run = replay(model, props["hit"], c.initial_state, c.switch_time)
+        assert run.violated and abs(run.state[0]) <= 0.5
+
+
+def test_thrust_safety_margin_agrees_with_the_event_file():
+    """rendezvous.yaml's thrust (|Fx| <= 10 N in approach and rendezvous) read as margins and
+    rendezvous_events.yaml's largest Fx in approach: margin = 10 N - max Fx (estimated)."""
+    srna = load_model("models/SRNA01.yaml")
+    thrust = {p.id: bind(p, srna) for p in load_properties("properties/rendezvous.yaml")}["thrust"]
+    events = {p.id: bind(p, srna) for p in load_properties("properties/rendezvous_events.yaml")}
+    part = margins(srna, thrust)[0]                      # Fx <= 10 N
+    assert part.event.modes == ["approach", "rendezvous"]
+    approach_only = type(part.event)(**{**part.event.__dict__, "modes": ["approach"],
+                                        "quantity": {"approach": part.event.quantity["approach"]}})
+    margin = BACKEND.check(srna, approach_only, {})
+    fx = BACKEND.check(srna, events["thrust_x_max"], {})
+    ten_newton = 10.0 * 60.0 ** 2                         # kg m/min^2
+    assert margin.bound[0] == pytest.approx(ten_newton - fx.bound[1], rel=1e-9)
+    assert margin.bound[1] == pytest.approx(ten_newton - fx.bound[0], rel=1e-9)
