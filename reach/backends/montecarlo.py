@@ -46,8 +46,8 @@ from reach.backends.initial_sampling import PolytopeSampler, input_signals, inpu
 from reach.backends.options import parse_options, ranged
 from reach.errors import InputError
 from reach.model.automaton import HybridAutomaton
-from reach.model.constraints import lambdify_margins
-from reach.model.simulate import Simulator
+from reach.model.constraints import NUMERICAL_TOLERANCE, lambdify_margins
+from reach.model.simulate import Simulator, single_threaded
 from reach.result import Counterexample, Result, Status
 from reach.spec.properties import BoundEvent, BoundReach, BoundReachAvoid, BoundSafety
 from reach.stats import clopper_pearson_upper, wilson
@@ -103,16 +103,74 @@ def switch_window(model: HybridAutomaton):
 
 # ------------------------------------------------------------------ monitoring
 
+_COMPILED: dict = {}
+
+
+def _compiled_tests(model: HybridAutomaton, prop: BoundSafety):
+    """``(tests, stacked)`` of ``prop`` in ``model``'s modes, compiled once per (model, property):
+    ``tests[mode index]`` the state-by-state violation test, ``stacked[mode index] = (L, c,
+    starts)`` every unsafe piece's ``H x <= g`` stacked (pieces starting at rows ``starts``) where
+    all pieces are linear and the property uses the standard test."""
+    key = (id(model), id(prop))
+    if key in _COMPILED and _COMPILED[key][0] is model and _COMPILED[key][1] is prop:
+        return _COMPILED[key][2]
+    names = list(model.modes)
+    tests = {names.index(m): prop.violation(m) for m in prop.modes if prop.violation(m) is not None}
+    stacked = {}
+    standard = type(prop).violation is BoundSafety.violation          # not a subclass's own test
+    for m_index, m in enumerate(names):
+        hs = prop.halfspace_pieces(m) if m_index in tests and standard else None
+        if hs:
+            stacked[m_index] = (np.vstack([H for H, _ in hs]), np.concatenate([g for _, g in hs]),
+                                np.cumsum([0] + [H.shape[0] for H, _ in hs[:-1]]))
+    if len(_COMPILED) > 256:
+        _COMPILED.clear()
+    _COMPILED[key] = (model, prop, (tests, stacked))
+    return tests, stacked
+
+
 class SafetyMonitor:
     """Tracks, per run, the smallest depth into the unsafe set and the first violation."""
 
     def __init__(self, model: HybridAutomaton, prop: BoundSafety, n_runs: int):
-        names = list(model.modes)
-        self.tests = {names.index(m): prop.violation(m) for m in prop.modes if prop.violation(m) is not None}
+        self.tests, self.stacked = _compiled_tests(model, prop)
         self.min_depth = np.full(n_runs, np.inf)
         self.violation_time = np.full(n_runs, np.nan)
         self.violation_state = np.full((n_runs, model.n), np.nan)
         self.violation_mode = np.full(n_runs, -1)
+
+    def block(self, t, X, seen, m_index, rows, scale):
+        """A whole block of grid states of one mode at once: ``X`` (B, n, R) at times ``t``
+        (B, R), ``seen`` (B, R) the states the runs ``rows`` (distinct) visit, ``scale`` (B, R)
+        their ``max_i |x_i|``. The same test as :meth:`__call__`: a piece's depth is the
+        largest of its margins ``H x - g``, the depth the smallest over the pieces, a
+        violation a depth below ``-NUMERICAL_TOLERANCE (1 + scale)``."""
+        if m_index not in self.tests or not seen.any():
+            return
+        if m_index not in self.stacked:            # a nonlinear piece: the state-by-state test
+            j, r = np.nonzero(seen)
+            self(t[j, r], np.moveaxis(X, 1, 2)[j, r], np.full(j.size, m_index), rows[r])
+            return
+        L, c, starts = self.stacked[m_index]
+        G = np.matmul(L, X)
+        G -= c[:, None]
+        if starts.size == G.shape[1]:                  # one constraint per piece
+            depth = G.min(axis=1)
+        else:
+            bounds = list(starts) + [G.shape[1]]
+            depth = G[:, bounds[0]:bounds[1]].max(axis=1)
+            for a, b in zip(bounds[1:-1], bounds[2:]):
+                np.minimum(depth, G[:, a:b].max(axis=1), out=depth)
+        depth = np.where(seen, depth, np.inf)
+        self.min_depth[rows] = np.minimum(self.min_depth[rows], depth.min(axis=0))
+        violated = depth < -NUMERICAL_TOLERANCE * (1.0 + scale)
+        fresh = violated.any(axis=0) & np.isnan(self.violation_time[rows])
+        if fresh.any():
+            r = np.flatnonzero(fresh)
+            j = violated[:, r].argmax(axis=0)
+            self.violation_time[rows[r]] = t[j, r]
+            self.violation_state[rows[r]] = X[j, :, r]
+            self.violation_mode[rows[r]] = m_index
 
     def __call__(self, t, X, mode, rows):
         for m_index, test in self.tests.items():
@@ -323,7 +381,10 @@ class MonteCarloBackend:
 
     def check_many(self, model: HybridAutomaton, props: list, options: dict | None = None) -> list[Result]:
         """Check several properties of one model; safety ones share the sampled runs."""
-        opts = Options.from_dict(options)
+        with single_threaded():
+            return self._check_many(model, props, Options.from_dict(options))
+
+    def _check_many(self, model: HybridAutomaton, props: list, opts: Options) -> list[Result]:
         results = {}
         safety = [p for p in props if isinstance(p, BoundSafety)]
         if safety:
