@@ -63,8 +63,10 @@ class Options:
     search_size: int = ranged(200, 1, 1_000_000)        # runs per generation
     seed: int = 0
     dt: float | None = None        # simulator grid step (model default if None)
-    batch: int = ranged(20000, 1, 1_000_000)            # runs per numpy batch for stochastic estimates
+    batch: int = ranged(20000, 1, 1_000_000)            # runs per batch (an executor unit; stochastic estimates)
     input_step: float | None = None  # piece length of sampled input signals (horizon/20 if None)
+    jobs: int = ranged(1, 1, 256)  # local worker processes for the i.i.d. batches
+    scheduler: object = None       # or a Dask scheduler address (or Client) to run them on
     optimise: bool = True          # falsification by optimisation after the search (reach.backends.falsify)
     generations: int = ranged(20, 0, 100_000)     # differential evolution generations
     population: int = ranged(40, 5, 1_000_000)    # runs per generation
@@ -187,6 +189,20 @@ class SafetyMonitor:
                 self.violation_time[rows[k]] = t[k]
                 self.violation_state[rows[k]] = X[k]
                 self.violation_mode[rows[k]] = m_index
+
+    ARRAYS = ("min_depth", "violation_time", "violation_state", "violation_mode")
+
+    def arrays(self) -> tuple:
+        """What the monitor found, per run (to send back from a worker and merge)."""
+        return tuple(getattr(self, a) for a in self.ARRAYS)
+
+    @classmethod
+    def merged(cls, model: HybridAutomaton, prop: BoundSafety, parts: list) -> "SafetyMonitor":
+        """One monitor over the runs of several (``arrays()`` of each, in run order)."""
+        out = cls(model, prop, 0)
+        for i, name in enumerate(cls.ARRAYS):
+            setattr(out, name, np.concatenate([q[i] for q in parts]))
+        return out
 
     def first_violation(self) -> int | None:
         """The violating run that went deepest into the unsafe set, if any."""
@@ -432,8 +448,9 @@ class MonteCarloBackend:
         X = np.concatenate([Xs, Xr])
         tau = None if window is None else np.concatenate([taus, taur])
         n_structured = Xs.shape[0]
-        monitors = [SafetyMonitor(model, p, X.shape[0]) for p in props]
-        traj = sim.run(X, tau, observers=monitors, kicks=kicks, signal=signal)
+        parts = _simulate_rounds(model, props, sim, opts, X, tau, signal, n_structured, kicks)
+        monitors = [SafetyMonitor.merged(model, p, [q[0][i] for q in parts]) for i, p in enumerate(props)]
+        blocked = sum(q[1] for q in parts)
         shared = (time.perf_counter() - start) / len(props)
         results = []
         for prop, monitor in zip(props, monitors):
@@ -441,7 +458,7 @@ class MonteCarloBackend:
             rounds = [("structured+random", X, tau, monitor, signal)]
             details = {"dt": sim.dt, "seed": opts.seed, "structured_runs": int(n_structured),
                        "random_runs": int(opts.samples),
-                       "blocked_runs": int(np.count_nonzero(np.isfinite(traj.blocked_at))),
+                       "blocked_runs": int(blocked),
                        "assumes": "states checked at grid points and event instants only "
                                   "(a falsifier, not a proof)"}
             fails = int(np.count_nonzero(np.isfinite(monitor.violation_time[n_structured:])))
@@ -577,6 +594,56 @@ class MonteCarloBackend:
         details = {"samples": total, "successes": successes, "estimate": successes / total, "dt": sim.dt,
                    "seed": opts.seed, "interval": "95 % Wilson"}
         return Result(NAME, model.name, prop.id, status, probability=(lo, hi), details=details)
+
+
+SAMPLE_BLOCK = 1000     # i.i.d. runs always simulated together: the unit of batches
+
+
+def _simulate_rounds(model, props, sim, opts: Options, X, tau, signal, n_structured: int, kicks) -> list:
+    """Simulate the structured runs (in this process) and the i.i.d. ones, monitoring every
+    property; ``[(monitor arrays per property, blocked runs)]`` in run order.
+
+    The i.i.d. runs are simulated in blocks of :data:`SAMPLE_BLOCK`, each block on its own
+    (disturbance kicks from ``SeedSequence(seed, spawn_key=(k,))`` for block ``k``): a run's
+    outcome depends on the seed and its index only, not on how the blocks are grouped into
+    batches of ``batch`` runs nor on where a batch runs (in this process, on ``jobs`` local
+    processes, or on a Dask ``scheduler``)."""
+    def rows(a, b):
+        return (X[a:b], None if tau is None else tau[a:b],
+                None if signal is None else (signal[0], signal[1][a:b], None if signal[2] is None else signal[2][a:b]))
+
+    monitors = [SafetyMonitor(model, p, n_structured) for p in props]
+    Xs, taus, signals = rows(0, n_structured)
+    traj = sim.run(Xs, taus, observers=monitors, kicks=kicks, signal=signals)
+    parts = [([m.arrays() for m in monitors], int(np.count_nonzero(np.isfinite(traj.blocked_at))))]
+    blocks = [(k,) + rows(a, min(a + SAMPLE_BLOCK, X.shape[0]))
+              for k, a in enumerate(range(n_structured, X.shape[0], SAMPLE_BLOCK))]
+    per_unit = max(1, -(-opts.batch // SAMPLE_BLOCK))
+    units = [(model, props, sim.dt, opts.seed, blocks[i:i + per_unit]) for i in range(0, len(blocks), per_unit)]
+    if len(units) <= 1 or (opts.jobs <= 1 and opts.scheduler is None):
+        return parts + [part for unit in units for part in simulate_blocks(*unit)]
+    from reach.executors import make_executor
+
+    out = [None] * len(units)
+    for i, (status, value) in make_executor(opts.jobs, opts.scheduler).map_unordered(simulate_blocks, units):
+        if status != "ok":
+            raise RuntimeError(f"a Monte Carlo batch did not finish ({status})")
+        out[i] = value
+    return parts + [part for unit in out for part in unit]
+
+
+def simulate_blocks(model, props, dt, seed, blocks) -> list:
+    """One batch (an executor unit): each block ``(k, X, tau, signal)`` of i.i.d. runs simulated
+    on its own with one monitor per property; ``[(monitor arrays, blocked runs)]``."""
+    sim = Simulator(model, dt)
+    out = []
+    with single_threaded():
+        for k, X, tau, signal in blocks:
+            kicks = _kicks(model, np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(k,))))
+            monitors = [SafetyMonitor(model, p, X.shape[0]) for p in props]
+            traj = sim.run(X, tau, observers=monitors, kicks=kicks, signal=signal)
+            out.append(([m.arrays() for m in monitors], int(np.count_nonzero(np.isfinite(traj.blocked_at)))))
+    return out
 
 
 def _kicks(model: HybridAutomaton, rng):
