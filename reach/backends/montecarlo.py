@@ -20,6 +20,13 @@ run would leave its invariant, and, in the random and search rounds, also at pie
 where the run's switching signal says so and a guard holds (each with probability
 ``SWITCH_PROBABILITY``). A counterexample carries its input and switching signal.
 
+The structured and i.i.d. runs are one simulation shared by all safety properties of the call
+(one monitor each; whole blocks of grid states are tested at once, every unsafe piece of a
+mode stacked in one matrix). The i.i.d. runs are simulated in fixed blocks of
+:data:`SAMPLE_BLOCK`, grouped into batches of ``batch`` runs that run in this process, on
+``jobs`` local processes or on a Dask ``scheduler`` (:mod:`reach.executors`): a seed gives the
+same answer whatever the split and the executor.
+
 Every visited state is checked against every unsafe piece of the property. A violation is
 replayed alone (:func:`replay`) and returned as UNSAFE with its counterexample. Otherwise the
 answer is UNKNOWN with the closest approach (depth) found and a one-sided 95 % Clopper-Pearson

@@ -7,7 +7,10 @@ together:
 
 * linear modes use the exact flow ``[x; 1](t) = expm([[A, b], [0, 0]] t) [x; 1]``: the states
   on the grid ``t_k = k dt`` of a whole segment come from precomputed powers of the one-step
-  matrix, so a segment of thousands of steps is one batched matrix product;
+  matrix, so a segment of thousands of steps is one batched matrix product; where the mode's
+  urgent guards and invariant are linear (and it has no may-transition with a general guard),
+  the states and those margins come together, block by block of grid steps
+  (:mod:`reach.model.batch`), and observers with a ``block`` method take whole blocks;
 * nonlinear modes step classical RK4 (``substeps`` per grid step), stopping once every run
   of the group has met an event;
 * an urgent transition is taken at the first instant its guard holds, located by bisection
