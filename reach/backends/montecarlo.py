@@ -54,7 +54,7 @@ from reach.backends.options import parse_options, ranged
 from reach.errors import InputError
 from reach.model.automaton import HybridAutomaton
 from reach.model.constraints import NUMERICAL_TOLERANCE, lambdify_margins
-from reach.model.simulate import Simulator, single_threaded
+from reach.model.simulate import Simulator, check_size, single_threaded
 from reach.result import Counterexample, Result, Status
 from reach.spec.properties import BoundEvent, BoundReach, BoundReachAvoid, BoundSafety
 from reach.stats import clopper_pearson_upper, wilson
@@ -455,6 +455,7 @@ class MonteCarloBackend:
         X = np.concatenate([Xs, Xr])
         tau = None if window is None else np.concatenate([taus, taur])
         n_structured = Xs.shape[0]
+        check_size(model, sim.dt, X.shape[0])      # all the runs' arrays are held at once
         parts = _simulate_rounds(model, props, sim, opts, X, tau, signal, n_structured, kicks)
         monitors = [SafetyMonitor.merged(model, p, [q[0][i] for q in parts]) for i, p in enumerate(props)]
         blocked = sum(q[1] for q in parts)
