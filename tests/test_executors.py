@@ -65,3 +65,32 @@ def test_taylor_subdomains_on_processes_and_dask_match_one_process():
                                   dashboard_address=None) as cluster, distributed.Client(cluster) as client:
         dask = essence(BACKEND.check(model, prop, {**base, "scheduler": client}))
     assert len(serial) == 2 and serial == local == dask
+
+
+MC_UNITS = [("models/SRA02.yaml", "properties/rendezvous.yaml"),
+            ("models/SRU01.yaml", "properties/collision_box_0p2.yaml")]
+
+
+def _mc_essence(model_file, prop_file, options):
+    from reach.checking import check_files
+
+    return [(r.property, r.status, r.details["closest_depth"], r.details["violation_probability_upper_95"],
+             r.details["blocked_runs"], None if r.counterexample is None else r.counterexample.initial_state)
+            for r in check_files(model_file, prop_file, "montecarlo", options)]
+
+
+@pytest.mark.parametrize("model_file,prop_file", MC_UNITS)
+def test_monte_carlo_batches_give_the_same_answer_whatever_the_split_and_the_executor(model_file, prop_file):
+    """2500 i.i.d. runs: one batch in this process, three batches in this process, three
+    batches on two worker processes, and on a Dask cluster: identical verdicts, closest
+    approaches, bounds and counterexamples for the seed."""
+    base = {"samples": 2500, "search_rounds": 1, "search_size": 50, "optimise": False, "seed": 3}
+    one = _mc_essence(model_file, prop_file, base)
+    split = _mc_essence(model_file, prop_file, {**base, "batch": 1000})
+    processes = _mc_essence(model_file, prop_file, {**base, "batch": 1000, "jobs": 2})
+    assert one == split == processes
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster, distributed.Client(cluster) as client:
+        dask = _mc_essence(model_file, prop_file, {**base, "batch": 700, "scheduler": client})
+    assert dask == one

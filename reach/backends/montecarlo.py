@@ -20,6 +20,13 @@ run would leave its invariant, and, in the random and search rounds, also at pie
 where the run's switching signal says so and a guard holds (each with probability
 ``SWITCH_PROBABILITY``). A counterexample carries its input and switching signal.
 
+The structured and i.i.d. runs are one simulation shared by all safety properties of the call
+(one monitor each; whole blocks of grid states are tested at once, every unsafe piece of a
+mode stacked in one matrix). The i.i.d. runs are simulated in fixed blocks of
+:data:`SAMPLE_BLOCK`, grouped into batches of ``batch`` runs that run in this process, on
+``jobs`` local processes or on a Dask ``scheduler`` (:mod:`reach.executors`): a seed gives the
+same answer whatever the split and the executor.
+
 Every visited state is checked against every unsafe piece of the property. A violation is
 replayed alone (:func:`replay`) and returned as UNSAFE with its counterexample. Otherwise the
 answer is UNKNOWN with the closest approach (depth) found and a one-sided 95 % Clopper-Pearson
@@ -46,8 +53,8 @@ from reach.backends.initial_sampling import PolytopeSampler, input_signals, inpu
 from reach.backends.options import parse_options, ranged
 from reach.errors import InputError
 from reach.model.automaton import HybridAutomaton
-from reach.model.constraints import lambdify_margins
-from reach.model.simulate import Simulator
+from reach.model.constraints import NUMERICAL_TOLERANCE, lambdify_margins
+from reach.model.simulate import Simulator, check_size, single_threaded
 from reach.result import Counterexample, Result, Status
 from reach.spec.properties import BoundEvent, BoundReach, BoundReachAvoid, BoundSafety
 from reach.stats import clopper_pearson_upper, wilson
@@ -63,8 +70,10 @@ class Options:
     search_size: int = ranged(200, 1, 1_000_000)        # runs per generation
     seed: int = 0
     dt: float | None = None        # simulator grid step (model default if None)
-    batch: int = ranged(20000, 1, 1_000_000)            # runs per numpy batch for stochastic estimates
+    batch: int = ranged(20000, 1, 1_000_000)            # runs per batch (an executor unit; stochastic estimates)
     input_step: float | None = None  # piece length of sampled input signals (horizon/20 if None)
+    jobs: int = ranged(1, 1, 256)  # local worker processes for the i.i.d. batches
+    scheduler: object = None       # or a Dask scheduler address (or Client) to run them on
     optimise: bool = True          # falsification by optimisation after the search (reach.backends.falsify)
     generations: int = ranged(20, 0, 100_000)     # differential evolution generations
     population: int = ranged(40, 5, 1_000_000)    # runs per generation
@@ -103,16 +112,74 @@ def switch_window(model: HybridAutomaton):
 
 # ------------------------------------------------------------------ monitoring
 
+_COMPILED: dict = {}
+
+
+def _compiled_tests(model: HybridAutomaton, prop: BoundSafety):
+    """``(tests, stacked)`` of ``prop`` in ``model``'s modes, compiled once per (model, property):
+    ``tests[mode index]`` the state-by-state violation test, ``stacked[mode index] = (L, c,
+    starts)`` every unsafe piece's ``H x <= g`` stacked (pieces starting at rows ``starts``) where
+    all pieces are linear and the property uses the standard test."""
+    key = (id(model), id(prop))
+    if key in _COMPILED and _COMPILED[key][0] is model and _COMPILED[key][1] is prop:
+        return _COMPILED[key][2]
+    names = list(model.modes)
+    tests = {names.index(m): prop.violation(m) for m in prop.modes if prop.violation(m) is not None}
+    stacked = {}
+    standard = type(prop).violation is BoundSafety.violation          # not a subclass's own test
+    for m_index, m in enumerate(names):
+        hs = prop.halfspace_pieces(m) if m_index in tests and standard else None
+        if hs:
+            stacked[m_index] = (np.vstack([H for H, _ in hs]), np.concatenate([g for _, g in hs]),
+                                np.cumsum([0] + [H.shape[0] for H, _ in hs[:-1]]))
+    if len(_COMPILED) > 256:
+        _COMPILED.clear()
+    _COMPILED[key] = (model, prop, (tests, stacked))
+    return tests, stacked
+
+
 class SafetyMonitor:
     """Tracks, per run, the smallest depth into the unsafe set and the first violation."""
 
     def __init__(self, model: HybridAutomaton, prop: BoundSafety, n_runs: int):
-        names = list(model.modes)
-        self.tests = {names.index(m): prop.violation(m) for m in prop.modes if prop.violation(m) is not None}
+        self.tests, self.stacked = _compiled_tests(model, prop)
         self.min_depth = np.full(n_runs, np.inf)
         self.violation_time = np.full(n_runs, np.nan)
         self.violation_state = np.full((n_runs, model.n), np.nan)
         self.violation_mode = np.full(n_runs, -1)
+
+    def block(self, t, X, seen, m_index, rows, scale):
+        """A whole block of grid states of one mode at once: ``X`` (B, n, R) at times ``t``
+        (B, R), ``seen`` (B, R) the states the runs ``rows`` (distinct) visit, ``scale`` (B, R)
+        their ``max_i |x_i|``. The same test as :meth:`__call__`: a piece's depth is the
+        largest of its margins ``H x - g``, the depth the smallest over the pieces, a
+        violation a depth below ``-NUMERICAL_TOLERANCE (1 + scale)``."""
+        if m_index not in self.tests or not seen.any():
+            return
+        if m_index not in self.stacked:            # a nonlinear piece: the state-by-state test
+            j, r = np.nonzero(seen)
+            self(t[j, r], np.moveaxis(X, 1, 2)[j, r], np.full(j.size, m_index), rows[r])
+            return
+        L, c, starts = self.stacked[m_index]
+        G = np.matmul(L, X)
+        G -= c[:, None]
+        if starts.size == G.shape[1]:                  # one constraint per piece
+            depth = G.min(axis=1)
+        else:
+            bounds = list(starts) + [G.shape[1]]
+            depth = G[:, bounds[0]:bounds[1]].max(axis=1)
+            for a, b in zip(bounds[1:-1], bounds[2:]):
+                np.minimum(depth, G[:, a:b].max(axis=1), out=depth)
+        depth = np.where(seen, depth, np.inf)
+        self.min_depth[rows] = np.minimum(self.min_depth[rows], depth.min(axis=0))
+        violated = depth < -NUMERICAL_TOLERANCE * (1.0 + scale)
+        fresh = violated.any(axis=0) & np.isnan(self.violation_time[rows])
+        if fresh.any():
+            r = np.flatnonzero(fresh)
+            j = violated[:, r].argmax(axis=0)
+            self.violation_time[rows[r]] = t[j, r]
+            self.violation_state[rows[r]] = X[j, :, r]
+            self.violation_mode[rows[r]] = m_index
 
     def __call__(self, t, X, mode, rows):
         for m_index, test in self.tests.items():
@@ -129,6 +196,20 @@ class SafetyMonitor:
                 self.violation_time[rows[k]] = t[k]
                 self.violation_state[rows[k]] = X[k]
                 self.violation_mode[rows[k]] = m_index
+
+    ARRAYS = ("min_depth", "violation_time", "violation_state", "violation_mode")
+
+    def arrays(self) -> tuple:
+        """What the monitor found, per run (to send back from a worker and merge)."""
+        return tuple(getattr(self, a) for a in self.ARRAYS)
+
+    @classmethod
+    def merged(cls, model: HybridAutomaton, prop: BoundSafety, parts: list) -> "SafetyMonitor":
+        """One monitor over the runs of several (``arrays()`` of each, in run order)."""
+        out = cls(model, prop, 0)
+        for i, name in enumerate(cls.ARRAYS):
+            setattr(out, name, np.concatenate([q[i] for q in parts]))
+        return out
 
     def first_violation(self) -> int | None:
         """The violating run that went deepest into the unsafe set, if any."""
@@ -323,7 +404,10 @@ class MonteCarloBackend:
 
     def check_many(self, model: HybridAutomaton, props: list, options: dict | None = None) -> list[Result]:
         """Check several properties of one model; safety ones share the sampled runs."""
-        opts = Options.from_dict(options)
+        with single_threaded():
+            return self._check_many(model, props, Options.from_dict(options))
+
+    def _check_many(self, model: HybridAutomaton, props: list, opts: Options) -> list[Result]:
         results = {}
         safety = [p for p in props if isinstance(p, BoundSafety)]
         if safety:
@@ -371,8 +455,10 @@ class MonteCarloBackend:
         X = np.concatenate([Xs, Xr])
         tau = None if window is None else np.concatenate([taus, taur])
         n_structured = Xs.shape[0]
-        monitors = [SafetyMonitor(model, p, X.shape[0]) for p in props]
-        traj = sim.run(X, tau, observers=monitors, kicks=kicks, signal=signal)
+        check_size(model, sim.dt, X.shape[0])      # all the runs' arrays are held at once
+        parts = _simulate_rounds(model, props, sim, opts, X, tau, signal, n_structured, kicks)
+        monitors = [SafetyMonitor.merged(model, p, [q[0][i] for q in parts]) for i, p in enumerate(props)]
+        blocked = sum(q[1] for q in parts)
         shared = (time.perf_counter() - start) / len(props)
         results = []
         for prop, monitor in zip(props, monitors):
@@ -380,7 +466,7 @@ class MonteCarloBackend:
             rounds = [("structured+random", X, tau, monitor, signal)]
             details = {"dt": sim.dt, "seed": opts.seed, "structured_runs": int(n_structured),
                        "random_runs": int(opts.samples),
-                       "blocked_runs": int(np.count_nonzero(np.isfinite(traj.blocked_at))),
+                       "blocked_runs": int(blocked),
                        "assumes": "states checked at grid points and event instants only "
                                   "(a falsifier, not a proof)"}
             fails = int(np.count_nonzero(np.isfinite(monitor.violation_time[n_structured:])))
@@ -516,6 +602,56 @@ class MonteCarloBackend:
         details = {"samples": total, "successes": successes, "estimate": successes / total, "dt": sim.dt,
                    "seed": opts.seed, "interval": "95 % Wilson"}
         return Result(NAME, model.name, prop.id, status, probability=(lo, hi), details=details)
+
+
+SAMPLE_BLOCK = 1000     # i.i.d. runs always simulated together: the unit of batches
+
+
+def _simulate_rounds(model, props, sim, opts: Options, X, tau, signal, n_structured: int, kicks) -> list:
+    """Simulate the structured runs (in this process) and the i.i.d. ones, monitoring every
+    property; ``[(monitor arrays per property, blocked runs)]`` in run order.
+
+    The i.i.d. runs are simulated in blocks of :data:`SAMPLE_BLOCK`, each block on its own
+    (disturbance kicks from ``SeedSequence(seed, spawn_key=(k,))`` for block ``k``): a run's
+    outcome depends on the seed and its index only, not on how the blocks are grouped into
+    batches of ``batch`` runs nor on where a batch runs (in this process, on ``jobs`` local
+    processes, or on a Dask ``scheduler``)."""
+    def rows(a, b):
+        return (X[a:b], None if tau is None else tau[a:b],
+                None if signal is None else (signal[0], signal[1][a:b], None if signal[2] is None else signal[2][a:b]))
+
+    monitors = [SafetyMonitor(model, p, n_structured) for p in props]
+    Xs, taus, signals = rows(0, n_structured)
+    traj = sim.run(Xs, taus, observers=monitors, kicks=kicks, signal=signals)
+    parts = [([m.arrays() for m in monitors], int(np.count_nonzero(np.isfinite(traj.blocked_at))))]
+    blocks = [(k,) + rows(a, min(a + SAMPLE_BLOCK, X.shape[0]))
+              for k, a in enumerate(range(n_structured, X.shape[0], SAMPLE_BLOCK))]
+    per_unit = max(1, -(-opts.batch // SAMPLE_BLOCK))
+    units = [(model, props, sim.dt, opts.seed, blocks[i:i + per_unit]) for i in range(0, len(blocks), per_unit)]
+    if len(units) <= 1 or (opts.jobs <= 1 and opts.scheduler is None):
+        return parts + [part for unit in units for part in simulate_blocks(*unit)]
+    from reach.executors import make_executor
+
+    out = [None] * len(units)
+    for i, (status, value) in make_executor(opts.jobs, opts.scheduler).map_unordered(simulate_blocks, units):
+        if status != "ok":
+            raise RuntimeError(f"a Monte Carlo batch did not finish ({status})")
+        out[i] = value
+    return parts + [part for unit in out for part in unit]
+
+
+def simulate_blocks(model, props, dt, seed, blocks) -> list:
+    """One batch (an executor unit): each block ``(k, X, tau, signal)`` of i.i.d. runs simulated
+    on its own with one monitor per property; ``[(monitor arrays, blocked runs)]``."""
+    sim = Simulator(model, dt)
+    out = []
+    with single_threaded():
+        for k, X, tau, signal in blocks:
+            kicks = _kicks(model, np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(k,))))
+            monitors = [SafetyMonitor(model, p, X.shape[0]) for p in props]
+            traj = sim.run(X, tau, observers=monitors, kicks=kicks, signal=signal)
+            out.append(([m.arrays() for m in monitors], int(np.count_nonzero(np.isfinite(traj.blocked_at)))))
+    return out
 
 
 def _kicks(model: HybridAutomaton, rng):

@@ -132,7 +132,8 @@ def lambdify_margins(constraints: Sequence[Constraint], symbols: Sequence[sympy.
     linear = halfspaces(constraints, symbols)
     if linear is not None:
         A, b = linear
-        return lambda X: X @ A.T - b
+        At = np.ascontiguousarray(A.T)          # a contiguous operand: a much faster product
+        return lambda X: X @ At - b
     fn = sympy.lambdify([list(symbols)], [c.g for c in constraints], modules="numpy")
 
     def margins(X: np.ndarray) -> np.ndarray:

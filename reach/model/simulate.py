@@ -7,7 +7,10 @@ together:
 
 * linear modes use the exact flow ``[x; 1](t) = expm([[A, b], [0, 0]] t) [x; 1]``: the states
   on the grid ``t_k = k dt`` of a whole segment come from precomputed powers of the one-step
-  matrix, so a segment of thousands of steps is one batched matrix product;
+  matrix, so a segment of thousands of steps is one batched matrix product; where the mode's
+  urgent guards and invariant are linear (and it has no may-transition with a general guard),
+  the states and those margins come together, block by block of grid steps
+  (:mod:`reach.model.batch`), and observers with a ``block`` method take whole blocks;
 * nonlinear modes step classical RK4 (``substeps`` per grid step), stopping once every run
   of the group has met an event;
 * an urgent transition is taken at the first instant its guard holds, located by bisection
@@ -35,16 +38,25 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg
 
+from reach.model import batch
 from reach.model.automaton import HybridAutomaton
 from reach.model.constraints import lambdify_margins
 
 BISECTION_STEPS = 40
 INVARIANT_TOLERANCE = 1e-7
 CHUNK_VALUES = 4_000_000          # states x steps x dims held at once in a linear segment
+BATCH_RUNS = 4096                 # runs of one linear segment advanced together
 MAX_STEPS = 5_000_000             # grid steps over the horizon (horizon / dt)
 MAX_PASSES_PER_STEP = 50          # events of one run inside one grid step before it counts as Zeno
 MEMORY_BUDGET = 4 * 2 ** 30       # bytes the simulator may plan to hold at once
 RUN_BYTES_PER_VALUE = 8 * 24      # per run and state value: the arrays a batch of runs carries
+
+
+def single_threaded():
+    """A context with one BLAS thread: the simulator's products are many and small, and
+    threads fighting over a loaded machine's cores make them several times slower."""
+    from threadpoolctl import threadpool_limits
+    return threadpool_limits(1, user_api="blas")
 
 
 def check_size(model: HybridAutomaton, dt: float, runs: int = 0) -> None:
@@ -116,7 +128,7 @@ class Simulator:
         self.mode_names = list(model.modes)
         self.n = model.n
         self.steps = int(np.ceil(model.horizon / self.dt - 1e-9))
-        self.generators, self.powers = {}, {}
+        self.generators, self.powers, self.tables = {}, {}, {}
         for name, mode in model.modes.items():
             if mode.linear is not None:
                 A, b = mode.linear
@@ -364,6 +376,14 @@ class Simulator:
     def _segment(self, name, rows, X, mode, t, tau, blocked_at, next_kick, watchers):
         """Advance ``rows`` (all in mode ``name``) to their next event, kick, or the horizon."""
         horizon = self.model.horizon
+        if name not in self.tables:
+            self.tables[name] = batch.LinearTable(self, name) if batch.eligible(self, name) else None
+        table = self.tables[name]
+        if table is not None:
+            for start in range(0, rows.size, BATCH_RUNS):
+                batch.segment_chunk(self, name, rows[start:start + BATCH_RUNS], X, mode, t, tau, blocked_at,
+                                    next_kick, watchers, horizon, table)
+            return
         span = float(np.max(np.minimum(next_kick[rows], horizon) - t[rows], initial=0.0))
         count = min(self.steps + 1, int(np.ceil(span / self.dt)) + 2)
         per_run = max(1, CHUNK_VALUES // (count * self.n))
@@ -422,7 +442,8 @@ class Simulator:
         # invariant: the first grid point outside it blocks the run
         inv = self.model.modes[name].invariant_margins
         M = inv(flat).reshape(n_rows, count, -1)
-        scale = 1.0 + np.abs(flat).max(axis=1).reshape(n_rows, count, 1)
+        absmax = np.abs(flat).max(axis=1).reshape(n_rows, count)
+        scale = 1.0 + absmax[:, :, None]
         outside = np.any(M > INVARIANT_TOLERANCE * scale, axis=2) & valid & (grid_t < event_time[:, None])
         blocked = outside.any(axis=1)
         block_j = outside.argmax(axis=1)
@@ -445,10 +466,8 @@ class Simulator:
             outside &= blocked[:, None]
         limit = np.where(blocked, grid_t[np.arange(n_rows), block_j], np.minimum(event_time, stop_at))
         seen = valid & (grid_t <= limit[:, None]) & (grid_t < event_time[:, None])
-        r_idx, j_idx = np.nonzero(seen)
-        if r_idx.size:
-            for f in watchers:
-                f(grid_t[r_idx, j_idx], Y[r_idx, j_idx], np.full(r_idx.size, mode[rows[0]]), rows[r_idx])
+        batch.notify_block(watchers, grid_t.T, Y.transpose(1, 2, 0), seen.T, int(mode[rows[0]]), rows,
+                           absmax.T)
         # runs that are blocked
         b = np.flatnonzero(blocked)
         X[rows[b]] = Y[b, block_j[b]]

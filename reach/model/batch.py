@@ -1,0 +1,264 @@
+"""Linear segments in blocks of grid steps: states, guard and invariant margins in one product.
+
+In a linear mode every quantity the simulator tests on the grid is affine in the state, and
+the state at grid step ``j`` of a segment is ``[x_j; 1] = P^j [x_0; 1]`` with ``P`` the exact
+one-step matrix (``expm`` of the augmented generator). Stacking the rows
+
+    ``L = [[I_n, 0], [H_guard, -g_guard] (each urgent transition), [H_inv, -g_inv]]``
+
+gives ``W_j = L P^j`` once per mode; then a block of ``B`` grid steps for ``R`` runs is one
+matrix product ``(B K, n+1) @ (n+1, R)``: the states and every margin at every grid point,
+runs along the last axis (so the reductions over rows and steps are contiguous). Blocks hold
+about :data:`BLOCK_VALUES` numbers (memory bounded, cache-sized); the block loop stops as soon
+as every run of the chunk has met its event, its blocking point or the end of its segment
+(the first block is short and each next one twice as long, up to that size).
+
+The semantics are the general path's (:meth:`reach.model.simulate.Simulator._segment_chunk`)
+step for step: the same grid points are visited, an urgent guard that holds at a grid point
+is located by the same bisection (``Simulator._first_entry``) inside the grid interval
+before it, the window switch is taken at ``tau``, the first grid point outside the invariant
+(beyond ``INVARIANT_TOLERANCE (1 + |x|_inf)``) blocks the run. Only rounding differs (``(L
+P^j) z`` against ``L (P^j z)``). Observers with a ``block`` method receive the visited grid
+states a block at a time (``block(t (B, R), X (B, n, R), seen (B, R), mode, rows, absmax)``);
+the event instants go through the ordinary call.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+BLOCK_VALUES = 1 << 19           # numbers in one block product (4 MiB)
+FIRST_BLOCK = 16                 # grid steps of a segment's first block
+SUB_BITS = 4                     # a guard entry is searched on sub-grids of 2^4 pieces per round
+
+
+class LinearTable:
+    """``W_j = L P^j`` of one linear mode, extended as far as segments ask."""
+
+    def __init__(self, sim, name: str):
+        model, n = sim.model, sim.n
+        parts = [np.hstack([np.eye(n), np.zeros((n, 1))])]
+        self.guards = []                                     # (offset, rows) of each urgent guard
+        offset = n
+        for tr, _ in sim.urgent[name]:
+            H, g = model.guard_halfspaces(tr)
+            parts.append(np.hstack([H, -g[:, None]]))
+            self.guards.append((offset, H.shape[0], _affine(H, g)))
+            offset += H.shape[0]
+        H, g = model.modes[name].invariant_halfspaces
+        parts.append(np.hstack([H, -g[:, None]]))
+        self.invariant = (offset, H.shape[0])
+        self.L = np.vstack(parts)
+        self.powers = sim.powers[name]
+        self.table = np.zeros((0,) + self.L.shape)
+        from reach.model.simulate import BISECTION_STEPS
+        self.sub = SubSteps(sim.generators[name], SUB_BITS, BISECTION_STEPS // SUB_BITS)
+
+    def __call__(self, j0: int, j1: int) -> np.ndarray:
+        """``W_j`` for ``j0 <= j < j1``: (j1 - j0, K, n+1)."""
+        if j1 > self.table.shape[0]:
+            size = min(self.powers.limit, max(j1, 2 * self.table.shape[0], 64))
+            self.table = np.einsum("kl,jlm->jkm", self.L, self.powers[:size])
+        return self.table[j0:j1]
+
+
+class SubSteps:
+    """``expm(M h k 2^-(b r))`` for ``k = 1..2^b`` at each level ``r = 1..rounds``: the
+    sub-grids a search for a guard entry in ``(0, h]`` walks down, cached for the few durations
+    ``h`` the searches start from (mostly one grid step)."""
+
+    def __init__(self, generator: np.ndarray, bits: int, rounds: int):
+        self.generator, self.bits, self.rounds, self.cache = generator, bits, rounds, {}
+
+    def __call__(self, h: float) -> np.ndarray:
+        if h not in self.cache:
+            if len(self.cache) > 64:
+                self.cache.clear()
+            from reach.model.simulate import batched_expm
+            k = np.arange(1, 2 ** self.bits + 1)
+            levels = [batched_expm(self.generator, h * k * 2.0 ** (-self.bits * r)) for r in range(1, self.rounds + 1)]
+            self.cache[h] = np.stack(levels)            # (rounds, 2^bits, n+1, n+1)
+        return self.cache[h]
+
+
+def first_entry(sim, name: str, X: np.ndarray, h: np.ndarray, guard, sub: SubSteps) -> np.ndarray:
+    """Earliest time in ``(0, h]`` at which ``guard`` holds (it holds at ``h``), to ``h 2^-(b
+    rounds)`` (the resolution of ``Simulator._first_entry``'s bisection): in each round the
+    interval ``(lo, lo + w]`` known to hold the entry is cut into ``2^b`` pieces, the states at
+    their ends are ``expm(M w k 2^-b) x(lo)``, and the first end where the guard holds becomes
+    the new right end. The first end, not any sign change: an entry is never skipped between
+    two ends that both hold. Runs sharing a duration share the exponentials; with many
+    distinct durations, ``Simulator._first_entry``."""
+    durations, which = np.unique(h, return_inverse=True)
+    if durations.size > 4:
+        return sim._first_entry(name, X, h, guard)
+    n, K = sim.n, 2 ** sub.bits
+    out = np.empty_like(h)
+    for d_index, d in enumerate(durations):
+        sel = np.flatnonzero(which.reshape(-1) == d_index)
+        E = sub(float(d))
+        x_lo, lo = X[sel], np.zeros(sel.size)
+        for r in range(sub.rounds):
+            P = E[r, :, :n, :]                                        # (K, n, n+1)
+            Z = x_lo @ P[:, :, :n].reshape(-1, n).T + P[:, :, n].reshape(-1)
+            Z = Z.reshape(sel.size * K, n)
+            inside = np.all(guard(Z) <= 0, axis=1).reshape(sel.size, K)
+            inside[:, -1] = True                                      # the right end holds
+            k = inside.argmax(axis=1)                                 # first end that holds
+            x_lo = np.where((k > 0)[:, None], Z.reshape(sel.size, K, n)[np.arange(sel.size), k - 1], x_lo)
+            lo = lo + k * d * 2.0 ** (-sub.bits * (r + 1))
+        out[sel] = lo + d * 2.0 ** (-sub.bits * sub.rounds)
+    return out
+
+
+def _affine(H: np.ndarray, g: np.ndarray):
+    """``X -> X H^T - g`` with ``H^T`` stored contiguous (a faster product than a transposed view)."""
+    Ht = np.ascontiguousarray(H.T)
+    return lambda X: X @ Ht - g
+
+
+def eligible(sim, name: str) -> bool:
+    """The block path applies to a linear mode whose urgent guards and invariant are linear and
+    which has no may-transition with a general guard."""
+    model = sim.model
+    return (name in sim.powers and not sim.exits[name]
+            and model.modes[name].invariant_halfspaces is not None
+            and all(model.guard_halfspaces(tr) is not None for tr, _ in sim.urgent[name]))
+
+
+def notify_block(watchers, t, S, seen, m_index, rows, absmax):
+    """Hand visited grid states to the observers: whole blocks to those with ``block``, the
+    states one by one (in time order per run) to the others."""
+    plain = [f for f in watchers if not hasattr(f, "block")]
+    for f in watchers:
+        if hasattr(f, "block"):
+            f.block(t, S, seen, m_index, rows, absmax)
+    if plain:
+        run, j = np.nonzero(seen.T)                    # by run, then time
+        if run.size:
+            for f in plain:
+                f(t[j, run], S[j, :, run], np.full(run.size, m_index), rows[run])
+
+
+def segment_chunk(sim, name, rows, X, mode, t, tau, blocked_at, next_kick, watchers, horizon, table):
+    """Advance ``rows`` (all in linear mode ``name``) to their next event, kick or the horizon,
+    in blocks of grid steps (see the module docstring)."""
+    from reach.model.simulate import INVARIANT_TOLERANCE
+
+    n, dt = sim.n, sim.dt
+    n_rows = rows.size
+    m_index = int(mode[rows[0]])
+    t0 = t[rows]
+    k0 = np.floor(t0 / dt + 1e-9).astype(int) + 1                       # first grid point after t0
+    end = np.minimum(next_kick[rows], horizon)
+    window = sim.window[name]
+    win_time = np.full(n_rows, np.inf)
+    if window is not None:
+        w = tau[rows]
+        win_time = np.where((w >= t0 - 1e-12) & (w <= end), np.maximum(w, t0), np.inf)
+    stop_at = np.minimum(end, win_time)
+    count = int(np.max(np.ceil(np.minimum(stop_at, horizon) / dt - 1e-9) - k0 + 1, initial=0)) + 1
+    count = max(1, min(count, sim.steps + 2 - int(k0.min())))
+    Y0 = sim.propagate(name, X[rows], np.maximum(k0 * dt - t0, 0.0))
+    Z = np.vstack([Y0.T, np.ones((1, n_rows))])                          # (n+1, R)
+
+    guards = sim.urgent[name]
+    event_time = win_time.copy()
+    event_tr = np.where(np.isfinite(win_time), 0, -1)
+    blocked = np.zeros(n_rows, dtype=bool)
+    block_x = np.zeros((n_rows, n))
+    block_t = np.zeros(n_rows)
+    last_t, last_x = t0.copy(), X[rows].copy()                       # last visited grid state
+    prev_t, prev_x = t0.copy(), X[rows].copy()                       # grid state before the block
+    done = np.zeros(n_rows, dtype=bool)
+    K = table.L.shape[0]
+    most = max(1, BLOCK_VALUES // (K * n_rows))
+    step_block = min(FIRST_BLOCK, most)                 # doubled each block: short segments stay cheap
+    inv_offset, inv_rows = table.invariant
+    j0 = 0
+    while j0 < count and not done.all():
+        j1 = min(count, j0 + step_block)
+        act = np.flatnonzero(~done)
+        B = j1 - j0
+        O = (table(j0, j1).reshape(-1, n + 1) @ Z[:, act]).reshape(B, K, act.size)
+        S = O[:, :n, :]
+        gt = (k0[act][None, :] + np.arange(j0, j1)[:, None]) * dt         # (B, A)
+        valid = gt <= stop_at[act] + 1e-12
+        for j_tr, (off, m, guard) in enumerate(table.guards, start=1):
+            inside = valid & np.all(O[:, off:off + m, :] <= 0, axis=1)
+            hit = np.flatnonzero(inside.any(axis=0))
+            if hit.size:
+                j = inside[:, hit].argmax(axis=0)
+                first = j == 0
+                p_t = np.where(first, prev_t[act[hit]], gt[np.maximum(j - 1, 0), hit])
+                p_x = np.where(first[:, None], prev_x[act[hit]], S[np.maximum(j - 1, 0), :, hit])
+                s = first_entry(sim, name, p_x, gt[j, hit] - p_t, guard, table.sub)
+                when = p_t + s
+                rows_hit = act[hit]
+                better = when < event_time[rows_hit]
+                event_time[rows_hit[better]] = when[better]
+                event_tr[rows_hit[better]] = j_tr
+        absmax = np.abs(S).max(axis=1)
+        M = O[:, inv_offset:inv_offset + inv_rows, :]
+        outside = (np.any(M > (INVARIANT_TOLERANCE * (1.0 + absmax))[:, None, :], axis=1)
+                   & valid & (gt < event_time[act]))
+        out_any = outside.any(axis=0)
+        limit_j = np.full(act.size, B)
+        if out_any.any():
+            b = np.flatnonzero(out_any)
+            jb = outside[:, b].argmax(axis=0)
+            limit_j[b] = jb
+            blocked[act[b]] = True
+            block_x[act[b]] = S[jb, :, b]
+            block_t[act[b]] = gt[jb, b]
+        seen = valid & (gt < event_time[act]) & (np.arange(B)[:, None] <= limit_j)
+        notify_block(watchers, gt, S, seen, m_index, rows[act], absmax)
+        n_seen = seen.sum(axis=0)
+        some = np.flatnonzero(n_seen)
+        if some.size:
+            last = n_seen[some] - 1
+            last_t[act[some]] = gt[last, some]
+            last_x[act[some]] = S[last, :, some]
+        prev_t[act], prev_x[act] = gt[-1], S[-1].T
+        done[act] |= out_any | (gt[-1] >= np.minimum(stop_at[act], event_time[act]) - 1e-12)
+        j0 = j1
+        step_block = min(2 * step_block, most)
+    finish(sim, name, rows, X, mode, t, tau, blocked_at, watchers, horizon, end, event_time, event_tr,
+           blocked, block_x, block_t, last_t, last_x)
+
+
+def finish(sim, name, rows, X, mode, t, tau, blocked_at, watchers, horizon, end, event_time, event_tr,
+           blocked, block_x, block_t, last_t, last_x):
+    """The end of a segment: blocked runs stop, runs with an event go to it and jump, the
+    others run on to the end of the segment (a kick or the horizon)."""
+    b = np.flatnonzero(blocked)
+    X[rows[b]] = block_x[b]
+    t[rows[b]] = block_t[b]
+    blocked_at[rows[b]] = block_t[b]
+    candidates = [sim.window[name]] + [tr for tr, _ in sim.urgent[name]]
+    has_event = ~blocked & (event_tr >= 0) & (event_time <= end)
+    e = np.flatnonzero(has_event)
+    if e.size:
+        Xe = sim.propagate(name, last_x[e], event_time[e] - last_t[e])
+        X[rows[e]] = Xe
+        t[rows[e]] = event_time[e]
+        for f in watchers:
+            f(event_time[e], Xe, mode[rows[e]], rows[e])
+        for j_tr, tr in enumerate(candidates):
+            sel = rows[e][event_tr[e] == j_tr]
+            if sel.size:
+                if tr is sim.window[name]:
+                    tau[sel] = np.nan                  # the window transition is taken once
+                sim._jump(tr, X, mode, sel)
+                sim._urgent_now(X, mode, sel)
+                for f in watchers:
+                    f(t[sel], X[sel], mode[sel], sel)
+    q = np.flatnonzero(~blocked & ~has_event)
+    if q.size:
+        X[rows[q]] = sim.propagate(name, last_x[q], end[q] - last_t[q])
+        t[rows[q]] = end[q]
+        off_grid = np.flatnonzero(end[q] - last_t[q] > 1e-9 * max(1.0, horizon))
+        if off_grid.size:
+            sel = rows[q][off_grid]
+            for f in watchers:
+                f(t[sel], X[sel], mode[sel], sel)

@@ -1,0 +1,101 @@
+"""The block path of linear segments (reach.model.batch) and the block monitors.
+
+References: the general per-segment path of the same Simulator (the block path switched off)
+for the same runs; the thermostat's closed-form flow for the switching instants; the
+state-by-state SafetyMonitor for the block monitor on random blocks (hypothesis).
+"""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from reach.backends.montecarlo import SafetyMonitor, random_plan, structured_plan, switch_window
+from reach.model import load_model
+from reach.model.simulate import Simulator
+from reach.spec import bind, load_properties
+
+
+def _runs(model_file, prop_file, count, general):
+    model = load_model(model_file)
+    props = [p for p in (bind(q, model) for q in load_properties(prop_file)) if p.modes]
+    window = switch_window(model)
+    Xs, ts = structured_plan(model, window, rng=np.random.default_rng(1))
+    X, tau = random_plan(model, window, count, np.random.default_rng(0))
+    X = np.concatenate([Xs, X])
+    tau = None if tau is None else np.concatenate([ts, tau])
+    sim = Simulator(model)
+    if general:
+        sim.tables = {name: None for name in model.modes}      # every segment on the general path
+    monitors = [SafetyMonitor(model, p, X.shape[0]) for p in props]
+    traj = sim.run(X, tau, observers=monitors)
+    assert any(table is not None for table in sim.tables.values()) != general     # the path asked for
+    return traj, monitors
+
+
+@pytest.mark.parametrize("model_file,prop_file", [("models/SRA02.yaml", "properties/rendezvous.yaml"),
+                                                  ("models/SRU01.yaml", "properties/rendezvous.yaml"),
+                                                  ("models/thermostat.yaml", "properties/thermostat.yaml")])
+def test_block_path_agrees_with_the_general_path(model_file, prop_file):
+    """Same final states and modes, same blocked runs, same closest approach per run and
+    property, the same runs violating (at the same instants): only rounding differs."""
+    fast, fast_mon = _runs(model_file, prop_file, 60, general=False)
+    slow, slow_mon = _runs(model_file, prop_file, 60, general=True)
+    assert np.array_equal(fast.final_mode, slow.final_mode)
+    assert np.array_equal(np.isnan(fast.blocked_at), np.isnan(slow.blocked_at))
+    np.testing.assert_allclose(fast.final_state, slow.final_state, rtol=1e-9, atol=1e-9)
+    for a, b in zip(fast_mon, slow_mon):
+        np.testing.assert_allclose(a.min_depth, b.min_depth, rtol=1e-9, atol=1e-9)
+        assert np.array_equal(np.isnan(a.violation_time), np.isnan(b.violation_time))
+        np.testing.assert_allclose(a.violation_time, b.violation_time, rtol=0, atol=1e-9)
+
+
+def test_thermostat_switches_at_the_closed_form_instants():
+    """Heating T' = 4 - 0.1 T from T0 reaches 21 at -10 ln((40 - 21)/(40 - T0)); off, T' =
+    1 - 0.1 T, falls from 21 to 19 in 10 ln(11/9); heating again 19 -> 21 in 10 ln(21/19)."""
+    model = load_model("models/thermostat.yaml")
+    sim = Simulator(model)
+    T0 = np.array([[19.5], [19.9]])
+    traj = sim.run(T0, record=True)
+    for i, t0 in enumerate(T0[:, 0]):
+        times, modes, states = traj.path[i]
+        switches = times[1:][np.diff(modes) != 0]
+        first = -10 * np.log(19 / (40 - t0))
+        expected = [first, first + 10 * np.log(11 / 9), first + 10 * np.log(11 / 9) + 10 * np.log(21 / 19)]
+        np.testing.assert_allclose(switches[:3], expected, atol=1e-9)
+        # between events the recorded grid states follow the closed form too
+        heating = (modes == 0) & (times < first - 1e-12)
+        np.testing.assert_allclose(states[heating, 0], 40 - (40 - t0) * np.exp(-0.1 * times[heating]),
+                                   rtol=1e-12)
+
+
+def _state_by_state(model, prop, t, X, seen, m_index, rows):
+    mon = SafetyMonitor(model, prop, rows.max() + 1)
+    run, j = np.nonzero(seen.T)                                  # by run, then time
+    if run.size:
+        mon(t[j, run], X[j, :, run], np.full(run.size, m_index), rows[run])
+    return mon
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2 ** 32 - 1), st.integers(1, 7), st.integers(1, 6))
+def test_block_monitor_equals_the_state_by_state_monitor(seed, B, R):
+    """Random blocks of rendezvous-mode states around the requirements' boundaries: the
+    block test gives the same closest depths and the same first violations."""
+    model = load_model("models/SRA01.yaml")
+    props = [p for p in (bind(q, model) for q in load_properties("properties/rendezvous.yaml")) if p.modes]
+    rng = np.random.default_rng(seed)
+    m_index = list(model.modes).index("rendezvous")
+    X = rng.normal(size=(B, model.n, R)) * np.array([60, 60, 3, 3, 50])[None, :, None]
+    t = np.sort(rng.random((B, R)), axis=0)
+    seen = rng.random((B, R)) < 0.7
+    rows = rng.permutation(10)[:R]
+    for prop in props:
+        ref = _state_by_state(model, prop, t, X, seen, m_index, rows)
+        mon = SafetyMonitor(model, prop, rows.max() + 1)
+        mon.block(t, X, seen, m_index, rows, np.abs(X).max(axis=1))
+        np.testing.assert_allclose(mon.min_depth, ref.min_depth, rtol=1e-12)
+        assert np.array_equal(np.isnan(mon.violation_time), np.isnan(ref.violation_time))
+        np.testing.assert_array_equal(mon.violation_time[~np.isnan(ref.violation_time)],
+                                      ref.violation_time[~np.isnan(ref.violation_time)])
+        np.testing.assert_allclose(mon.violation_state, ref.violation_state, rtol=1e-12)
