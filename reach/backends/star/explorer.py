@@ -126,6 +126,7 @@ class _Explorer:
         self.stats = _Stats()
         self.unresolved: list[_Witness] = []
         self.replayed: list = []
+        self.sets: list = []            # SetPiece of every explored segment (option keep_sets)
         self.root = initial if initial is not None else data.initial_star(model.initial)
         self.root_mode = model.initial.mode
 
@@ -264,6 +265,8 @@ class _Explorer:
             error = h * h / 8 * samples @ F.T
             if dev is not None:
                 error = error + dev[1:last + 1]          # the whole cell, R non-decreasing
+        if self.opt.keep_sets:
+            self._keep_chain(mode, grid_star, centers, bases, error, cells)
         for piece in self.pieces.get(mode, []):
             candidates |= self._screen(centers, bases, box, error, piece.H, piece.g, cells)
         for jump in self.jumps[mode]:
@@ -279,6 +282,25 @@ class _Explorer:
         for index, members in (pending or {}).items():
             jump = self.jumps[mode][index]
             self._aggregate(jump.target, members, kept_rows(jump, Hi, gi))
+
+    def _keep_chain(self, mode: str, grid_star, centers, bases, error, cells):
+        """The chain's segments as set pieces (option ``keep_sets``). Segment ``j`` is the hull
+        of grid star ``j`` and grid star ``j + 1`` under the predicate of ``j`` (every run still
+        in the mode at ``t_j`` satisfies the invariant rows known up to ``t_j``), plus the box
+        ``error_j``: the bound the screening itself uses for the states between the grid points
+        (:meth:`_screen`). In discrete time the pieces are the grid stars plus their input
+        spread."""
+        from reach.result import SetPiece
+
+        names = tuple(self.model.state) + (("time",) if self.data.added_clock else ())
+        clock = np.eye(self.n)[self.clock][None]
+        for j in cells:
+            first = grid_star(j)
+            stars = (first,) if self.opt.discrete_time else (
+                first, Star(centers[j + 1], bases[j + 1], first.predicate, first.box))
+            t0 = -float(first.support_bounds(-clock)[0])
+            t1 = max(float(s.support_bounds(clock)[0]) for s in stars)
+            self.sets.append(SetPiece(mode, t0, t1, "star", names, stars, np.asarray(error[j], float)))
 
     def _progress(self):
         now = time.perf_counter()

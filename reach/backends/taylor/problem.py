@@ -207,7 +207,7 @@ class EventProblem:
         return enc
 
     def sweep(self, center: np.ndarray, half_width: np.ndarray, order: int, rel_tol: float,
-              tol: float) -> dict:
+              tol: float, keep_sets: bool = False) -> dict:
         """Rigorous bounds of the extremum of ``q`` over the listed modes' stretches.
 
         In each mode the verified enclosure (:mod:`.verified`) runs until the step whose end lies
@@ -218,13 +218,15 @@ class EventProblem:
         may meet the guard, clipped to the guard's single-variable bounds and mapped by the
         reset; the next mode starts from that box (up to the horizon counted from its earliest
         entry). The lower end is the best bound of ``q`` at the initial mode's step nodes that no
-        run can have left the mode before, or on an entry box."""
+        run can have left the mode before, or on an entry box. With ``keep_sets`` the result's
+        ``"sets"`` lists every step's enclosure box (:func:`_step_box`)."""
         T = self.model.horizon
         m = len(self.uncertain)
         x0 = initial_state(algebra(order, m + 1), center, half_width, self.uncertain)
         mode, t_earliest = self.model.initial.mode, 0.0
         sign = 1.0 if self.prop.sense == "max" else -1.0
         outer, inner, steps, error, visited = -np.inf, -np.inf, 0, 0.0, set()
+        kept = [] if keep_sets else None
         for hop in range(MAX_SWITCHES + 1):
             code = self.code(mode)
             if len(code.exits) > 1:
@@ -244,6 +246,8 @@ class EventProblem:
                 inner = max(inner, lo if sign > 0 else -hi)
             for k in range(len(enc.steps)):
                 X = enc.tm(k)
+                if kept is not None:
+                    kept.append(_step_box(mode, X, enc.steps[k], t_earliest, self.clock))
                 if code.q is not None:
                     lo, hi = code.q(X).bound()
                     outer = max(outer, hi if sign > 0 else -lo)
@@ -274,7 +278,22 @@ class EventProblem:
             wide = [i for i in range(self.model.n) if box[i, 1] > box[i, 0]]
             x0 = initial_state(algebra(order, len(wide) + 1), box.mean(axis=1), 0.5 * (box[:, 1] - box[:, 0]), wide)
         bound = (inner, outer) if sign > 0 else (-outer, -inner)
-        return {"bound": tuple(float(v) for v in bound), "steps": steps, "error": error}
+        out = {"bound": tuple(float(v) for v in bound), "steps": steps, "error": error}
+        if kept is not None:
+            out["sets"] = kept
+        return out
+
+
+def _step_box(mode: str, X, step, t_earliest: float, clock: int | None) -> tuple:
+    """``(mode, t0, t1, low, high)``: the interval hull of a step's Taylor-model enclosure (every
+    run of the subdomain lies in it over the whole step); the times from the clock's bounds, or
+    the step's span after the earliest entry without a clock."""
+    box = np.array([x.bound() for x in X], dtype=float)
+    if clock is not None:
+        t0, t1 = box[clock]
+    else:
+        t0, t1 = t_earliest + step.t0, t_earliest + step.t0 + step.h
+    return mode, float(t0), float(t1), box[:, 0], box[:, 1]
 
 
 def _unbounded(why: str) -> dict:
