@@ -294,6 +294,8 @@ def cmd_bench(args) -> int:
 def cmd_sweep(args) -> int:
     import time
 
+    import numpy as np
+
     from reach.backends.star import arc_cells, safe_abort_map
     from reach.bench.plots import plot_abort_map
     from reach.executors import make_executor
@@ -317,7 +319,14 @@ def cmd_sweep(args) -> int:
     times = safe_abort_map(model_path, [args.properties], cells, args.property, {},
                            make_executor(args.jobs, args.scheduler))
     seconds = time.perf_counter() - start
-    plot_abort_map(cells, times, window, out, f"{model.name}: latest safe abort ({seconds:.1f} s)")
+    from reach.bench.plots import passive_margins
+    from reach.spec import bind, load_properties
+
+    bound = [bind(p, model) for p in load_properties(args.properties) if not args.property or p.id in args.property]
+    abort_times = np.linspace(window[0], window[1], 25)
+    margins, margin_unit = passive_margins(model, bound, cells, abort_times)
+    plot_abort_map(cells, times, window, out, f"{model.name}: latest safe abort ({seconds:.1f} s)",
+                   model.units.time, margins, abort_times, margin_unit)
     print(f"| angle [deg] | x [m] | y [m] | latest safe abort [{model.units.time}] |")
     print("|---|---|---|---|")
     for (low, high, angle), t in zip(cells, times):
