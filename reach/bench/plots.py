@@ -194,7 +194,8 @@ def plot_abort_map(cells, times, window, out: Path, title: str, time_unit: str =
                                          f"{f' [{margin_unit}]' if margin_unit else ''} (log)")
         ax.set_xlabel("cell angle [deg]")
         ax.set_ylabel(f"abort time{unit}")
-        ax.set_title("Passive safety margin per cell (centre run) and abort time", fontsize=10)
+        ax.set_title("Passive safety margin per cell (centre run) and abort time\n"
+                     "(blank: that run does not switch, e.g. the abort guard no longer holds)", fontsize=10)
     fig.tight_layout()
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=110)

@@ -183,7 +183,7 @@ def run_suite(suite_path, backends=None, instances=None, out="results", jobs=Non
     report["plots"] = plot_models(chosen, out / "plots", stream) + plot_subdomains(
         [r for r in rows if r.get("run") == run_id], out / "plots")
     (out / "results.json").write_text(json.dumps(report, indent=1))
-    (out / "results.md").write_text(markdown_table(report))
+    (out / "results.md").write_text(markdown_table(report, out))
     failures = [c for c in checks if c["level"] == "fail"]
     print(f"wall time {wall:.1f} s; cross-checks: {len(checks) - len(failures)} notes, {len(failures)} failures",
           file=stream)

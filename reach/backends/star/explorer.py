@@ -302,7 +302,7 @@ class _Explorer:
 
         names = tuple(self.model.state) + (("time",) if self.data.added_clock else ())
         clock = np.eye(self.n)[self.clock][None]
-        t0 = -min(float(s.support_bounds(-clock)[0]) for s in stars)
+        t0 = min(-float(s.support_bounds(-clock)[0]) for s in stars)
         t1 = max(float(s.support_bounds(clock)[0]) for s in stars)
         self.sets.append(SetPiece(mode, t0, t1, "star", names, tuple(stars),
                                   None if bloat is None else np.asarray(bloat, float)))
