@@ -15,14 +15,14 @@ from pathlib import Path
 
 import numpy as np
 
-from reach.plotting.requirements import regions
+from reach.plotting.requirements import drawable, regions
 
 STYLE = {                    # back-end -> how its sets are drawn
     "star": {"fill": True, "alpha": 0.35, "lw": 0.0},
     "taylor": {"fill": False, "alpha": 0.9, "lw": 0.6},
 }
 CAP = 400                    # polygons per back-end and mode
-LP_BUDGET = 1000             # LPs a picture may spend tightening star pieces (see tightened)
+LP_BUDGET = 2000             # LPs a picture may spend on star pieces (see projected)
 
 
 def pyplot():
@@ -32,18 +32,20 @@ def pyplot():
     return plt
 
 
-def chosen_pieces(results, checked: dict[str, set] | None = None) -> dict[str, list]:
+def chosen_pieces(results, checked: dict[str, set] | None = None, shown=None) -> dict[str, list]:
     """Per mode, the pieces of one result: preferably of a property checked in that mode
     (``checked``: mode -> property ids; its check refined the sets there, where another check
-    may have kept a coarse aggregate), then the one with the most pieces (each check explores
-    only the modes it needs)."""
+    may have kept a coarse aggregate), among those of a property drawn in the picture's plane
+    (``shown``: mode -> ids; refined against what the picture shows), then the one with the most
+    pieces (each check explores only the modes it needs)."""
     best: dict[str, tuple] = {}
     for r in results:
         by_mode: dict[str, list] = {}
         for piece in r.sets:
             by_mode.setdefault(piece.mode, []).append(piece)
         for mode, pieces in by_mode.items():
-            rank = (r.property in (checked or {}).get(mode, ()), len(pieces))
+            rank = (r.property in (checked or {}).get(mode, ()), r.property in (shown or {}).get(mode, ()),
+                    len(pieces))
             if mode not in best or rank > best[mode][0]:
                 best[mode] = (rank, pieces)
     return {mode: pieces for mode, (_, pieces) in best.items()}
@@ -58,21 +60,35 @@ def checked_modes(bound_props) -> dict[str, set]:
     return out
 
 
-def projected(model, results_by_backend: dict, axes, exact: bool, cap: int = CAP, checked=None):
-    """``{backend: {mode: ("polygons" | "paths", [arrays])}}`` in the plane of ``axes``."""
+def projected(model, results_by_backend: dict, axes, exact: bool, cap: int = CAP, checked=None, modes=None,
+              bound_props=None):
+    """``{backend: {mode: ("polygons" | "paths", [arrays])}}`` in the plane of ``axes`` (only
+    ``modes`` if given). With ``exact``, LPs (at most ``LP_BUDGET``) make star polygons exact at
+    their directions where a mode's pieces fit the budget, else cut the widest coefficient-box
+    polygons by exact axis intervals (:func:`tightened`)."""
+    from reach.sets.projection import DIRECTIONS
     from reach.sets.simplify import merged_polygons
 
     out, budget = {}, LP_BUDGET
     for backend, results in results_by_backend.items():
         out[backend] = {}
-        for mode, pieces in chosen_pieces(results, checked).items():
+        shown = {m: drawable(model, bound_props or [], axes, m) for m in model.modes}
+        for mode, pieces in chosen_pieces(results, checked, shown).items():
+            if modes is not None and mode not in modes:
+                continue
             ax, ay = axes[0].of(model, mode), axes[1].of(model, mode)
             runs = [p for p in pieces if p.kind == "run"]
             sets = [p for p in pieces if p.kind != "run"]
             if sets:
-                polys = [p.polygon(ax, ay, exact=False) for p in sets]
-                if exact:
-                    budget = tightened(sets, polys, ax, ay, budget)
+                need = sum(DIRECTIONS * len(p.stars) for p in sets
+                           if p.kind == "star" and any(s.predicate.A.shape[0] for s in p.stars))
+                if exact and need <= budget:            # every polygon from exact supports
+                    polys = [p.polygon(ax, ay, exact=True) for p in sets]
+                    budget -= need
+                else:
+                    polys = [p.polygon(ax, ay, exact=False) for p in sets]
+                    if exact:
+                        budget = tightened(sets, polys, ax, ay, budget)
                 out[backend][mode] = ("polygons", merged_polygons(polys, cap))
             elif runs:
                 out[backend][mode] = ("paths", [p.path(ax, ay) for p in runs])
@@ -143,7 +159,7 @@ def _view(drawn, cexs) -> tuple[float, float, float, float]:
     return float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])
 
 
-def plot_reach_sets(model, results_by_backend: dict, bound_props, axes, out: Path, exact: bool = False,
+def plot_reach_sets(model, results_by_backend: dict, bound_props, axes, out: Path, exact: bool = True,
                     title: str | None = None, modes: list[str] | None = None, view=None, ax=None) -> dict:
     """Draw the sets of ``results_by_backend`` (``{backend: [Result]}``) on ``axes`` (two
     :class:`reach.plotting.axes.Axis`) into ``out`` (or onto the matplotlib ``ax`` given).
@@ -153,9 +169,8 @@ def plot_reach_sets(model, results_by_backend: dict, bound_props, axes, out: Pat
     from matplotlib.collections import LineCollection, PolyCollection
     from matplotlib.patches import Patch
 
-    drawn = projected(model, results_by_backend, axes, exact, checked=checked_modes(bound_props))
-    if modes is not None:
-        drawn = {b: {m: v for m, v in d.items() if m in modes} for b, d in drawn.items()}
+    drawn = projected(model, results_by_backend, axes, exact, checked=checked_modes(bound_props), modes=modes,
+                      bound_props=bound_props)
     cexs = counterexamples(model, results_by_backend, axes)
     view = view or _view(drawn, cexs)
     own = ax is None
@@ -166,7 +181,7 @@ def plot_reach_sets(model, results_by_backend: dict, bound_props, axes, out: Pat
     shown_modes = sorted({m for d in drawn.values() for m in d}, key=names.index)
     found, hidden, view = regions(model, bound_props, axes, shown_modes, view)
     handles = []
-    for k, region in enumerate(found):
+    for region in found:
         colour = "tab:red" if region.kind == "unsafe" else "tab:green"
         ax.add_patch(plt.Polygon(region.polygon, closed=True, facecolor=colour, alpha=0.12,
                                  edgecolor=colour, lw=0.8, hatch="//", zorder=0))

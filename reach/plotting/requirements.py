@@ -62,6 +62,19 @@ def functional(model, axis, mode):
     return spec
 
 
+def drawable(model, bound_props, axes, mode: str) -> set[str]:
+    """Ids of the safety properties with an unsafe piece in ``mode`` that can be drawn on ``axes``."""
+    out = set()
+    fx, fy = functional(model, axes[0], mode), functional(model, axes[1], mode)
+    for prop in bound_props:
+        for piece in (getattr(prop, "pieces", None) or {}).get(mode, []):
+            hs = halfspaces(piece, model.symbols)
+            if hs is not None and plane_rows(*hs, fx, fy) is not None:
+                out.add(prop.id)
+                break
+    return out
+
+
 def regions(model, bound_props, axes, modes, view) -> tuple[list[Region], list[str], tuple]:
     """The drawable unsafe pieces of the safety properties (and the targets of reach
     properties) in the listed modes, cut to the view; the ids of the properties with pieces that
