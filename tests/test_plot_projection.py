@@ -155,8 +155,11 @@ def test_clip_and_merge_keep_every_point():
     area = abs(x @ np.roll(y, -1) - y @ np.roll(x, -1)) / 2             # shoelace
     assert np.isclose(area, 0.5) and np.all(half @ [1.0, 1.0] <= 1.0 + 1e-9)
     rng = np.random.default_rng(3)
-    polys = [convex_hull(rng.normal(size=(8, 2)) + k) for k in range(30)]
-    merged = merged_polygons(polys, 7)
+    chain = [convex_hull(rng.normal(size=(8, 2)) + 0.2 * k) for k in range(30)]      # overlapping
+    merged = merged_polygons(chain, 7)
     assert len(merged) <= 7
-    for p in polys:
+    for p in chain:
         assert any(np.all(inside(m, p, 1e-9)) for m in merged)
+    apart = [convex_hull(rng.normal(size=(8, 2)) + 100.0 * (k % 2)) for k in range(30)]  # two branches
+    merged = merged_polygons(apart, 7)
+    assert all(np.ptp(m, axis=0).max() < 50 for m in merged)      # no hull bridges the two

@@ -2,7 +2,7 @@
 
 Merging never loses a state: the interval hull of boxes contains each box, and the convex hull
 of polygons contains each polygon. Pieces are merged in runs of ``ceil(count / cap)`` consecutive
-ones (consecutive in time within one mode, as a back-end emits them), so at most ``cap`` remain.
+ones (consecutive in time within one mode, as a back-end emits them), so about ``cap`` remain.
 """
 
 from __future__ import annotations
@@ -58,8 +58,22 @@ def convex_hull(points: np.ndarray) -> np.ndarray:
 
 
 def merged_polygons(polygons: list[np.ndarray], cap: int) -> list[np.ndarray]:
-    """At most ``cap`` polygons: convex hulls of runs of consecutive ones (empty ones skipped)."""
+    """About ``cap`` polygons: convex hulls of runs of consecutive ones (empty ones skipped). A run
+    also ends where the next polygon's bounding box does not meet the run's (pieces of another
+    flowpipe branch: their hull would bridge empty space), so a few more than ``cap`` may remain."""
     polygons = [p for p in polygons if p.shape[0]]
     if len(polygons) <= cap:
         return polygons
-    return [convex_hull(np.vstack([polygons[k] for k in run])) for run in _runs(len(polygons), cap)]
+    size = max(1, math.ceil(len(polygons) / max(1, cap)))
+    out, run, low, high = [], [], None, None
+    for p in polygons:
+        lo, hi = p.min(axis=0), p.max(axis=0)
+        if run and (len(run) >= size or np.any(lo > high) or np.any(hi < low)):
+            out.append(convex_hull(np.vstack(run)))
+            run = []
+        if not run:
+            low, high = lo, hi
+        run.append(p)
+        low, high = np.minimum(low, lo), np.maximum(high, hi)
+    out.append(convex_hull(np.vstack(run)))
+    return out
