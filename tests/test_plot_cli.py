@@ -32,13 +32,11 @@ def run(args, cwd):
     (["--out", "pic.xyz"], "--out: unknown picture format"),
     (["-p", "nothere"], "--property: no property 'nothere'"),
 ])
-def test_bad_input_is_one_line_exit_2(tmp_path, capsys, monkeypatch, extra, message):
-    monkeypatch.chdir(tmp_path)
-    code = main(["plot", str(ROOT / "models" / "thermostat.yaml"), str(ROOT / "properties" / "thermostat.yaml"),
-                 "-b", "star", *extra])
-    err = capsys.readouterr().err
+def test_bad_input_is_one_line_exit_2(tmp_path, extra, message):
+    code, out, err = run(["plot", str(ROOT / "models" / "thermostat.yaml"), str(ROOT / "properties" / "thermostat.yaml"),
+                          "-b", "star", *extra], tmp_path)
     assert code == 2
-    assert len(err.strip().splitlines()) == 1 and message in err
+    assert len(err.strip().splitlines()) == 1 and message in err, err
     assert not list(tmp_path.iterdir())
 
 
