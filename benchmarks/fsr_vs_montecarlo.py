@@ -189,7 +189,7 @@ def plot_scenario(name, model, prop, path):
         for s in (1, 2, 3):
             e = ellipse(means[K, [iy, ix]], covs[K][np.ix_([iy, ix], [iy, ix])], sigma=s)
             ax.plot(e[:, 0] * km, e[:, 1] * km, "b-", lw=0.8,
-                    label="1, 2, 3 sigma at t = at" if s == 1 else None)
+                    label=f"1, 2, 3 sigma ellipses at t = {prop.at:g} s" if s == 1 else None)
         if box is not None:
             (ylo, yhi), (xlo, xhi) = box
             ax.plot(np.array([ylo, yhi, yhi, ylo, ylo]) * km, np.array([xlo, xlo, xhi, xhi, xlo]) * km,
@@ -220,10 +220,16 @@ def plot_scenario(name, model, prop, path):
         Hs, gs = halfspaces(prop.safe, prop.symbols)
         marginal = [1 - polytope_probability(means[k], covs[k], Hs, gs, abs_error=1e-4).value
                     for k in range(K)]
+        shown = (times[:K] >= grid[0]) & (times[:K] <= grid[-1])     # the stretch on the time axis
+        values = np.asarray(marginal)[shown]
         axes2 = ax.twinx()
-        axes2.semilogy(times[:K], np.maximum(marginal, 1e-300), "r-", lw=0.8)
+        floor = max(float(values[values > 0].min()) / 10, 1e-300) if np.any(values > 0) else 1e-16
+        axes2.semilogy(times[:K][shown], np.maximum(values, floor), "r.-", lw=0.8)
+        axes2.set_ylim(floor, 1)
         axes2.set_ylabel("P(x(t_k) outside the safe set)", color="r")
-        axes2.set_ylim(1e-12, 1)
+        axes2.tick_params(axis="y", colors="r")
+        ax.plot([], [], "r.-", label="P(x(t_k) outside the safe set), right axis"
+                + ("" if np.any(values > 0) else ": 0 to working precision"))
     ax.set_xlabel("t [s]")
     ax.set_ylabel("probability")
     ax.set_title("probability against time")

@@ -4,6 +4,7 @@
     reach lint MODEL... (files or directories of models)
     reach replay COUNTEREXAMPLE.json
     reach plot MODEL [--runs N] [--out FILE.png]
+    reach plot MODEL PROPS --backend B [--backend B2] [--vars x,y] [--out FILE.png]
     reach bench [--suite suite.yaml] [--backend B] [--instance I] [-j N] [--scheduler ADDR]
     reach sweep MODEL PROPS [--radius R] [--cells N]
     reach compare OLD.json NEW.json
@@ -254,12 +255,29 @@ def cmd_plot(args) -> int:
     from reach.bench.plots import plot_model_runs
     from reach.model import load_model
 
+    if args.properties is not None:
+        return cmd_plot_sets(args)
+    if args.backend or args.vars:
+        raise InputError("--backend and --vars need a property file: reach plot MODEL PROPS --backend B",
+                         field="properties")
     _number(args.runs, "--runs", 1, 10_000)
     model = load_model(find_model(args.model))
     out = _figure_path(args.out, Path("results/plots") / f"{safe_name(model.name)}_runs.png")
     plot_model_runs(model, out, runs=args.runs, seed=args.seed)
     print(printable(f"wrote {out}"))
     return 0
+
+
+def cmd_plot_sets(args) -> int:
+    """The reachable sets of one or more back-ends (:mod:`reach.plotting.command`)."""
+    from reach.plotting.command import plot_files
+
+    out = _figure_path(args.out, Path("reach_sets.png")) if args.out else None
+    code, out, summary, seconds = plot_files(args.model, args.properties, args.backend or ["montecarlo"],
+                                             args.vars, out, _parse_options(args.option), args.property,
+                                             exact=not args.fast, stream=sys.stdout)
+    print(printable(f"wrote {out} ({out.stat().st_size / 1024:.0f} KB, drawn in {seconds:.1f} s)"))
+    return code
 
 
 def cmd_bench(args) -> int:
@@ -275,6 +293,8 @@ def cmd_bench(args) -> int:
 
 def cmd_sweep(args) -> int:
     import time
+
+    import numpy as np
 
     from reach.backends.star import arc_cells, safe_abort_map
     from reach.bench.plots import plot_abort_map
@@ -299,7 +319,14 @@ def cmd_sweep(args) -> int:
     times = safe_abort_map(model_path, [args.properties], cells, args.property, {},
                            make_executor(args.jobs, args.scheduler))
     seconds = time.perf_counter() - start
-    plot_abort_map(cells, times, window, out, f"{model.name}: latest safe abort ({seconds:.1f} s)")
+    from reach.bench.plots import passive_margins
+    from reach.spec import bind, load_properties
+
+    bound = [bind(p, model) for p in load_properties(args.properties) if not args.property or p.id in args.property]
+    abort_times = np.linspace(window[0], window[1], 25)
+    margins, margin_unit = passive_margins(model, bound, cells, abort_times)
+    plot_abort_map(cells, times, window, out, f"{model.name}: latest safe abort ({seconds:.1f} s)",
+                   model.units.time, margins, abort_times, margin_unit)
     print(f"| angle [deg] | x [m] | y [m] | latest safe abort [{model.units.time}] |")
     print("|---|---|---|---|")
     for (low, high, angle), t in zip(cells, times):
@@ -347,8 +374,16 @@ def build_parser() -> argparse.ArgumentParser:
                        "(exit 1: it violates the property, 3: it does not)", epilog=EXIT_CODES)
     p.add_argument("counterexample")
     p.set_defaults(func=cmd_replay)
-    p = sub.add_parser("plot", help="plot sample runs of a model, coloured by mode")
+    p = sub.add_parser("plot", help="plot the reachable sets back-ends compute (with PROPS), or sample "
+                       "runs of a model coloured by mode", epilog=EXIT_CODES)
     p.add_argument("model")
+    p.add_argument("properties", nargs="?", help="property file (or SpaceEx .cfg): draw the back-ends' sets")
+    p.add_argument("--backend", "-b", action="append", help="back-end whose sets are drawn (repeatable)")
+    p.add_argument("--vars", help="the two axes, e.g. x,y or t,vx (states, inputs, t for time)")
+    p.add_argument("--property", "-p", action="append", help="check only this property (repeatable)")
+    p.add_argument("--option", "-o", action="append", metavar="KEY=VALUE",
+                   help="back-end option (B.KEY=VALUE for back-end B only)")
+    p.add_argument("--fast", action="store_true", help="coefficient-box bounds only (no LPs to tighten)")
     p.add_argument("--runs", type=int, default=20)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out")

@@ -115,8 +115,10 @@ class Result:
     coverage: float | None = None
     counterexample: Counterexample | None = None
     details: dict = field(default_factory=dict)
+    sets: list = field(default_factory=list, repr=False)   # [SetPiece], only when asked (keep_sets)
 
     def to_dict(self) -> dict:
+        """JSON-ready; the computed sets appear only as their summary (:func:`sets_summary`)."""
         out = {
             "backend": self.backend, "model": self.model, "property": self.property,
             "status": self.status.value.lower(), "seconds": self.seconds,
@@ -124,7 +126,141 @@ class Result:
             "counterexample": self.counterexample.to_dict() if self.counterexample else None,
             "details": self.details,
         }
+        if self.sets:
+            out["sets"] = sets_summary(self.sets)
         return _plain(out)
+
+
+@dataclass
+class SetPiece:
+    """A set a back-end computed: every state a run may have in ``mode`` during ``[t0, t1]`` lies
+    in it (``kind`` ``star``, ``box``), or the states one sampled run visited (``run``).
+
+    * ``star``: the convex hull of ``stars`` (:class:`reach.sets.Star` over ``names``) plus the box
+      ``[-bloat, bloat]`` -- e.g. a flowpipe segment of the star back-end: the hull of two grid
+      stars plus the interpolation error bound;
+    * ``box``: ``[low, high]`` (a step enclosure of taylor's rigorous sweep);
+    * ``run``: ``times`` and ``points`` (rows) of a simulated run (Monte Carlo).
+
+    ``names``: the coordinates (the back-end's state, which may carry an added clock).
+    """
+
+    mode: str
+    t0: float
+    t1: float
+    kind: str
+    names: tuple
+    stars: tuple = ()
+    bloat: np.ndarray | None = None
+    low: np.ndarray | None = None
+    high: np.ndarray | None = None
+    times: np.ndarray | None = None
+    points: np.ndarray | None = None
+
+    def coordinate(self, name: str) -> int | None:
+        """Index of ``name`` in ``names``; None for the time axis (``t`` or ``time`` when not a
+        coordinate)."""
+        if name in self.names:
+            return self.names.index(name)
+        if name in ("t", "time"):
+            return None
+        raise KeyError(name)
+
+    def functional(self, axis) -> tuple[np.ndarray, float] | None:
+        """An axis as ``(w, c)`` with value ``w . x + c`` over ``names``; None for time (a name
+        that is not a coordinate). ``axis``: a coordinate's name or ``(w, c)`` itself (``w`` over
+        the model's states; an added clock coordinate gets weight 0)."""
+        n = len(self.names)
+        if isinstance(axis, str):
+            k = self.coordinate(axis)
+            return None if k is None else (np.eye(n)[k], 0.0)
+        w, c = axis
+        row = np.zeros(n)
+        row[:len(w)] = w
+        return row, float(c)
+
+    def support(self, W: np.ndarray, exact: bool = True) -> np.ndarray:
+        """Upper bounds of ``max w . x`` over the piece for the rows ``w`` of ``W`` (over ``names``):
+        exact for boxes (``w . c + |w| . r``); for stars the largest member's support (one LP per
+        row when ``exact`` and its predicate has rows, else the coefficient-box bound) plus
+        ``|w| . bloat``."""
+        from reach.sets.projection import star_support
+
+        W = np.atleast_2d(W)
+        if self.kind == "box":
+            c, r = (self.high + self.low) / 2, (self.high - self.low) / 2
+            return W @ c + np.abs(W) @ r
+        if self.kind == "run":
+            return np.max(self.points @ W.T, axis=0)
+        value = np.max([star_support(s, W, exact) for s in self.stars], axis=0)
+        return value + (0.0 if self.bloat is None else np.abs(W) @ self.bloat)
+
+    def polygon(self, x, y, directions: int | None = None, exact: bool = True) -> np.ndarray:
+        """Vertices of an outer polygon of the projection onto the axes ``x``, ``y`` (names or
+        ``(w, c)``, see :meth:`functional`); no rows if the piece is empty.
+
+        Two functionals: support functions in ``directions`` plane directions
+        (:func:`reach.sets.projection.outer_polygon`; the plane direction ``d`` lifts to
+        ``d_0 w_x + d_1 w_y``). A time axis that is not a coordinate is the interval ``[t0, t1]``:
+        the projection lies in ``[t0, t1]`` times the interval of the other axis."""
+        from reach.sets.projection import DIRECTIONS, outer_polygon
+
+        if self.kind == "run":
+            raise ValueError("a sampled run is a path, not a set")
+        fx, fy = self.functional(x), self.functional(y)
+        if fx is None or fy is None:
+            other = fy if fx is None else fx
+            if other is None:
+                return np.array([[self.t0, self.t0], [self.t1, self.t1]])
+            w, c = other
+            up = self.support(np.stack([w, -w]), exact)
+            lo, hi = -up[1] + c, up[0] + c
+            if not lo <= hi:
+                return np.zeros((0, 2))
+            rect = np.array([[self.t0, lo], [self.t1, lo], [self.t1, hi], [self.t0, hi]])
+            return rect if fx is None else rect[:, ::-1][[0, 3, 2, 1]]
+        (wx, cx), (wy, cy) = fx, fy
+
+        def support(D):
+            return self.support(np.outer(D[:, 0], wx) + np.outer(D[:, 1], wy), exact) + D @ [cx, cy]
+
+        return outer_polygon(support, directions or DIRECTIONS)
+
+    def path(self, x, y) -> np.ndarray:
+        """The run's points on the axes ``x``, ``y`` (rows); time where an axis is time."""
+        cols = []
+        for axis in (x, y):
+            f = self.functional(axis)
+            cols.append(self.times if f is None else self.points @ f[0] + f[1])
+        return np.stack(cols, axis=1)
+
+
+#: at most this many pieces are summarised per mode and kind in a result's JSON
+SUMMARY_PIECES = 50
+
+
+def sets_summary(pieces: list) -> dict:
+    """Per mode and kind: the number of pieces, the time they span, and the interval hull of at
+    most ``SUMMARY_PIECES`` merged runs of consecutive pieces (each a box over ``names``) -- a
+    picture's worth, not the sets themselves."""
+    from reach.sets.simplify import merged_boxes
+
+    out = {}
+    for (mode, kind), group in _grouped(pieces).items():
+        entry = {"pieces": len(group), "t": [min(p.t0 for p in group), max(p.t1 for p in group)],
+                 "names": list(group[0].names)}
+        if kind != "run":
+            entry["boxes"] = [{"t": [t0, t1], "low": lo, "high": hi}
+                              for t0, t1, lo, hi in merged_boxes(group, SUMMARY_PIECES)]
+        out[f"{mode}/{kind}"] = entry
+    return out
+
+
+def _grouped(pieces: list) -> dict:
+    groups: dict = {}
+    for p in pieces:
+        groups.setdefault((p.mode, p.kind), []).append(p)
+    return groups
 
 
 def _finite(value) -> bool:

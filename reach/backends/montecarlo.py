@@ -60,6 +60,7 @@ from reach.spec.properties import BoundEvent, BoundReach, BoundReachAvoid, Bound
 from reach.stats import clopper_pearson_upper, wilson
 
 NAME = "montecarlo"
+KEPT_RUNS = 40                 # sampled runs kept for pictures (option keep_sets)
 SWITCH_PROBABILITY = 0.3       # chance that a random run takes an enabled may-transition at a piece start
 
 
@@ -78,6 +79,7 @@ class Options:
     generations: int = ranged(20, 0, 100_000)     # differential evolution generations
     population: int = ranged(40, 5, 1_000_000)    # runs per generation
     polish: int = ranged(60, 0, 1_000_000)        # Nelder-Mead runs from the best point
+    keep_sets: bool = False        # safety: KEPT_RUNS sampled runs in Result.sets (pictures)
 
     @classmethod
     def from_dict(cls, options: dict | None) -> "Options":
@@ -379,6 +381,27 @@ def random_plan(model: HybridAutomaton, window, count: int, rng):
 
 # ------------------------------------------------------------------ the back-end
 
+def sampled_runs(model: HybridAutomaton, sim: Simulator, X, tau, signal, structured: int) -> list:
+    """``KEPT_RUNS`` of the planned runs (half from the ``structured`` first rows -- corners and
+    faces -- the rest i.i.d.) simulated again with their path recorded (disturbance-free: the
+    kicks of a stochastic model are left out), one :class:`~reach.result.SetPiece` of kind
+    ``run`` per stretch in one mode."""
+    from reach.result import SetPiece
+
+    first = min(KEPT_RUNS // 2, structured)
+    rows = np.r_[np.arange(first), np.arange(structured, min(X.shape[0], structured + KEPT_RUNS - first))]
+    sub = None if signal is None else (signal[0], signal[1][rows], None if signal[2] is None else signal[2][rows])
+    traj = sim.run(X[rows], None if tau is None else tau[rows], record=True, signal=sub)
+    names, modes = tuple(model.state), list(model.modes)
+    pieces = []
+    for t, mode, states in traj.path.values():
+        cuts = np.flatnonzero(np.diff(mode)) + 1
+        for a, b in zip(np.r_[0, cuts], np.r_[cuts, mode.size]):
+            pieces.append(SetPiece(modes[int(mode[a])], float(t[a]), float(t[b - 1]), "run", names,
+                                   times=np.asarray(t[a:b], float), points=np.asarray(states[a:b], float)))
+    return pieces
+
+
 class MonteCarloBackend:
     name = NAME
     varying_inputs = True          # sampled as piecewise-constant signals
@@ -459,6 +482,7 @@ class MonteCarloBackend:
         parts = _simulate_rounds(model, props, sim, opts, X, tau, signal, n_structured, kicks)
         monitors = [SafetyMonitor.merged(model, p, [q[0][i] for q in parts]) for i, p in enumerate(props)]
         blocked = sum(q[1] for q in parts)
+        runs = sampled_runs(model, sim, X, tau, signal, n_structured) if opts.keep_sets else []
         shared = (time.perf_counter() - start) / len(props)
         results = []
         for prop, monitor in zip(props, monitors):
@@ -497,6 +521,7 @@ class MonteCarloBackend:
                     details["note"] = ("violations were sampled under random disturbance; "
                                        "a single run is not a replayable counterexample")
             result.seconds = shared + time.perf_counter() - begin
+            result.sets = runs
             results.append(result)
         return results
 

@@ -17,9 +17,44 @@ def _pyplot():
     return plt
 
 
-def plot_model_runs(model, out: Path, runs: int = 20, seed: int = 0) -> None:
-    """Sample runs (corners of the initial box and random ones): the first two states against
-    each other (the only state against time), and every state against time, coloured by mode."""
+def _clocks(model, traj) -> set[int]:
+    """States that are clocks along every run (``x_k(t) - t`` constant): a straight line, no panel."""
+    out = set()
+    for k in range(model.n):
+        if all(np.ptp(states[:, k] - t) < 1e-9 * max(1.0, float(np.max(np.abs(t)))) if t.size else True
+               for t, _, states in traj.path.values()):
+            out.add(k)
+    return out
+
+
+def _shade(ax, model, bound_props, axes, modes):
+    """The drawable requirement pieces on a panel (``axes``: two plotting axes), in its limits."""
+    from reach.plotting.requirements import regions
+
+    view = (*ax.get_xlim(), *ax.get_ylim())
+    found, _, view = regions(model, bound_props or [], axes, modes, view)
+    for region in found:
+        ax.add_patch(plt_polygon(region.polygon))
+    ax.set_xlim(view[0], view[1])
+    ax.set_ylim(view[2], view[3])
+    return sorted({r.prop for r in found})
+
+
+def plt_polygon(vertices):
+    plt = _pyplot()
+    return plt.Polygon(vertices, closed=True, facecolor="tab:red", alpha=0.12, edgecolor="tab:red",
+                       lw=0.8, hatch="//", zorder=0)
+
+
+def plot_model_runs(model, out: Path, runs: int = 20, seed: int = 0, bound_props=None) -> None:
+    """Sample runs (corners of the initial box and random ones), coloured by mode: a phase plane
+    (the pair of states the properties constrain together, else the first two states that are
+    not clocks) and every state that is not a clock against time, axes in the model's units, the
+    requirement bounds of ``bound_props`` that can be drawn on a panel shaded."""
+    from matplotlib.patches import Patch
+
+    from reach.plotting.axes import make_axis, parse_vars
+
     plt = _pyplot()
     rng = np.random.default_rng(seed)
     window = switch_window(model)
@@ -31,61 +66,136 @@ def plot_model_runs(model, out: Path, runs: int = 20, seed: int = 0) -> None:
     traj = Simulator(model).run(X, tau, record=True)
     names = list(model.modes)
     colours = {m: plt.cm.tab10(i % 10) for i, m in enumerate(names)}
-    n = model.n
-    fig, axes = plt.subplots(1 + (n + 1) // 2, 2, figsize=(11, 3.2 * (1 + (n + 1) // 2)))
-    axes = np.atleast_2d(axes)
-    plane = axes[0, 0]
-    for i, (t, modes, states) in traj.path.items():
-        for m_index, name in enumerate(names):
-            sel = modes == m_index
-            if not np.any(sel):
-                continue
-            across = states[sel, 1] if n > 1 else t[sel]          # one state: against time
-            plane.plot(states[sel, 0], across, ".", ms=1, color=colours[name])
-            for k in range(n):
-                ax = axes[1 + k // 2, k % 2]
-                ax.plot(t[sel], states[sel, k], ".", ms=1, color=colours[name])
-    plane.set_xlabel(model.state[0])
-    plane.set_ylabel(model.state[1] if n > 1 else f"time [{model.units.time}]")
-    plane.set_title(f"{model.name}: {len(traj.path)} runs")
-    for name in names:
-        plane.plot([], [], "-", color=colours[name], label=name)
-    plane.legend(loc="best", fontsize=8)
-    axes[0, 1].axis("off")
-    axes[0, 1].text(0, 0.5, model.description, wrap=True, fontsize=9)
-    for k in range(n):
-        ax = axes[1 + k // 2, k % 2]
-        ax.set_ylabel(model.state[k])
-        ax.set_xlabel(f"time [{model.units.time}]")
-    for k in range(n, 2 * ((n + 1) // 2)):
-        axes[1 + k // 2, k % 2].axis("off")
+    clocks = _clocks(model, traj)
+    shown = [k for k in range(model.n) if k not in clocks] or [0]
+    free = [model.state[k] for k in shown]
+    plane_axes = parse_vars(model, None, bound_props or [])
+    if {a.name for a in plane_axes} & {model.state[k] for k in clocks} and len(free) >= 2:
+        plane_axes = (make_axis(model, free[0]), make_axis(model, free[1]))
+    phase = len(free) >= 2
+    time_axis = make_axis(model, "time")
+    panels = ([plane_axes] if phase else []) + [(time_axis, make_axis(model, name)) for name in free]
+    cols = 2
+    rows = (len(panels) + 1 + cols - 1) // cols
+    fig, axes = plt.subplots(rows, cols, figsize=(11, 3.3 * rows), squeeze=False)
+    flat = list(axes.flat)
+    visited = set()
+    for p, (ax_x, ax_y) in enumerate(panels):
+        ax = flat[p]
+        for t, modes, states in traj.path.values():
+            labels = [names[int(m)] for m in modes]
+            xs, ys = ax_x.values(model, t, labels, states), ax_y.values(model, t, labels, states)
+            for m_index, name in enumerate(names):
+                sel = modes == m_index
+                if np.any(sel):
+                    visited.add(name)
+                    ax.plot(xs[sel], ys[sel], ".", ms=1, color=colours[name])
+        ax.set_xlabel(ax_x.label)
+        ax.set_ylabel(ax_y.label)
+        ax.grid(True, alpha=0.25)
+        drawn = _shade(ax, model, bound_props, (ax_x, ax_y), names)
+        handles = [Patch(color=colours[m], label=m) for m in names if m in visited]
+        if drawn:
+            handles.append(Patch(facecolor="tab:red", alpha=0.25, hatch="//", edgecolor="tab:red",
+                                 label="unsafe: " + ", ".join(drawn)))
+        if p == 0 or drawn:
+            ax.legend(handles=handles, loc="best", fontsize=7)
+    flat[0].set_title(f"{model.name}: {len(traj.path)} runs" + (" (phase plane)" if phase else ""))
+    info = flat[len(panels)]
+    info.axis("off")
+    clock_names = ", ".join(model.state[k] for k in sorted(clocks))
+    info.text(0, 0.5, model.description + (f"\n(clock {clock_names}: not drawn)" if clock_names else ""),
+              wrap=True, fontsize=9)
+    for ax in flat[len(panels) + 1:]:
+        ax.axis("off")
     fig.tight_layout()
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=110)
     plt.close(fig)
 
 
-def plot_abort_map(cells, times, window, out: Path, title: str) -> None:
-    """Fig. 5 of the rendezvous paper: initial cells coloured by the latest safe abort time."""
+def passive_margins(model, bound_props, cells, abort_times) -> tuple[np.ndarray, str]:
+    """Closest approach to the unsafe sets of the modes entered through the abort window, per
+    cell (its centre) and abort time: ``(margins (cells, times), unit)``, from one simulated run
+    each. The margin is the property's depth ``max_j g_j`` of each unsafe piece (the distance
+    outside a box in its sup norm), the smallest over the run after the abort; a sampled
+    picture of where margins are thin, not a bound."""
+    from reach.plotting.axes import unit_of
+
+    targets = {tr.target for tr in model.transitions if tr.window is not None}
+    tests = [prop.violation(mode) for prop in bound_props or [] for mode in targets
+             if getattr(prop, "kind", "") == "safety" and prop.pieces.get(mode)]
+    tests = [t for t in tests if t is not None]
+    margins = np.full((len(cells), len(abort_times)), np.nan)
+    if not tests:
+        return margins, ""
+    centres = np.array([(low + high) / 2 for low, high, _ in cells])
+    X = np.repeat(centres, len(abort_times), axis=0)
+    tau = np.tile(np.asarray(abort_times, float), len(cells))
+    traj = Simulator(model).run(X, tau, record=True)
+    index = {name: k for k, name in enumerate(model.modes)}
+    for run, (t, modes, states) in traj.path.items():
+        after = np.isin(modes, [index[m] for m in targets])
+        if np.any(after):
+            depth = np.min([test(states[after])[1] for test in tests], axis=0)
+            margins[run // len(abort_times), run % len(abort_times)] = float(np.min(depth))
+    return margins, unit_of(model, model.state[0])[0]
+
+
+def plot_abort_map(cells, times, window, out: Path, title: str, time_unit: str = "",
+                   margins: np.ndarray | None = None, abort_times=None, margin_unit: str = "") -> None:
+    """Fig. 5 of the rendezvous paper: initial cells coloured by the latest safe abort time, a
+    colour of their own for cells safe for every abort in the window; with ``margins`` a second
+    panel: the closest approach after the abort per cell and abort time (log scale)."""
     plt = _pyplot()
     import matplotlib.colors as mcolors
+    from matplotlib.patches import Patch
 
     lo, hi = window
     norm = mcolors.Normalize(vmin=lo, vmax=hi)
     cmap = plt.cm.viridis
-    fig, ax = plt.subplots(figsize=(6.5, 6))
+    panels = 2 if margins is not None else 1
+    fig, axes = plt.subplots(1, panels, figsize=(6.8 * panels, 6), squeeze=False)
+    ax = axes[0, 0]
+    unit = f" [{time_unit}]" if time_unit else ""
+    whole = 0
     for (low, high, _), t in zip(cells, times):
-        colour = "lightgrey" if not np.isfinite(t) else cmap(norm(t))
+        if not np.isfinite(t):
+            colour = "lightgrey"
+        elif t >= hi - 1e-9 * max(1.0, abs(hi)):
+            colour, whole = "tab:green", whole + 1
+        else:
+            colour = cmap(norm(t))
         ax.add_patch(plt.Rectangle((low[0], low[1]), high[0] - low[0], high[1] - low[1],
                                    facecolor=colour, edgecolor="k", lw=0.5))
-    ax.plot([0], [0], "r*", ms=12, label="target")
+    ax.plot([0], [0], "r*", ms=12)
     ax.autoscale_view()
     ax.set_aspect("equal")
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
-    ax.set_title(title)
-    fig.colorbar(plt.cm.ScalarMappable(norm=norm, cmap=cmap), ax=ax, label="latest safe abort time")
-    ax.legend(loc="lower left")
+    ax.set_title(title, fontsize=10)
+    fig.colorbar(plt.cm.ScalarMappable(norm=norm, cmap=cmap), ax=ax,
+                 label=f"latest safe abort time{unit} (below the window's end)")
+    ax.legend(handles=[Patch(color="tab:green", label=f"safe for every abort in [{lo:g}, {hi:g}]{unit} "
+                                                      f"({whole} of {len(cells)} cells)"),
+                       Patch(color="lightgrey", label="no safe abort found"),
+                       plt.Line2D([], [], color="r", marker="*", ls="", ms=10, label="target")],
+              loc="lower left", fontsize=8)
+    if margins is not None:
+        ax = axes[0, 1]
+        angles = [c[2] for c in cells]
+        positive = margins[np.isfinite(margins) & (margins > 0)]
+        vmin = float(positive.min()) if positive.size else 1e-3
+        vmax = float(positive.max()) if positive.size else 1.0
+        shown = np.where(np.isfinite(margins), np.maximum(margins, vmin), np.nan)
+        image = ax.pcolormesh(angles, abort_times, shown.T, shading="nearest", cmap=plt.cm.magma,
+                              norm=mcolors.LogNorm(vmin=vmin, vmax=max(vmax, vmin * 1.01)))
+        fig.colorbar(image, ax=ax, label=f"closest approach to the unsafe set after the abort"
+                                         f"{f' [{margin_unit}]' if margin_unit else ''} (log)")
+        ax.set_xlabel("cell angle [deg]")
+        ax.set_ylabel(f"abort time{unit}")
+        ax.set_title("Passive safety margin per cell (centre run) and abort time\n"
+                     "(blank: that run does not switch, e.g. the abort guard no longer holds)", fontsize=10)
     fig.tight_layout()
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=110)

@@ -29,19 +29,26 @@ def run_unit(model_path: str, property_path: str, backend: str, options: dict) -
 
 
 def plot_models(instances, folder: Path, stream) -> list[str]:
-    """Sample runs of every model of the suite, coloured by mode (one PNG per model)."""
+    """Sample runs of every model of the suite, coloured by mode, with the requirements of the
+    property files it is checked against (one PNG per model)."""
     from reach.bench.plots import plot_model_runs
     from reach.model import load_model
+    from reach.spec import bind, load_properties
 
+    files: dict[str, list[str]] = {}
+    for inst in instances:
+        files.setdefault(str(inst.model), []).append(str(inst.properties))
     written = []
-    for path in sorted({str(inst.model) for inst in instances}):
+    for path in sorted(files):
         try:
             model = load_model(path)
+            bound = [bind(p, model) for f in sorted(set(files[path])) if f.endswith((".yaml", ".yml"))
+                     for p in load_properties(f)]
         except InputError as exc:
             print(f"  no plot for {path}: {exc}", file=stream)
             continue
         target = folder / f"{model.name}_runs.png"
-        plot_model_runs(model, target, runs=12)
+        plot_model_runs(model, target, runs=12, bound_props=bound)
         written.append(str(target))
     return written
 
@@ -176,7 +183,7 @@ def run_suite(suite_path, backends=None, instances=None, out="results", jobs=Non
     report["plots"] = plot_models(chosen, out / "plots", stream) + plot_subdomains(
         [r for r in rows if r.get("run") == run_id], out / "plots")
     (out / "results.json").write_text(json.dumps(report, indent=1))
-    (out / "results.md").write_text(markdown_table(report))
+    (out / "results.md").write_text(markdown_table(report, out))
     failures = [c for c in checks if c["level"] == "fail"]
     print(f"wall time {wall:.1f} s; cross-checks: {len(checks) - len(failures)} notes, {len(failures)} failures",
           file=stream)

@@ -3,6 +3,21 @@
 from __future__ import annotations
 
 from collections import defaultdict
+from pathlib import Path
+
+#: back-ends whose verdicts are proofs (Monte Carlo is the referee, not a formal method)
+FORMAL = ("star", "taylor", "fsr")
+DECIDED = ("safe", "unsafe")
+
+#: pictures embedded at the top of results.md when they are in its plots folder
+KEY_PICTURES = (
+    ("fig4_positions_star_linear.png", "Fig. 4: positions without Passive, star on the linear model (SRA02)"),
+    ("fig4_positions_taylor_nonlinear.png", "Fig. 4: positions, taylor on the nonlinear SRNA01 with Monte Carlo runs"),
+    ("fig4_velocity_mode2.png", "Fig. 4: velocity in rendezvous against the octagon"),
+    ("fig4_thrust_x.png", "Fig. 4: thrust Fx"),
+    ("fig4_positions_passive.png", "Fig. 4: positions after a Passive transition in [120, 125] min"),
+    ("SRA08_abort_map.png", "Safe-abort map of SRA08 with the Passive margins"),
+)
 
 
 def _cell(row, run_marks: dict) -> str:
@@ -16,8 +31,64 @@ def _cell(row, run_marks: dict) -> str:
     return text + run_marks.get(row.get("run"), "")
 
 
-def markdown_table(report: dict) -> str:
-    """Instance x property rows, one column per back-end with verdict and seconds."""
+def agreement(rows: dict) -> tuple[str, str]:
+    """Whether the formal back-ends of one instance/property agree, and the time ratio between
+    them: ``(agree, ratio)`` for ``rows`` = ``{backend: row}``.
+
+    * ``yes``: at least two formal back-ends decided (SAFE/UNSAFE) and all the same way;
+    * ``NO``: one says SAFE and another UNSAFE (the cross-checks say whether a counterexample
+      replays);
+    * ``open (B undecided)``: decided ones agree, some formal back-end gave UNKNOWN or a time-out;
+    * ``one formal`` / empty: fewer than two formal back-ends answered (n/a is no answer).
+
+    Ratio: the slowest over the fastest of the formal back-ends that decided, as ``slow/fast x``."""
+    formal = {b: r for b, r in rows.items() if b in FORMAL and str(r.get("status", "")).lower() != "unsupported"}
+    if len(formal) < 2:
+        return ("one formal" if formal else ""), ""
+    decided = {b: r for b, r in formal.items() if str(r["status"]).lower() in DECIDED}
+    verdicts = {str(r["status"]).lower() for r in decided.values()}
+    open_ = sorted(set(formal) - set(decided))
+    if len(verdicts) > 1:
+        agree = "NO"
+    elif len(decided) >= 2 and not open_:
+        agree = "yes"
+    else:
+        agree = f"open ({', '.join(open_)} undecided)" if open_ else "yes"
+    ratio = ""
+    if len(decided) >= 2:
+        timed = sorted(decided.items(), key=lambda kv: _seconds(kv[1]))
+        (fast, fr), (slow, sr) = timed[0], timed[-1]
+        if _seconds(fr) > 0:
+            ratio = f"{slow}/{fast} {_seconds(sr) / _seconds(fr):.1f}x"
+    return agree, ratio
+
+
+def _plot_names(report: dict, folder) -> set[str]:
+    """The pictures of a report: those it lists and those in ``folder/plots`` (earlier runs')."""
+    names = {Path(p).name for p in report.get("plots") or []}
+    if folder is not None and (Path(folder) / "plots").is_dir():
+        names |= {p.name for p in (Path(folder) / "plots").glob("*.png")}
+    return names
+
+
+def _plot_links(names: set[str], instance: str, model: str) -> str:
+    """Links to the pictures of an instance (its model's runs, its subdomain maps)."""
+    from reach.paths import safe_name
+
+    links = []
+    runs = f"{safe_name(model)}_runs.png"
+    if runs in names:
+        links.append(f"[runs](plots/{runs})")
+    for name in sorted(names):
+        if name.startswith(f"{instance}_") and name.endswith("_subdomains.png"):
+            links.append(f"[{name[len(instance) + 1:-len('_subdomains.png')]}](plots/{name})")
+    return " ".join(links)
+
+
+def markdown_table(report: dict, folder=None) -> str:
+    """Instance x property rows, one column per back-end with verdict and seconds, whether the
+    formal back-ends agree and their time ratio (:func:`agreement`), and links to the instance's
+    pictures; the key pictures in ``folder/plots`` embedded above the table."""
     backends = report["backends"]
     grid = defaultdict(dict)
     expected = {}
@@ -42,12 +113,24 @@ def markdown_table(report: dict) -> str:
                          f"wall time {float(run.get('wall_seconds') or 0):.1f} s")
         last = runs[-1]
         lines += [f"- unmarked: {last['run']}{', ' + last['filter'] if last.get('filter') else ''}", ""]
-    lines += ["Verdict and seconds per back-end (n/a: the back-end does not handle this case).", "",
-             "| instance | property | expected | " + " | ".join(backends) + " |",
-             "|---|---|---|" + "---|" * len(backends)]
+    pictures = [(name, text) for name, text in KEY_PICTURES
+                if folder is not None and (Path(folder) / "plots" / name).is_file()]
+    if pictures:
+        lines += ["## Pictures", ""]
+        for name, text in pictures:
+            lines += [f"![{text}](plots/{name})", "", f"*{text}*", ""]
+    lines += ["Verdict and seconds per back-end (n/a: the back-end does not handle this case); whether the "
+              f"formal back-ends ({', '.join(FORMAL)}) agree, and the time ratio of the slowest to the fastest "
+              "that decided.", "",
+              "| instance | property | expected | " + " | ".join(backends) + " | formal agree | time ratio | plots |",
+              "|---|---|---|" + "---|" * len(backends) + "---|---|---|"]
+    models = {r["instance"]: r.get("model") or r["instance"] for r in report["rows"]}
+    names = _plot_names(report, folder)
     for key in order:
         cells = [_cell(grid[key][b], run_marks) if b in grid[key] else "" for b in backends]
-        lines.append(f"| {key[0]} | {key[1]} | {expected[key]} | " + " | ".join(cells) + " |")
+        agree, ratio = agreement(grid[key])
+        lines.append(f"| {key[0]} | {key[1]} | {expected[key]} | " + " | ".join(cells)
+                     + f" | {agree} | {ratio} | {_plot_links(names, key[0], models[key[0]])} |")
     lines += ["", "## Cross-checks", ""]
     if not report["cross_checks"]:
         lines.append("All back-ends agree with each other and with the expected verdicts.")

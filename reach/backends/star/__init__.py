@@ -199,7 +199,7 @@ class StarBackend:
                  status.value, explorer.stats.chains,
                  explorer.stats.cells, explorer.stats.lps, explorer.stats.aggregated)
         return Result(NAME, model.name, prop.id, status, time.perf_counter() - start,
-                      counterexample=counterexample, details=details)
+                      counterexample=counterexample, details=details, sets=explorer.sets)
 
 
 def _run_details(explorer: _Explorer) -> dict:

@@ -126,6 +126,7 @@ class _Explorer:
         self.stats = _Stats()
         self.unresolved: list[_Witness] = []
         self.replayed: list = []
+        self.sets: list = []            # SetPiece of every explored segment (option keep_sets)
         self.root = initial if initial is not None else data.initial_star(model.initial)
         self.root_mode = model.initial.mode
 
@@ -270,6 +271,8 @@ class _Explorer:
         for jump in self.jumps[mode]:
             if jump.target in self.relevant:
                 candidates |= self._screen(centers, bases, box, error, jump.H, jump.g, cells)
+        if self.opt.keep_sets:
+            self._keep_chain(mode, grid_star, centers, bases, error, [j for j in cells if j not in candidates])
 
         aggregate = (self.aggregate_after is not None and not flow.drift
                      and path.jumps >= self.aggregate_after)
@@ -280,6 +283,30 @@ class _Explorer:
         for index, members in (pending or {}).items():
             jump = self.jumps[mode][index]
             self._aggregate(jump.target, members, kept_rows(jump, Hi, gi))
+
+    def _keep_chain(self, mode: str, grid_star, centers, bases, error, cells):
+        """The screened-out cells of a chain as set pieces (option ``keep_sets``; the others are
+        kept by :meth:`_cell` at their final refinement). Segment ``j`` is the hull of grid star
+        ``j`` and grid star ``j + 1`` under the predicate of ``j`` (every run still in the mode
+        at ``t_j`` satisfies the invariant rows known up to ``t_j``), plus the box ``error_j``:
+        the bound the screening itself rests on (:meth:`_screen`). In discrete time the pieces
+        are the grid stars plus their input spread."""
+        for j in cells:
+            first = grid_star(j)
+            stars = (first,) if self.opt.discrete_time else (
+                first, Star(centers[j + 1], bases[j + 1], first.predicate, first.box))
+            self._keep(mode, stars, error[j])
+
+    def _keep(self, mode: str, stars, bloat=None):
+        """One set piece: the hull of ``stars`` plus the box ``bloat``, dated by its clock."""
+        from reach.result import SetPiece
+
+        names = tuple(self.model.state) + (("time",) if self.data.added_clock else ())
+        clock = np.eye(self.n)[self.clock][None]
+        t0 = min(-float(s.support_bounds(-clock)[0]) for s in stars)
+        t1 = max(float(s.support_bounds(clock)[0]) for s in stars)
+        self.sets.append(SetPiece(mode, t0, t1, "star", names, tuple(stars),
+                                  None if bloat is None else np.asarray(bloat, float)))
 
     def _progress(self):
         now = time.perf_counter()
@@ -315,12 +342,14 @@ class _Explorer:
         start = min(path.since for _, path in kept)
         jumps = max(path.jumps for _, path in kept)
         stalled = min(path.stalled for _, path in kept)
+        kept_sets = len(self.sets)
         try:
             self._chain(mode, hull, _Path(jumps=jumps, stalled=stalled, origin=agg, since=start),
                         hull.box.center)
         except _Deaggregate as failure:
             if failure.target is not agg:
                 raise
+            del self.sets[kept_sets:]               # the members' own segments replace the hull's
             agg.refined = True
             self.stats.deaggregated += 1
             LOG.info("aggregate of %d stars entering '%s' refined into its members (%s)",
@@ -376,15 +405,19 @@ class _Explorer:
         seg, error = self._segment(mode, start, h, spread)
         final = depth >= self.opt.max_refinements or self.opt.discrete_time or self.flows[mode].drift
         block = start.nvars
+        kept_sets = len(self.sets)
         try:
             hull = seg.box_bound()
             if not final and np.any(error > ERROR_RATIO * np.maximum(-hull.low, hull.high)):
                 raise _Refine(None, block)          # a fast transient: refine before checking
+            if self.opt.keep_sets:
+                self._keep(mode, (seg,))
             self._check_segment(mode, seg, path, block, not final)
             self._jump_from(mode, seg, path, block, not final, point, pending)
         except _Refine as failure:
             if final or failure.blame != block:
                 raise
+            del self.sets[kept_sets:]               # the halves keep their own segments
             self.stats.refined += 1
             self.stats.deepest = max(self.stats.deepest, depth + 1)
             half = h / 2

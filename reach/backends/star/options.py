@@ -74,6 +74,8 @@ class StarOptions:
         piece made only of strict inequalities is entered when the depth exceeds ``tol``;
         a piece with a non-strict row is met when the depth is at least ``-tol``.
     replay_dt: simulator step for replays (None: the simulator's default).
+    keep_sets: keep the flowpipe segments of every explored chain in ``Result.sets`` (for
+        pictures; memory grows with the exploration).
     """
 
     step: float | None = None
@@ -90,6 +92,7 @@ class StarOptions:
     max_deaggregations: int = 50
     touch_tolerance: float = 1e-9
     replay_dt: float | None = None
+    keep_sets: bool = False
 
     @classmethod
     def from_dict(cls, options: dict | None) -> "StarOptions":

@@ -65,6 +65,7 @@ class Options:
     refine: int = ranged(0, 0, 12)                # extra halvings of subdomains whose bound straddles the requirement
     jobs: int = ranged(1, 1, 256)                  # local worker processes for ADS boxes and sweeps
     scheduler: object = None        # or a Dask scheduler address (or Client) to run them on
+    keep_sets: bool = False         # rigorous mode: the step enclosures in Result.sets (pictures)
 
     @classmethod
     def from_dict(cls, options: dict | None) -> "Options":
@@ -133,6 +134,7 @@ class TaylorBackend:
             held = list(contenders(result[0], prop.sense).values())
             return stack(held) if held else DA.const(algebra(opts.order, len(u)), 0.0)
 
+        kept_sets: list = []            # step enclosures of the rigorous sweeps (keep_sets)
         if avoid:
             subdomains = [Subdomain(problem.low[u], problem.high[u], None, 0.0, 0, True)]
         else:
@@ -146,7 +148,10 @@ class TaylorBackend:
             if rigorous:
                 started = time.perf_counter()
                 sweeps = run_units(sweep_box, [(model, prop, opts.order, opts.step_tol, opts.integration_tol,
-                                                *full_box(sub.center, sub.half_width)) for sub in subs])
+                                                *full_box(sub.center, sub.half_width), opts.keep_sets)
+                                               for sub in subs])
+                for sweep in sweeps:
+                    kept_sets.extend(_set_pieces(model, sweep.pop("sets", [])))
                 log.info("rigorous sweeps of %d subdomains in %.1f s", len(subs), time.perf_counter() - started)
             out = []
             for sub, sweep in zip(subs, sweeps):
@@ -246,7 +251,15 @@ class TaylorBackend:
             details["why_not_safe"] = "the remainder is estimated; remainder: rigorous proves bounds"
             status, coverage = Status.UNKNOWN, 0.0
         return Result(self.name, model.name, prop.id, status, bound=(lo, hi), coverage=coverage,
-                      details=details)
+                      details=details, sets=kept_sets)
+
+
+def _set_pieces(model, boxes) -> list:
+    """Step enclosure boxes ``(mode, t0, t1, low, high)`` of a sweep as set pieces."""
+    from reach.result import SetPiece
+
+    names = tuple(model.state)
+    return [SetPiece(mode, t0, t1, "box", names, low=low, high=high) for mode, t0, t1, low, high in boxes]
 
 
 def _unit_runner(opts: Options, portable: bool):

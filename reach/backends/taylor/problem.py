@@ -230,7 +230,7 @@ class EventProblem:
         return enc
 
     def sweep(self, center: np.ndarray, half_width: np.ndarray, order: int, rel_tol: float,
-              tol: float) -> dict:
+              tol: float, keep_sets: bool = False) -> dict:
         """Rigorous bounds of the extremum of ``q`` over the listed modes' stretches.
 
         In each mode the verified enclosure (:mod:`.verified`) runs until the step whose end lies
@@ -244,11 +244,13 @@ class EventProblem:
         abort) branches. Exits from which no listed mode can be reached are not followed. The
         lower end is the best bound of ``q`` at the initial mode's step nodes that no run can
         have left the mode before, or on an entry box that every run passes through (a chain
-        of exits, each the only one possible in its mode)."""
+        of exits, each the only one possible in its mode). With ``keep_sets`` the result's
+        ``"sets"`` lists every step's enclosure box (:func:`_step_box`)."""
         T = self.model.horizon
         m = len(self.uncertain)
         sign = 1.0 if self.prop.sense == "max" else -1.0
         outer, inner, steps, error, stretches = -np.inf, -np.inf, 0, 0.0, 0
+        kept = [] if keep_sets else None
         x0 = initial_state(algebra(order, m + 1), center, half_width, self.uncertain)
         branches = [(self.model.initial.mode, x0, 0.0, 0, True)]
         while branches:
@@ -281,6 +283,8 @@ class EventProblem:
             exit_taken = None
             for k in range(len(enc.steps)):
                 X = enc.tm(k)
+                if kept is not None:
+                    kept.append(_step_box(mode, X, enc.steps[k], t_earliest, self.clock))
                 if code.q is not None:
                     lo, hi = code.q(X).bound()
                     outer = max(outer, hi if sign > 0 else -lo)
@@ -316,8 +320,11 @@ class EventProblem:
                 branches.append((ex.transition.target, start_box, box[self.clock, 0], hop + 1,
                                  sure and len(possible) == 1 and ex is exit_taken))
         bound = (inner, outer) if sign > 0 else (-outer, -inner)
-        return {"bound": tuple(float(v) for v in bound), "steps": steps, "error": error,
-                "stretches": stretches}
+        out = {"bound": tuple(float(v) for v in bound), "steps": steps, "error": error,
+               "stretches": stretches}
+        if kept is not None:
+            out["sets"] = kept
+        return out
 
     def _leads_to_property(self, mode: str) -> bool:
         """Whether a listed mode can be reached from ``mode`` through urgent switches."""
@@ -330,6 +337,18 @@ class EventProblem:
                 seen.add(name)
                 todo += [tr.target for tr in self.model.outgoing(name) if tr.urgent]
         return False
+
+
+def _step_box(mode: str, X, step, t_earliest: float, clock: int | None) -> tuple:
+    """``(mode, t0, t1, low, high)``: the interval hull of a step's Taylor-model enclosure (every
+    run of the subdomain lies in it over the whole step); the times from the clock's bounds, or
+    the step's span after the earliest entry without a clock."""
+    box = np.array([x.bound() for x in X], dtype=float)
+    if clock is not None:
+        t0, t1 = box[clock]
+    else:
+        t0, t1 = t_earliest + step.t0, t_earliest + step.t0 + step.h
+    return mode, float(t0), float(t1), box[:, 0], box[:, 1]
 
 
 def _unbounded(why: str) -> dict:

@@ -30,6 +30,7 @@ def expand_box(model, prop, order: int, expand_order: int, tol: float, center, h
     return {name: truncate(p, order) if expand_order > order else p for name, p in maps.items()}, maps
 
 
-def sweep_box(model, prop, order: int, rel_tol: float, tol: float, center, half_width) -> dict:
+def sweep_box(model, prop, order: int, rel_tol: float, tol: float, center, half_width,
+              keep_sets: bool = False) -> dict:
     """The rigorous sweep of one subdomain (:meth:`EventProblem.sweep`)."""
-    return problem(model, prop).sweep(center, half_width, order, rel_tol, tol)
+    return problem(model, prop).sweep(center, half_width, order, rel_tol, tol, keep_sets)

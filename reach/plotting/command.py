@@ -1,0 +1,104 @@
+"""``reach plot MODEL PROPS --backend B [--backend B2] [--vars x,y] [--out FILE]``: check with each
+back-end keeping its sets (option ``keep_sets``), then draw them (:mod:`.reach_sets`).
+
+Options: ``-o KEY=VALUE`` goes to every back-end, ``-o B.KEY=VALUE`` to back-end ``B`` only. A
+taylor check keeps sets only with ``remainder: rigorous`` (its verified step enclosures), which
+the picture asks for unless the user chose a remainder. The exit code is the check's
+(:func:`reach.checking.exit_code` over every back-end's results).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import time
+from pathlib import Path
+
+from reach.errors import InputError
+
+
+def split_options(pairs: dict, backends: list[str]) -> dict[str, dict]:
+    """``{backend: options}`` from ``{key or backend.key: value}``."""
+    out = {b: {} for b in backends}
+    for key, value in pairs.items():
+        head, dot, rest = key.partition(".")
+        if dot and head in out:
+            out[head][rest] = value
+        elif dot:
+            raise InputError(f"'{head}' is not one of the back-ends plotted ({', '.join(backends)})",
+                             field="--option")
+        else:
+            for b in backends:
+                out[b][key] = value
+    return out
+
+
+def _knows(backend: str, name: str) -> bool:
+    from reach.backends import BACKENDS, OPTIONS
+
+    cls = getattr(importlib.import_module(BACKENDS[backend]), OPTIONS[backend])
+    return name in {f.name for f in dataclasses.fields(cls)}
+
+
+def load(model_path: str, properties_path: str | None, only: list[str] | None):
+    """``(model, bound properties, spaceex)``: a YAML model and property file, or a SpaceEx
+    ``.xml`` with its ``.cfg`` (its forbidden set as one property)."""
+    from reach.checking import check_modes, is_spaceex
+    from reach.locate import find_model
+    from reach.model import load_model
+    from reach.spec import bind, load_properties
+
+    if is_spaceex(model_path):
+        return None, None, True
+    model = load_model(find_model(model_path))
+    props = load_properties(properties_path)
+    if only:
+        unknown = set(only) - {p.id for p in props}
+        if unknown:
+            raise InputError(f"no property '{sorted(unknown)[0]}' in {properties_path}", field="--property")
+        props = [p for p in props if p.id in only]
+    for prop in props:
+        check_modes(prop, model)
+    return model, [bind(p, model) for p in props], False
+
+
+def plot_files(model_path: str, properties_path: str, backends: list[str], variables: str | None,
+               out: Path | None, options: dict, only: list[str] | None = None, exact: bool = True,
+               stream=None):
+    """Check and draw; returns ``(exit code, output path, drawing summary, seconds to draw)``."""
+    from reach.checking import check_model, check_spaceex, exit_code, resolve_backend
+    from reach.backends import validate_options
+    from reach.paths import safe_name
+    from reach.plotting.axes import parse_vars
+    from reach.plotting.reach_sets import plot_reach_sets
+
+    per_backend = split_options(options, backends)
+    for b in backends:
+        resolve_backend(b)
+        opts = per_backend[b]
+        if _knows(b, "keep_sets"):
+            opts["keep_sets"] = True
+        if b == "taylor":
+            opts.setdefault("remainder", "rigorous")
+        validate_options(b, opts)
+    model, bound, spaceex = load(model_path, properties_path, only)
+    axes = None if spaceex else parse_vars(model, variables, bound)      # bad --vars before any work
+    results = {}
+    for b in backends:
+        if spaceex:
+            res, model, _, props = check_spaceex(model_path, properties_path, b, per_backend[b])
+            bound = list(props.values())
+            axes = axes or parse_vars(model, variables, bound)
+        else:
+            res = check_model(resolve_backend(b), model, bound, per_backend[b])
+        results[b] = res
+        if stream is not None:
+            print(f"{b}: " + ", ".join(f"{r.property} {r.status.value} ({len(r.sets)} sets)" for r in res),
+                  file=stream)
+    if out is None:
+        out = Path(f"{safe_name(model.name)}_{'_'.join(backends)}_{safe_name(axes[0].name)}_"
+                   f"{safe_name(axes[1].name)}.png")
+    start = time.perf_counter()
+    summary = plot_reach_sets(model, results, bound, axes, out, exact=exact)
+    seconds = time.perf_counter() - start
+    return exit_code([r for rs in results.values() for r in rs]), out, summary, seconds
