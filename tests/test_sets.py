@@ -236,10 +236,9 @@ def test_chord_hull_without_error_is_the_convex_hull_of_the_ends(seed, point):
     (brute-force vertices), also for a start that is a single point (the hull is then the
     segment from ``x0`` to ``x1``, nothing beyond ``x1``)."""
     rng = np.random.default_rng(seed)
-    if point:
-        a = rng.normal(size=2)
-        start = Star(rng.normal(size=2), rng.normal(size=(2, 2)), box=Box(a, a))
-        corners = a[None]
+    if point:                       # the center alone: all coefficients pinned to 0
+        start = Star(rng.normal(size=2), rng.normal(size=(2, 2)), box=Box(np.zeros(2), np.zeros(2)))
+        corners = np.zeros((1, 2))
     else:
         start = _offset_star(rng)
         corners = star_predicate_polygon(start).vertices_2d()
