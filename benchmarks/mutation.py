@@ -89,6 +89,8 @@ _SIGN = "sign is +1 or -1: only its sign is used"
 _RESHAPE = "numpy reads any negative size in reshape as the inferred one"
 _TIE = "differs only when a size equals the negligible threshold exactly"
 _DTYPE = "the values are float arrays already"
+_CACHE = "the cache is skipped: the bound is recomputed, same values"
+_EINSUM = "einsum labels in upper case name the same contraction"
 _FLOAT_ARITH = "the array enters only float arithmetic (c1 - c0, V1 - V0, E = r), so any numeric input gives the same values"
 EQUIVALENT: dict[str, str] = {
     "reach.backends.taylor.bound.x_contenders__mutmut_4": _SIGN,
@@ -117,6 +119,19 @@ EQUIVALENT: dict[str, str] = {
         "np.zeros_like(None) is a 0-d zero: the bisection computes the same values (object dtype)",
     "reach.model.simulate.x\u01c1Simulator\u01c1_first_entry__mutmut_20":
         "differs only when a margin is exactly 0 at a bisection midpoint, by at most dt 2^-40",
+    "reach.backends.star.flowpipe.x\u01c1AffineFlow\u01c1deviation__mutmut_2": _CACHE,
+    "reach.backends.star.flowpipe.x\u01c1AffineFlow\u01c1deviation__mutmut_3": _CACHE,
+    "reach.backends.star.flowpipe.x__chain_bounds__mutmut_9": _EINSUM,
+    "reach.backends.star.flowpipe.x__chain_abs_bounds__mutmut_9": _EINSUM,
+    "reach.backends.star.flowpipe.x__chain_abs_bounds__mutmut_20": _EINSUM,
+    "reach.backends.star.flowpipe.x__plus_box__mutmut_3": _DTYPE,
+    "reach.backends.star.flowpipe.x__plus_box__mutmut_5": _DTYPE,
+    "reach.backends.star.flowpipe.x__drift_segment__mutmut_30": _DTYPE,
+    "reach.backends.star.flowpipe.x__drift_segment__mutmut_32": _DTYPE,
+    "reach.backends.star.flowpipe.x__segment__mutmut_22": _RESHAPE,
+    "reach.backends.star.flowpipe.x__segment__mutmut_31": _RESHAPE,
+    "reach.backends.star.flowpipe.x__segment__mutmut_40": _RESHAPE,
+    "reach.backends.star.flowpipe.x__segment__mutmut_54": _RESHAPE,
     "reach.sets.star.x_chord_hull__mutmut_5": _FLOAT_ARITH,
     "reach.sets.star.x_chord_hull__mutmut_7": _FLOAT_ARITH,
     "reach.sets.star.x_chord_hull__mutmut_10": _FLOAT_ARITH,

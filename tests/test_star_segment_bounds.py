@@ -163,3 +163,19 @@ def test_input_deviation_bound_covers_the_bang_bang_input_and_is_tight():
     assert np.all(R >= exact - 1e-12)
     assert np.all(R[1:] <= exact[1:] * np.exp(2 * abs(a) * h))
     assert AffineFlow(np.array([[a]]), np.zeros(1)).deviation(h, count) is None
+
+
+def test_deviation_bound_grows_with_the_horizon_asked():
+    """Asking for more grid points after fewer (the bound is cached per step) gives the
+    same rows as a fresh flow: ``R_0 = 0`` and ``R_j = sum_{i < j} |Phi^i| w`` with
+    ``Phi = e^{A h}`` and ``w = h e^{|A| h} |B| u_r`` (the class doc), here for a
+    three-state chain driven through its first state."""
+    A = np.array([[-0.3, 0.0, 0.0], [1.0, -0.2, 0.0], [0.0, 1.0, -0.1]])
+    B, u_r, h = np.array([[1.0], [0.0], [0.0]]), np.array([0.5]), 0.2
+    Phi = expm(A * h)
+    w = h * expm(np.abs(A) * h) @ (np.abs(B) @ u_r)
+    reference = np.vstack([np.zeros(3)] + [sum(np.abs(np.linalg.matrix_power(Phi, i)) @ w for i in range(j))
+                                           for j in range(1, 8)])
+    flow = AffineFlow(A, np.zeros(3), B, u_r)
+    for count in (1, 2, 3, 7, 4):
+        assert flow.deviation(h, count) == pytest.approx(reference[:count + 1], rel=1e-12, abs=1e-15)
