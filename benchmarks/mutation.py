@@ -13,6 +13,7 @@ counts the ones judged equivalent in ``EQUIVALENT`` separately.
     pip install -e '.[test,mutation]'
     python benchmarks/mutation.py --label after                  # all targets, working tree
     python benchmarks/mutation.py --rev 0404ccd --label before taylor_remainder crosscheck
+    python benchmarks/mutation.py --label after --survivors-of before star_segments   # rerun survivors only
     python benchmarks/mutation.py --list
 
 Kill rate = (killed + timed out) / (all mutants run - equivalent ones).
@@ -121,6 +122,7 @@ EQUIVALENT: dict[str, str] = {
         "differs only when a margin is exactly 0 at a bisection midpoint, by at most dt 2^-40",
     "reach.backends.star.flowpipe.x\u01c1AffineFlow\u01c1deviation__mutmut_2": _CACHE,
     "reach.backends.star.flowpipe.x\u01c1AffineFlow\u01c1deviation__mutmut_3": _CACHE,
+    "reach.backends.star.flowpipe.x\u01c1AffineFlow\u01c1deviation__mutmut_29": _CACHE,
     "reach.backends.star.flowpipe.x__chain_bounds__mutmut_9": _EINSUM,
     "reach.backends.star.flowpipe.x__chain_abs_bounds__mutmut_9": _EINSUM,
     "reach.backends.star.flowpipe.x__chain_abs_bounds__mutmut_20": _EINSUM,
