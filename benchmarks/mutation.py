@@ -254,10 +254,11 @@ def write_report(out: Path, store: dict):
         for name, r in rows.items():
             c = r["counts"]
             killed, considered, rate = kill_rate(c)
+            partial = f" ({c['not run']} not run)" if c.get("not run") else ""
             text.append(f"| {name} | {r['file']} {r['rev']} | {', '.join(r['functions'])} | "
                         f"{', '.join(Path(t).name for t in r['tests'])} | {sum(c.values())} | {killed} | "
                         f"{c.get('survived', 0)} | {c.get('no tests', 0)} | {c.get('equivalent', 0)} | "
-                        f"{rate:.0f} % | {r['seconds'] / 60:.1f} |")
+                        f"{rate:.0f} %{partial} | {r['seconds'] / 60:.1f} |")
         text.append("")
     notes = ""
     if out.exists() and "\n## Notes" in out.read_text():
