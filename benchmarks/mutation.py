@@ -13,6 +13,7 @@ counts the ones judged equivalent in ``EQUIVALENT`` separately.
     pip install -e '.[test,mutation]'
     python benchmarks/mutation.py --label after                  # all targets, working tree
     python benchmarks/mutation.py --rev 0404ccd --label before taylor_remainder crosscheck
+    python benchmarks/mutation.py --label after --survivors-of before star_segments   # rerun survivors only
     python benchmarks/mutation.py --list
 
 Kill rate = (killed + timed out) / (all mutants run - equivalent ones).
@@ -55,10 +56,11 @@ class Target:
 
 
 TARGETS = {
-    "star_segments": Target("reach/backends/star.py",
-                            ("AffineFlow.curvature", "_chain_bounds", "_chain_abs_bounds", "_segment",
-                             "_drift_segment", "_block_spreads", "_depth"),
-                            ("tests/test_star.py", "tests/test_star_verdicts.py", "tests/test_abort_deadline.py")),
+    "star_segments": Target("reach/backends/star/flowpipe.py",
+                            ("AffineFlow.curvature", "AffineFlow.deviation", "_chain_bounds", "_chain_abs_bounds",
+                             "_segment", "_drift_segment", "_plus_box"),
+                            ("tests/test_star_segment_bounds.py", "tests/test_star.py", "tests/test_star_inputs.py",
+                             "tests/test_star_soundness.py")),
     "chord_hull": Target("reach/sets/star.py", ("chord_hull",), ("tests/test_sets.py", "tests/test_star.py")),
     "fsr_intervals": Target("reach/backends/fsr.py", ("reach", "reach_avoid", "_sequential", "_verdict", "leave_bound"),
                             ("tests/test_fsr.py",)),
@@ -75,7 +77,7 @@ TARGETS = {
     "crosscheck": Target("reach/bench/crosscheck.py", ("cross_check", "_replays"),
                          ("tests/test_bench.py", "tests/test_crosscheck.py")),
     "within_bound": Target("reach/backends/event_sampling.py", ("within_bound",),
-                           ("tests/test_bench.py", "tests/test_event_sampling.py", "tests/test_crosscheck.py")),
+                           ("tests/test_within_bound.py", "tests/test_event_sampling.py", "tests/test_crosscheck.py")),
     "constraints": Target("reach/model/constraints.py",
                           ("Constraint.negated", "from_comparisons", "affine_coefficients", "halfspaces",
                            "lambdify_margins", "violation_test"),
@@ -88,6 +90,9 @@ _SIGN = "sign is +1 or -1: only its sign is used"
 _RESHAPE = "numpy reads any negative size in reshape as the inferred one"
 _TIE = "differs only when a size equals the negligible threshold exactly"
 _DTYPE = "the values are float arrays already"
+_CACHE = "the cache is skipped: the bound is recomputed, same values"
+_EINSUM = "einsum labels in upper case name the same contraction"
+_FLOAT_ARITH = "the array enters only float arithmetic (c1 - c0, V1 - V0, E = r), so any numeric input gives the same values"
 EQUIVALENT: dict[str, str] = {
     "reach.backends.taylor.bound.x_contenders__mutmut_4": _SIGN,
     "reach.backends.taylor.bound.x_contenders__mutmut_9": _SIGN,
@@ -111,6 +116,36 @@ EQUIVALENT: dict[str, str] = {
     "reach.model.constraints.x_lambdify_margins__mutmut_18": "lambdify's default modules include numpy",
     "reach.model.constraints.x_lambdify_margins__mutmut_21": "lambdify's default modules include numpy",
     "reach.model.constraints.x_violation_test__mutmut_27": "a tie with the allowance only",
+    "reach.model.simulate.x\u01c1Simulator\u01c1_first_entry__mutmut_2":
+        "np.zeros_like(None) is a 0-d zero: the bisection computes the same values (object dtype)",
+    "reach.model.simulate.x\u01c1Simulator\u01c1_first_entry__mutmut_20":
+        "differs only when a margin is exactly 0 at a bisection midpoint, by at most dt 2^-40",
+    "reach.backends.star.flowpipe.x\u01c1AffineFlow\u01c1deviation__mutmut_2": _CACHE,
+    "reach.backends.star.flowpipe.x\u01c1AffineFlow\u01c1deviation__mutmut_3": _CACHE,
+    "reach.backends.star.flowpipe.x\u01c1AffineFlow\u01c1deviation__mutmut_29": _CACHE,
+    "reach.backends.star.flowpipe.x__chain_bounds__mutmut_9": _EINSUM,
+    "reach.backends.star.flowpipe.x__chain_abs_bounds__mutmut_9": _EINSUM,
+    "reach.backends.star.flowpipe.x__chain_abs_bounds__mutmut_20": _EINSUM,
+    "reach.backends.star.flowpipe.x__plus_box__mutmut_3": _DTYPE,
+    "reach.backends.star.flowpipe.x__plus_box__mutmut_5": _DTYPE,
+    "reach.backends.star.flowpipe.x__drift_segment__mutmut_30": _DTYPE,
+    "reach.backends.star.flowpipe.x__drift_segment__mutmut_32": _DTYPE,
+    "reach.backends.star.flowpipe.x__segment__mutmut_22": _RESHAPE,
+    "reach.backends.star.flowpipe.x__segment__mutmut_31": _RESHAPE,
+    "reach.backends.star.flowpipe.x__segment__mutmut_40": _RESHAPE,
+    "reach.backends.star.flowpipe.x__segment__mutmut_54": _RESHAPE,
+    "reach.model.simulate.x\u01c1Simulator\u01c1_urgent_now__mutmut_3":
+        "one more round than modes: differs only for a cycle of urgent guards that all hold at once",
+    "reach.model.simulate.x\u01c1Simulator\u01c1_urgent_now__mutmut_4": "None and False are both falsy",
+    "reach.sets.star.x_chord_hull__mutmut_5": _FLOAT_ARITH,
+    "reach.sets.star.x_chord_hull__mutmut_7": _FLOAT_ARITH,
+    "reach.sets.star.x_chord_hull__mutmut_10": _FLOAT_ARITH,
+    "reach.sets.star.x_chord_hull__mutmut_12": _FLOAT_ARITH,
+    "reach.sets.star.x_chord_hull__mutmut_19": _FLOAT_ARITH,
+    "reach.sets.star.x_chord_hull__mutmut_21": _FLOAT_ARITH,
+    "reach.sets.star.x_chord_hull__mutmut_14": "np.asarray(None, dtype=float) is nan, and nan > 0 selects no error",
+    "reach.sets.star.x_chord_hull__mutmut_65": "1 - 2a is +1 or -1 at the tent points 0 and 1: x and / agree",
+    "reach.sets.star.x_chord_hull__mutmut_118": "the b box is implied by the homogenised box rows b <= lam hi, lam <= 1",
 }
 
 STATUS = {1: "killed", 3: "killed", -24: "timeout", 24: "timeout", 36: "timeout", 152: "timeout",
@@ -150,8 +185,12 @@ def configure(dest: Path, target: Target):
     return tests
 
 
-def run_target(name: str, target: Target, rev: str | None, workdir: Path, jobs: int, log, collect=False):
+def run_target(name: str, target: Target, rev: str | None, workdir: Path, jobs: int, log, collect=False,
+               only: list[str] | None = None):
+    """Run (or with ``collect`` read back) the mutants of ``target``; ``only``: just these
+    mutant names (the rest of the target is left out of the counts)."""
     dest = workdir / name
+    patterns = target.patterns() if only is None else only
     mutmut = [str(Path(sys.executable).with_name("mutmut"))]
     started = time.perf_counter()
     if collect:
@@ -161,14 +200,14 @@ def run_target(name: str, target: Target, rev: str | None, workdir: Path, jobs: 
         copy_tree(rev, dest)
         tests = configure(dest, target)
         env = {**os.environ, "HYPOTHESIS_PROFILE": "ci", "MPLBACKEND": "Agg"}
-        command = ["nice", "-n", "10", *mutmut, "run", "--max-children", str(jobs), *target.patterns()]
+        command = ["nice", "-n", "10", *mutmut, "run", "--max-children", str(jobs), *patterns]
         run = subprocess.run(command, cwd=dest, env=env, capture_output=True, text=True)
         log.write(f"## {name}\n$ {' '.join(command)}\n{run.stdout[-4000:]}\n{run.stderr[-4000:]}\n")
         returncode = run.returncode
     seconds = time.perf_counter() - started
     meta = dest / "mutants" / (target.file + ".meta")
     codes = json.loads(meta.read_text())["exit_code_by_key"] if meta.exists() else {}
-    wanted = [re.compile(p.replace(".", r"\.").replace("*", ".*") + "$") for p in target.patterns()]
+    wanted = [re.compile(p.replace(".", r"\.").replace("*", ".*") + "$") for p in patterns]
     codes = {k: v for k, v in codes.items() if any(w.match(k) for w in wanted)}
     counts: dict[str, int] = {}
     survivors = []
@@ -182,6 +221,18 @@ def run_target(name: str, target: Target, rev: str | None, workdir: Path, jobs: 
             survivors.append((key, status, diff))
     return {"file": target.file, "functions": target.functions, "tests": tests,
             "counts": counts, "survivors": survivors, "seconds": seconds, "returncode": returncode}
+
+
+def rerun_survivors(previous: dict, row: dict) -> dict:
+    """``previous`` (a full run) with its survivors replaced by ``row``, a run of just those
+    mutants against the current tests. Tests are only ever added, so a mutant killed before
+    stays killed; ``seconds`` is the time of the rerun."""
+    counts = dict(previous["counts"])
+    for _, status, _ in previous["survivors"]:
+        counts[status] -= 1
+    for status, n in row["counts"].items():
+        counts[status] = counts.get(status, 0) + n
+    return {**row, "counts": {k: v for k, v in counts.items() if v}, "rerun_of": previous["rev"]}
 
 
 def kill_rate(counts: dict) -> tuple[int, int, float]:
@@ -203,10 +254,11 @@ def write_report(out: Path, store: dict):
         for name, r in rows.items():
             c = r["counts"]
             killed, considered, rate = kill_rate(c)
+            partial = f" ({c['not run']} not run)" if c.get("not run") else ""
             text.append(f"| {name} | {r['file']} {r['rev']} | {', '.join(r['functions'])} | "
                         f"{', '.join(Path(t).name for t in r['tests'])} | {sum(c.values())} | {killed} | "
                         f"{c.get('survived', 0)} | {c.get('no tests', 0)} | {c.get('equivalent', 0)} | "
-                        f"{rate:.0f} % | {r['seconds'] / 60:.1f} |")
+                        f"{rate:.0f} %{partial} | {r['seconds'] / 60:.1f} |")
         text.append("")
     notes = ""
     if out.exists() and "\n## Notes" in out.read_text():
@@ -229,6 +281,8 @@ def main(argv=None) -> int:
     ap.add_argument("--jobs", type=int, default=1, help="mutants run at once")
     ap.add_argument("--out", type=Path, default=ROOT / "results" / "mutation.md")
     ap.add_argument("--list", action="store_true", help="list the targets and exit")
+    ap.add_argument("--survivors-of", metavar="LABEL",
+                    help="run only the survivors recorded under LABEL and count the rest as recorded there")
     ap.add_argument("--collect", action="store_true",
                     help="do not run: read the results already in the work directory")
     args = ap.parse_args(argv)
@@ -247,8 +301,17 @@ def main(argv=None) -> int:
     with open(args.workdir / f"mutmut_{args.label}.log", "a") as log:
         for name in names:
             previous = store.get(args.label, {}).get(name, {})
-            row = run_target(name, TARGETS[name], args.rev, args.workdir / args.label, args.jobs, log,
-                             args.collect)
+            base = store.get(args.survivors_of, {}).get(name) if args.survivors_of else None
+            if args.survivors_of and base is None:
+                ap.error(f"no {args.survivors_of} run of {name} recorded")
+            only = None if base is None else [key for key, _, _ in base["survivors"]]
+            if only == []:
+                row = {**base, "seconds": 0.0, "survivors": []}
+            else:
+                row = run_target(name, TARGETS[name], args.rev, args.workdir / args.label, args.jobs, log,
+                                 args.collect, only)
+                if base is not None:
+                    row = rerun_survivors(base, row)
             if args.collect:
                 row["seconds"] = previous.get("seconds", row["seconds"])
             row["rev"] = args.rev or "working tree"

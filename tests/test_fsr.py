@@ -13,6 +13,7 @@ from scipy.special import ndtr
 from reach.backends import fsr_fourier as F
 from reach.backends.base import run
 from reach.backends.fsr import BACKEND, GaussianProblem, reach, reach_avoid
+from reach.backends.fsr import leave_bound as fsr_leave_bound
 from reach.model.constraints import halfspaces
 from reach.model.loader import load_model
 from reach.model.ltv import (KickedLinearSystem, cwh_matrix, eccentric_orbit_system, kick_times,
@@ -376,3 +377,91 @@ def test_unsupported_models_and_properties_say_why():
     assert BACKEND.supports(arch, reach_prop) is not None
     result = run(BACKEND, arch, safety)
     assert result.status is Status.UNSUPPORTED and result.details["reason"]
+
+
+# ------------------------------------------------------------------ intervals: Boole terms and verdicts
+
+def _walk_sides(steps, level):
+    """``P(S_k < level)`` for the standard random walk ``S_k`` (variance ``k``), ``k = 1..steps``."""
+    return ndtr(level / np.sqrt(np.arange(1, steps + 1)))
+
+
+def test_default_drop_budget_is_a_tenth_of_the_error_and_drops_the_smallest_sides():
+    """A corridor ``x >= -3`` around a random walk: the rows dropped are the smallest tail
+    masses ``P(S_k < -3) = Phi(-3 / sqrt k)`` while their running sum stays within
+    ``abs_error / 10``, and the Boole term is that sum (closed form)."""
+    steps, abs_error = 6, 0.04
+    problem = scalar_problem(0.0, 1.0, float(steps), 0.0, 0.0, 1.0)
+    target = (np.array([[-1.0]]), np.array([10.0]))             # x[K] >= -10: one more, tiny side
+    wide = (np.array([[-1.0]]), np.array([3.0]))
+    p, info = reach_avoid(problem, target, wide, abs_error=abs_error)
+    sides = np.sort(np.append(_walk_sides(steps - 1, -3.0), ndtr(-10.0 / np.sqrt(steps))))
+    count = int(np.sum(np.cumsum(sides) <= abs_error / 10))
+    assert 0 < count < steps
+    assert info["dropped"] == count + 1                          # and x[0] = 0, fixed
+    assert info["boole"] == pytest.approx(np.sum(sides[:count]), rel=1e-9)
+    exact, _ = reach_avoid(problem, target, wide, abs_error=1e-4, drop_budget=0.0)
+    assert p.low <= exact.value <= p.high
+
+
+def test_row_cap_keeps_the_first_and_last_rows_and_charges_the_rest_to_boole():
+    """Random walk, ``S_k >= 0`` for ``k = 1..3`` capped at two rows: the rows kept are
+    ``k = 1`` and ``k = 3`` (first and last in time), whose joint probability is the orthant
+    probability ``1/4 + asin(rho) / (2 pi)`` with ``rho = 1 / sqrt 3``; the cut row costs
+    ``P(S_2 < 0) = 1/2`` in the lower end. With one row the value is ``P(S_1 >= 0) = 1/2``."""
+    problem = scalar_problem(0.0, 1.0, 3.0, 0.0, 0.0, 1.0)
+    positive = (np.array([[-1.0]]), np.array([0.0]))
+    p, info = reach_avoid(problem, positive, positive, abs_error=1e-4, drop_budget=0.0, max_rows=2)
+    orthant = 0.25 + np.arcsin(1 / np.sqrt(3)) / (2 * np.pi)
+    assert info["capped"] == 1 and info["kept"] == 2
+    assert info["boole"] == pytest.approx(0.5)
+    assert p.value == pytest.approx(orthant, abs=3e-4) and p.high >= orthant - 1e-12
+    assert p.low == pytest.approx(max(0.0, p.value - 0.5), abs=3e-4)
+    exact = comb(6, 3) / 4 ** 3                                  # Sparre Andersen, all three rows
+    assert p.low <= exact <= p.high
+    one, info = reach_avoid(problem, positive, positive, abs_error=1e-4, drop_budget=0.0, max_rows=1)
+    assert info["capped"] == 2 and one.value == pytest.approx(0.5, abs=1e-9) and one.low == 0.0
+    none, info = reach_avoid(problem, positive, positive, abs_error=1e-4, drop_budget=0.0, max_rows=3)
+    assert info["capped"] == 0 and none.low <= exact <= none.high
+
+
+def test_leave_bound_is_the_boole_sum_of_post_kick_exceedances():
+    """``x[k+1] = r (x[k] + w[k])``, ``w ~ N(mu, var)``: the post-kick state ``x[k] + w[k]``
+    is normal with mean ``r^k x0 + mu (1 + r + ... + r^k)`` and variance
+    ``var (1 + r^2 + ... + r^2k)``; the bound is the sum over the kicks and rows of the
+    closed-form exceedance probabilities."""
+    a, K, x0, mu, var = -0.3, 6, 0.5, 0.1, 0.25
+    problem = scalar_problem(a, 1.0, float(K), x0, mu, var)
+    r = np.exp(a)
+    k = np.arange(K)
+    mean = r ** k * x0 + mu * np.array([sum(r ** j for j in range(i + 1)) for i in k])
+    sd = np.sqrt(var * np.array([sum(r ** (2 * j) for j in range(i + 1)) for i in k]))
+    H, g = np.array([[1.0], [-1.0]]), np.array([1.6, 1.0])
+    exact = np.sum(ndtr((mean - 1.6) / sd)) + np.sum(ndtr((-mean - 1.0) / sd))
+    assert 0.05 < exact < 1
+    assert fsr_leave_bound(problem, H, g) == pytest.approx(exact, rel=1e-12)
+    assert fsr_leave_bound(problem, H, np.array([-5.0, 1.0])) == 1.0          # capped at 1
+
+
+def test_leave_bound_without_noise_is_the_indicator_of_reaching_the_face():
+    """No kick noise: the state stays at ``x0``; leaving ``x < g`` is certain when
+    ``x0 >= g`` (the face counts as outside) and impossible otherwise."""
+    problem = scalar_problem(0.0, 1.0, 3.0, 1.0, 0.0, 0.0)
+    H = np.array([[1.0]])
+    assert fsr_leave_bound(problem, H, np.array([1.0])) == 1.0
+    assert fsr_leave_bound(problem, H, np.array([1.0 + 1e-9])) == 0.0
+
+
+@pytest.mark.parametrize("low,high,at_least,status,verdict", [
+    (0.6, 0.7, 0.6, Status.SAFE, "holds"),               # the lower end meets the threshold
+    (0.5, 0.7, 0.6, Status.UNKNOWN, "undecided"),
+    (0.5, 0.6, 0.6, Status.UNKNOWN, "undecided"),        # the threshold is still reachable
+    (0.5, 0.59, 0.6, Status.UNKNOWN, "violated"),
+    (0.9, 1.0, None, Status.UNKNOWN, "no threshold"),
+])
+def test_verdict_reads_the_interval_against_the_threshold(low, high, at_least, status, verdict):
+    """SAFE only when the whole interval is at least the threshold; a violation is only
+    reported (never as SAFE or UNSAFE) when the whole interval is below it."""
+    from reach.backends.fsr import _verdict
+    from reach.sets.gaussian import Probability
+    assert _verdict(Probability(0.5 * (low + high), low, high), at_least) == (status, verdict)

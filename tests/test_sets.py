@@ -181,3 +181,72 @@ def test_chord_hull_contains_interpolants_and_is_the_convex_hull(seed):
     # the first coefficients of a hull point are the start's coefficients
     res = seg.maximize(rng.normal(size=2))
     assert start.predicate.contains(res.x[:2], tol=1e-6)
+
+
+def _offset_star(rng) -> Star:
+    """A 2-D star whose coefficient box need not contain 0 (``low`` in [-1, 1]), its
+    predicate a half-plane just beyond a random point of the box: never empty."""
+    low = rng.uniform(-1, 1, 2)
+    high = low + rng.uniform(0.2, 2.0, 2)
+    a = rng.uniform(low, high)
+    w = rng.normal(size=2)
+    return Star(rng.normal(size=2), rng.normal(size=(2, 2)) + 2 * np.eye(2), HPolytope(w[None], [w @ a + 0.1]),
+                Box(low, high))
+
+
+def _at_weight(seg: Star, m: int, lam: float) -> Star:
+    """The points of a chord hull with the chord weight (coefficient ``2 m``) fixed to ``lam``."""
+    low, high = seg.box.low.copy(), seg.box.high.copy()
+    low[2 * m] = high[2 * m] = lam
+    return Star(seg.center, seg.basis, seg.predicate, Box(low, high))
+
+
+@given(SEEDS, st.sampled_from([0.0, 0.1, 0.3, 0.5, 0.8, 1.0]))
+@settings(max_examples=40, deadline=None)
+def test_chord_hull_at_each_weight_is_the_interpolant_plus_the_tent(seed, lam):
+    """At chord weight ``lam`` the hull is exactly ``(1 - lam) X0 + lam X1 + E(lam)`` (Minkowski
+    sums; ``X0`` the start, ``X1 = {x1(a)}``), which holds every interpolant
+    ``(1 - lam) x0(a) + lam x1(a)``, with ``E(lam) = {|e_i| <= t(lam) r_i}``,
+    ``t = min(1, 4 lam, 4 (1 - lam))``: the two tangent lines of the error parabola
+    ``4 lam (1 - lam)`` at the grid points, capped at its peak. Reference support:
+    ``(1 - lam) h0 + lam h1 + t(lam) |d| . r`` with ``h0, h1`` the maxima over the brute-force
+    vertices of the coefficient polygon. A component with zero error adds no coefficient."""
+    rng = np.random.default_rng(seed)
+    start = _offset_star(rng)
+    M = rng.normal(size=(2, 2))
+    c1, V1 = M @ start.center + rng.normal(size=2), M @ start.basis
+    error = np.array([rng.uniform(0.05, 0.5), 0.0])[rng.permutation(2)]
+    seg = chord_hull(start, c1, V1, error)
+    assert seg.nvars == 2 * 2 + 1 + 1
+    corners = star_predicate_polygon(start).vertices_2d()
+    tent = min(1.0, 4 * lam, 4 * (1 - lam))
+    assert tent >= 4 * lam * (1 - lam)              # the parabola lies under the tangent lines
+    sliced = _at_weight(seg, 2, lam)
+    for _ in range(4):
+        d = rng.normal(size=2)
+        h0, h1 = np.max((start.center + corners @ start.basis.T) @ d), np.max((c1 + corners @ V1.T) @ d)
+        reference = (1 - lam) * h0 + lam * h1 + tent * np.abs(d) @ error
+        assert sliced.support(d) == pytest.approx(reference, abs=1e-6)
+
+
+@given(SEEDS, st.booleans())
+@settings(max_examples=25, deadline=None)
+def test_chord_hull_without_error_is_the_convex_hull_of_the_ends(seed, point):
+    """No error: the hull is ``conv(start, end)`` and its support the larger end support
+    (brute-force vertices), also for a start that is a single point (the hull is then the
+    segment from ``x0`` to ``x1``, nothing beyond ``x1``)."""
+    rng = np.random.default_rng(seed)
+    if point:                       # the center alone: all coefficients pinned to 0
+        start = Star(rng.normal(size=2), rng.normal(size=(2, 2)), box=Box(np.zeros(2), np.zeros(2)))
+        corners = np.zeros((1, 2))
+    else:
+        start = _offset_star(rng)
+        corners = star_predicate_polygon(start).vertices_2d()
+    M = rng.normal(size=(2, 2))
+    c1, V1 = M @ start.center + rng.normal(size=2), M @ start.basis
+    seg = chord_hull(start, c1, V1)
+    assert seg.nvars == 2 * 2 + 1
+    ends = np.vstack([start.center + corners @ start.basis.T, c1 + corners @ V1.T])
+    for _ in range(4):
+        d = rng.normal(size=2)
+        assert seg.support(d) == pytest.approx(np.max(ends @ d), abs=1e-6)
