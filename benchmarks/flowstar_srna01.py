@@ -45,6 +45,7 @@ import json
 import os
 import platform
 import re
+import resource
 import shutil
 import subprocess
 import sys
@@ -249,28 +250,35 @@ class FlowstarRun:
     flowpipes: int | None = None
     cpu_seconds: float | None = None
     output: str = ""
+    process_cpu_seconds: float = 0.0   # user + system time of the flowstar process
+
+
+def children_cpu() -> float:
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
 
 
 def run_flowstar(binary: str, text: str, workdir: Path, timeout: float) -> FlowstarRun:
     """Feed ``text`` to ``flowstar`` on standard input in ``workdir`` (it writes outputs/ there)."""
-    start = time.perf_counter()
+    start, cpu0 = time.perf_counter(), children_cpu()
     try:
         proc = subprocess.run([binary], input=text, capture_output=True, text=True, cwd=workdir,
                               timeout=timeout)
     except subprocess.TimeoutExpired:
         return FlowstarRun(time.perf_counter() - start, "FAILED", False, output=f"timed out after {timeout:g} s")
     seconds = time.perf_counter() - start
+    cpu = children_cpu() - cpu0
     out = ANSI.sub("", proc.stdout)
     verdict = re.search(r"Result of (?:the )?safety verification[^:]*:\s*(SAFE|UNSAFE|UNKNOWN)", out)
     pipes = re.search(r"(\d+) flowpipe\(s\) computed", out)
-    cpu = re.search(r"(?:Total time cost|Time cost of safety verification):\s*([0-9.]+)", out)
+    own = re.search(r"(?:Total time cost|Time cost of safety verification):\s*([0-9.]+)", out)
     tail = "\n".join(line for line in out.splitlines() if "%" not in line)[-2000:]
     if proc.returncode != 0 or verdict is None:
         tail += ANSI.sub("", proc.stderr)[-1000:]
-        return FlowstarRun(seconds, "FAILED", False, output=tail)
+        return FlowstarRun(seconds, "FAILED", False, output=tail, process_cpu_seconds=cpu)
     return FlowstarRun(seconds, verdict.group(1), "Computation not completed" not in out,
                        int(pipes.group(1)) if pipes else None,
-                       float(cpu.group(1)) if cpu else None, tail)
+                       float(own.group(1)) if own else None, tail, cpu)
 
 
 def check_on_dump(dump: str, unsafe: dict[str, list]) -> str:
@@ -303,20 +311,21 @@ def flowstar_setting(binary: str, model, pieces: dict[str, list], order: int, ho
         work = Path(tmp)
         first = {m: v[0][1] for m, v in by_mode.items()}
         main = run_flowstar(binary, flowstar_model(model, order, horizon, first), work, timeout)
-        record = {"order": order, "horizon_min": horizon, "reach_seconds": round(main.seconds, 2),
+        record = {"order": order, "horizon_min": horizon, "flowpipe_seconds": round(main.seconds, 2),
                   "flowstar_cpu_seconds": main.cpu_seconds, "flowpipes": main.flowpipes,
                   "completed": main.completed, "verdict_first_pieces": main.verdict}
         for m, v in by_mode.items():
             for user in v[0][2]:
                 piece_verdict[user] = main.verdict if main.completed else "UNKNOWN"
         dump_file = work / "outputs" / "srna01.flow"
-        check_seconds = 0.0
+        check_seconds, check_cpu = 0.0, 0.0
         if main.verdict != "FAILED" and dump_file.exists():
             dump = dump_file.read_text()
             for r in range(1, rounds):
                 unsafe = {m: v[r][1] for m, v in by_mode.items() if r < len(v)}
                 chk = run_flowstar(binary, check_on_dump(dump, unsafe), work, timeout)
                 check_seconds += chk.seconds
+                check_cpu += chk.process_cpu_seconds
                 for m, v in by_mode.items():
                     if r < len(v):
                         for user in v[r][2]:
@@ -324,6 +333,8 @@ def flowstar_setting(binary: str, model, pieces: dict[str, list], order: int, ho
         else:
             record["output"] = main.output
     record["check_seconds"] = round(check_seconds, 2)
+    record["flowpipe_cpu_seconds"] = round(main.process_cpu_seconds, 2)
+    record["cpu_seconds"] = round(main.process_cpu_seconds + check_cpu, 2)
     record["check_runs"] = max(rounds - 1, 0)
     record["unique_pieces_checked"] = {m: len(v) for m, v in by_mode.items()}
     record["pieces_outside_invariant"] = sorted(f"{pid}[{k}]" for pid, k in outside)
@@ -355,10 +366,11 @@ def reach_setting(model, horizon: float, timeout_note: str = "") -> dict:
     out = {}
     for path in PROPERTY_FILES:
         props = [bind(p, short) for p in load_properties(path)]
-        start = time.perf_counter()
+        start, cpu0 = time.perf_counter(), time.process_time() + children_cpu()
         results = check_model(backend, short, props, {"remainder": "rigorous"})
         seconds = time.perf_counter() - start
-        out[path.name] = {"seconds": round(seconds, 2),
+        cpu = time.process_time() + children_cpu() - cpu0
+        out[path.name] = {"seconds": round(seconds, 2), "cpu_seconds": round(cpu, 2),
                           "verdicts": {r.property: r.status.value for r in results}}
     return out
 
@@ -394,8 +406,24 @@ def ratios_of(fs: dict, rs: dict) -> dict:
     for name, r in rs.items():
         if r["seconds"] > 0 and "UNSUPPORTED" not in r["verdicts"].values():
             out[name] = {"total": round(fs["seconds"] / r["seconds"], 3),
-                         "flowpipes": round(fs["reach_seconds"] / r["seconds"], 3)}
+                         "flowpipes": round(fs["flowpipe_seconds"] / r["seconds"], 3)}
+            if r.get("cpu_seconds") and fs.get("cpu_seconds"):
+                out[name]["total_cpu"] = round(fs["cpu_seconds"] / r["cpu_seconds"], 3)
+                out[name]["flowpipes_cpu"] = round(fs["flowpipe_cpu_seconds"] / r["cpu_seconds"], 3)
     return out
+
+
+def summary(verdicts: dict) -> str:
+    """``11 SAFE`` or ``3 SAFE; UNKNOWN: a, b``: counts of SAFE and n/a, the rest by name."""
+    safe = sum(v == "SAFE" for v in verdicts.values())
+    skipped = sum(v == "n/a" for v in verdicts.values())
+    rest = {}
+    for pid, v in verdicts.items():
+        if v not in ("SAFE", "n/a"):
+            rest.setdefault(v, []).append(pid)
+    parts = [f"{safe} SAFE"] + ([f"{skipped} n/a"] if skipped else [])
+    parts += [f"{v}: {', '.join(ids)}" for v, ids in rest.items()]
+    return "; ".join(parts)
 
 
 def markdown(report: dict) -> str:
@@ -411,23 +439,35 @@ def markdown(report: dict) -> str:
              "and run: the reachability run checks the first piece of each mode and dumps its Taylor-model "
              "flowpipes, every further piece is checked on the dump by one more Flow* run (`checks`). "
              "A piece that cannot meet the mode invariant (LP) is not sent to Flow*.", "",
-             "| TM order, horizon | Flow* flowpipes s (Flow* CPU s) | checks (runs, s) | Flow* total s | "
-             "Flow* verdicts | reach taylor s (rendezvous.yaml / rendezvous_events.yaml) | reach verdicts | "
-             "ratio Flow*/reach, total (flowpipe run only) |",
-             "|---|---|---|---|---|---|---|---|"]
+             "| TM order, horizon | Flow* flowpipe run s (CPU; Flow*'s clock) | checks: runs, s (CPU) | "
+             "Flow* total s (CPU) | Flow* verdicts | property file | reach taylor s (CPU) | reach verdicts | "
+             "ratio Flow*/reach total, wall (CPU) | flowpipe run only, wall (CPU) |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for st in report["settings"]:
         fs, rs = st["flowstar"], st["reach_taylor"]
-        fv = "; ".join(f"{k}: {v}" for k, v in fs["verdicts"].items())
-        names = list(rs)
-        rv = " / ".join(", ".join(f"{k}: {v}" for k, v in rs[n]["verdicts"].items()) for n in names)
-        rsec = " / ".join(f"{rs[n]['seconds']:.1f}" for n in names)
         found = ratios_of(fs, rs)
-        ratio = " / ".join(f"{found[n]['total']:.2f} ({found[n]['flowpipes']:.2f})" if n in found
-                           else "- (reach UNSUPPORTED)" for n in names)
-        lines.append(f"| {fs['order']}, {fs['horizon_min']:g} min | {fs['reach_seconds']:.1f} "
-                     f"({fs['flowstar_cpu_seconds']}) | {fs['check_runs']}, {fs['check_seconds']:.1f} | "
-                     f"{fs['seconds']:.1f} | {fv} | {rsec} | {rv} | {ratio} |")
-    lines += ["", "Anchor (shared/ANCHORS.md, a quieter machine): Flow* SAFE to 200 min in 42 s (order 5) and "
+        for k, (name, r) in enumerate(rs.items()):
+            left = (f"| {fs['order']}, {fs['horizon_min']:g} min | {fs['flowpipe_seconds']:.1f} "
+                    f"({fs.get('flowpipe_cpu_seconds', '-')}; {fs['flowstar_cpu_seconds']:.1f}) | "
+                    f"{fs['check_runs']}, {fs['check_seconds']:.1f} ({fs.get('cpu_seconds', 0) - fs.get('flowpipe_cpu_seconds', 0):.1f}) | "
+                    f"{fs['seconds']:.1f} ({fs.get('cpu_seconds', '-')}) | "
+                    f"{summary({p: v for p, v in fs['verdicts'].items() if p in r['verdicts']})} |")
+            q = found.get(name)
+            ratio = (f"{q['total']:.2f} ({q.get('total_cpu', float('nan')):.2f}) | "
+                     f"{q['flowpipes']:.2f} ({q.get('flowpipes_cpu', float('nan')):.2f})") if q else "- | -"
+            lines.append(f"{left} {name} | {r['seconds']:.1f} ({r.get('cpu_seconds', '-')}) | "
+                         f"{summary(r['verdicts'])} | {ratio} |")
+    lines += ["", "How to read it: Flow* CPU s is Flow*'s own clock of the reachability run (the wall-clock "
+              "column includes writing the dump). Flow*'s jump is a may-transition inside the docking guard "
+              "while the approach invariant holds; the model's urgent runs are among those runs, so Flow*'s "
+              "SAFE is a SAFE of the model. The checks re-read the dumped Taylor models, whose coefficients "
+              "Flow* prints with 15 significant digits. Pieces outside the invariant: "
+              + (", ".join(report["settings"][0]["flowstar"]["pieces_outside_invariant"]) or "none")
+              + " (the open `x < -100` cannot hold where the invariant says `x >= -100`; Flow* would check it "
+              "closed and meet the entry edge `x = -100`). reach runs `check_model` with the taylor back-end "
+              "and `remainder: rigorous` on the same model with its horizon set to the Flow* time; "
+              "a property file that reach's taylor does not support on this branch has no ratio.", "",
+              "Anchor (shared/ANCHORS.md, a quieter machine): Flow* SAFE to 200 min in 42 s (order 5) and "
               "to 240 min in 89 s (order 7), one unsafe conjunction per run; all 14 pieces add about 80 s.", ""]
     dace = report.get("daceypy")
     if dace:
@@ -491,7 +531,7 @@ def main(argv=None) -> int:
     for order, horizon in SETTINGS:
         print(f"Flow* order {order} to {horizon:g} min ...", flush=True)
         fs = flowstar_setting(binary, model, pieces, order, horizon, args.timeout)
-        print(f"  {fs['seconds']} s ({fs['reach_seconds']} s flowpipes, {fs['check_runs']} checks "
+        print(f"  {fs['seconds']} s ({fs['flowpipe_seconds']} s flowpipes, {fs['check_runs']} checks "
               f"{fs['check_seconds']} s): {fs['verdicts']}", flush=True)
         print(f"reach taylor (rigorous) to {horizon:g} min ...", flush=True)
         rs = reach_setting(model, horizon)
