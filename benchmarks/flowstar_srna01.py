@@ -34,8 +34,10 @@ at the jump; TM order 5 to 200 min and order 7 to 240 min. reach's taylor back-e
 same model with the rigorous remainder through both property files
 (properties/rendezvous.yaml and properties/rendezvous_events.yaml) to the same horizons. If
 ``benchmarks/taylor_vs_daceypy.py`` and ``daceypy`` (``--daceypy-path``) are present, that
-comparison runs in the same run too. Times are wall-clock seconds; ratios are peer / reach.
-Results go to results/flowstar.json (and ``--markdown`` prints the table rows).
+comparison runs in the same run too. Times are wall-clock and CPU seconds (user + system of
+the Flow* processes; of this process and its children for reach); ratios are Flow* / reach.
+Results go to results/flowstar.json and results/flowstar.md (``--render`` rewrites the .md
+from the .json; ``--write-model FILE`` only writes the order-5 Flow* model).
 """
 
 from __future__ import annotations
@@ -51,7 +53,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import sympy
@@ -103,7 +105,7 @@ def flowstar_text(expr: sympy.Expr) -> str:
         terms = sympy.Add.make_args(expr)
         out = ""
         for k, term in enumerate(terms):
-            coeff, rest = term.as_coeff_Mul()
+            coeff = term.as_coeff_Mul()[0]
             negative = coeff.is_Number and float(coeff) < 0
             body = flowstar_text(-term) if negative else flowstar_text(term)
             if k == 0:
@@ -355,11 +357,11 @@ def flowstar_setting(binary: str, model, pieces: dict[str, list], order: int, ho
 
 # ---------------------------------------------------------------- reach and daceypy, same run
 
-def reach_setting(model, horizon: float, timeout_note: str = "") -> dict:
+def reach_setting(model, horizon: float) -> dict:
     """reach's taylor back-end (rigorous remainder) on both property files to ``horizon``."""
     from dataclasses import replace
 
-    from reach.checking import check_model, resolve_backend
+    from reach.checking import check_model, not_applicable, resolve_backend
     from reach.spec import bind, load_properties
     backend = resolve_backend("taylor")
     short = replace(model, horizon=horizon)
@@ -371,7 +373,8 @@ def reach_setting(model, horizon: float, timeout_note: str = "") -> dict:
         seconds = time.perf_counter() - start
         cpu = time.process_time() + children_cpu() - cpu0
         out[path.name] = {"seconds": round(seconds, 2), "cpu_seconds": round(cpu, 2),
-                          "verdicts": {r.property: r.status.value for r in results}}
+                          "verdicts": {r.property: "n/a" if not_applicable(r) else r.status.value
+                                       for r in results}}
     return out
 
 
@@ -446,10 +449,11 @@ def markdown(report: dict) -> str:
     for st in report["settings"]:
         fs, rs = st["flowstar"], st["reach_taylor"]
         found = ratios_of(fs, rs)
-        for k, (name, r) in enumerate(rs.items()):
+        check_cpu = fs.get("cpu_seconds", 0) - fs.get("flowpipe_cpu_seconds", 0)
+        for name, r in rs.items():
             left = (f"| {fs['order']}, {fs['horizon_min']:g} min | {fs['flowpipe_seconds']:.1f} "
                     f"({fs.get('flowpipe_cpu_seconds', '-')}; {fs['flowstar_cpu_seconds']:.1f}) | "
-                    f"{fs['check_runs']}, {fs['check_seconds']:.1f} ({fs.get('cpu_seconds', 0) - fs.get('flowpipe_cpu_seconds', 0):.1f}) | "
+                    f"{fs['check_runs']}, {fs['check_seconds']:.1f} ({check_cpu:.1f}) | "
                     f"{fs['seconds']:.1f} ({fs.get('cpu_seconds', '-')}) | "
                     f"{summary({p: v for p, v in fs['verdicts'].items() if p in r['verdicts']})} |")
             q = found.get(name)
@@ -520,7 +524,8 @@ def main(argv=None) -> int:
         print("FLOWSTAR does not name a flowstar executable; nothing run.\n" + BUILD_HELP)
         return 0
 
-    report = {"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), "machine": {"cores": os.cpu_count(), "platform": platform.platform(),
+    report = {"date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
+              "machine": {"cores": os.cpu_count(), "platform": platform.platform(),
                           "load_average_at_start": list(os.getloadavg())},
               "model": str(MODEL.relative_to(ROOT)),
               "property_files": [str(p.relative_to(ROOT)) for p in PROPERTY_FILES],
