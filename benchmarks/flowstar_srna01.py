@@ -461,8 +461,10 @@ def markdown(report: dict) -> str:
                      f"{q['flowpipes']:.2f} ({q.get('flowpipes_cpu', float('nan')):.2f})") if q else "- | -"
             lines.append(f"{left} {name} | {r['seconds']:.1f} ({r.get('cpu_seconds', '-')}) | "
                          f"{summary(r['verdicts'])} | {ratio} |")
-    lines += ["", "How to read it: Flow* CPU s is Flow*'s own clock of the reachability run (the wall-clock "
-              "column includes writing the dump). Flow*'s jump is a may-transition inside the docking guard "
+    lines += ["", "How to read it: CPU is user + system seconds of the flowstar processes (for reach: of "
+              "its process); Flow*'s clock is the time it prints for the reachability computation alone "
+              "(the run's CPU also covers preparing and writing the dump). With the machine shared, the CPU "
+              "ratios are the steadier ones. Flow*'s jump is a may-transition inside the docking guard "
               "while the approach invariant holds; the model's urgent runs are among those runs, so Flow*'s "
               "SAFE is a SAFE of the model. The checks re-read the dumped Taylor models, whose coefficients "
               "Flow* prints with 15 significant digits. Pieces outside the invariant: "
