@@ -16,6 +16,7 @@ from __future__ import annotations
 import itertools
 
 import numpy as np
+from scipy.integrate import quad
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -166,16 +167,21 @@ def test_input_deviation_bound_covers_the_bang_bang_input_and_is_tight():
 
 
 def test_deviation_bound_grows_with_the_horizon_asked():
-    """Asking for more grid points after fewer (the bound is cached per step) gives the
-    same rows as a fresh flow: ``R_0 = 0`` and ``R_j = sum_{i < j} |Phi^i| w`` with
-    ``Phi = e^{A h}`` and ``w = h e^{|A| h} |B| u_r`` (the class doc), here for a
-    three-state chain driven through its first state."""
+    """Asking for more grid points after fewer (the bound is cached per step) gives the same
+    rows as a fresh flow, and every row bounds the exact support of the input effect,
+    ``R(t) = int_0^t |e^{A tau} B| u_r dtau`` (the class doc; scipy ``quad``), from above, within 10 % in
+    each entry and 1 % in sum, here for a three-state chain driven through its first state."""
     A = np.array([[-0.3, 0.0, 0.0], [1.0, -0.2, 0.0], [0.0, 1.0, -0.1]])
     B, u_r, h = np.array([[1.0], [0.0], [0.0]]), np.array([0.5]), 0.2
-    Phi = expm(A * h)
-    w = h * expm(np.abs(A) * h) @ (np.abs(B) @ u_r)
-    reference = np.vstack([np.zeros(3)] + [sum(np.abs(np.linalg.matrix_power(Phi, i)) @ w for i in range(j))
-                                           for j in range(1, 8)])
+    exact = np.zeros((8, 3))
+    for j in range(1, 8):
+        for row in range(3):
+            exact[j, row] = u_r[0] * quad(lambda tau: abs((expm(A * tau) @ B)[row, 0]), 0.0, j * h,
+                                          epsabs=1e-14, epsrel=1e-12)[0]
+    fresh = AffineFlow(A, np.zeros(3), B, u_r).deviation(h, 7)
+    assert np.all(fresh >= exact - 1e-14)
+    assert np.all(fresh[1:] <= exact[1:] * 1.1)            # the curvature term, O(delta^2)
+    assert fresh[1:].sum() <= exact[1:].sum() * 1.01
     flow = AffineFlow(A, np.zeros(3), B, u_r)
     for count in (1, 2, 3, 7, 4):
-        assert flow.deviation(h, count) == pytest.approx(reference[:count + 1], rel=1e-12, abs=1e-15)
+        assert flow.deviation(h, count) == pytest.approx(fresh[:count + 1], rel=1e-12, abs=1e-15)
