@@ -11,7 +11,10 @@ is an :class:`LPResult` whose ``status`` is one of ``"optimal"``, ``"infeasible"
 :class:`LPError`, so a caller never mistakes a solver failure for an answer.
 
 HiGHS works with a primal feasibility tolerance of about 1e-7: "infeasible" means no
-point satisfies the constraints to that tolerance.
+point satisfies the constraints to that tolerance. An infeasible verdict is the one a proof
+rests on (an empty intersection with an unsafe set), and HiGHS's presolve has been seen to
+give it for feasible, unbounded problems; it is therefore only accepted when the solver
+without presolve confirms it.
 """
 
 from __future__ import annotations
@@ -87,6 +90,9 @@ def minimize(c, A_ub=None, b_ub=None, *, A_eq=None, b_eq=None, bounds=None,
                                             "dual_feasibility_tolerance": tolerance}
     res = linprog(c, A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=b_eq, bounds=_bounds(bounds, n),
                   method="highs", options=options)
+    if res.status == 2:         # HiGHS's presolve can call an unbounded LP infeasible: ask again without it
+        res = linprog(c, A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=b_eq, bounds=_bounds(bounds, n),
+                      method="highs", options={**options, "presolve": False})
     if res.status == 0:
         return LPResult(OPTIMAL, float(res.fun), np.asarray(res.x, dtype=float))
     if res.status == 2:
@@ -144,7 +150,7 @@ def maximize_many(C, A_ub, b_ub, bounds) -> np.ndarray:
     index = np.arange(n, dtype=np.int32)
     values = np.empty(C.shape[0])
     status = highspy.HighsModelStatus
-    k, fresh = 0, False
+    k, fresh, presolve = 0, False, True
     while k < C.shape[0]:
         solver.changeColsCost(n, index, C[k])
         solver.run()
@@ -158,6 +164,11 @@ def maximize_many(C, A_ub, b_ub, bounds) -> np.ndarray:
             fresh = True
             continue
         elif s == status.kInfeasible:
+            if presolve:        # confirmed without presolve only (module doc)
+                solver.setOptionValue("presolve", "off")
+                solver.clearSolver()
+                presolve = False
+                continue
             return np.full(C.shape[0], -np.inf)
         else:
             values[k] = np.nan

@@ -159,3 +159,35 @@ def test_maximize_many_agrees_with_one_lp_per_objective(seed):
                                                                     np.sign(want[np.isinf(want)]))
     finite = np.isfinite(want)
     assert np.allclose(got[finite], want[finite], rtol=1e-6, atol=1e-6)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**32 - 1))
+def test_a_feasible_lp_is_never_called_infeasible(seed):
+    """An empty set is what a proof rests on: when a point of the polyhedron exists (checked
+    by substitution), no objective may report it empty. HiGHS's presolve calls some feasible,
+    unbounded problems infeasible (seed 199 here is one); reach.lp asks again without it."""
+    rng = np.random.default_rng(seed)
+    m, n = int(rng.integers(0, 10)), int(rng.integers(1, 7))
+    A, b = rng.normal(size=(m, n)), rng.normal(size=m) + rng.choice([-2.0, 1.0])
+    lo = np.where(rng.random(n) < 0.2, -np.inf, -rng.random(n))
+    hi = np.where(rng.random(n) < 0.2, np.inf, rng.random(n))
+    point = lp.feasible_point(A if m else None, b if m else None, bounds=(lo, hi), n=n)
+    if point is None:
+        return
+    assert np.all(A @ point <= b + 1e-6) and np.all(point >= lo - 1e-6) and np.all(point <= hi + 1e-6)
+    C = rng.normal(size=(6, n))
+    for c in C:
+        assert not lp.maximize(c, A if m else None, b if m else None, bounds=(lo, hi)).infeasible
+    assert np.all(lp.maximize_many(C, A, b, (lo, hi)) > -np.inf)
+
+
+def test_the_presolve_case_is_unbounded_not_infeasible():
+    rng = np.random.default_rng(199)
+    m, n = int(rng.integers(0, 10)), int(rng.integers(1, 7))
+    A, b = rng.normal(size=(m, n)), rng.normal(size=m) + rng.choice([-2.0, 1.0])
+    lo = np.where(rng.random(n) < 0.2, -np.inf, -rng.random(n))
+    hi = np.where(rng.random(n) < 0.2, np.inf, rng.random(n))
+    C = rng.normal(size=(6, n))
+    assert lp.maximize(C[0], A, b, bounds=(lo, hi)).optimal
+    assert lp.maximize(C[1], A, b, bounds=(lo, hi)).unbounded
