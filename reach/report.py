@@ -112,7 +112,7 @@ def figures(result, prop, model) -> dict:
     if note:
         out["margin_note"] = note
     if result.counterexample is not None:
-        out["time_unit"] = model.units.time
+        out["time_unit"] = model.time_unit
     return out
 
 
@@ -152,9 +152,9 @@ def line(result, prop, model) -> str:
     parts = []
     if result.counterexample is not None:
         c = result.counterexample
-        t = model.units.time
-        abort = "" if c.switch_time is None else f", switch at t={c.switch_time:g} {t}"
-        parts.append(f"violated at t={c.violation_time:.4g} {t} in {c.violation_mode}{abort}")
+        t = f" {model.time_unit}" if model.time_unit else ""
+        abort = "" if c.switch_time is None else f", switch at t={c.switch_time:g}{t}"
+        parts.append(f"violated at t={c.violation_time:.4g}{t} in {c.violation_mode}{abort}")
     if kind == "event":
         unit = prop.unit
         quantity = f"{prop.sense} {prop.text or 'quantity'}"

@@ -5,6 +5,7 @@ units; 1 m/s = 60 m/min.
 """
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -139,3 +140,21 @@ def test_an_avoided_set_reads_as_avoid(tmp_path, sra01):
     wall = bind(load_properties(path)[0], sra01)
     result = Result("montecarlo", "SRA01", "wall", Status.UNKNOWN, details={"closest_depth": 60.0})
     assert line(result, wall, sra01).startswith("avoid x >= 5[m]: closest margin 60 m")
+
+
+def test_a_model_without_units_shows_no_unit_of_time():
+    """The thermostat declares no units: its times carry none (not the SI default "s"), while
+    a model in minutes says so, in the report line and on a plot's time axis."""
+    from reach.plotting.axes import make_axis
+
+    root = Path(__file__).resolve().parents[1]
+    thermostat, sra01 = load_model(root / "models" / "thermostat.yaml"), load_model(root / "models" / "SRA01.yaml")
+    assert thermostat.time_unit == "" and make_axis(thermostat, "time").label == "time"
+    assert sra01.time_unit == "min" and make_axis(sra01, "time").label == "time [min]"
+    prop = next(p for p in load_properties(root / "properties" / "thermostat.yaml") if p.id == "below_20p5")
+    cex = Counterexample(model="thermostat", property=prop.id, model_file="m.yaml", property_file="p.yaml",
+                         initial_state=[19.5], switch_time=None, violation_time=1.25, violation_mode="heating",
+                         violation_state=[20.6], dt=0.01)
+    text = line(Result("montecarlo", "thermostat", prop.id, Status.UNSAFE, counterexample=cex),
+                bind(prop, thermostat), thermostat)
+    assert "violated at t=1.25 in heating" in text

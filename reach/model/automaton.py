@@ -191,6 +191,11 @@ class HybridAutomaton:
     dimensions: DimensionSystem | None = None          # None: the model declares no units
 
     @property
+    def time_unit(self) -> str:
+        """The unit of time to show: the model's, or none when the model declares no units."""
+        return self.units.time if self.dimensions is not None else ""
+
+    @property
     def varying_inputs(self) -> list[BoundedInput]:
         return [u for u in self.bounded_inputs if u.varying]
 

@@ -92,7 +92,7 @@ def make_axis(model, name: str) -> Axis:
         raise InputError(f"no state or input '{name}' in model '{model.name}' (states: "
                          f"{', '.join(model.state)}; inputs: {', '.join(model.inputs) or 'none'}; "
                          f"or t for time)", field="--vars")
-    unit, scale = (model.units.time, 1.0) if kind == "time" else unit_of(model, name)
+    unit, scale = (model.time_unit, 1.0) if kind == "time" else unit_of(model, name)
     return Axis(name, kind, f"{'time' if kind == 'time' else name} [{unit}]" if unit else name, scale)
 
 
