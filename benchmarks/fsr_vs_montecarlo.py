@@ -198,6 +198,7 @@ def plot_scenario(name, model, prop, path):
         ax.set_aspect("equal", adjustable="datalim")
         ax.set_xlabel("y [m]")
         ax.set_ylabel("x [m]")
+        ax.xaxis.set_major_locator(plt.MaxNLocator(5))     # long tick labels must not overlap
         ax.set_title(f"at t = {prop.at:g} s")
     else:
         _plot_marginals(ax, model, problem, means[K], covs[K], box, (ix, iy), km)
