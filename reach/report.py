@@ -101,6 +101,8 @@ def figures(result, prop, model) -> dict:
             out["unit_note"] = "requirements of different dimensions: margins in model units"
         if "closest_depth" in d:
             out["closest_margin"] = _in(unit, d["closest_depth"])
+        if "margin_bound" in d:
+            out["margin_bound"] = [_in(unit, v) for v in d["margin_bound"]]
         depth = _depth_at_violation(result.counterexample, prop)
         if depth is not None:
             out["violation_margin"] = _in(unit, depth)
@@ -172,6 +174,11 @@ def line(result, prop, model) -> str:
             parts.append(f"{quantity} {required}")
     elif kind == "safety":
         text = f["requirement"]
+        if "margin_bound" in f:
+            unit = prop.margin_unit()
+            text += f": smallest margin in {_with_unit(interval(*f['margin_bound']), unit)}"
+            if unit is None:
+                text += " (model units)"
         if "closest_margin" in f:
             unit = prop.margin_unit()
             text += f": closest margin {_with_unit(number(f['closest_margin']), unit)}"

@@ -44,6 +44,16 @@ def test_safety_margin_in_newtons_next_to_the_requirement(sra01):
     assert line(result, thrust, sra01).startswith("abs(Fx) <= 10[N], abs(Fy) <= 10[N]: closest margin 2.603 N")
 
 
+def test_a_proved_margin_bound_in_newtons(sra01):
+    """taylor's safety answer carries the margin bound in model units (kg m/min^2); the line
+    shows it in the requirement's N: 9371.15 / 3600 = 2.603, 10817.6 / 3600 = 3.005."""
+    thrust = _prop(sra01, "properties/rendezvous.yaml", "thrust")
+    result = Result("taylor", "SRA01", "thrust", Status.SAFE, details={"margin_bound": [9371.15, 10817.6]})
+    assert figures(result, thrust, sra01)["margin_bound"] == pytest.approx([9371.15 / 3600, 10817.6 / 3600])
+    assert line(result, thrust, sra01).startswith(
+        "abs(Fx) <= 10[N], abs(Fy) <= 10[N]: smallest margin in [2.603, 3.005] N")
+
+
 def test_velocity_margin_in_metres_per_second(sra01):
     velocity = _prop(sra01, "properties/rendezvous.yaml", "velocity")
     result = Result("montecarlo", "SRA01", "velocity", Status.UNKNOWN, details={"closest_depth": 0.07698})

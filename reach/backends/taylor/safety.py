@@ -136,7 +136,6 @@ def check_safety(backend, model, prop: BoundSafety, options: dict | None):
     if lows:
         lo, hi = min(lows), min(highs)
         details["margin_bound"] = [lo, hi]
-        details["method"] = f"smallest margin in [{lo:.6g}, {hi:.6g}] (model units)"
         remainders = {r["remainder"] for r in rows if "remainder" in r}
         details["remainder"] = ", ".join(sorted(remainders))
     if status == Status.SAFE:
