@@ -137,3 +137,21 @@ def test_thrust_safety_margin_agrees_with_the_event_file():
     ten_newton = 10.0 * 60.0 ** 2                         # kg m/min^2
     assert margin.bound[0] == pytest.approx(ten_newton - fx.bound[1], rel=1e-9)
     assert margin.bound[1] == pytest.approx(ten_newton - fx.bound[0], rel=1e-9)
+
+
+def test_kept_sets_of_a_safety_check_hold_the_closed_form_runs(tmp_path):
+    """With ``keep_sets`` a safety answer carries the rigorous step boxes, and the closed-form
+    runs x(t) = x0 cos t, v(t) = -x0 sin t lie in the boxes of their time (the picture's promise)."""
+    model, props = _files(tmp_path, SPRING, """
+        properties:
+          - {id: low, kind: safety, require: ["x <= 1.2"]}
+    """)
+    result = BACKEND.check(model, props["low"], {**RIGOROUS, "keep_sets": True})
+    assert result.status is Status.SAFE and result.sets
+    for x0 in (0.9, 1.0, 1.1):
+        for piece in result.sets[:: max(1, len(result.sets) // 25)]:
+            t = 0.5 * (piece.t0 + piece.t1)
+            (xs, vs) = piece.polygon("x", "v").T
+            x, v = x0 * np.cos(t), -x0 * np.sin(t)
+            assert xs.min() - 1e-9 <= x <= xs.max() + 1e-9 and vs.min() - 1e-9 <= v <= vs.max() + 1e-9
+    assert not BACKEND.check(model, props["low"], RIGOROUS).sets

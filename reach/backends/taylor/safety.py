@@ -110,6 +110,7 @@ def check_safety(backend, model, prop: BoundSafety, options: dict | None):
     lower end of the margin above the requirement) or implied by invariants; otherwise UNKNOWN
     with the margin bounds (estimated ones say so)."""
     rows, statuses, lows, highs, counterexample = [], [], [], [], None
+    sets: list = []             # keep_sets: the enclosures of the first margin's sweeps (the same flow for each)
     for part in margins(model, prop):
         if part.event is None:
             rows.append({"constraint": part.text, "status": "SAFE",
@@ -117,6 +118,7 @@ def check_safety(backend, model, prop: BoundSafety, options: dict | None):
             statuses.append(Status.SAFE)
             continue
         result = backend.check(model, part.event, options)
+        sets = sets or result.sets
         lo, hi = result.bound
         if result.status != Status.SAFE and counterexample is None:
             counterexample = _witness(model, prop, result)
@@ -152,7 +154,7 @@ def check_safety(backend, model, prop: BoundSafety, options: dict | None):
         details.pop("reason", None)
     coverage = 1.0 if status == Status.SAFE else 0.0
     return Result(backend.name, model.name, prop.id, status, coverage=coverage, details=details,
-                  counterexample=counterexample)
+                  counterexample=counterexample, sets=sets)
 
 
 WITNESSES = 4      # subdomains whose centre and corners are replayed, per margin
