@@ -35,6 +35,13 @@ def check_files(model_path, property_path, backend_name: str, options: dict | No
     """Load, bind and check every property (or those in ``only``); one Result per property."""
     backend = resolve_backend(backend_name)
     validate_options(backend_name, options)
+    model, props = load_bound(model_path, property_path, only)
+    return check_model(backend, model, props, options)
+
+
+def load_bound(model_path, property_path, only: list[str] | None = None):
+    """``(model, properties bound to it)``: every property of the file, or those in ``only``,
+    each checked against the model's modes."""
     model = load_model(model_path)
     props = load_properties(property_path)
     if only:
@@ -44,7 +51,7 @@ def check_files(model_path, property_path, backend_name: str, options: dict | No
         props = [p for p in props if p.id in only]
     for prop in props:
         check_modes(prop, model)
-    return check_model(backend, model, [bind(p, model) for p in props], options)
+    return model, [bind(p, model) for p in props]
 
 
 def check_modes(prop, model) -> None:

@@ -240,19 +240,8 @@ def finish(sim, name, rows, X, mode, t, tau, blocked_at, watchers, horizon, end,
     e = np.flatnonzero(has_event)
     if e.size:
         Xe = sim.propagate(name, last_x[e], event_time[e] - last_t[e])
-        X[rows[e]] = Xe
-        t[rows[e]] = event_time[e]
-        for f in watchers:
-            f(event_time[e], Xe, mode[rows[e]], rows[e])
-        for j_tr, tr in enumerate(candidates):
-            sel = rows[e][event_tr[e] == j_tr]
-            if sel.size:
-                if tr is sim.window[name]:
-                    tau[sel] = np.nan                  # the window transition is taken once
-                sim._jump(tr, X, mode, sel)
-                sim._urgent_now(X, mode, sel)
-                for f in watchers:
-                    f(t[sel], X[sel], mode[sel], sel)
+        sim._take_events(rows[e], Xe, event_time[e], event_tr[e], candidates, sim.window[name], X, t, mode,
+                         tau, watchers)
     q = np.flatnonzero(~blocked & ~has_event)
     if q.size:
         X[rows[q]] = sim.propagate(name, last_x[q], end[q] - last_t[q])

@@ -368,6 +368,24 @@ class Simulator:
                     todo = todo[~ok]
         return np.concatenate(taken) if taken else np.zeros(0, dtype=int)
 
+    def _take_events(self, at_rows, Xe, times, which, candidates, window, X, t, mode, tau, watchers):
+        """Runs ``at_rows`` reach their event: the state ``Xe`` at ``times``, then the jump of
+        ``candidates[which]`` (the window transition is taken once: its time is cleared), any
+        urgent transition that holds at once, and the watchers told before and after."""
+        X[at_rows] = Xe
+        t[at_rows] = times
+        for f in watchers:
+            f(times, Xe, mode[at_rows], at_rows)
+        for j_tr, tr in enumerate(candidates):
+            sel = at_rows[which == j_tr]
+            if sel.size:
+                if tr is window:
+                    tau[sel] = np.nan
+                self._jump(tr, X, mode, sel)
+                self._urgent_now(X, mode, sel)
+                for f in watchers:
+                    f(t[sel], X[sel], mode[sel], sel)
+
     def _jump(self, tr, X, mode, rows):
         mode[rows] = self.mode_names.index(tr.target)
         if tr.name in self.resets:
@@ -481,19 +499,8 @@ class Simulator:
             base_t = np.where(last >= 0, grid_t[e, np.maximum(last, 0)], t0[e])
             base_x = np.where((last >= 0)[:, None], Y[e, np.maximum(last, 0)], X[rows[e]])
             Xe = self.propagate(name, base_x, event_time[e] - base_t)
-            X[rows[e]] = Xe
-            t[rows[e]] = event_time[e]
-            for f in watchers:
-                f(event_time[e], Xe, mode[rows[e]], rows[e])
-            for j_tr, tr in enumerate(candidates):
-                sel = rows[e][event_tr[e] == j_tr]
-                if sel.size:
-                    if tr is window:
-                        tau[sel] = np.nan                  # the window transition is taken once
-                    self._jump(tr, X, mode, sel)
-                    self._urgent_now(X, mode, sel)
-                    for f in watchers:
-                        f(t[sel], X[sel], mode[sel], sel)
+            self._take_events(rows[e], Xe, event_time[e], event_tr[e], candidates, window, X, t, mode,
+                              tau, watchers)
         # the others run to the end of the segment (a kick or the horizon)
         q = np.flatnonzero(~blocked & ~((event_tr >= 0) & (event_time <= end)))
         if q.size:

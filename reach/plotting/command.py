@@ -43,23 +43,13 @@ def _knows(backend: str, name: str) -> bool:
 def load(model_path: str, properties_path: str | None, only: list[str] | None):
     """``(model, bound properties, spaceex)``: a YAML model and property file, or a SpaceEx
     ``.xml`` with its ``.cfg`` (its forbidden set as one property)."""
-    from reach.checking import check_modes, is_spaceex
+    from reach.checking import is_spaceex, load_bound
     from reach.locate import find_model
-    from reach.model import load_model
-    from reach.spec import bind, load_properties
 
     if is_spaceex(model_path):
         return None, None, True
-    model = load_model(find_model(model_path))
-    props = load_properties(properties_path)
-    if only:
-        unknown = set(only) - {p.id for p in props}
-        if unknown:
-            raise InputError(f"no property '{sorted(unknown)[0]}' in {properties_path}", field="--property")
-        props = [p for p in props if p.id in only]
-    for prop in props:
-        check_modes(prop, model)
-    return model, [bind(p, model) for p in props], False
+    model, props = load_bound(find_model(model_path), properties_path, only)
+    return model, props, False
 
 
 def plot_files(model_path: str, properties_path: str, backends: list[str], variables: str | None,
