@@ -18,19 +18,10 @@ from hypothesis import strategies as st
 from reach.errors import InputError
 from reach.model import load_model
 from reach.spec import load_properties
+from documents import yaml_values
 
 LOCATED = re.compile(r"^(?P<file>[^\n:]+):(?P<line>\d+): (?:[^\n]+: )?[^\n]+$")
 
-scalars = (st.none() | st.booleans() | st.integers(-5, 5) | st.floats(allow_nan=True) |
-           st.text(alphabet="xytv0123456789+-*/()[]<=>_ abcdmnops", max_size=12))
-yaml_values = st.recursive(
-    scalars,
-    lambda children: st.lists(children, max_size=3) | st.dictionaries(
-        st.sampled_from(["name", "state", "modes", "flow", "initial", "box", "mode", "horizon", "x", "a",
-                         "transitions", "guard", "from", "to", "control", "gain", "lqr", "invariant",
-                         "disturbance", "properties", "id", "kind", "require", "avoid", "extends"]),
-        children, max_size=5),
-    max_leaves=25)
 
 
 def merged_sra01() -> dict:

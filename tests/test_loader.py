@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 from reach.errors import InputError
 from reach.model import load_model
 from reach.spec import bind, load_properties
+from documents import yaml_values
 
 MODELS = sorted(p for p in Path("models").glob("*.yaml") if not p.name.startswith("_"))
 GOOD = Path("models/SRA02.yaml").read_text()
@@ -128,15 +129,6 @@ def test_thrust_property_binds_through_the_control_law():
     assert depth[0] == pytest.approx(36000 - np.abs(u).max(), rel=1e-3)
 
 
-yaml_values = st.recursive(
-    st.none() | st.booleans() | st.integers(-5, 5) | st.floats(allow_nan=True) |
-    st.text(alphabet="xytv0123456789+-*/()[]<=>_ abcdmnops", max_size=12),
-    lambda children: st.lists(children, max_size=3) | st.dictionaries(
-        st.sampled_from(["name", "state", "modes", "flow", "initial", "box", "mode", "horizon", "x", "a",
-                         "transitions", "guard", "from", "to", "control", "gain", "lqr", "invariant",
-                         "disturbance", "properties", "id", "kind", "require", "avoid", "extends"]),
-        children, max_size=5),
-    max_leaves=25)
 
 
 @settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])

@@ -148,16 +148,7 @@ def segment_chunk(sim, name, rows, X, mode, t, tau, blocked_at, next_kick, watch
     n, dt = sim.n, sim.dt
     n_rows = rows.size
     m_index = int(mode[rows[0]])
-    t0 = t[rows]
-    k0 = np.floor(t0 / dt + 1e-9).astype(int) + 1                       # first grid point after t0
-    end = np.minimum(next_kick[rows], horizon)
-    window = sim.window[name]
-    win_time = np.full(n_rows, np.inf)
-    if window is not None:
-        w = tau[rows]
-        win_time = np.where((w >= t0 - 1e-12) & (w <= end), np.maximum(w, t0), np.inf)
-    stop_at = np.minimum(end, win_time)
-    count = int(np.max(np.ceil(np.minimum(stop_at, horizon) / dt - 1e-9) - k0 + 1, initial=0)) + 1
+    t0, k0, end, window, win_time, stop_at, count = sim.segment_limits(name, rows, t, tau, next_kick, horizon)
     count = max(1, min(count, sim.steps + 2 - int(k0.min())))
     Y0 = sim.propagate(name, X[rows], np.maximum(k0 * dt - t0, 0.0))
     Z = np.vstack([Y0.T, np.ones((1, n_rows))])                          # (n+1, R)
@@ -235,12 +226,12 @@ def finish(sim, name, rows, X, mode, t, tau, blocked_at, watchers, horizon, end,
     X[rows[b]] = block_x[b]
     t[rows[b]] = block_t[b]
     blocked_at[rows[b]] = block_t[b]
-    candidates = [sim.window[name]] + [tr for tr, _ in sim.urgent[name]]
+    candidates = [window] + [tr for tr, _ in sim.urgent[name]]
     has_event = ~blocked & (event_tr >= 0) & (event_time <= end)
     e = np.flatnonzero(has_event)
     if e.size:
         Xe = sim.propagate(name, last_x[e], event_time[e] - last_t[e])
-        sim._take_events(rows[e], Xe, event_time[e], event_tr[e], candidates, sim.window[name], X, t, mode,
+        sim._take_events(rows[e], Xe, event_time[e], event_tr[e], candidates, window, X, t, mode,
                          tau, watchers)
     q = np.flatnonzero(~blocked & ~has_event)
     if q.size:

@@ -409,18 +409,26 @@ class Simulator:
             self._segment_chunk(name, rows[start:start + per_run], X, mode, t, tau, blocked_at,
                                 next_kick, watchers, horizon)
 
-    def _segment_chunk(self, name, rows, X, mode, t, tau, blocked_at, next_kick, watchers, horizon):
-        n_rows = rows.size
+    def segment_limits(self, name, rows, t, tau, next_kick, horizon):
+        """``(t0, k0, end, window, win_time, stop_at, count)`` of the runs ``rows`` in mode ``name``:
+        their start, first grid point after it, segment end (next kick or horizon), the window
+        transition and its time where it falls in the segment, the known stop and the number of
+        grid points to look at."""
         t0 = t[rows]
         k0 = np.floor(t0 / self.dt + 1e-9).astype(int) + 1                 # first grid point after t0
         end = np.minimum(next_kick[rows], horizon)
         window = self.window[name]
-        win_time = np.full(n_rows, np.inf)
+        win_time = np.full(rows.size, np.inf)
         if window is not None:
             w = tau[rows]
             win_time = np.where((w >= t0 - 1e-12) & (w <= end), np.maximum(w, t0), np.inf)
         stop_at = np.minimum(end, win_time)                                # known limits
         count = int(np.max(np.ceil(np.minimum(stop_at, horizon) / self.dt - 1e-9) - k0 + 1, initial=0)) + 1
+        return t0, k0, end, window, win_time, stop_at, count
+
+    def _segment_chunk(self, name, rows, X, mode, t, tau, blocked_at, next_kick, watchers, horizon):
+        n_rows = rows.size
+        t0, k0, end, window, win_time, stop_at, count = self.segment_limits(name, rows, t, tau, next_kick, horizon)
         count = max(1, min(count, self.steps + 2 - int(k0.min())))
         first = k0 * self.dt
         Y0 = self.propagate(name, X[rows], np.maximum(first - t0, 0.0))
