@@ -226,12 +226,12 @@ def finish(sim, name, rows, X, mode, t, tau, blocked_at, watchers, horizon, end,
     X[rows[b]] = block_x[b]
     t[rows[b]] = block_t[b]
     blocked_at[rows[b]] = block_t[b]
-    candidates = [window] + [tr for tr, _ in sim.urgent[name]]
+    candidates = [sim.window[name]] + [tr for tr, _ in sim.urgent[name]]
     has_event = ~blocked & (event_tr >= 0) & (event_time <= end)
     e = np.flatnonzero(has_event)
     if e.size:
         Xe = sim.propagate(name, last_x[e], event_time[e] - last_t[e])
-        sim._take_events(rows[e], Xe, event_time[e], event_tr[e], candidates, window, X, t, mode,
+        sim._take_events(rows[e], Xe, event_time[e], event_tr[e], candidates, sim.window[name], X, t, mode,
                          tau, watchers)
     q = np.flatnonzero(~blocked & ~has_event)
     if q.size:
