@@ -48,11 +48,14 @@ def exact_projection(star: Star, i: int, j: int) -> np.ndarray:
 
 
 def inside(polygon: np.ndarray, points: np.ndarray, slack: float) -> np.ndarray:
-    """Points in the convex counter-clockwise polygon, up to ``slack``."""
+    """Points in the convex counter-clockwise polygon, up to ``slack``. Edges shorter than 1e-12 of
+    the polygon's extent (repeated vertices up to rounding) have no meaningful normal and are
+    skipped."""
     ok = np.ones(len(points), dtype=bool)
+    extent = np.ptp(polygon, axis=0).max()
     for a, b in zip(polygon, np.roll(polygon, -1, axis=0)):
         edge = b - a
-        if np.linalg.norm(edge) == 0:
+        if np.linalg.norm(edge) <= 1e-12 * extent:
             continue
         normal = np.array([edge[1], -edge[0]]) / np.linalg.norm(edge)
         ok &= (points - a) @ normal <= slack
