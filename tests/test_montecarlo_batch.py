@@ -1,4 +1,4 @@
-"""The block path of linear segments (reach.model.batch) and the block monitors.
+"""The block path of segments (reach.model.batch, batch_nonlinear) and the block monitors.
 
 References: the general per-segment path of the same Simulator (the block path switched off)
 for the same runs; the thermostat's closed-form flow for the switching instants; the
@@ -35,6 +35,8 @@ def _runs(model_file, prop_file, count, general):
 
 @pytest.mark.parametrize("model_file,prop_file", [("models/SRA02.yaml", "properties/rendezvous.yaml"),
                                                   ("models/SRU01.yaml", "properties/rendezvous.yaml"),
+                                                  ("models/SRNA01.yaml", "properties/rendezvous.yaml"),
+                                                  ("models/SRA02-NL.yaml", "properties/rendezvous.yaml"),
                                                   ("models/thermostat.yaml", "properties/thermostat.yaml")])
 def test_block_path_agrees_with_the_general_path(model_file, prop_file):
     """Same final states and modes, same blocked runs, same closest approach per run and

@@ -246,12 +246,14 @@ class Replay:
 
 def replay(model: HybridAutomaton, prop: BoundSafety, initial_state, switch_time: float | None,
            dt: float | None = None, input_signal: dict | None = None) -> Replay:
-    """Simulate exactly one run (abort at ``switch_time``, inputs ``input_signal``) and check
-    ``prop`` along it (an event property: its extremum along the run,
+    """Simulate exactly one run (abort at ``switch_time``, inputs ``input_signal``) on the
+    simulator's general per-segment path (independent of the block path the sampled runs took)
+    and check ``prop`` along it (an event property: its extremum along the run,
     :func:`reach.backends.event_sampling.replay_event`)."""
     if isinstance(prop, BoundEvent):
         return replay_event(model, prop, initial_state, dt)
     sim = Simulator(model, dt)
+    sim.tables = dict.fromkeys(model.modes)     # the general per-segment path, not the block path
     x0 = np.asarray(initial_state, dtype=float).reshape(1, -1)
     tau = None if switch_time is None else np.array([float(switch_time)])
     monitor = SafetyMonitor(model, prop, 1)

@@ -35,24 +35,19 @@ SUB_BITS = 4                     # a guard entry is searched on sub-grids of 2^4
 class LinearTable:
     """``W_j = L P^j`` of one linear mode, extended as far as segments ask."""
 
+    nonlinear = False
+
     def __init__(self, sim, name: str):
-        model, n = sim.model, sim.n
-        parts = [np.hstack([np.eye(n), np.zeros((n, 1))])]
-        self.guards = []                                     # (offset, rows) of each urgent guard
-        offset = n
-        for tr, _ in sim.urgent[name]:
-            H, g = model.guard_halfspaces(tr)
-            parts.append(np.hstack([H, -g[:, None]]))
-            self.guards.append((offset, H.shape[0], _affine(H, g)))
-            offset += H.shape[0]
-        H, g = model.modes[name].invariant_halfspaces
-        parts.append(np.hstack([H, -g[:, None]]))
-        self.invariant = (offset, H.shape[0])
-        self.L = np.vstack(parts)
+        self.L, self.guards, self.invariant = stacked_rows(sim, name)
         self.powers = sim.powers[name]
         self.table = np.zeros((0,) + self.L.shape)
         from reach.model.simulate import BISECTION_STEPS
         self.sub = SubSteps(sim.generators[name], SUB_BITS, BISECTION_STEPS // SUB_BITS)
+        self.sim, self.name = sim, name
+
+    def entry(self, X: np.ndarray, h: np.ndarray, guard) -> np.ndarray:
+        """Earliest time in ``(0, h]`` at which ``guard`` holds (:func:`first_entry`)."""
+        return first_entry(self.sim, self.name, X, h, guard, self.sub)
 
     def __call__(self, j0: int, j1: int) -> np.ndarray:
         """``W_j`` for ``j0 <= j < j1``: (j1 - j0, K, n+1)."""
@@ -60,6 +55,36 @@ class LinearTable:
             size = min(self.powers.limit, max(j1, 2 * self.table.shape[0], 64))
             self.table = np.einsum("kl,jlm->jkm", self.L, self.powers[:size])
         return self.table[j0:j1]
+
+
+def stacked_rows(sim, name: str):
+    """``(L, guards, invariant)`` of mode ``name``: ``L`` the rows ``[I_n, 0]``, ``[H, -g]`` of
+    each urgent guard and of the invariant; ``guards`` each guard's ``(offset, rows, margins)``
+    in ``L``, ``invariant`` its ``(offset, rows)``."""
+    model, n = sim.model, sim.n
+    parts = [np.hstack([np.eye(n), np.zeros((n, 1))])]
+    guards = []
+    offset = n
+    for tr, _ in sim.urgent[name]:
+        H, g = model.guard_halfspaces(tr)
+        parts.append(np.hstack([H, -g[:, None]]))
+        guards.append((offset, H.shape[0], _affine(H, g)))
+        offset += H.shape[0]
+    H, g = model.modes[name].invariant_halfspaces
+    parts.append(np.hstack([H, -g[:, None]]))
+    return np.vstack(parts), guards, (offset, H.shape[0])
+
+
+def table_for(sim, name: str):
+    """The block table of mode ``name`` (:class:`LinearTable`, or
+    :class:`reach.model.batch_nonlinear.NonlinearTable` for a nonlinear mode), or None where
+    the general path applies (:func:`eligible`)."""
+    if not eligible(sim, name):
+        return None
+    if name in sim.powers:
+        return LinearTable(sim, name)
+    from reach.model.batch_nonlinear import NonlinearTable
+    return NonlinearTable(sim, name)
 
 
 class SubSteps:
@@ -118,10 +143,12 @@ def _affine(H: np.ndarray, g: np.ndarray):
 
 
 def eligible(sim, name: str) -> bool:
-    """The block path applies to a linear mode whose urgent guards and invariant are linear and
-    which has no may-transition with a general guard."""
+    """The block path applies to a mode whose urgent guards and invariant are linear and which
+    has no may-transition with a general guard (linear flows by products, nonlinear ones by
+    :mod:`reach.model.batch_nonlinear`)."""
     model = sim.model
-    return (name in sim.powers and not sim.exits[name]
+    mode = model.modes[name]
+    return ((name in sim.powers or not mode.timeless) and not sim.exits[name]
             and model.modes[name].invariant_halfspaces is not None
             and all(model.guard_halfspaces(tr) is not None for tr, _ in sim.urgent[name]))
 
@@ -152,6 +179,7 @@ def segment_chunk(sim, name, rows, X, mode, t, tau, blocked_at, next_kick, watch
     count = max(1, min(count, sim.steps + 2 - int(k0.min())))
     Y0 = sim.propagate(name, X[rows], np.maximum(k0 * dt - t0, 0.0))
     Z = np.vstack([Y0.T, np.ones((1, n_rows))])                          # (n+1, R)
+    steps = table.steps if table.nonlinear else None
 
     guards = sim.urgent[name]
     event_time = win_time.copy()
@@ -171,10 +199,17 @@ def segment_chunk(sim, name, rows, X, mode, t, tau, blocked_at, next_kick, watch
         j1 = min(count, j0 + step_block)
         act = np.flatnonzero(~done)
         B = j1 - j0
-        O = (table(j0, j1).reshape(-1, n + 1) @ Z[:, act]).reshape(B, K, act.size)
-        S = O[:, :n, :]
         gt = (k0[act][None, :] + np.arange(j0, j1)[:, None]) * dt         # (B, A)
         valid = gt <= stop_at[act] + 1e-12
+        if steps is None:
+            O = (table(j0, j1).reshape(-1, n + 1) @ Z[:, act]).reshape(B, K, act.size)
+            S = O[:, :n, :]
+        else:                           # the states from the integrator, the margins from L
+            S_next = steps.block(Z[:n, act], B + 1)
+            Z[:n, act] = S_next[B]
+            S = S_next[:B]
+            O = table.outputs(S)
+            valid &= np.isfinite(S).all(axis=1)
         for j_tr, (off, m, guard) in enumerate(table.guards, start=1):
             inside = valid & np.all(O[:, off:off + m, :] <= 0, axis=1)
             hit = np.flatnonzero(inside.any(axis=0))
@@ -183,7 +218,7 @@ def segment_chunk(sim, name, rows, X, mode, t, tau, blocked_at, next_kick, watch
                 first = j == 0
                 p_t = np.where(first, prev_t[act[hit]], gt[np.maximum(j - 1, 0), hit])
                 p_x = np.where(first[:, None], prev_x[act[hit]], S[np.maximum(j - 1, 0), :, hit])
-                s = first_entry(sim, name, p_x, gt[j, hit] - p_t, guard, table.sub)
+                s = table.entry(p_x, gt[j, hit] - p_t, guard)
                 when = p_t + s
                 rows_hit = act[hit]
                 better = when < event_time[rows_hit]
@@ -211,7 +246,7 @@ def segment_chunk(sim, name, rows, X, mode, t, tau, blocked_at, next_kick, watch
             last_t[act[some]] = gt[last, some]
             last_x[act[some]] = S[last, :, some]
         prev_t[act], prev_x[act] = gt[-1], S[-1].T
-        done[act] |= out_any | (gt[-1] >= np.minimum(stop_at[act], event_time[act]) - 1e-12)
+        done[act] |= out_any | (gt[-1] >= np.minimum(stop_at[act], event_time[act]) - 1e-12) | ~valid.any(axis=0)
         j0 = j1
         step_block = min(2 * step_block, most)
     finish(sim, name, rows, X, mode, t, tau, blocked_at, watchers, horizon, end, event_time, event_tr,
