@@ -44,10 +44,24 @@ class LinearTable:
         from reach.model.simulate import BISECTION_STEPS
         self.sub = SubSteps(sim.generators[name], SUB_BITS, BISECTION_STEPS // SUB_BITS)
         self.sim, self.name = sim, name
+        M = sim.generators[name]
+        self.scalar = (float(M[0, 0]), float(M[0, 1])) if sim.n == 1 else None    # x' = a x + b
 
     def entry(self, X: np.ndarray, h: np.ndarray, guard) -> np.ndarray:
-        """Earliest time in ``(0, h]`` at which ``guard`` holds (:func:`first_entry`)."""
+        """Earliest time in ``(0, h]`` at which ``guard`` holds (it holds at ``h``):
+        :func:`first_entry`, or in closed form for a scalar flow (:func:`scalar_entry`)."""
+        if self.scalar is not None:
+            return scalar_entry(self.scalar, guard.rows, X[:, 0], h)
         return first_entry(self.sim, self.name, X, h, guard, self.sub)
+
+    def propagate(self, X: np.ndarray, h) -> np.ndarray:
+        """``Simulator.propagate`` in this mode; a scalar flow in closed form,
+        ``x(h) = x e^(a h) + b expm1(a h) / a`` (``x + b h`` for ``a = 0``)."""
+        if self.scalar is None:
+            return self.sim.propagate(self.name, X, h)
+        a, b = self.scalar
+        h = np.broadcast_to(np.asarray(h, dtype=float), X.shape[:1])[:, None]
+        return X * np.exp(a * h) + (b * np.expm1(a * h) / a if a != 0 else b * h)
 
     def __call__(self, j0: int, j1: int) -> np.ndarray:
         """``W_j`` for ``j0 <= j < j1``: (j1 - j0, K, n+1)."""
@@ -136,10 +150,43 @@ def first_entry(sim, name: str, X: np.ndarray, h: np.ndarray, guard, sub: SubSte
     return out
 
 
-def _affine(H: np.ndarray, g: np.ndarray):
-    """``X -> X H^T - g`` with ``H^T`` stored contiguous (a faster product than a transposed view)."""
-    Ht = np.ascontiguousarray(H.T)
-    return lambda X: X @ Ht - g
+def scalar_entry(flow, rows, x0: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """First entry into ``{x : H x <= g}`` (``rows = (H, g)``) of ``x' = a x + b`` from ``x0``,
+    in ``(0, h]`` where it holds at ``h``. The solution ``x(s)`` is monotone, so each row holds
+    on a half-line of ``s`` and the entry is the largest of the rows' crossing instants (0 for a
+    row that already holds), ``s = ln((c + b/a) / (x0 + b/a)) / a`` for the crossing of ``x = c``
+    (``(c - x0) / b`` when ``a = 0``). Returned ``h 2^-40`` late, as the bisection's right end
+    (where the guard holds), and at most ``h``."""
+    from reach.model.simulate import BISECTION_STEPS
+
+    a, b = flow
+    H, g = rows
+    H = H[:, 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        c = g / np.where(H != 0, H, np.nan)                            # (m,) crossing levels
+        holds = H[None, :] * x0[:, None] <= g[None, :]                 # (R, m) at s = 0
+        if a != 0:
+            s = np.log((c[None, :] + b / a) / (x0[:, None] + b / a)) / a
+        else:
+            s = (c[None, :] - x0[:, None]) / b
+    s = np.where(holds | ~np.isfinite(s), 0.0, s)
+    entry = np.clip(s.max(axis=1), 0.0, None) + h * 2.0 ** (-BISECTION_STEPS)
+    return np.minimum(entry, h)
+
+
+class _Affine:
+    """``X -> X H^T - g`` with ``H^T`` stored contiguous (a faster product than a transposed
+    view); ``rows = (H, g)``."""
+
+    def __init__(self, H: np.ndarray, g: np.ndarray):
+        self.rows, self.Ht = (H, g), np.ascontiguousarray(H.T)
+
+    def __call__(self, X: np.ndarray) -> np.ndarray:
+        return X @ self.Ht - self.rows[1]
+
+
+def _affine(H: np.ndarray, g: np.ndarray) -> _Affine:
+    return _Affine(H, g)
 
 
 def eligible(sim, name: str) -> bool:
@@ -177,7 +224,7 @@ def segment_chunk(sim, name, rows, X, mode, t, tau, blocked_at, next_kick, watch
     m_index = int(mode[rows[0]])
     t0, k0, end, window, win_time, stop_at, count = sim.segment_limits(name, rows, t, tau, next_kick, horizon)
     count = max(1, min(count, sim.steps + 2 - int(k0.min())))
-    Y0 = sim.propagate(name, X[rows], np.maximum(k0 * dt - t0, 0.0))
+    Y0 = table.propagate(X[rows], np.maximum(k0 * dt - t0, 0.0))
     Z = np.vstack([Y0.T, np.ones((1, n_rows))])                          # (n+1, R)
     steps = table.steps if table.nonlinear else None
 
@@ -250,11 +297,11 @@ def segment_chunk(sim, name, rows, X, mode, t, tau, blocked_at, next_kick, watch
         j0 = j1
         step_block = min(2 * step_block, most)
     finish(sim, name, rows, X, mode, t, tau, blocked_at, watchers, horizon, end, event_time, event_tr,
-           blocked, block_x, block_t, last_t, last_x)
+           blocked, block_x, block_t, last_t, last_x, table.propagate)
 
 
 def finish(sim, name, rows, X, mode, t, tau, blocked_at, watchers, horizon, end, event_time, event_tr,
-           blocked, block_x, block_t, last_t, last_x):
+           blocked, block_x, block_t, last_t, last_x, propagate):
     """The end of a segment: blocked runs stop, runs with an event go to it and jump, the
     others run on to the end of the segment (a kick or the horizon)."""
     b = np.flatnonzero(blocked)
@@ -265,12 +312,12 @@ def finish(sim, name, rows, X, mode, t, tau, blocked_at, watchers, horizon, end,
     has_event = ~blocked & (event_tr >= 0) & (event_time <= end)
     e = np.flatnonzero(has_event)
     if e.size:
-        Xe = sim.propagate(name, last_x[e], event_time[e] - last_t[e])
+        Xe = propagate(last_x[e], event_time[e] - last_t[e])
         sim._take_events(rows[e], Xe, event_time[e], event_tr[e], candidates, sim.window[name], X, t, mode,
                          tau, watchers)
     q = np.flatnonzero(~blocked & ~has_event)
     if q.size:
-        X[rows[q]] = sim.propagate(name, last_x[q], end[q] - last_t[q])
+        X[rows[q]] = propagate(last_x[q], end[q] - last_t[q])
         t[rows[q]] = end[q]
         off_grid = np.flatnonzero(end[q] - last_t[q] > 1e-9 * max(1.0, horizon))
         if off_grid.size:

@@ -119,3 +119,6 @@ class NonlinearTable:
 
     def entry(self, X: np.ndarray, h: np.ndarray, guard) -> np.ndarray:
         return self.sim._first_entry(self.name, X, h, guard)
+
+    def propagate(self, X: np.ndarray, h) -> np.ndarray:
+        return self.sim.propagate(self.name, X, h)
