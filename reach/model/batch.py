@@ -1,4 +1,4 @@
-"""Linear segments in blocks of grid steps: states, guard and invariant margins in one product.
+"""Segments in blocks of grid steps: states, guard and invariant margins in one product.
 
 In a linear mode every quantity the simulator tests on the grid is affine in the state, and
 the state at grid step ``j`` of a segment is ``[x_j; 1] = P^j [x_0; 1]`` with ``P`` the exact
@@ -18,7 +18,12 @@ step for step: the same grid points are visited, an urgent guard that holds at a
 is located by the same bisection (``Simulator._first_entry``) inside the grid interval
 before it, the window switch is taken at ``tau``, the first grid point outside the invariant
 (beyond ``INVARIANT_TOLERANCE (1 + |x|_inf)``) blocks the run. Only rounding differs (``(L
-P^j) z`` against ``L (P^j z)``). Observers with a ``block`` method receive the visited grid
+P^j) z`` against ``L (P^j z)``). In a mode with a scalar state (``x' = a x + b``) the
+guard entry and the propagation to events are in closed form instead (:func:`scalar_entry`,
+``h 2^-40`` late as the bisection's right end). A nonlinear mode with linear guards and
+invariant takes the same block loop with the states of a block from the batched RK4 of
+:mod:`reach.model.batch_nonlinear` and the margins from ``L [x; 1]``; its guard entries are
+the general path's bisection. Observers with a ``block`` method receive the visited grid
 states a block at a time (``block(t (B, R), X (B, n, R), seen (B, R), mode, rows, absmax)``);
 the event instants go through the ordinary call.
 """
@@ -82,7 +87,7 @@ def stacked_rows(sim, name: str):
     for tr, _ in sim.urgent[name]:
         H, g = model.guard_halfspaces(tr)
         parts.append(np.hstack([H, -g[:, None]]))
-        guards.append((offset, H.shape[0], _affine(H, g)))
+        guards.append((offset, H.shape[0], _Affine(H, g)))
         offset += H.shape[0]
     H, g = model.modes[name].invariant_halfspaces
     parts.append(np.hstack([H, -g[:, None]]))
@@ -183,10 +188,6 @@ class _Affine:
 
     def __call__(self, X: np.ndarray) -> np.ndarray:
         return X @ self.Ht - self.rows[1]
-
-
-def _affine(H: np.ndarray, g: np.ndarray) -> _Affine:
-    return _Affine(H, g)
 
 
 def eligible(sim, name: str) -> bool:
