@@ -9,7 +9,8 @@ Safety properties. Runs are drawn in three rounds, each one numpy batch:
    the unsafe set (``search_rounds`` generations);
 4. *optimiser* (``optimise``, deterministic models): the robustness (smallest depth) minimised
    over the initial state, the switch instant and the input values by differential evolution
-   seeded with the closest runs so far, then Nelder-Mead (:mod:`reach.backends.falsify`).
+   seeded with the closest runs so far, then Nelder-Mead (a batched grid refinement for at most
+   two parameters) (:mod:`reach.backends.falsify`).
 
 A polytopic initial set is sampled by its vertices, facet points and centre (structured) and
 uniformly by hit-and-run (random); time-varying bounded inputs are piecewise-constant signals
@@ -78,7 +79,7 @@ class Options:
     optimise: bool = True          # falsification by optimisation after the search (reach.backends.falsify)
     generations: int = ranged(20, 0, 100_000)     # differential evolution generations
     population: int = ranged(40, 5, 1_000_000)    # runs per generation
-    polish: int = ranged(60, 0, 1_000_000)        # Nelder-Mead runs from the best point
+    polish: int = ranged(60, 0, 1_000_000)        # polish runs from the best point (reach.backends.falsify)
     keep_sets: bool = False        # safety: KEPT_RUNS sampled runs in Result.sets (pictures)
 
     @classmethod
