@@ -14,7 +14,8 @@ properties/thermostat.yaml. For each, the median over ``repeat`` repetitions of
   substeps on SRNA01), urgent guards tested at the grid points and taken there (no event
   location), the abort at the first grid point at or after the run's instant, every property
   tested at every step with its own vectorised test;
-* ``reach check --backend montecarlo`` on the thermostat, end to end (seconds, once).
+* ``reach check --backend montecarlo`` on the thermostat, end to end (wall and CPU seconds,
+  once: on a shared machine the CPU seconds are the process's own cost).
 
 Writes ``OUT.md`` and ``OUT.json``.
 """
@@ -23,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import resource
 import statistics
 import subprocess
 import sys
@@ -136,10 +138,14 @@ def measure(label, model_file, prop_file, runs, repeat):
 def thermostat_check():
     cmd = [sys.executable, "-m", "reach.cli", "check", "models/thermostat.yaml", "properties/thermostat.yaml",
            "--backend", "montecarlo"]
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     seconds, proc = timed(lambda: subprocess.run(cmd, capture_output=True, text=True), 1)
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
     reported = {line.split()[0]: line.split()[2] for line in proc.stdout.splitlines()[1:]
                 if len(line.split()) > 3 and line.split()[2].replace(".", "").isdigit()}
-    return {"command": " ".join(["reach"] + cmd[3:]), "seconds_end_to_end": seconds, "exit": proc.returncode,
+    return {"command": " ".join(["reach"] + cmd[3:]), "seconds_end_to_end": seconds, "cpu_seconds": cpu,
+            "exit": proc.returncode,
             "seconds_per_property": reported}
 
 
@@ -157,7 +163,8 @@ def main() -> None:
         print(f"{label}: {r['runs_per_s']:,.0f} runs/s, reference {r['reference_runs_per_s']:,.0f} runs/s, "
               f"ratio {r['ratio']:.2f} (depth gap {r['largest_relative_depth_gap']:.1e})", flush=True)
     check = thermostat_check()
-    print(f"thermostat check: {check['seconds_end_to_end']:.2f} s end to end, exit {check['exit']}")
+    print(f"thermostat check: {check['seconds_end_to_end']:.2f} s end to end ({check['cpu_seconds']:.2f} s CPU), "
+          f"exit {check['exit']}")
     out = Path(args.out)
     out.with_suffix(".json").write_text(json.dumps({"instances": rows, "thermostat_check": check}, indent=2))
     lines = ["# Monte Carlo throughput", "",
@@ -170,7 +177,8 @@ def main() -> None:
         lines.append(f"| {r['instance']} | {r['runs']} x {r['steps']} | {r['runs_per_s']:,.0f} | "
                      f"{r['reference_runs_per_s']:,.0f} | {r['ratio']:.2f} | {r['largest_relative_depth_gap']:.1e} |")
     per = ", ".join(f"{k} {v} s" for k, v in check["seconds_per_property"].items())
-    lines += ["", f"`{check['command']}`: {check['seconds_end_to_end']:.2f} s end to end, once "
+    lines += ["", f"`{check['command']}`: {check['seconds_end_to_end']:.2f} s end to end, "
+              f"{check['cpu_seconds']:.2f} s CPU (user + system), once "
               f"(exit {check['exit']}; reported per property: {per}).", ""]
     out.with_suffix(".md").write_text("\n".join(lines))
 

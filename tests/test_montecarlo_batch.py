@@ -1,4 +1,4 @@
-"""The block path of linear segments (reach.model.batch) and the block monitors.
+"""The block path of segments (reach.model.batch, batch_nonlinear) and the block monitors.
 
 References: the general per-segment path of the same Simulator (the block path switched off)
 for the same runs; the thermostat's closed-form flow for the switching instants; the
@@ -35,6 +35,8 @@ def _runs(model_file, prop_file, count, general):
 
 @pytest.mark.parametrize("model_file,prop_file", [("models/SRA02.yaml", "properties/rendezvous.yaml"),
                                                   ("models/SRU01.yaml", "properties/rendezvous.yaml"),
+                                                  ("models/SRNA01.yaml", "properties/rendezvous.yaml"),
+                                                  ("models/SRA02-NL.yaml", "properties/rendezvous.yaml"),
                                                   ("models/thermostat.yaml", "properties/thermostat.yaml")])
 def test_block_path_agrees_with_the_general_path(model_file, prop_file):
     """Same final states and modes, same blocked runs, same closest approach per run and
@@ -99,3 +101,27 @@ def test_block_monitor_equals_the_state_by_state_monitor(seed, B, R):
         np.testing.assert_array_equal(mon.violation_time[~np.isnan(ref.violation_time)],
                                       ref.violation_time[~np.isnan(ref.violation_time)])
         np.testing.assert_allclose(mon.violation_state, ref.violation_state, rtol=1e-12)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.floats(0.01, 0.99), st.floats(1e-3, 2.0), st.sampled_from([("heating", 21.0), ("off", 19.0)]))
+def test_scalar_entry_is_the_bisections_entry(fraction, h, mode_level):
+    """The closed-form entry of a scalar affine flow (batch.scalar_entry) and the general path's
+    bisection (Simulator._first_entry) from the state that reaches the switching level after
+    ``s = fraction h`` (the thermostat's flow run backwards from the level in closed form,
+    T(-s) = c + (T - c) e^(0.1 s) with c = 40 heating, 10 off): both give ``s`` to the
+    bisection's resolution ``h 2^-40`` (and rounding)."""
+    from reach.model import batch
+
+    mode, level = mode_level
+    model = load_model("models/thermostat.yaml")
+    sim = Simulator(model)
+    table = batch.table_for(sim, mode)
+    (_, _, guard), = table.guards
+    s = fraction * h
+    c = 40.0 if mode == "heating" else 10.0
+    X = np.array([[c + (level - c) * np.exp(0.1 * s)]])
+    got = table.entry(X, np.array([h]), guard)[0]
+    want = sim._first_entry(mode, X, np.array([h]), guard)[0]
+    tol = 2 * h * 2.0 ** -40 + 1e-12
+    assert abs(got - s) <= tol and abs(want - s) <= tol

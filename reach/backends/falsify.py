@@ -13,8 +13,10 @@ A run is fixed by a point ``u`` of the unit cube ``[0, 1]^d``, the concatenation
 
 ``rho(u)`` is minimised by differential evolution (``scipy.optimize.differential_evolution``,
 vectorised: a whole generation is one :meth:`Simulator.run`), its initial population the runs
-closest to the unsafe set so far plus a Latin hypercube, then polished by Nelder-Mead from the
-best point. The search stops at the first violating run. A violation found here is only a
+closest to the unsafe set so far plus a Latin hypercube (ended early where a generation's
+robustness values all agree to a relative 1e-9: a flat landscape), then polished from the best
+point: by Nelder-Mead, or for at most two parameters by a batched grid refinement (a few
+simulations of many runs instead of many of one). The search stops at the first violating run. A violation found here is only a
 candidate: the back-end replays it alone before it reports UNSAFE.
 """
 
@@ -29,6 +31,9 @@ import scipy.stats
 from reach.backends.initial_sampling import PolytopeSampler
 
 NO_VISIT = 1e12        # robustness of a run that never enters a mode of the property
+FLAT = 1e-9            # a generation whose robustness values agree to this (relative) ends the evolution
+GRID_DIM = 2           # up to this many parameters the polish is a batched grid refinement
+GRID_ROUNDS = 5
 
 
 @dataclass
@@ -136,10 +141,13 @@ def falsify(model, prop, window, sim, monitor_factory, elite, budget: Budget, se
     init = np.concatenate([seeds, fill])
     scipy.optimize.differential_evolution(
         lambda U: evaluate(U.T), [(0.0, 1.0)] * param.dim, init=init, maxiter=budget.generations,
-        vectorized=True, updating="deferred", polish=False, tol=0.0, seed=rng,
-        callback=lambda intermediate_result: best["violated"])
+        vectorized=True, updating="deferred", polish=False, tol=FLAT, atol=FLAT,
+        seed=rng, callback=lambda intermediate_result: best["violated"])
     if not best["violated"] and budget.polish > 0:
         start = param.encode(best["run"][0], best["run"][1], best["run"][2])[0]
+        if param.dim <= GRID_DIM:
+            _grid_polish(evaluate, best, start, budget.polish)
+            return _outcome(best)
         try:
             scipy.optimize.minimize(
                 lambda u: _stop_at_violation(best, evaluate(u[None, :]))[0], start, method="Nelder-Mead",
@@ -149,6 +157,26 @@ def falsify(model, prop, window, sim, monitor_factory, elite, budget: Budget, se
         except _Found:
             pass
     return _outcome(best)
+
+
+def _grid_polish(evaluate, best, start: np.ndarray, budget: int) -> None:
+    """The polish of a search over at most :data:`GRID_DIM` parameters, batched: in each of
+    :data:`GRID_ROUNDS` rounds a grid of ``G^d`` points (``G^d <= budget / rounds``) spanning
+    ``centre +- w`` is one :meth:`Simulator.run`; the best point so far becomes the centre and
+    ``w`` shrinks to the grid's spacing (``w`` starts at the Nelder-Mead simplex edge, 0.05)."""
+    d = start.size
+    G = max(3, int(np.floor((budget / GRID_ROUNDS) ** (1.0 / d))))
+    centre, w = start.copy(), 0.05
+    for _ in range(GRID_ROUNDS):
+        axes = [np.clip(np.linspace(c - w, c + w, G), 0.0, 1.0) for c in centre]
+        U = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, d)
+        values = evaluate(U)
+        if best["violated"]:
+            return
+        k = int(np.argmin(values))
+        if values[k] <= best["depth"]:
+            centre = U[k]
+        w *= 2.0 / (G - 1)
 
 
 class _Found(Exception):

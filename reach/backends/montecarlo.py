@@ -9,7 +9,8 @@ Safety properties. Runs are drawn in three rounds, each one numpy batch:
    the unsafe set (``search_rounds`` generations);
 4. *optimiser* (``optimise``, deterministic models): the robustness (smallest depth) minimised
    over the initial state, the switch instant and the input values by differential evolution
-   seeded with the closest runs so far, then Nelder-Mead (:mod:`reach.backends.falsify`).
+   seeded with the closest runs so far, then Nelder-Mead (a batched grid refinement for at most
+   two parameters) (:mod:`reach.backends.falsify`).
 
 A polytopic initial set is sampled by its vertices, facet points and centre (structured) and
 uniformly by hit-and-run (random); time-varying bounded inputs are piecewise-constant signals
@@ -78,7 +79,7 @@ class Options:
     optimise: bool = True          # falsification by optimisation after the search (reach.backends.falsify)
     generations: int = ranged(20, 0, 100_000)     # differential evolution generations
     population: int = ranged(40, 5, 1_000_000)    # runs per generation
-    polish: int = ranged(60, 0, 1_000_000)        # Nelder-Mead runs from the best point
+    polish: int = ranged(60, 0, 1_000_000)        # polish runs from the best point (reach.backends.falsify)
     keep_sets: bool = False        # safety: KEPT_RUNS sampled runs in Result.sets (pictures)
 
     @classmethod
@@ -246,12 +247,14 @@ class Replay:
 
 def replay(model: HybridAutomaton, prop: BoundSafety, initial_state, switch_time: float | None,
            dt: float | None = None, input_signal: dict | None = None) -> Replay:
-    """Simulate exactly one run (abort at ``switch_time``, inputs ``input_signal``) and check
-    ``prop`` along it (an event property: its extremum along the run,
+    """Simulate exactly one run (abort at ``switch_time``, inputs ``input_signal``) on the
+    simulator's general per-segment path (independent of the block path the sampled runs took)
+    and check ``prop`` along it (an event property: its extremum along the run,
     :func:`reach.backends.event_sampling.replay_event`)."""
     if isinstance(prop, BoundEvent):
         return replay_event(model, prop, initial_state, dt)
     sim = Simulator(model, dt)
+    sim.tables = dict.fromkeys(model.modes)     # the general per-segment path, not the block path
     x0 = np.asarray(initial_state, dtype=float).reshape(1, -1)
     tau = None if switch_time is None else np.array([float(switch_time)])
     monitor = SafetyMonitor(model, prop, 1)

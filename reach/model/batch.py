@@ -1,4 +1,4 @@
-"""Linear segments in blocks of grid steps: states, guard and invariant margins in one product.
+"""Segments in blocks of grid steps: states, guard and invariant margins in one product.
 
 In a linear mode every quantity the simulator tests on the grid is affine in the state, and
 the state at grid step ``j`` of a segment is ``[x_j; 1] = P^j [x_0; 1]`` with ``P`` the exact
@@ -18,7 +18,12 @@ step for step: the same grid points are visited, an urgent guard that holds at a
 is located by the same bisection (``Simulator._first_entry``) inside the grid interval
 before it, the window switch is taken at ``tau``, the first grid point outside the invariant
 (beyond ``INVARIANT_TOLERANCE (1 + |x|_inf)``) blocks the run. Only rounding differs (``(L
-P^j) z`` against ``L (P^j z)``). Observers with a ``block`` method receive the visited grid
+P^j) z`` against ``L (P^j z)``). In a mode with a scalar state (``x' = a x + b``) the
+guard entry and the propagation to events are in closed form instead (:func:`scalar_entry`,
+``h 2^-40`` late as the bisection's right end). A nonlinear mode with linear guards and
+invariant takes the same block loop with the states of a block from the batched RK4 of
+:mod:`reach.model.batch_nonlinear` and the margins from ``L [x; 1]``; its guard entries are
+the general path's bisection. Observers with a ``block`` method receive the visited grid
 states a block at a time (``block(t (B, R), X (B, n, R), seen (B, R), mode, rows, absmax)``);
 the event instants go through the ordinary call.
 """
@@ -35,24 +40,33 @@ SUB_BITS = 4                     # a guard entry is searched on sub-grids of 2^4
 class LinearTable:
     """``W_j = L P^j`` of one linear mode, extended as far as segments ask."""
 
+    nonlinear = False
+
     def __init__(self, sim, name: str):
-        model, n = sim.model, sim.n
-        parts = [np.hstack([np.eye(n), np.zeros((n, 1))])]
-        self.guards = []                                     # (offset, rows) of each urgent guard
-        offset = n
-        for tr, _ in sim.urgent[name]:
-            H, g = model.guard_halfspaces(tr)
-            parts.append(np.hstack([H, -g[:, None]]))
-            self.guards.append((offset, H.shape[0], _affine(H, g)))
-            offset += H.shape[0]
-        H, g = model.modes[name].invariant_halfspaces
-        parts.append(np.hstack([H, -g[:, None]]))
-        self.invariant = (offset, H.shape[0])
-        self.L = np.vstack(parts)
+        self.L, self.guards, self.invariant = stacked_rows(sim, name)
         self.powers = sim.powers[name]
         self.table = np.zeros((0,) + self.L.shape)
         from reach.model.simulate import BISECTION_STEPS
         self.sub = SubSteps(sim.generators[name], SUB_BITS, BISECTION_STEPS // SUB_BITS)
+        self.sim, self.name = sim, name
+        M = sim.generators[name]
+        self.scalar = (float(M[0, 0]), float(M[0, 1])) if sim.n == 1 else None    # x' = a x + b
+
+    def entry(self, X: np.ndarray, h: np.ndarray, guard) -> np.ndarray:
+        """Earliest time in ``(0, h]`` at which ``guard`` holds (it holds at ``h``):
+        :func:`first_entry`, or in closed form for a scalar flow (:func:`scalar_entry`)."""
+        if self.scalar is not None:
+            return scalar_entry(self.scalar, guard.rows, X[:, 0], h)
+        return first_entry(self.sim, self.name, X, h, guard, self.sub)
+
+    def propagate(self, X: np.ndarray, h) -> np.ndarray:
+        """``Simulator.propagate`` in this mode; a scalar flow in closed form,
+        ``x(h) = x e^(a h) + b expm1(a h) / a`` (``x + b h`` for ``a = 0``)."""
+        if self.scalar is None:
+            return self.sim.propagate(self.name, X, h)
+        a, b = self.scalar
+        h = np.broadcast_to(np.asarray(h, dtype=float), X.shape[:1])[:, None]
+        return X * np.exp(a * h) + (b * np.expm1(a * h) / a if a != 0 else b * h)
 
     def __call__(self, j0: int, j1: int) -> np.ndarray:
         """``W_j`` for ``j0 <= j < j1``: (j1 - j0, K, n+1)."""
@@ -60,6 +74,36 @@ class LinearTable:
             size = min(self.powers.limit, max(j1, 2 * self.table.shape[0], 64))
             self.table = np.einsum("kl,jlm->jkm", self.L, self.powers[:size])
         return self.table[j0:j1]
+
+
+def stacked_rows(sim, name: str):
+    """``(L, guards, invariant)`` of mode ``name``: ``L`` the rows ``[I_n, 0]``, ``[H, -g]`` of
+    each urgent guard and of the invariant; ``guards`` each guard's ``(offset, rows, margins)``
+    in ``L``, ``invariant`` its ``(offset, rows)``."""
+    model, n = sim.model, sim.n
+    parts = [np.hstack([np.eye(n), np.zeros((n, 1))])]
+    guards = []
+    offset = n
+    for tr, _ in sim.urgent[name]:
+        H, g = model.guard_halfspaces(tr)
+        parts.append(np.hstack([H, -g[:, None]]))
+        guards.append((offset, H.shape[0], _Affine(H, g)))
+        offset += H.shape[0]
+    H, g = model.modes[name].invariant_halfspaces
+    parts.append(np.hstack([H, -g[:, None]]))
+    return np.vstack(parts), guards, (offset, H.shape[0])
+
+
+def table_for(sim, name: str):
+    """The block table of mode ``name`` (:class:`LinearTable`, or
+    :class:`reach.model.batch_nonlinear.NonlinearTable` for a nonlinear mode), or None where
+    the general path applies (:func:`eligible`)."""
+    if not eligible(sim, name):
+        return None
+    if name in sim.powers:
+        return LinearTable(sim, name)
+    from reach.model.batch_nonlinear import NonlinearTable
+    return NonlinearTable(sim, name)
 
 
 class SubSteps:
@@ -111,17 +155,48 @@ def first_entry(sim, name: str, X: np.ndarray, h: np.ndarray, guard, sub: SubSte
     return out
 
 
-def _affine(H: np.ndarray, g: np.ndarray):
-    """``X -> X H^T - g`` with ``H^T`` stored contiguous (a faster product than a transposed view)."""
-    Ht = np.ascontiguousarray(H.T)
-    return lambda X: X @ Ht - g
+def scalar_entry(flow, rows, x0: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """First entry into ``{x : H x <= g}`` (``rows = (H, g)``) of ``x' = a x + b`` from ``x0``,
+    in ``(0, h]`` where it holds at ``h``. The solution ``x(s)`` is monotone, so each row holds
+    on a half-line of ``s`` and the entry is the largest of the rows' crossing instants (0 for a
+    row that already holds), ``s = ln((c + b/a) / (x0 + b/a)) / a`` for the crossing of ``x = c``
+    (``(c - x0) / b`` when ``a = 0``). Returned ``h 2^-40`` late, as the bisection's right end
+    (where the guard holds), and at most ``h``."""
+    from reach.model.simulate import BISECTION_STEPS
+
+    a, b = flow
+    H, g = rows
+    H = H[:, 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        c = g / np.where(H != 0, H, np.nan)                            # (m,) crossing levels
+        holds = H[None, :] * x0[:, None] <= g[None, :]                 # (R, m) at s = 0
+        if a != 0:
+            s = np.log((c[None, :] + b / a) / (x0[:, None] + b / a)) / a
+        else:
+            s = (c[None, :] - x0[:, None]) / b
+    s = np.where(holds | ~np.isfinite(s), 0.0, s)
+    entry = np.clip(s.max(axis=1), 0.0, None) + h * 2.0 ** (-BISECTION_STEPS)
+    return np.minimum(entry, h)
+
+
+class _Affine:
+    """``X -> X H^T - g`` with ``H^T`` stored contiguous (a faster product than a transposed
+    view); ``rows = (H, g)``."""
+
+    def __init__(self, H: np.ndarray, g: np.ndarray):
+        self.rows, self.Ht = (H, g), np.ascontiguousarray(H.T)
+
+    def __call__(self, X: np.ndarray) -> np.ndarray:
+        return X @ self.Ht - self.rows[1]
 
 
 def eligible(sim, name: str) -> bool:
-    """The block path applies to a linear mode whose urgent guards and invariant are linear and
-    which has no may-transition with a general guard."""
+    """The block path applies to a mode whose urgent guards and invariant are linear and which
+    has no may-transition with a general guard (linear flows by products, nonlinear ones by
+    :mod:`reach.model.batch_nonlinear`)."""
     model = sim.model
-    return (name in sim.powers and not sim.exits[name]
+    mode = model.modes[name]
+    return ((name in sim.powers or not mode.timeless) and not sim.exits[name]
             and model.modes[name].invariant_halfspaces is not None
             and all(model.guard_halfspaces(tr) is not None for tr, _ in sim.urgent[name]))
 
@@ -150,8 +225,9 @@ def segment_chunk(sim, name, rows, X, mode, t, tau, blocked_at, next_kick, watch
     m_index = int(mode[rows[0]])
     t0, k0, end, window, win_time, stop_at, count = sim.segment_limits(name, rows, t, tau, next_kick, horizon)
     count = max(1, min(count, sim.steps + 2 - int(k0.min())))
-    Y0 = sim.propagate(name, X[rows], np.maximum(k0 * dt - t0, 0.0))
+    Y0 = table.propagate(X[rows], np.maximum(k0 * dt - t0, 0.0))
     Z = np.vstack([Y0.T, np.ones((1, n_rows))])                          # (n+1, R)
+    steps = table.steps if table.nonlinear else None
 
     guards = sim.urgent[name]
     event_time = win_time.copy()
@@ -171,10 +247,17 @@ def segment_chunk(sim, name, rows, X, mode, t, tau, blocked_at, next_kick, watch
         j1 = min(count, j0 + step_block)
         act = np.flatnonzero(~done)
         B = j1 - j0
-        O = (table(j0, j1).reshape(-1, n + 1) @ Z[:, act]).reshape(B, K, act.size)
-        S = O[:, :n, :]
         gt = (k0[act][None, :] + np.arange(j0, j1)[:, None]) * dt         # (B, A)
         valid = gt <= stop_at[act] + 1e-12
+        if steps is None:
+            O = (table(j0, j1).reshape(-1, n + 1) @ Z[:, act]).reshape(B, K, act.size)
+            S = O[:, :n, :]
+        else:                           # the states from the integrator, the margins from L
+            S_next = steps.block(Z[:n, act], B + 1)
+            Z[:n, act] = S_next[B]
+            S = S_next[:B]
+            O = table.outputs(S)
+            valid &= np.isfinite(S).all(axis=1)
         for j_tr, (off, m, guard) in enumerate(table.guards, start=1):
             inside = valid & np.all(O[:, off:off + m, :] <= 0, axis=1)
             hit = np.flatnonzero(inside.any(axis=0))
@@ -183,7 +266,7 @@ def segment_chunk(sim, name, rows, X, mode, t, tau, blocked_at, next_kick, watch
                 first = j == 0
                 p_t = np.where(first, prev_t[act[hit]], gt[np.maximum(j - 1, 0), hit])
                 p_x = np.where(first[:, None], prev_x[act[hit]], S[np.maximum(j - 1, 0), :, hit])
-                s = first_entry(sim, name, p_x, gt[j, hit] - p_t, guard, table.sub)
+                s = table.entry(p_x, gt[j, hit] - p_t, guard)
                 when = p_t + s
                 rows_hit = act[hit]
                 better = when < event_time[rows_hit]
@@ -211,15 +294,15 @@ def segment_chunk(sim, name, rows, X, mode, t, tau, blocked_at, next_kick, watch
             last_t[act[some]] = gt[last, some]
             last_x[act[some]] = S[last, :, some]
         prev_t[act], prev_x[act] = gt[-1], S[-1].T
-        done[act] |= out_any | (gt[-1] >= np.minimum(stop_at[act], event_time[act]) - 1e-12)
+        done[act] |= out_any | (gt[-1] >= np.minimum(stop_at[act], event_time[act]) - 1e-12) | ~valid.any(axis=0)
         j0 = j1
         step_block = min(2 * step_block, most)
     finish(sim, name, rows, X, mode, t, tau, blocked_at, watchers, horizon, end, event_time, event_tr,
-           blocked, block_x, block_t, last_t, last_x)
+           blocked, block_x, block_t, last_t, last_x, table.propagate)
 
 
 def finish(sim, name, rows, X, mode, t, tau, blocked_at, watchers, horizon, end, event_time, event_tr,
-           blocked, block_x, block_t, last_t, last_x):
+           blocked, block_x, block_t, last_t, last_x, propagate):
     """The end of a segment: blocked runs stop, runs with an event go to it and jump, the
     others run on to the end of the segment (a kick or the horizon)."""
     b = np.flatnonzero(blocked)
@@ -230,12 +313,12 @@ def finish(sim, name, rows, X, mode, t, tau, blocked_at, watchers, horizon, end,
     has_event = ~blocked & (event_tr >= 0) & (event_time <= end)
     e = np.flatnonzero(has_event)
     if e.size:
-        Xe = sim.propagate(name, last_x[e], event_time[e] - last_t[e])
+        Xe = propagate(last_x[e], event_time[e] - last_t[e])
         sim._take_events(rows[e], Xe, event_time[e], event_tr[e], candidates, sim.window[name], X, t, mode,
                          tau, watchers)
     q = np.flatnonzero(~blocked & ~has_event)
     if q.size:
-        X[rows[q]] = sim.propagate(name, last_x[q], end[q] - last_t[q])
+        X[rows[q]] = propagate(last_x[q], end[q] - last_t[q])
         t[rows[q]] = end[q]
         off_grid = np.flatnonzero(end[q] - last_t[q] > 1e-9 * max(1.0, horizon))
         if off_grid.size:

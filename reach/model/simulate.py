@@ -12,7 +12,8 @@ together:
   the states and those margins come together, block by block of grid steps
   (:mod:`reach.model.batch`), and observers with a ``block`` method take whole blocks;
 * nonlinear modes step classical RK4 (``substeps`` per grid step), stopping once every run
-  of the group has met an event;
+  of the group has met an event; where their urgent guards and invariant are linear, in
+  blocks over all the runs at once (:mod:`reach.model.batch_nonlinear`);
 * an urgent transition is taken at the first instant its guard holds, located by bisection
   inside the grid interval where it first holds (to ``dt * 2**-40``); the window transition
   is taken exactly at ``tau``; a may-transition with a general guard is taken when a run would
@@ -395,7 +396,7 @@ class Simulator:
         """Advance ``rows`` (all in mode ``name``) to their next event, kick, or the horizon."""
         horizon = self.model.horizon
         if name not in self.tables:
-            self.tables[name] = batch.LinearTable(self, name) if batch.eligible(self, name) else None
+            self.tables[name] = batch.table_for(self, name)
         table = self.tables[name]
         if table is not None:
             for start in range(0, rows.size, BATCH_RUNS):
