@@ -116,6 +116,7 @@ import numpy as np
 from reach import lp
 from reach.backends.star.explorer import LOG, _Explorer, _Stop
 from reach.backends.star.flowpipe import AffineFlow, flowpipe
+from reach.backends.star.linearise import LinearisedModel, check_linearised
 from reach.backends.star.options import DEPTH_LP_TOLERANCE, NAME, StarOptions
 from reach.backends.star.transitions import _LinearModel, _unsafe_pieces
 from reach.backends.star.witnesses import witness_details
@@ -151,8 +152,9 @@ class StarBackend:
         if getattr(prop, "kind", None) != "safety":
             return f"the star back-end checks safety properties only (got '{getattr(prop, 'kind', '?')}')"
         if not _LinearModel.of(model).linear:
-            return ("nonlinear dynamics, invariants, guards or resets: generalized star sets need "
-                    "affine flows (the taylor back-end covers nonlinear models)")
+            reason = LinearisedModel.of(model).reason
+            if reason is not None:
+                return reason
         if model.disturbance is not None:
             return "stochastic disturbance: the star back-end is deterministic (use fsr or montecarlo)"
         for mode in prop.modes:
@@ -166,7 +168,14 @@ class StarBackend:
         if reason is not None:
             return Result(NAME, model.name, prop.id, Status.UNSUPPORTED, details={"reason": reason})
         opt = StarOptions.from_dict(options)
-        explorer = _Explorer(model, prop, opt)
+        if not _LinearModel.of(model).linear:
+            return check_linearised(model, prop, opt, lambda data, cover: self._explore(
+                model, prop, opt, time.perf_counter(), data, cover))
+        return self._explore(model, prop, opt, start)
+
+    def _explore(self, model, prop, opt, start, data=None, cover=None) -> Result:
+        """One exploration and its Result (``data``, ``cover``: see :class:`_Explorer`)."""
+        explorer = _Explorer(model, prop, opt, data=data, cover=cover)
         status, counterexample = Status.SAFE, None
         details = {}
         try:
@@ -242,6 +251,8 @@ def safe_abort_time(model, props, low, high, options=None) -> float:
     windows = [tr.window for tr in model.transitions if tr.window is not None]
     if not windows:
         raise ValueError(f"model '{model.name}' has no abort window to sweep")
+    if not _LinearModel.of(model).linear:
+        raise ValueError(f"model '{model.name}': the safe-abort sweep needs affine flows")
     opt = StarOptions.from_dict({**dict(options or {}), "replay": False})
     initial = Star.from_box(_LinearModel.of(model).initial_box(low, high))
     latest = max(w[2] for w in windows)

@@ -97,14 +97,18 @@ class _Explorer:
     """One check of one safety property on one linear hybrid automaton."""
 
     def __init__(self, model, prop, options: StarOptions, initial: Star | None = None,
-                 cutoff: float | None = None):
+                 cutoff: float | None = None, data=None, cover=None):
         """``cutoff`` switches to the safe-abort sweep: instead of a verdict, the explorer
         lowers ``cutoff`` to the earliest time from which a run may violate (an abort at or
-        after it, or a violation before any abort at it) and skips everything later."""
+        after it, or a violation before any abort at it) and skips everything later.
+        ``data``: the automaton's matrices (default: :class:`_LinearModel`; a linearised one for
+        nonlinear flows); ``cover(mode, centers, bases, box, error, cells)`` is told every chain
+        (:class:`.linearise.Cover`)."""
         self.model, self.prop, self.opt = model, prop, options
         self.sweep = cutoff is not None
         self.cutoff = np.inf if cutoff is None else float(cutoff)
-        data = _LinearModel.of(model)
+        self.cover = cover
+        data = _LinearModel.of(model) if data is None else data
         self.data = data
         self.n, self.clock = data.n, data.clock
         self.horizon = float(model.horizon)
@@ -266,6 +270,8 @@ class _Explorer:
             error = h * h / 8 * samples @ F.T
             if dev is not None:
                 error = error + dev[1:last + 1]          # the whole cell, R non-decreasing
+        if self.cover is not None:
+            self.cover(mode, centers[:last + 1], bases[:last + 1], box, error, len(cells))
         for piece in self.pieces.get(mode, []):
             candidates |= self._screen(centers, bases, box, error, piece.H, piece.g, cells)
         for jump in self.jumps[mode]:

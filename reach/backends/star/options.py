@@ -76,6 +76,9 @@ class StarOptions:
     replay_dt: simulator step for replays (None: the simulator's default).
     keep_sets: keep the flowpipe segments of every explored chain in ``Result.sets`` (for
         pictures; memory grows with the exploration).
+    linearise_rounds: nonlinear flows: at most this many rounds of growing each mode's
+        linearisation box around the reachable hull before UNKNOWN (:mod:`.linearise`).
+    linearise_margin: a grown box adds this fraction of the hull's half-width.
     """
 
     step: float | None = None
@@ -93,6 +96,8 @@ class StarOptions:
     touch_tolerance: float = 1e-9
     replay_dt: float | None = None
     keep_sets: bool = False
+    linearise_rounds: int = 4
+    linearise_margin: float = 0.1
 
     @classmethod
     def from_dict(cls, options: dict | None) -> "StarOptions":
