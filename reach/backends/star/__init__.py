@@ -169,13 +169,13 @@ class StarBackend:
             return Result(NAME, model.name, prop.id, Status.UNSUPPORTED, details={"reason": reason})
         opt = StarOptions.from_dict(options)
         if not _LinearModel.of(model).linear:
-            return check_linearised(model, prop, opt, lambda data, cover: self._explore(
-                model, prop, opt, time.perf_counter(), data, cover))
+            return check_linearised(model, prop, opt, lambda data, blocks: self._explore(
+                model, prop, opt, start, data, blocks))
         return self._explore(model, prop, opt, start)
 
-    def _explore(self, model, prop, opt, start, data=None, cover=None) -> Result:
-        """One exploration and its Result (``data``, ``cover``: see :class:`_Explorer`)."""
-        explorer = _Explorer(model, prop, opt, data=data, cover=cover)
+    def _explore(self, model, prop, opt, start, data=None, linearise=None) -> Result:
+        """One exploration and its Result (``data``, ``linearise``: see :class:`_Explorer`)."""
+        explorer = _Explorer(model, prop, opt, data=data, linearise=linearise)
         status, counterexample = Status.SAFE, None
         details = {}
         try:

@@ -76,8 +76,10 @@ class StarOptions:
     replay_dt: simulator step for replays (None: the simulator's default).
     keep_sets: keep the flowpipe segments of every explored chain in ``Result.sets`` (for
         pictures; memory grows with the exploration).
-    linearise_rounds: nonlinear flows: at most this many rounds of growing each mode's
-        linearisation box around the reachable hull before UNKNOWN (:mod:`.linearise`).
+    linearise_cells: nonlinear flows (:mod:`.linearise`): cells per block of a chain, each
+        block linearised over its own box (None: one block to the horizon; shorter blocks give
+        smaller remainders on strongly nonlinear flows, at a few coefficients per block).
+    linearise_inflations: at most this many times a block's box is grown before UNKNOWN.
     linearise_margin: a grown box adds this fraction of the hull's half-width.
     """
 
@@ -96,7 +98,8 @@ class StarOptions:
     touch_tolerance: float = 1e-9
     replay_dt: float | None = None
     keep_sets: bool = False
-    linearise_rounds: int = 4
+    linearise_cells: int | None = None
+    linearise_inflations: int = 8
     linearise_margin: float = 0.1
 
     @classmethod
