@@ -1,4 +1,5 @@
-"""The ``star`` back-end: generalized-star-set reachability of linear hybrid automata.
+"""The ``star`` back-end: generalized-star-set reachability of linear hybrid automata (and of
+nonlinear flows by conservative linearisation).
 
 Method
 ------
@@ -94,10 +95,23 @@ unsafe: any point of a segment there before the horizon is a witness, replayed a
 the replay does not reach the mode, the cell that fired the latest refinable jump on the
 path is bisected, and UNKNOWN follows when nothing is left to refine.
 
+Nonlinear flows (:mod:`.linearise`, Althoff, Stursberg & Buss, CDC 2008). A mode whose flow
+``f`` is not affine is explored in blocks of cells; for each block ``f(x) = A x + b + L(x)``
+with ``A, b`` the linearisation at the centre of a box ``X`` and the Lagrange remainder ``L``
+enclosed over ``X`` by interval Hessians in outward rounding (:mod:`.remainder`); ``L`` is a
+time-varying input in that enclosure, bounded by its exact support as above. ``X`` is grown
+until the block's cover under that input lies strictly inside it (else the block is halved;
+UNKNOWN when a single cell does not close). SAFE then holds for the nonlinear automaton: a run
+cannot leave ``X`` within the block (at its first exit it would still be a run of the affine
+flow with such an input, so inside the cover, strictly inside ``X``), so it is a run of the
+affine automaton with a bounded input. Invariants, guards and resets must stay linear; UNSAFE
+needs a counterexample replayed on the nonlinear simulator.
+
 Layout: :mod:`.options` (settings, constants), :mod:`.flowpipe` (flows, segments, bounds),
 :mod:`.transitions` (the automaton as matrices), :mod:`.explorer` (the exploration),
-:mod:`.aggregation`, :mod:`.witnesses` (witnesses back to initial states), this module (the
-back-end, its Result and the safe-abort sweep).
+:mod:`.aggregation`, :mod:`.witnesses` (witnesses back to initial states), :mod:`.linearise`
+and :mod:`.remainder` (nonlinear flows), this module (the back-end, its Result and the safe-abort
+sweep).
 
 ``discrete_time=True`` checks and switches at grid points only (Hylaa's semantics): no
 segments, no error terms -- not a proof for continuous time, so it answers UNSAFE (replayed)
