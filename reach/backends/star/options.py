@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from reach.backends.options import parse_options
+from reach.backends.options import parse_options, ranged
 
 
 NAME = "star"
@@ -98,8 +98,8 @@ class StarOptions:
     touch_tolerance: float = 1e-9
     replay_dt: float | None = None
     keep_sets: bool = False
-    linearise_cells: int | None = None
-    linearise_inflations: int = 8
+    linearise_cells: int | None = ranged(None, 1)
+    linearise_inflations: int = ranged(8, 1)
     linearise_margin: float = 0.1
 
     @classmethod
