@@ -157,10 +157,10 @@ def test_violation_between_grid_points():
 
 
 def test_unsupported_models_and_properties():
-    model = automaton()
-    model.modes["coast"] = Mode("coast", SYMBOLS, [V, -V ** 3, sympy.Integer(1)], {}, [])
+    model = automaton()       # a nonlinear flow is linearised; a nonlinear invariant is not
+    model.modes["coast"] = Mode("coast", SYMBOLS, [V, -V ** 3, sympy.Integer(1)], {}, [c(V ** 2 - 4)])
     result = BACKEND.check(model, x_at_most(10.0))
-    assert result.status is Status.UNSUPPORTED and "nonlinear" in result.details["reason"]
+    assert result.status is Status.UNSUPPORTED and "nonlinear invariants" in result.details["reason"]
 
     class Reach:
         kind, id = "reach", "dock"

@@ -1,4 +1,5 @@
-"""The ``star`` back-end: generalized-star-set reachability of linear hybrid automata.
+"""The ``star`` back-end: generalized-star-set reachability of linear hybrid automata (and of
+nonlinear flows by conservative linearisation).
 
 Method
 ------
@@ -94,10 +95,23 @@ unsafe: any point of a segment there before the horizon is a witness, replayed a
 the replay does not reach the mode, the cell that fired the latest refinable jump on the
 path is bisected, and UNKNOWN follows when nothing is left to refine.
 
+Nonlinear flows (:mod:`.linearise`, Althoff, Stursberg & Buss, CDC 2008). A mode whose flow
+``f`` is not affine is explored in blocks of cells; for each block ``f(x) = A x + b + L(x)``
+with ``A, b`` the linearisation at the centre of a box ``X`` and the Lagrange remainder ``L``
+enclosed over ``X`` by interval Hessians in outward rounding (:mod:`.remainder`); ``L`` is a
+time-varying input in that enclosure, bounded by its exact support as above. ``X`` is grown
+until the block's cover under that input lies strictly inside it (else the block is halved;
+UNKNOWN when a single cell does not close). SAFE then holds for the nonlinear automaton: a run
+cannot leave ``X`` within the block (at its first exit it would still be a run of the affine
+flow with such an input, so inside the cover, strictly inside ``X``), so it is a run of the
+affine automaton with a bounded input. Invariants, guards and resets must stay linear; UNSAFE
+needs a counterexample replayed on the nonlinear simulator.
+
 Layout: :mod:`.options` (settings, constants), :mod:`.flowpipe` (flows, segments, bounds),
 :mod:`.transitions` (the automaton as matrices), :mod:`.explorer` (the exploration),
-:mod:`.aggregation`, :mod:`.witnesses` (witnesses back to initial states), this module (the
-back-end, its Result and the safe-abort sweep).
+:mod:`.aggregation`, :mod:`.witnesses` (witnesses back to initial states), :mod:`.linearise`
+and :mod:`.remainder` (nonlinear flows), this module (the back-end, its Result and the safe-abort
+sweep).
 
 ``discrete_time=True`` checks and switches at grid points only (Hylaa's semantics): no
 segments, no error terms -- not a proof for continuous time, so it answers UNSAFE (replayed)
@@ -116,6 +130,7 @@ import numpy as np
 from reach import lp
 from reach.backends.star.explorer import LOG, _Explorer, _Stop
 from reach.backends.star.flowpipe import AffineFlow, flowpipe
+from reach.backends.star.linearise import LinearisedModel, check_linearised
 from reach.backends.star.options import DEPTH_LP_TOLERANCE, NAME, StarOptions
 from reach.backends.star.transitions import _LinearModel, _unsafe_pieces
 from reach.backends.star.witnesses import witness_details
@@ -151,8 +166,9 @@ class StarBackend:
         if getattr(prop, "kind", None) != "safety":
             return f"the star back-end checks safety properties only (got '{getattr(prop, 'kind', '?')}')"
         if not _LinearModel.of(model).linear:
-            return ("nonlinear dynamics, invariants, guards or resets: generalized star sets need "
-                    "affine flows (the taylor back-end covers nonlinear models)")
+            reason = LinearisedModel.of(model).reason
+            if reason is not None:
+                return reason
         if model.disturbance is not None:
             return "stochastic disturbance: the star back-end is deterministic (use fsr or montecarlo)"
         for mode in prop.modes:
@@ -166,7 +182,14 @@ class StarBackend:
         if reason is not None:
             return Result(NAME, model.name, prop.id, Status.UNSUPPORTED, details={"reason": reason})
         opt = StarOptions.from_dict(options)
-        explorer = _Explorer(model, prop, opt)
+        if not _LinearModel.of(model).linear:
+            return check_linearised(model, prop, opt, lambda data, blocks: self._explore(
+                model, prop, opt, start, data, blocks))
+        return self._explore(model, prop, opt, start)
+
+    def _explore(self, model, prop, opt, start, data=None, linearise=None) -> Result:
+        """One exploration and its Result (``data``, ``linearise``: see :class:`_Explorer`)."""
+        explorer = _Explorer(model, prop, opt, data=data, linearise=linearise)
         status, counterexample = Status.SAFE, None
         details = {}
         try:
@@ -242,6 +265,8 @@ def safe_abort_time(model, props, low, high, options=None) -> float:
     windows = [tr.window for tr in model.transitions if tr.window is not None]
     if not windows:
         raise ValueError(f"model '{model.name}' has no abort window to sweep")
+    if not _LinearModel.of(model).linear:
+        raise ValueError(f"model '{model.name}': the safe-abort sweep needs affine flows")
     opt = StarOptions.from_dict({**dict(options or {}), "replay": False})
     initial = Star.from_box(_LinearModel.of(model).initial_box(low, high))
     latest = max(w[2] for w in windows)

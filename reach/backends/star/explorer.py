@@ -97,14 +97,17 @@ class _Explorer:
     """One check of one safety property on one linear hybrid automaton."""
 
     def __init__(self, model, prop, options: StarOptions, initial: Star | None = None,
-                 cutoff: float | None = None):
+                 cutoff: float | None = None, data=None, linearise=None):
         """``cutoff`` switches to the safe-abort sweep: instead of a verdict, the explorer
         lowers ``cutoff`` to the earliest time from which a run may violate (an abort at or
-        after it, or a violation before any abort at it) and skips everything later."""
+        after it, or a violation before any abort at it) and skips everything later.
+        ``data``: the automaton's matrices (default: :class:`_LinearModel`); ``linearise``: the
+        chains of nonlinear modes, block by block (:class:`.linearise.Blocks`)."""
         self.model, self.prop, self.opt = model, prop, options
         self.sweep = cutoff is not None
         self.cutoff = np.inf if cutoff is None else float(cutoff)
-        data = _LinearModel.of(model)
+        self.linearise = linearise
+        data = _LinearModel.of(model) if data is None else data
         self.data = data
         self.n, self.clock = data.n, data.clock
         self.horizon = float(model.horizon)
@@ -113,7 +116,7 @@ class _Explorer:
             from reach.errors import InputError
             raise InputError(f"{model.name}: horizon {self.horizon:g} / step {self.h:g} = {self.horizon / self.h:.3g} "
                              f"cells; at most {MAX_CELLS:.0e} (use a larger step)", field="options.star.step")
-        self.flows, self.invariants, self.jumps = data.flows, data.invariants, data.fired
+        self.flows, self.invariants, self.jumps = dict(data.flows), data.invariants, data.fired
         self.max_jumps = np.inf if options.max_jumps is None else options.max_jumps
         from reach.model.lint import zero_dwell_cycles
         self.stall_limit = STALL_JUMPS if zero_dwell_cycles(model)[0] else np.inf
@@ -167,11 +170,23 @@ class _Explorer:
         self._chain(self.root_mode, start, _Path(), self.root.box.center)
 
     def _chain(self, mode: str, star: Star, path: _Path, guess=None, direction=None):
+        """Explore ``star`` in ``mode`` up to the horizon (:meth:`_flow_chain`); in a mode with a
+        nonlinear flow block by block, each with its own linearisation (``linearise``)."""
+        if self.linearise is not None and mode in self.linearise.curved:
+            self.linearise.chain(self, mode, star, path, guess, direction)
+        else:
+            self._flow_chain(mode, star, path, guess, direction)
+
+    def _flow_chain(self, mode: str, star: Star, path: _Path, guess=None, direction=None,
+                    block: int | None = None):
         """Explore ``star`` in ``mode`` up to the horizon: checks, jumps, refinement.
 
         ``guess`` (and ``direction``): where a point of ``star`` may be (see :meth:`_point`).
         The run of a known point proves the chain non-empty for as long as it stays inside
-        the invariant, without LPs.
+        the invariant, without LPs. ``block``: stop after this many cells and return
+        ``(star, point)``, the star every run still in the mode is in at that time (the grid
+        star plus its input effect, in the invariant) and a point guess for it; None if the
+        chain ended before (or went to the horizon).
         """
         if mode not in self.relevant:
             return
@@ -193,6 +208,8 @@ class _Explorer:
                                         f"(option max_stars)")
         flow, h = self.flows[mode], self.h
         count = max(1, int(np.ceil((self.horizon - t0) / h - 1e-9)))
+        handoff = block is not None and block < count
+        count = block if handoff else count
         segment_vars = star.nvars if flow.drift else 2 * star.nvars + 1 + self.n
         if segment_vars > self.opt.max_coefficients or \
                 8 * 3 * (count + 1) * self.n * (star.nvars + 1) > MAX_CHAIN_BYTES:
@@ -283,6 +300,10 @@ class _Explorer:
         for index, members in (pending or {}).items():
             jump = self.jumps[mode][index]
             self._aggregate(jump.target, members, kept_rows(jump, Hi, gi))
+        if handoff and ended_inside:
+            end = grid_star(count) if dev is None else _plus_box(grid_star(count), dev[count])
+            return end.intersect_halfspaces(Hi, gi), np.concatenate([point, np.zeros(end.nvars - point.size)])
+        return None
 
     def _keep_chain(self, mode: str, grid_star, centers, bases, error, cells):
         """The screened-out cells of a chain as set pieces (option ``keep_sets``; the others are

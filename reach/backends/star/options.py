@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from reach.backends.options import parse_options
+from reach.backends.options import parse_options, ranged
 
 
 NAME = "star"
@@ -76,6 +76,11 @@ class StarOptions:
     replay_dt: simulator step for replays (None: the simulator's default).
     keep_sets: keep the flowpipe segments of every explored chain in ``Result.sets`` (for
         pictures; memory grows with the exploration).
+    linearise_cells: nonlinear flows (:mod:`.linearise`): cells per block of a chain, each
+        block linearised over its own box (None: one block to the horizon; shorter blocks give
+        smaller remainders on strongly nonlinear flows, at a few coefficients per block).
+    linearise_inflations: at most this many times a block's box is grown before UNKNOWN.
+    linearise_margin: a grown box adds this fraction of the hull's half-width.
     """
 
     step: float | None = None
@@ -93,6 +98,9 @@ class StarOptions:
     touch_tolerance: float = 1e-9
     replay_dt: float | None = None
     keep_sets: bool = False
+    linearise_cells: int | None = ranged(None, 1)
+    linearise_inflations: int = ranged(8, 1)
+    linearise_margin: float = 0.1
 
     @classmethod
     def from_dict(cls, options: dict | None) -> "StarOptions":
