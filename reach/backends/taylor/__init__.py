@@ -44,7 +44,7 @@ from reach.backends.taylor.flow import Unsmooth
 from reach.backends.taylor.keys import picklable
 from reach.backends.taylor import units
 from reach.backends.taylor.problem import EventProblem, global_clock
-from reach.backends.taylor.units import expand_box, sweep_box
+from reach.backends.taylor.units import expand_boxes, sweep_box
 from reach.result import Result, Status
 from reach.backends.taylor.safety import check_safety, margins
 from reach.backends.taylor.window import unsupported_window, with_switch_time
@@ -125,8 +125,12 @@ class TaylorBackend:
         run_units = _unit_runner(opts, picklable(model, prop))
 
         def expand_level(boxes):
-            return run_units(expand_box, [(model, prop, opts.order, expand_order, opts.integration_tol,
-                                           *full_box(c, h)) for c, h in boxes])
+            """A level's boxes in ``jobs`` batches (:mod:`.lockstep`), one per worker."""
+            full = [full_box(c, h) for c, h in boxes]
+            chunks = [list(part) for part in np.array_split(np.arange(len(full)), min(opts.jobs, len(full))) if len(part)]
+            parts = run_units(expand_boxes, [(model, prop, opts.order, expand_order, opts.integration_tol,
+                                              [full[i] for i in chunk]) for chunk in chunks])
+            return [result for part in parts for result in part]
 
         def measure(result):
             """The ADS measure of a box: its candidates that can hold the extremum, stacked (zero
