@@ -8,7 +8,9 @@ through its urgent switches (:mod:`.problem`) and the candidates for the extremu
 entering a mode, at every interior local extremum (the event ``dq/dt = 0``, :mod:`.event`,
 eqs. 5-14), and on leaving (guard crossing or horizon) — are expanded as Taylor maps of the scaled
 initial deviations. The ADS splitting criterion is the truncation estimate of those maps that
-can hold the extremum (:func:`.bound.contenders`).
+can hold the extremum (:func:`.bound.contenders`). The boxes of one ADS level are expanded in
+lockstep, one batch per worker (:mod:`.lockstep`): their DA propagations run as one array
+computation, which gives each box the maps it would get on its own.
 
 Bounds, by the ``remainder`` option:
 

@@ -75,11 +75,13 @@ class Algebra:
         if key not in self._graded:
             keep = (self.degree[self.left] >= low_a) & (self.degree[self.right] >= low_b)
             target = self.target[keep]
-            starts = np.flatnonzero(np.r_[True, target[1:] != target[:-1]])
+            starts = np.flatnonzero(np.r_[True, target[1:] != target[:-1]]) if len(target) else target
             self._graded[key] = (self.left[keep], self.right[keep], starts, target[starts])
         left, right, starts, targets = self._graded[key]
         out = np.zeros(np.broadcast_shapes(a.shape, b.shape))
-        out[..., targets] = np.add.reduceat(np.take(a, left, axis=-1) * np.take(b, right, axis=-1), starts, axis=-1)
+        if len(left):       # else every product has degree above the order
+            out[..., targets] = np.add.reduceat(np.take(a, left, axis=-1) * np.take(b, right, axis=-1),
+                                                starts, axis=-1)
         return out
 
     def multiply(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
