@@ -17,7 +17,12 @@ A :class:`TMJet` carries instead a Taylor model (:mod:`.tm`) of the value and Ta
 
 Every Taylor model asserts ``g(xi) - P(xi) in I`` on the whole box, so the interval bounds of the
 derivative models contain ``Df(z)`` for every ``z`` in ``Z`` (the same statement as the interval jet),
-while the dependence on ``xi`` is kept through the layers up to the model's order.
+while the dependence on ``xi`` is kept through the layers up to the model's order. On a 1 mm box of
+the transfer the Jacobian enclosure of the thrust rows is 2.3e-5 wide (order 3) against 5.6e5 for
+the interval jet (the gradient's size: 1.4e-3).
+
+The verified integration does not use it yet: with it, the Jacobian is no longer what stops the
+proof on CW SIREN; the logarithmic-norm Gronwall radius is (results/cw_siren.md).
 """
 
 from __future__ import annotations
