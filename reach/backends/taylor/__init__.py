@@ -8,7 +8,9 @@ through its urgent switches (:mod:`.problem`) and the candidates for the extremu
 entering a mode, at every interior local extremum (the event ``dq/dt = 0``, :mod:`.event`,
 eqs. 5-14), and on leaving (guard crossing or horizon) — are expanded as Taylor maps of the scaled
 initial deviations. The ADS splitting criterion is the truncation estimate of those maps that
-can hold the extremum (:func:`.bound.contenders`).
+can hold the extremum (:func:`.bound.contenders`). The boxes of one ADS level are expanded in
+lockstep, one batch per worker (:mod:`.lockstep`): their DA propagations run as one array
+computation, which gives each box the maps it would get on its own.
 
 Bounds, by the ``remainder`` option:
 
@@ -44,7 +46,7 @@ from reach.backends.taylor.flow import Unsmooth
 from reach.backends.taylor.keys import picklable
 from reach.backends.taylor import units
 from reach.backends.taylor.problem import EventProblem, global_clock
-from reach.backends.taylor.units import expand_box, sweep_box
+from reach.backends.taylor.units import expand_boxes, sweep_box
 from reach.result import Result, Status
 from reach.backends.taylor.safety import check_safety, margins
 from reach.backends.taylor.window import unsupported_window, with_switch_time
@@ -125,8 +127,12 @@ class TaylorBackend:
         run_units = _unit_runner(opts, picklable(model, prop))
 
         def expand_level(boxes):
-            return run_units(expand_box, [(model, prop, opts.order, expand_order, opts.integration_tol,
-                                           *full_box(c, h)) for c, h in boxes])
+            """A level's boxes in ``jobs`` batches (:mod:`.lockstep`), one per worker."""
+            full = [full_box(c, h) for c, h in boxes]
+            chunks = [list(part) for part in np.array_split(np.arange(len(full)), min(opts.jobs, len(full))) if len(part)]
+            parts = run_units(expand_boxes, [(model, prop, opts.order, expand_order, opts.integration_tol,
+                                              [full[i] for i in chunk]) for chunk in chunks])
+            return [result for part in parts for result in part]
 
         def measure(result):
             """The ADS measure of a box: its candidates that can hold the extremum, stacked (zero

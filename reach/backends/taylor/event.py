@@ -24,7 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from reach.backends.taylor.da import DA, algebra, invert
-from reach.backends.taylor.flow import propagate
+from reach.backends.taylor.flow import step_sizes
+from reach.backends.taylor.lockstep import Propagation, run_one
 
 
 @dataclass
@@ -78,9 +79,19 @@ def event_map(f, event, x0: list[DA], nodes: np.ndarray, t_e: float, order: int)
     the state entering a mode); ``nodes``: RK step nodes of the nominal run from there;
     ``event(x) -> DA`` is ``E``. Times are counted from ``nodes[0]``.
     """
+    return run_one(event_map_steps(f, event, x0, nodes, t_e, order))
+
+
+def event_map_steps(f, event, x0: list[DA], nodes: np.ndarray, t_e: float, order: int):
+    """:func:`event_map` as a generator that yields its propagation (:mod:`.lockstep`).
+
+    The state is carried to ``t_e`` in the ``m`` deviations and embedded in the algebra with the
+    time deviation afterwards: the flow does not touch the new variable, so this is the same
+    polynomial as propagating in ``m + 1`` variables, at the cost of ``m``."""
     m = x0[0].alg.nvars
     alg = algebra(order, m + 1)
-    x_e = propagate(f, [x.embed(alg) for x in x0], nodes, t_e)
+    x_e = yield Propagation(f, list(x0), step_sizes(nodes, t_e))
+    x_e = [x.embed(alg) for x in x_e]
     x = picard(f, x_e, m, order)                                   # eq. (11)
     E = event(x)                                                   # eq. (12)
     identity = [DA.var(alg, j) for j in range(m)]
@@ -94,7 +105,12 @@ def event_map(f, event, x0: list[DA], nodes: np.ndarray, t_e: float, order: int)
 
 def fixed_time_map(f, x0: list[DA], nodes: np.ndarray, T: float) -> EventMap:
     """The transfer map of eq. (4) at a fixed time ``T`` (an event that does not move)."""
-    x = propagate(f, list(x0), nodes, T)
+    return run_one(fixed_time_map_steps(f, x0, nodes, T))
+
+
+def fixed_time_map_steps(f, x0: list[DA], nodes: np.ndarray, T: float):
+    """:func:`fixed_time_map` as a generator that yields its propagation."""
+    x = yield Propagation(f, list(x0), step_sizes(nodes, T))
     return EventMap(DA.const(x0[0].alg, T), x)
 
 

@@ -166,18 +166,23 @@ def _tableau():
 A_DOP853, B_DOP853 = _tableau()
 
 
-def rk8(f, x: list, h: float, steps: int) -> list:
+def rk8(f, x: list, h, steps: int) -> list:
     """``steps`` explicit DOP853 steps (8th order) of size ``h`` of the autonomous ``x' = f(x)``.
 
     The state is held as one array (``(n, M)`` coefficients for DA states), so each stage is
-    one weighted sum of the previous stages' rates.
+    one weighted sum of the previous stages' rates. DA states of shape ``(B,)`` are ``B``
+    independent runs (``(n, B, M)`` coefficients) and ``h`` may then be an array of ``B`` step
+    sizes, one per run; a zero step leaves its run exactly as it is.
     """
     alg = next((v.alg for v in x if isinstance(v, DA)), None)
+    h = np.asarray(h, dtype=float)
+    if alg is not None and h.ndim == 1:
+        h = h[:, None]
 
     def pack(values):
         if alg is None:
             return np.stack(np.broadcast_arrays(*[np.asarray(v, dtype=float) for v in values]))
-        return np.stack([v.c if isinstance(v, DA) else DA.const(alg, v).c for v in values])
+        return np.stack(np.broadcast_arrays(*[v.c if isinstance(v, DA) else DA.const(alg, v).c for v in values]))
 
     def unpack(X):
         return list(X) if alg is None else [DA(alg, row) for row in X]
@@ -247,17 +252,23 @@ def nominal(f_numeric, x0: np.ndarray, T: float, tol: float = 1e-9, refine: int 
     return Nominal(dense.sol, nodes)
 
 
-def propagate(f, x: list, nodes: np.ndarray, t_end: float) -> list:
-    """DA (or float) state from ``nodes[0]`` to ``t_end``: RK8 steps along the nodes, then a
-    last partial step."""
-    t = nodes[0]
+def step_sizes(nodes: np.ndarray, t_end: float) -> list[float]:
+    """The RK8 steps from ``nodes[0]`` to ``t_end``: along the nodes, then a last partial step."""
+    t, out = nodes[0], []
     for t_next in nodes[1:]:
         if t_next > t_end:
             break
-        x = rk8(f, x, t_next - t, 1)
+        out.append(t_next - t)
         t = t_next
     if t_end > t:
-        x = rk8(f, x, t_end - t, 1)
+        out.append(t_end - t)
+    return out
+
+
+def propagate(f, x: list, nodes: np.ndarray, t_end: float) -> list:
+    """DA (or float) state from ``nodes[0]`` to ``t_end`` (:func:`step_sizes`)."""
+    for h in step_sizes(nodes, t_end):
+        x = rk8(f, x, h, 1)
     return x
 
 

@@ -23,10 +23,12 @@ import numpy as np
 import sympy
 
 from reach.backends.taylor.da import DA, algebra
-from reach.backends.taylor.event import event_map, fixed_time_map, initial_state, local_extrema, refine_time
+from reach.backends.taylor.event import (event_map_steps, fixed_time_map_steps, initial_state, local_extrema,
+                                         refine_time)
 from reach.backends.taylor.flow import compile_expressions, compile_numeric, nominal
 from reach.backends.taylor.interval import Jet
 from reach.backends.taylor.keys import fingerprint
+from reach.backends.taylor.lockstep import run_batch, run_one
 from reach.backends.taylor.tm import TM
 from reach.backends.taylor.verified import at_sigma, enclose_stretch
 from reach.model.constraints import affine_coefficients, lambdify_margins
@@ -158,6 +160,15 @@ class EventProblem:
     # ------------------------------------------------------------ estimated (event maps)
     def candidates(self, center: np.ndarray, half_width: np.ndarray, order: int, tol: float) -> dict:
         """Taylor maps (in the subdomain's scaled deviations) of the extremum candidates."""
+        return run_one(self.candidate_steps(center, half_width, order, tol))
+
+    def candidates_batch(self, boxes: list, order: int, tol: float) -> list[dict]:
+        """:meth:`candidates` of many boxes ``(center, half_width)``, their DA propagations run
+        together as one batch (:mod:`.lockstep`)."""
+        return run_batch([self.candidate_steps(c, h, order, tol) for c, h in boxes])
+
+    def candidate_steps(self, center: np.ndarray, half_width: np.ndarray, order: int, tol: float):
+        """:meth:`candidates` as a generator that yields its DA propagations."""
         T = self.model.horizon
         X = initial_state(algebra(order, len(self.uncertain)), center, half_width, self.uncertain)
         mode, t0, out, visited = self.model.initial.mode, 0.0, {}, set()
@@ -183,23 +194,23 @@ class EventProblem:
                 for k in local_extrema(values, self.prop.sense):
                     tk = run.sharpen(k, lambda Y: sign * np.asarray(code.q_numeric(list(Y))))
                     t_e, _ = refine_time(code.f, code.qdot, run.solution, tk, order)
-                    em = event_map(code.f, code.qdot, X, run.nodes, t_e, order)
+                    em = yield from event_map_steps(code.f, code.qdot, X, run.nodes, t_e, order)
                     out[f"{mode}:extremum@{t0 + t_e:.6g}"] = code.q(em.state)
             visited.add(mode)
             if leave is None:
                 if code.q is not None:
                     if hop == 0:
-                        em = fixed_time_map(code.f, X, run.nodes, T)
+                        em = yield from fixed_time_map_steps(code.f, X, run.nodes, T)
                     else:
                         c = self.clock
-                        em = event_map(code.f, lambda x: x[c] - T, X, run.nodes, T - t0, order)
+                        em = yield from event_map_steps(code.f, lambda x: x[c] - T, X, run.nodes, T - t0, order)
                     out[f"{mode}:horizon"] = code.q(em.state)
                 return out
             _, ex, face = leave
             tk = run.sharpen(last, lambda Y: np.where(np.all(ex.margins(Y.T) <= 0, axis=1),
                                                       -np.arange(Y.shape[1]), -np.inf))
             t_e, _ = refine_time(code.f, face, run.solution, tk, order)
-            em = event_map(code.f, face, X, run.nodes, t_e, order)
+            em = yield from event_map_steps(code.f, face, X, run.nodes, t_e, order)
             if code.q is not None:
                 out[f"{mode}:exit@{t0 + t_e:.6g}"] = code.q(em.state)
             if visited >= set(self.prop.modes):

@@ -3,7 +3,9 @@
 They are module-level functions of picklable arguments (the model, the bound property, plain
 numbers), so a level of ADS boxes or the rigorous sweeps of all subdomains can run on local worker
 processes or a Dask cluster (:mod:`reach.executors`). Each process compiles a problem once
-and keeps it, keyed by a digest of the pickled model and property.
+and keeps it, keyed by a digest of the pickled model and property. The units run with one BLAS
+thread: their matrix products are many and small, and BLAS threads competing for the cores of a
+loaded machine made them tens of times slower.
 """
 
 from __future__ import annotations
@@ -11,6 +13,7 @@ from __future__ import annotations
 from reach.backends.taylor.bound import truncate
 from reach.backends.taylor.keys import fingerprint
 from reach.backends.taylor.problem import EventProblem
+from reach.model.simulate import single_threaded
 
 _PROBLEMS: dict[str, tuple] = {}
 
@@ -27,10 +30,22 @@ def problem(model, prop) -> EventProblem:
 def expand_box(model, prop, order: int, expand_order: int, tol: float, center, half_width):
     """Candidate maps of one box: ``(maps truncated to order, maps as expanded)``."""
     maps = problem(model, prop).candidates(center, half_width, expand_order, tol)
-    return {name: truncate(p, order) if expand_order > order else p for name, p in maps.items()}, maps
+    return _truncated(maps, order, expand_order), maps
+
+
+def expand_boxes(model, prop, order: int, expand_order: int, tol: float, boxes: list) -> list:
+    """:func:`expand_box` of each ``(center, half_width)`` in ``boxes``, expanded as one batch."""
+    with single_threaded():
+        batch = problem(model, prop).candidates_batch(boxes, expand_order, tol)
+    return [(_truncated(maps, order, expand_order), maps) for maps in batch]
+
+
+def _truncated(maps: dict, order: int, expand_order: int) -> dict:
+    return {name: truncate(p, order) if expand_order > order else p for name, p in maps.items()}
 
 
 def sweep_box(model, prop, order: int, rel_tol: float, tol: float, center, half_width,
               keep_sets: bool = False) -> dict:
     """The rigorous sweep of one subdomain (:meth:`EventProblem.sweep`)."""
-    return problem(model, prop).sweep(center, half_width, order, rel_tol, tol, keep_sets)
+    with single_threaded():
+        return problem(model, prop).sweep(center, half_width, order, rel_tol, tol, keep_sets)
