@@ -565,7 +565,7 @@ class _Explorer:
         time-varying inputs and the ``piece`` the segment ``seg`` meets, then also the
         extremal input witness of :meth:`_extremal_witness`. UNSAFE (:class:`_Stop`) on the
         first replay that violates."""
-        if not self.opt.replay:
+        if not self.opt.replay or self.stats.replays >= self.opt.max_replays:
             return
         try:
             from reach.backends.montecarlo import constant_signal
@@ -597,9 +597,9 @@ class _Explorer:
         deepest into ``piece`` by the time-varying inputs, or None.
 
         The direction is ``c = -h_r`` for the row ``h_r x <= g_r`` of the piece that the
-        inputs move most (``|h_r| R`` largest) and the other rows are kept as
-        constraints (an instant ``t == 20`` stays an instant); "moved most" is read off the
-        input's reach bound over the horizon (:meth:`.flowpipe.AffineFlow.deviation`). One LP: the point of ``seg``
+        inputs move most (``|h_r| R`` largest, ``R`` the input's reach bound over the horizon,
+        :meth:`.flowpipe.AffineFlow.deviation`); the other rows are kept as constraints (an
+        instant ``t == 20`` stays an instant). One LP: the point of ``seg``
         (cut by those rows and the horizon) that maximises ``c^T x``; its coefficients give
         the initial state (as any witness) and its clock ``t`` the instant to aim at. The input
         signal is :func:`.witnesses.extremal_signal` of the witness mode's flow, which
