@@ -54,7 +54,7 @@ from reach.backends.initial_sampling import PolytopeSampler, input_signals, inpu
 from reach.backends.options import parse_options, ranged
 from reach.errors import InputError
 from reach.model.automaton import HybridAutomaton
-from reach.model.constraints import NUMERICAL_TOLERANCE, lambdify_margins
+from reach.model.constraints import NUMERICAL_TOLERANCE, equality_rows, lambdify_margins
 from reach.model.simulate import Simulator, check_size, single_threaded
 from reach.result import Counterexample, Result, Status
 from reach.spec.properties import BoundEvent, BoundReach, BoundReachAvoid, BoundSafety
@@ -132,6 +132,8 @@ def _compiled_tests(model: HybridAutomaton, prop: BoundSafety):
     standard = type(prop).violation is BoundSafety.violation          # not a subclass's own test
     for m_index, m in enumerate(names):
         hs = prop.halfspace_pieces(m) if m_index in tests and standard else None
+        if any(equality_rows(piece) for piece in prop.pieces.get(m, [])):
+            hs = None                   # an equality (an instant) takes the state-by-state test
         if hs:
             stacked[m_index] = (np.vstack([H for H, _ in hs]), np.concatenate([g for _, g in hs]),
                                 np.cumsum([0] + [H.shape[0] for H, _ in hs[:-1]]))

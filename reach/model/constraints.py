@@ -144,6 +144,18 @@ def lambdify_margins(constraints: Sequence[Constraint], symbols: Sequence[sympy.
     return margins
 
 
+def equality_rows(constraints: Sequence[Constraint]) -> list[int]:
+    """Indices of the constraints that pair up into equalities: two non-strict constraints
+    ``g <= 0`` and ``-g <= 0`` (``t == 20`` written as ``t <= 20`` and ``t >= 20``)."""
+    rows = set()
+    for i, a in enumerate(constraints):
+        for j in range(i + 1, len(constraints)):
+            b = constraints[j]
+            if not (a.strict or b.strict) and sympy.expand(a.g + b.g) == 0:
+                rows.update((i, j))
+    return sorted(rows)
+
+
 def violation_test(constraints: Sequence[Constraint], symbols: Sequence[sympy.Symbol]):
     """Vectorised robust membership in the conjunction: ``X -> (inside, depth)``.
 
@@ -151,13 +163,24 @@ def violation_test(constraints: Sequence[Constraint], symbols: Sequence[sympy.Sy
     ``inside`` asks for ``depth < -1e-9 (1 + |x|_inf)``: a point counts as inside only if
     rounding errors of that relative size cannot have put it there, so a violation found
     this way is a violation of the strict and the non-strict reading alike.
-    """
+
+    Equalities (:func:`equality_rows`, e.g. the instant ``t == 20``) cannot hold with a
+    margin: a point meets one when ``|g| <= 1e-9 (1 + |x|_inf)`` (it is on the equality up
+    to rounding), and is inside when it meets every equality and lies beyond rounding in
+    every other constraint; its depth is then the largest of the other margins."""
     margins = lambdify_margins(constraints, symbols)
+    equal = np.zeros(len(constraints), dtype=bool)
+    equal[equality_rows(constraints)] = True
 
     def test(X: np.ndarray):
         g = margins(X)
         depth = g.max(axis=1) if g.shape[1] else np.full(X.shape[0], -np.inf)
         tolerance = NUMERICAL_TOLERANCE * (1.0 + np.abs(X).max(axis=1))
-        return depth < -tolerance, depth
+        if not equal.any():
+            return depth < -tolerance, depth
+        on = np.all(np.abs(g[:, equal]) <= tolerance[:, None], axis=1)
+        rest = g[:, ~equal].max(axis=1) if (~equal).any() else np.full(X.shape[0], -np.inf)
+        depth = np.where(on, rest, depth)
+        return on & (rest < -tolerance), depth
 
     return test

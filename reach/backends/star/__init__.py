@@ -88,7 +88,16 @@ input-free grid stars and applied exactly to the segments. The box is the exact 
 ``d(t)`` over all measurable signals, ``int_0^t |e^{A s} B| u_r ds`` per component, bounded
 from above on sub-cells by the chord of ``e^{A s} B`` plus a closure bound on its curvature
 (:class:`.flowpipe.AffineFlow`; sound between grid points, within ``O(delta^2)`` of exact).
-A polytopic initial set (``initial.polytope``) cuts the initial star.
+A polytopic initial set (``initial.polytope``) cuts the initial star. A witness is replayed
+with the inputs held at its initial values and then with the extremal signal of the piece:
+for the piece row ``h x <= g`` the inputs move most, the LP point of the segment deepest
+along ``-h`` (the other rows kept, so an instant ``t == 20`` stays one) gives the initial
+state and the instant ``t``, and the input is the bang-bang signal
+``u = u_c + u_r sign(int_piece -h e^{A (t - s)} B)`` on a fine grid
+(:func:`.witnesses.extremal_signal`), which attains the input's exact support at ``t``;
+the simulator replays it on a grid that contains the pieces' starts. UNSAFE only if a
+replay violates (an equality of the piece is met up to rounding there, the other rows
+beyond it: :func:`reach.model.constraints.violation_test`).
 
 Forbidden locations. A piece with no rows (SpaceEx ``loc() == error``) makes its whole mode
 unsafe: any point of a segment there before the horizon is a witness, replayed at once; if

@@ -16,7 +16,7 @@ from reach.backends.star.options import (ERROR_RATIO, MAX_CELLS, MAX_CHAIN_BYTES
                                          STALL_JUMPS, TIGHT_RATIO, StarOptions)
 from reach.backends.star.transitions import (_LinearModel, _modes_leading_to, _Piece,
                                              _unsafe_pieces, kept_rows)
-from reach.backends.star.witnesses import _Witness, trace, nearest_point
+from reach.backends.star.witnesses import _Witness, extremal_signal, nearest_point, trace
 from reach.result import Status
 from reach.sets import Box, Star
 
@@ -490,7 +490,7 @@ class _Explorer:
             removable = refinable[np.isfinite(refinable)].sum()
             tight = np.isfinite(piece.inradius) and removable < TIGHT_RATIO * piece.inradius
             if blame is None or depth > removable or tight:
-                self._try_replay(witness)
+                self._try_replay(witness, piece, seg)
             self._unresolved(witness, blame, seg)
 
     def _check_whole_mode(self, mode: str, seg: Star, path: _Path, blocks, open_, piece):
@@ -581,22 +581,84 @@ class _Explorer:
 
     # ---- witnesses
 
-    def _try_replay(self, witness: _Witness):
+    def _try_replay(self, witness: _Witness, piece: _Piece | None = None, seg: Star | None = None):
+        """Replay ``witness`` with its inputs held at the witness's initial values; with
+        time-varying inputs and the ``piece`` the segment ``seg`` meets, then also the
+        extremal input witness of :meth:`_extremal_witness`. UNSAFE (:class:`_Stop`) on the
+        first replay that violates."""
         if not self.opt.replay or self.stats.replays >= self.opt.max_replays:
             return
         try:
-            from reach.backends.montecarlo import constant_signal, replay
+            from reach.backends.montecarlo import constant_signal
         except ImportError:
             return
-        self.stats.replays += 1
         x0, switch = self.initial_point(witness)
-        run = replay(self.model, self.prop, x0, switch, self.opt.replay_dt, constant_signal(self.model, x0))
+        self._replay(witness, x0, switch, constant_signal(self.model, x0))
+        if self.data.varying and piece is not None and seg is not None:
+            found = self._extremal_witness(witness, piece, seg)
+            if found is not None:
+                self._replay(*found)
+
+    def _replay(self, witness: _Witness, x0, switch, signal, dt=None):
+        if self.stats.replays >= self.opt.max_replays:
+            return
+        from reach.backends.montecarlo import replay
+        self.stats.replays += 1
+        run = replay(self.model, self.prop, x0, switch, dt or self.opt.replay_dt, signal)
         self.replayed.append({"initial_state": x0.tolist(), "switch_time": switch,
+                              "input_signal": None if signal is None else f"{len(signal['values'])} pieces",
                               "violated": bool(run.violated)})
         if run.violated:
             raise _Stop(Status.UNSAFE, "replayed counterexample",
                         counterexample=run.counterexample(self.model, self.prop, NAME),
                         witness=witness)
+
+    def _extremal_witness(self, witness: _Witness, piece: _Piece, seg: Star):
+        """``(witness, initial state, switch time, input signal, replay step)``: a run aimed
+        deepest into ``piece`` by the time-varying inputs, or None.
+
+        The direction is ``c = -h_r`` for the row ``h_r x <= g_r`` of the piece that the
+        inputs move most (``|h_r| R`` largest, ``R`` the input's reach bound over the horizon,
+        :meth:`.flowpipe.AffineFlow.deviation`); the other rows are kept as constraints (an
+        instant ``t == 20`` stays an instant). One LP: the point of ``seg``
+        (cut by those rows and the horizon) that maximises ``c^T x``; its coefficients give
+        the initial state (as any witness) and its clock ``t`` the instant to aim at. The input
+        signal is :func:`.witnesses.extremal_signal` of the witness mode's flow, which
+        attains the input's exact support along ``c`` at ``t`` (exact for a path without
+        jumps; a candidate otherwise). Only the replay decides."""
+        flow = self.flows[witness.mode]
+        if not flow.inputs:
+            return None
+        reach = flow.deviation(self.h, max(1, int(np.ceil(self.horizon / self.h - 1e-9))))[-1]
+        moved = np.abs(piece.H) @ reach
+        if not np.any(moved > 0):
+            return None
+        r = int(np.argmax(moved))
+        others = np.delete(np.arange(len(piece.g)), r)
+        H = np.vstack([piece.H[others], np.eye(self.n)[self.clock]])
+        g = np.append(piece.g[others], self.horizon)
+        self._lp_budget()
+        res = seg.intersect_halfspaces(H, g).maximize(-piece.H[r])
+        if not res.optimal:
+            return None
+        alpha = res.x
+        aimed = _Witness(witness.mode, witness.piece, witness.depth, alpha, seg.point(alpha), witness.path)
+        t = float(aimed.state[self.clock])
+        if not t > 0:
+            return None
+        x0, switch = self.initial_point(aimed)
+        step, values = extremal_signal(flow, -piece.H[r], t, [u.low for u in self.data.varying],
+                                       [u.high for u in self.data.varying])
+        signal = {"step": step, "inputs": [u.name for u in self.data.varying], "values": values.tolist()}
+        return aimed, x0, switch, signal, self._signal_dt(step)
+
+    def _signal_dt(self, step: float) -> float:
+        """The replay step for pieces of length ``step``: the largest ``step / k`` not above the
+        replay step asked for (or the simulator's default), so that every piece -- and the
+        instant ``t`` the signal aims at -- starts on the simulator's grid."""
+        from reach.model.simulate import default_dt
+        base = self.opt.replay_dt or default_dt(self.model)
+        return step / max(1, int(np.ceil(step / base - 1e-9)))
 
     def initial_point(self, witness: _Witness):
         """Initial state and abort time of a witness, read off its coefficients."""

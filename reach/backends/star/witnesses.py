@@ -74,3 +74,43 @@ def trace(alpha, path, nearest):
         _, alpha, path = best
         entries = [(e, alpha) for e in path.entries] + entries
     return alpha, entries
+
+
+#: pieces of the extremal input signal over ``[0, t]`` (:func:`extremal_signal`)
+SIGNAL_PIECES = 1000
+
+#: quadrature sub-samples per piece of the extremal input signal
+SIGNAL_SUBSAMPLES = 8
+
+
+def extremal_signal(flow, c, t: float, u_low, u_high, pieces: int = SIGNAL_PIECES):
+    """``(step, values (pieces, p))``: the piecewise-constant input on ``pieces`` equal pieces
+    of ``[0, t]`` that maximises ``c^T x(t)`` for the flow ``x' = A x + b + B (u - u_c)``
+    (:class:`.flowpipe.AffineFlow`), any initial state.
+
+    ``c^T x(t) = c^T x_free(t) + int_0^t g(s) (u(s) - u_c) ds`` with
+    ``g(s) = c^T e^{A (t - s)} B``, so over inputs constant on each piece ``P_k`` the maximum
+    takes, per input ``i``, ``u_i = u_c,i + u_r,i sign(int_{P_k} g_i)`` -- the bang-bang
+    signal that attains the input's exact support ``int_0^t |g| u_r``
+    (:meth:`.flowpipe.AffineFlow.deviation`) as the pieces shrink; it switches where
+    ``g_i`` changes sign. The integrals are composite Simpson sums of ``SIGNAL_SUBSAMPLES``
+    sub-intervals per piece (``g`` sampled as ``c^T e^{A l delta} B``, one matrix-vector product
+    per sample)."""
+    u_low, u_high = np.asarray(u_low, float), np.asarray(u_high, float)
+    centre, radius = (u_low + u_high) / 2, (u_high - u_low) / 2
+    step = t / pieces
+    sub = SIGNAL_SUBSAMPLES
+    delta = step / sub
+    Phi_delta = flow.step(delta)[0]
+    row = np.asarray(c, dtype=float)
+    samples = np.empty((pieces * sub + 1, flow.B.shape[1]))
+    for l in range(samples.shape[0]):                       # g at s = t - l delta
+        samples[l] = row @ flow.B
+        row = row @ Phi_delta
+    samples = samples[::-1]                                 # g at s = l delta
+    weights = np.ones(sub + 1)
+    weights[1:-1:2], weights[2:-1:2] = 4.0, 2.0
+    blocks = np.lib.stride_tricks.sliding_window_view(samples, sub + 1, axis=0)[::sub]
+    integrals = delta / 3 * blocks @ weights                # (pieces, p)
+    values = np.clip(centre + radius * np.sign(integrals), u_low, u_high)
+    return step, values
