@@ -14,7 +14,9 @@ HiGHS works with a primal feasibility tolerance of about 1e-7: "infeasible" mean
 point satisfies the constraints to that tolerance. An infeasible verdict is the one a proof
 rests on (an empty intersection with an unsafe set), and HiGHS's presolve has been seen to
 give it for feasible, unbounded problems; it is therefore only accepted when the solver
-without presolve confirms it.
+without presolve confirms it. Presolve has also stopped with model status "unknown" on an
+unbounded problem that the solver without it decides, so any status other than optimal or
+unbounded is asked again without presolve before it counts as an error.
 """
 
 from __future__ import annotations
@@ -90,7 +92,7 @@ def minimize(c, A_ub=None, b_ub=None, *, A_eq=None, b_eq=None, bounds=None,
                                             "dual_feasibility_tolerance": tolerance}
     res = linprog(c, A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=b_eq, bounds=_bounds(bounds, n),
                   method="highs", options=options)
-    if res.status == 2:         # HiGHS's presolve can call an unbounded LP infeasible: ask again without it
+    if res.status not in (0, 3):    # presolve's "infeasible" or "unknown": ask again without it
         res = linprog(c, A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=b_eq, bounds=_bounds(bounds, n),
                       method="highs", options={**options, "presolve": False})
     if res.status == 0:
@@ -163,12 +165,12 @@ def maximize_many(C, A_ub, b_ub, bounds) -> np.ndarray:
             solver.clearSolver()
             fresh = True
             continue
+        elif presolve:          # infeasible or undecided: once more without presolve (module doc)
+            solver.setOptionValue("presolve", "off")
+            solver.clearSolver()
+            presolve = False
+            continue
         elif s == status.kInfeasible:
-            if presolve:        # confirmed without presolve only (module doc)
-                solver.setOptionValue("presolve", "off")
-                solver.clearSolver()
-                presolve = False
-                continue
             return np.full(C.shape[0], -np.inf)
         else:
             values[k] = np.nan

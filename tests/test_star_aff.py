@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from scipy.integrate import quad
 from scipy.linalg import expm
@@ -144,6 +144,7 @@ def test_sampling_time_bounds_the_step(tmp_path):
 
 @settings(max_examples=60, deadline=None)
 @given(st.integers(0, 2**32 - 1))
+@example(8388607)           # presolve stops with "unknown" on an unbounded row (decided without it)
 def test_maximize_many_agrees_with_one_lp_per_objective(seed):
     rng = np.random.default_rng(seed)
     m, n = int(rng.integers(0, 10)), int(rng.integers(1, 7))
