@@ -14,6 +14,7 @@ counts the ones judged equivalent in ``EQUIVALENT`` separately.
     python benchmarks/mutation.py --label after                  # all targets, working tree
     python benchmarks/mutation.py --rev 0404ccd --label before taylor_remainder crosscheck
     python benchmarks/mutation.py --label after --survivors-of before star_segments   # rerun survivors only
+    python benchmarks/mutation.py --merge /tmp/other/mutation.json        # add a parallel run's rows
     python benchmarks/mutation.py --list
 
 Kill rate = (killed + timed out) / (all mutants run - equivalent ones).
@@ -96,6 +97,9 @@ _DTYPE = "the values are float arrays already"
 _CACHE = "the cache is skipped: the bound is recomputed, same values"
 _EINSUM = "einsum labels in upper case name the same contraction"
 _FLOAT_ARITH = "the array enters only float arithmetic (c1 - c0, V1 - V0, E = r), so any numeric input gives the same values"
+_NO_ROWS = "with rows = 0 the slice of A is empty and the star is returned before b is used"
+_WARNINGS = "errstate with the default for one kind: only a floating-point warning differs, never a value"
+_NO_BREAK = "array_equal with None is False: the loop never stops early, and the rounds left repeat the fixed point"
 EQUIVALENT: dict[str, str] = {
     "reach.backends.taylor.bound.x_contenders__mutmut_4": _SIGN,
     "reach.backends.taylor.bound.x_contenders__mutmut_9": _SIGN,
@@ -140,6 +144,14 @@ EQUIVALENT: dict[str, str] = {
     "reach.model.simulate.x\u01c1Simulator\u01c1_urgent_now__mutmut_3":
         "one more round than modes: differs only for a cycle of urgent guards that all hold at once",
     "reach.model.simulate.x\u01c1Simulator\u01c1_urgent_now__mutmut_4": "None and False are both falsy",
+    "reach.model.simulate.x\u01c1Simulator\u01c1_urgent_now__mutmut_5":
+        "starting a round with moved = True only runs the remaining rounds, which change nothing once a round moved no run",
+    "reach.backends.star.flowpipe.x__tightened__mutmut_8": _NO_ROWS,
+    "reach.backends.star.flowpipe.x__tightened__mutmut_10": _NO_ROWS,
+    **{f"reach.backends.star.flowpipe.x__tightened__mutmut_{i}": _WARNINGS for i in range(43, 49)},
+    **{f"reach.backends.star.flowpipe.x__tightened__mutmut_{i}": _NO_BREAK for i in (100, 101, 104, 105)},
+    "reach.backends.fsr.x_reach_avoid__mutmut_164":
+        "at exactly max_rows rows the cap chooses them all (linspace hits every index): nothing is cut",
     "reach.sets.star.x_chord_hull__mutmut_5": _FLOAT_ARITH,
     "reach.sets.star.x_chord_hull__mutmut_7": _FLOAT_ARITH,
     "reach.sets.star.x_chord_hull__mutmut_10": _FLOAT_ARITH,
@@ -238,6 +250,18 @@ def rerun_survivors(previous: dict, row: dict) -> dict:
     return {**row, "counts": {k: v for k, v in counts.items() if v}, "rerun_of": previous["rev"]}
 
 
+def apply_equivalents(row: dict) -> dict:
+    """``row`` with the survivors judged equivalent since it was run (``EQUIVALENT``) counted as such."""
+    counts, survivors = dict(row["counts"]), []
+    for key, status, diff in row["survivors"]:
+        if status == "survived" and key in EQUIVALENT:
+            counts["survived"] -= 1
+            counts["equivalent"] = counts.get("equivalent", 0) + 1
+        else:
+            survivors.append((key, status, diff))
+    return {**row, "counts": {k: v for k, v in counts.items() if v}, "survivors": survivors}
+
+
 def kill_rate(counts: dict) -> tuple[int, int, float]:
     killed = counts.get("killed", 0) + counts.get("timeout", 0)
     considered = sum(v for k, v in counts.items() if k not in ("equivalent", "skipped", "not run"))
@@ -286,6 +310,8 @@ def main(argv=None) -> int:
     ap.add_argument("--list", action="store_true", help="list the targets and exit")
     ap.add_argument("--survivors-of", metavar="LABEL",
                     help="run only the survivors recorded under LABEL and count the rest as recorded there")
+    ap.add_argument("--merge", type=Path, metavar="JSON",
+                    help="first add the rows of another store (a run in parallel with its own --out)")
     ap.add_argument("--collect", action="store_true",
                     help="do not run: read the results already in the work directory")
     args = ap.parse_args(argv)
@@ -301,6 +327,14 @@ def main(argv=None) -> int:
     args.out.parent.mkdir(parents=True, exist_ok=True)
     store_path = args.out.with_suffix(".json")
     store = json.loads(store_path.read_text()) if store_path.exists() else {}
+    if args.merge:
+        for label, rows in json.loads(args.merge.read_text()).items():
+            store.setdefault(label, {}).update(rows)
+    store = {label: {name: apply_equivalents(r) for name, r in rows.items()} for label, rows in store.items()}
+    if args.merge and not args.targets:          # only merge: rewrite the store and the report
+        store_path.write_text(json.dumps(store, indent=1, ensure_ascii=False) + "\n")
+        write_report(args.out, store)
+        return 0
     with open(args.workdir / f"mutmut_{args.label}.log", "a") as log:
         for name in names:
             previous = store.get(args.label, {}).get(name, {})
