@@ -23,6 +23,7 @@ Kill rate = (killed + timed out) / (all mutants run - equivalent ones).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import re
@@ -310,6 +311,8 @@ def main(argv=None) -> int:
     ap.add_argument("--list", action="store_true", help="list the targets and exit")
     ap.add_argument("--survivors-of", metavar="LABEL",
                     help="run only the survivors recorded under LABEL and count the rest as recorded there")
+    ap.add_argument("--tests", nargs="+", metavar="FILE",
+                    help="run only these of the target's test files: a mutant they kill is killed by all of them")
     ap.add_argument("--merge", type=Path, metavar="JSON",
                     help="first add the rows of another store (a run in parallel with its own --out)")
     ap.add_argument("--collect", action="store_true",
@@ -345,7 +348,10 @@ def main(argv=None) -> int:
             if only == []:
                 row = {**base, "seconds": 0.0, "survivors": []}
             else:
-                row = run_target(name, TARGETS[name], args.rev, args.workdir / args.label, args.jobs, log,
+                target = TARGETS[name]
+                if args.tests:
+                    target = dataclasses.replace(target, tests=tuple(t for t in target.tests if t in args.tests))
+                row = run_target(name, target, args.rev, args.workdir / args.label, args.jobs, log,
                                  args.collect, only)
                 if base is not None:
                     row = rerun_survivors(base, row)
