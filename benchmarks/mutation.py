@@ -311,8 +311,9 @@ def main(argv=None) -> int:
     ap.add_argument("--list", action="store_true", help="list the targets and exit")
     ap.add_argument("--survivors-of", metavar="LABEL",
                     help="run only the survivors recorded under LABEL and count the rest as recorded there")
-    ap.add_argument("--tests", nargs="+", metavar="FILE",
-                    help="run only these of the target's test files: a mutant they kill is killed by all of them")
+    ap.add_argument("--tests", action="append", metavar="FILE",
+                    help="run only this one of the target's test files (repeat for more): a mutant they kill "
+                         "is killed by all of them")
     ap.add_argument("--merge", type=Path, metavar="JSON",
                     help="first add the rows of another store (a run in parallel with its own --out)")
     ap.add_argument("--collect", action="store_true",
