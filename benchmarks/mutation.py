@@ -14,6 +14,7 @@ counts the ones judged equivalent in ``EQUIVALENT`` separately.
     python benchmarks/mutation.py --label after                  # all targets, working tree
     python benchmarks/mutation.py --rev 0404ccd --label before taylor_remainder crosscheck
     python benchmarks/mutation.py --label after --survivors-of before star_segments   # rerun survivors only
+    python benchmarks/mutation.py --merge /tmp/other/mutation.json        # add a parallel run's rows
     python benchmarks/mutation.py --list
 
 Kill rate = (killed + timed out) / (all mutants run - equivalent ones).
@@ -22,6 +23,7 @@ Kill rate = (killed + timed out) / (all mutants run - equivalent ones).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import re
@@ -61,9 +63,12 @@ TARGETS = {
                              "_segment", "_drift_segment", "_plus_box"),
                             ("tests/test_star_segment_bounds.py", "tests/test_star.py", "tests/test_star_inputs.py",
                              "tests/test_star_soundness.py")),
+    "star_tightened": Target("reach/backends/star/flowpipe.py", ("_tightened",),
+                             ("tests/test_star_tightened.py", "tests/test_star_soundness.py",
+                              "tests/test_star_inputs.py", "tests/test_star_aff.py")),
     "chord_hull": Target("reach/sets/star.py", ("chord_hull",), ("tests/test_sets.py", "tests/test_star.py")),
     "fsr_intervals": Target("reach/backends/fsr.py", ("reach", "reach_avoid", "_sequential", "_verdict", "leave_bound"),
-                            ("tests/test_fsr.py",)),
+                            ("tests/test_fsr.py", "tests/test_fsr_intervals.py")),
     "taylor_remainder": Target("reach/backends/taylor/bound.py",
                                ("polynomial_range", "_parity", "estimated_remainder", "truncate",
                                 "next_order_remainder", "enclose", "contenders"),
@@ -72,7 +77,7 @@ TARGETS = {
                          ("tests/test_taylor_da.py", "tests/test_remainder_estimate.py")),
     "simulator_events": Target("reach/model/simulate.py",
                                ("Simulator._first_entry", "Simulator._urgent_now", "Simulator._jump"),
-                               ("tests/test_urgent_location.py", "tests/test_dynamics.py",
+                               ("tests/test_urgent_location.py", "tests/test_simulator_events.py", "tests/test_dynamics.py",
                                 "tests/test_vtxo_supervisor.py", "tests/test_montecarlo.py")),
     "crosscheck": Target("reach/bench/crosscheck.py", ("cross_check", "_replays"),
                          ("tests/test_bench.py", "tests/test_crosscheck.py")),
@@ -93,6 +98,9 @@ _DTYPE = "the values are float arrays already"
 _CACHE = "the cache is skipped: the bound is recomputed, same values"
 _EINSUM = "einsum labels in upper case name the same contraction"
 _FLOAT_ARITH = "the array enters only float arithmetic (c1 - c0, V1 - V0, E = r), so any numeric input gives the same values"
+_NO_ROWS = "with rows = 0 the slice of A is empty and the star is returned before b is used"
+_WARNINGS = "errstate with the default for one kind: only a floating-point warning differs, never a value"
+_NO_BREAK = "array_equal with None is False: the loop never stops early, and the rounds left repeat the fixed point"
 EQUIVALENT: dict[str, str] = {
     "reach.backends.taylor.bound.x_contenders__mutmut_4": _SIGN,
     "reach.backends.taylor.bound.x_contenders__mutmut_9": _SIGN,
@@ -137,6 +145,14 @@ EQUIVALENT: dict[str, str] = {
     "reach.model.simulate.x\u01c1Simulator\u01c1_urgent_now__mutmut_3":
         "one more round than modes: differs only for a cycle of urgent guards that all hold at once",
     "reach.model.simulate.x\u01c1Simulator\u01c1_urgent_now__mutmut_4": "None and False are both falsy",
+    "reach.model.simulate.x\u01c1Simulator\u01c1_urgent_now__mutmut_5":
+        "starting a round with moved = True only runs the remaining rounds, which change nothing once a round moved no run",
+    "reach.backends.star.flowpipe.x__tightened__mutmut_8": _NO_ROWS,
+    "reach.backends.star.flowpipe.x__tightened__mutmut_10": _NO_ROWS,
+    **{f"reach.backends.star.flowpipe.x__tightened__mutmut_{i}": _WARNINGS for i in range(43, 49)},
+    **{f"reach.backends.star.flowpipe.x__tightened__mutmut_{i}": _NO_BREAK for i in (100, 101, 104, 105)},
+    "reach.backends.fsr.x_reach_avoid__mutmut_164":
+        "at exactly max_rows rows the cap chooses them all (linspace hits every index): nothing is cut",
     "reach.sets.star.x_chord_hull__mutmut_5": _FLOAT_ARITH,
     "reach.sets.star.x_chord_hull__mutmut_7": _FLOAT_ARITH,
     "reach.sets.star.x_chord_hull__mutmut_10": _FLOAT_ARITH,
@@ -235,6 +251,18 @@ def rerun_survivors(previous: dict, row: dict) -> dict:
     return {**row, "counts": {k: v for k, v in counts.items() if v}, "rerun_of": previous["rev"]}
 
 
+def apply_equivalents(row: dict) -> dict:
+    """``row`` with the survivors judged equivalent since it was run (``EQUIVALENT``) counted as such."""
+    counts, survivors = dict(row["counts"]), []
+    for key, status, diff in row["survivors"]:
+        if status == "survived" and key in EQUIVALENT:
+            counts["survived"] -= 1
+            counts["equivalent"] = counts.get("equivalent", 0) + 1
+        else:
+            survivors.append((key, status, diff))
+    return {**row, "counts": {k: v for k, v in counts.items() if v}, "survivors": survivors}
+
+
 def kill_rate(counts: dict) -> tuple[int, int, float]:
     killed = counts.get("killed", 0) + counts.get("timeout", 0)
     considered = sum(v for k, v in counts.items() if k not in ("equivalent", "skipped", "not run"))
@@ -283,6 +311,11 @@ def main(argv=None) -> int:
     ap.add_argument("--list", action="store_true", help="list the targets and exit")
     ap.add_argument("--survivors-of", metavar="LABEL",
                     help="run only the survivors recorded under LABEL and count the rest as recorded there")
+    ap.add_argument("--tests", action="append", metavar="FILE",
+                    help="run only this one of the target's test files (repeat for more): a mutant they kill "
+                         "is killed by all of them")
+    ap.add_argument("--merge", type=Path, metavar="JSON",
+                    help="first add the rows of another store (a run in parallel with its own --out)")
     ap.add_argument("--collect", action="store_true",
                     help="do not run: read the results already in the work directory")
     args = ap.parse_args(argv)
@@ -298,6 +331,14 @@ def main(argv=None) -> int:
     args.out.parent.mkdir(parents=True, exist_ok=True)
     store_path = args.out.with_suffix(".json")
     store = json.loads(store_path.read_text()) if store_path.exists() else {}
+    if args.merge:
+        for label, rows in json.loads(args.merge.read_text()).items():
+            store.setdefault(label, {}).update(rows)
+    store = {label: {name: apply_equivalents(r) for name, r in rows.items()} for label, rows in store.items()}
+    if args.merge and not args.targets:          # only merge: rewrite the store and the report
+        store_path.write_text(json.dumps(store, indent=1, ensure_ascii=False) + "\n")
+        write_report(args.out, store)
+        return 0
     with open(args.workdir / f"mutmut_{args.label}.log", "a") as log:
         for name in names:
             previous = store.get(args.label, {}).get(name, {})
@@ -308,7 +349,10 @@ def main(argv=None) -> int:
             if only == []:
                 row = {**base, "seconds": 0.0, "survivors": []}
             else:
-                row = run_target(name, TARGETS[name], args.rev, args.workdir / args.label, args.jobs, log,
+                target = TARGETS[name]
+                if args.tests:
+                    target = dataclasses.replace(target, tests=tuple(t for t in target.tests if t in args.tests))
+                row = run_target(name, target, args.rev, args.workdir / args.label, args.jobs, log,
                                  args.collect, only)
                 if base is not None:
                     row = rerun_survivors(base, row)
