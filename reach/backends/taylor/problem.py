@@ -242,13 +242,14 @@ class EventProblem:
         horizon; runs that switched earlier are followed on with the mode's flow, which only
         enlarges the set. The upper end (for a maximum) is the largest Taylor-model bound of ``q``
         over those steps. For every exit whose guard some step may meet, the states entering
-        its target lie in the hull of those step boxes, clipped to the guard's single-variable
-        bounds and mapped by the reset; the target mode is swept from that box (up to the
-        horizon counted from its earliest entry), so a mode with several exits (a dock and an
-        abort) branches. Exits from which no listed mode can be reached are not followed. The
+        its target lie in the Taylor models of those steps (:meth:`_entries`), mapped by the
+        reset; the target mode is swept from each (up to the horizon counted from its earliest
+        entry), so a mode with several exits (a dock and an abort) branches. Exits from which
+        no listed mode can be reached are not followed. The
         lower end is the best bound of ``q`` at the initial mode's step nodes that no run can
         have left the mode before, or on an entry box that every run passes through (a chain
-        of exits, each the only one possible in its mode). With ``keep_sets`` the result's
+        of exits, each the only one possible in its mode; with several switching steps, the
+        smallest such bound over their Taylor models). With ``keep_sets`` the result's
         ``"sets"`` lists every step's enclosure box (:func:`_step_box`)."""
         T = self.model.horizon
         m = len(self.uncertain)

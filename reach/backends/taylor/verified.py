@@ -3,7 +3,9 @@
 On a subdomain (scaled deviations ``xi in [-1, 1]^m``) the flow on each step ``[t_k, t_k + h]`` is
 the polynomial ``P_k(xi, sigma)`` of order ``n`` in ``xi`` and the scaled step time ``sigma in [-1, 1]``
 (``t = t_k + h (sigma + 1)/2``), built by Picard iteration (eq. 6, in time and deviations) from
-``P_{k-1}(xi, 1)``; the piecewise polynomial ``x~(xi, t)`` is continuous and exact at ``t = 0``.
+``P_{k-1}(xi, 1)``; the piecewise polynomial ``x~(xi, t)`` is continuous and, from a polynomial initial
+set, exact at ``t = 0``. From a Taylor-model initial set ``x0(xi) + [-e0, e0]`` (the state entering a
+mode after a switch) the error starts inside that box, so ``r_0 = sqrt(e0' |S| e0) >= |e(0)|_S``.
 
 Error bound. The defect ``delta = dx~/dt - f(x~)`` is enclosed on the whole step by Taylor-model
 arithmetic (:mod:`.tm`). The error ``e = x - x~`` solves ``e' = Jbar e - delta`` with ``Jbar`` the mean
