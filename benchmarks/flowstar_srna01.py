@@ -495,6 +495,12 @@ def markdown(report: dict) -> str:
 BUILD_HELP = __doc__[__doc__.index("Build it"):__doc__.index("Without")]
 
 
+def write(report: dict, json_path: Path, md_path: Path) -> None:
+    report["machine"]["load_average_at_end"] = list(os.getloadavg())
+    json_path.write_text(json.dumps(report, indent=2) + "\n")
+    md_path.write_text(markdown(report))
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--timeout", type=float, default=1800.0, help="seconds per Flow* call")
@@ -547,13 +553,12 @@ def main(argv=None) -> int:
         ratios = ratios_of(fs, rs)
         report["settings"].append({"flowstar": fs, "reach_taylor": rs, "ratio_flowstar_over_reach": ratios})
         print(f"  ratio Flow*/reach: {ratios}", flush=True)
+        write(report, Path(args.json), md_path)        # each finished setting survives a cut run
     dace = daceypy_run(args.daceypy_path)
     if dace is not None:
         report["daceypy"] = dace
         print(f"daceypy: {dace}")
-    report["machine"]["load_average_at_end"] = list(os.getloadavg())
-    Path(args.json).write_text(json.dumps(report, indent=2) + "\n")
-    md_path.write_text(markdown(report))
+    write(report, Path(args.json), md_path)
     print(f"wrote {args.json} and {md_path}")
     return 0
 
