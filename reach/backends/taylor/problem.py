@@ -30,13 +30,11 @@ from reach.backends.taylor.interval import Jet
 from reach.backends.taylor.keys import fingerprint
 from reach.backends.taylor.lockstep import run_batch, run_one
 from reach.backends.taylor.tm import TM
-from reach.backends.taylor.verified import ROUNDING, at_sigma, enclose_stretch
+from reach.backends.taylor.verified import at_sigma, enclose_stretch
 from reach.model.constraints import affine_coefficients, lambdify_margins
 from reach.spec.properties import BoundEvent
 
 MAX_SWITCHES = 8
-ENTRY_DEGREE = 2              # entry Taylor models keep this degree; higher terms join the remainder
-MAX_ENTRY_STEPS = 16          # switching steps followed one by one as Taylor models (else boxed)
 KEEP_ENCLOSURES = 8
 _ENCLOSURES: OrderedDict = OrderedDict()
 
@@ -224,12 +222,10 @@ class EventProblem:
         raise ValueError(f"more than {MAX_SWITCHES} mode switches")
 
     # ------------------------------------------------------------ rigorous (verified sweep)
-    def _enclosure(self, code: ModeCode, x0: list[DA], duration: float, rel_tol: float, tol: float,
-                   e0: np.ndarray):
-        """The verified enclosure of one mode's stretch from ``x0 + [-e0, e0]``, shared by the
-        properties of a model (it does not depend on the quantity): kept for the last few
-        subdomains."""
-        key = fingerprint(self.model, code.name, [x.c for x in x0], duration, rel_tol, tol, e0)
+    def _enclosure(self, code: ModeCode, x0: list[DA], duration: float, rel_tol: float, tol: float):
+        """The verified enclosure of one mode's stretch, shared by the properties of a model (it
+        does not depend on the quantity): kept for the last few subdomains."""
+        key = fingerprint(self.model, code.name, [x.c for x in x0], duration, rel_tol, tol)
         if key in _ENCLOSURES:
             _ENCLOSURES.move_to_end(key)
             return _ENCLOSURES[key][0]
@@ -238,7 +234,7 @@ class EventProblem:
         stop = lambda step: code.inside([TM(at_sigma(p, 1.0)) for p in step.poly], True) is not None
         # the sweep takes its first step from the nominal run and runs on (past the nominal
         # crossing) until every run is inside the guard, or to the horizon
-        enc = enclose_stretch(code.f, x0, np.r_[run.nodes[:2], duration], stop, rel_tol, e0)
+        enc = enclose_stretch(code.f, x0, np.r_[run.nodes[:2], duration], stop, rel_tol)
         _ENCLOSURES[key] = (enc, self.model)      # the model stays alive with its entry
         while len(_ENCLOSURES) > KEEP_ENCLOSURES:
             _ENCLOSURES.popitem(last=False)
@@ -253,14 +249,13 @@ class EventProblem:
         horizon; runs that switched earlier are followed on with the mode's flow, which only
         enlarges the set. The upper end (for a maximum) is the largest Taylor-model bound of ``q``
         over those steps. For every exit whose guard some step may meet, the states entering
-        its target lie in the Taylor models of those steps (:meth:`_entries`), mapped by the
-        reset; the target mode is swept from each (up to the horizon counted from its earliest
-        entry), so a mode with several exits (a dock and an abort) branches. Exits from which
-        no listed mode can be reached are not followed. The
+        its target lie in the hull of those step boxes, clipped to the guard's single-variable
+        bounds and mapped by the reset; the target mode is swept from that box (up to the
+        horizon counted from its earliest entry), so a mode with several exits (a dock and an
+        abort) branches. Exits from which no listed mode can be reached are not followed. The
         lower end is the best bound of ``q`` at the initial mode's step nodes that no run can
         have left the mode before, or on an entry box that every run passes through (a chain
-        of exits, each the only one possible in its mode; with several switching steps, the
-        smallest such bound over their Taylor models). With ``keep_sets`` the result's
+        of exits, each the only one possible in its mode). With ``keep_sets`` the result's
         ``"sets"`` lists every step's enclosure box (:func:`_step_box`)."""
         T = self.model.horizon
         m = len(self.uncertain)
@@ -268,13 +263,13 @@ class EventProblem:
         outer, inner, steps, error, stretches = -np.inf, -np.inf, 0, 0.0, 0
         kept = [] if keep_sets else None
         x0 = initial_state(algebra(order, m + 1), center, half_width, self.uncertain)
-        branches = [(self.model.initial.mode, x0, np.zeros(self.model.n), 0.0, 0, True)]
+        branches = [(self.model.initial.mode, x0, 0.0, 0, True)]
         while branches:
-            mode, x0, e0, t_earliest, hop, sure = branches.pop()
+            mode, x0, t_earliest, hop, sure = branches.pop()
             if hop > MAX_SWITCHES:
                 return _unbounded(f"more than {MAX_SWITCHES} mode switches")
             code = self.code(mode)
-            start = _start(x0, e0)
+            start = [TM(at_sigma(x, -1.0)) for x in x0]
             if T - t_earliest <= 1e-12 * max(1.0, T):       # entered at the horizon: one instant
                 if code.q is not None:
                     lo, hi = code.q(start).bound()
@@ -283,7 +278,7 @@ class EventProblem:
                         inner = max(inner, lo if sign > 0 else -hi)
                 continue
             try:
-                enc = self._enclosure(code, x0, T - t_earliest, rel_tol, tol, e0)
+                enc = self._enclosure(code, x0, T - t_earliest, rel_tol, tol)
             except ArithmeticError as err:
                 return _unbounded(str(err))
             if enc is None:
@@ -307,10 +302,12 @@ class EventProblem:
                     if certified:
                         lo0, hi0 = code.q([TM(at_sigma(x.poly, -1.0), x.lo, x.hi) for x in X]).bound()
                         inner = max(inner, lo0 if sign > 0 else -hi0)
+                box = None
                 for i, ex in enumerate(code.exits):
                     if code.may_enter(ex, X):
                         certified = False
-                        entry[i].append(k)
+                        box = np.array([x.bound() for x in X]) if box is None else box
+                        entry[i].append(box)
                 exit_taken = code.inside(enc.tm_at_end(k), True)
                 if exit_taken is not None:
                     break
@@ -324,60 +321,20 @@ class EventProblem:
                     continue
                 if self.clock is None:
                     return _unbounded("events after a mode switch need a global clock state")
-                every = sure and len(possible) == 1 and ex is exit_taken    # every run takes ex
-                starts = self._entries(ex, enc, entry[i], order)
-                target = self.code(ex.transition.target)
-                if every and target.q is not None and len(starts) > 1:
-                    # every run enters through one of the starts: q there bounds the inner end
-                    ends = [target.q(_start(y0, r0)).bound() for y0, r0, _ in starts]
-                    inner = max(inner, min(lo if sign > 0 else -hi for lo, hi in ends))
-                for y0, r0, t_entry in starts:
-                    branches.append((ex.transition.target, y0, r0, t_entry, hop + 1, every and len(starts) == 1))
+                box = _entry_box(ex, entry[i], self.model)
+                if ex.reset is not None:
+                    out = ex.reset(Jet.seed(box[:, 0], box[:, 1]))
+                    box = np.array([[o.lo, o.hi] if isinstance(o, Jet) else [o, o] for o in out], dtype=float)
+                wide = [j for j in range(self.model.n) if box[j, 1] > box[j, 0]]
+                start_box = initial_state(algebra(order, len(wide) + 1), box.mean(axis=1),
+                                          0.5 * (box[:, 1] - box[:, 0]), wide)
+                branches.append((ex.transition.target, start_box, box[self.clock, 0], hop + 1,
+                                 sure and len(possible) == 1 and ex is exit_taken))
         bound = (inner, outer) if sign > 0 else (-outer, -inner)
         out = {"bound": tuple(float(v) for v in bound), "steps": steps, "error": error,
                "stretches": stretches}
         if kept is not None:
             out["sets"] = kept
-        return out
-
-    def _entries(self, ex: Exit, enc, steps: list[int], order: int) -> list[tuple]:
-        """The starts ``(x0, e0, t_earliest)`` in the target of ``ex`` of the runs that switch on
-        the enclosure steps ``steps``.
-
-        A run that switches on step ``k`` enters the target at its state on that step, which
-        lies in the step's Taylor model ``P_k(xi, sigma) + [-e_k, e_k]`` (reset applied). So,
-        up to ``MAX_ENTRY_STEPS`` steps, each step starts one branch from that Taylor model: the
-        step time ``sigma`` becomes one more expansion variable (the link between the state and
-        the switch time is kept) and the remainder box the initial error (:mod:`.verified`).
-        The terms of degree above ``ENTRY_DEGREE`` are bounded into that box: with all of them,
-        the total-degree truncation leaves the high powers of the old variables almost no
-        degree in the new step time, and the stiff rendezvous flow's time series stalls.
-        States of the step that do not switch only enlarge the set. Beyond that many steps the
-        entry is the interval hull of the step boxes, clipped to the guard's single-variable
-        bounds (:func:`_entry_box`)."""
-        if len(steps) > MAX_ENTRY_STEPS:
-            box = _entry_box(ex, [np.array([x.bound() for x in enc.tm(k)]) for k in steps], self.model)
-            if ex.reset is not None:
-                out = ex.reset(Jet.seed(box[:, 0], box[:, 1]))
-                box = np.array([[o.lo, o.hi] if isinstance(o, Jet) else [o, o] for o in out], dtype=float)
-            wide = [j for j in range(self.model.n) if box[j, 1] > box[j, 0]]
-            x0 = initial_state(algebra(order, len(wide) + 1), box.mean(axis=1), 0.5 * (box[:, 1] - box[:, 0]), wide)
-            return [(x0, np.zeros(self.model.n), float(box[self.clock, 0]))]
-        out = []
-        for k in steps:
-            X = enc.tm(k)
-            if ex.reset is not None:
-                X = [x if isinstance(x, TM) else TM.const(X[0].alg, x) for x in ex.reset(X)]
-            alg = algebra(order, X[0].alg.nvars + 1)
-            x0, e0 = [], []
-            for x in X:
-                kept = x.poly.alg.degree <= ENTRY_DEGREE
-                rest = DA(x.poly.alg, np.where(kept, 0.0, x.poly.c))
-                lo, hi = (TM(rest) + TM.const(x.poly.alg, 0.0).widen(x.lo, x.hi)).bound()
-                x0.append((DA(x.poly.alg, np.where(kept, x.poly.c, 0.0)) + 0.5 * (lo + hi)).embed(alg))
-                e0.append(0.5 * (hi - lo) * (1.0 + ROUNDING))
-            e0 = np.array(e0, dtype=float)
-            out.append((x0, e0, float(X[self.clock].bound()[0])))
         return out
 
     def _leads_to_property(self, mode: str) -> bool:
@@ -403,11 +360,6 @@ def _step_box(mode: str, X, step, t_earliest: float, clock: int | None) -> tuple
     else:
         t0, t1 = t_earliest + step.t0, t_earliest + step.t0 + step.h
     return mode, float(t0), float(t1), box[:, 0], box[:, 1]
-
-
-def _start(x0: list[DA], e0: np.ndarray) -> list[TM]:
-    """Taylor models of the states at the start of a stretch: ``x0(xi, sigma = -1) + [-e0, e0]``."""
-    return [TM(at_sigma(x, -1.0), -r, r) for x, r in zip(x0, e0)]
 
 
 def _unbounded(why: str) -> dict:

@@ -166,7 +166,8 @@ def _witness(model, prop: BoundSafety, result):
     own) that the simulator runs alone; None if none violates."""
     from reach.backends.montecarlo import replay
 
-    rows = sorted(result.details.get("subdomains", []), key=lambda r: (r["bound"][1], r["bound"][0]))
+    rows = [r for r in result.details.get("subdomains", []) if np.isfinite(r["bound"][1])]
+    rows.sort(key=lambda r: r["bound"][1])
     names = result.details["variables"]
     for row in rows[:WITNESSES]:
         if row["bound"][0] > 0:

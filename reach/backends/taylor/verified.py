@@ -3,9 +3,7 @@
 On a subdomain (scaled deviations ``xi in [-1, 1]^m``) the flow on each step ``[t_k, t_k + h]`` is
 the polynomial ``P_k(xi, sigma)`` of order ``n`` in ``xi`` and the scaled step time ``sigma in [-1, 1]``
 (``t = t_k + h (sigma + 1)/2``), built by Picard iteration (eq. 6, in time and deviations) from
-``P_{k-1}(xi, 1)``; the piecewise polynomial ``x~(xi, t)`` is continuous and, from a polynomial initial
-set, exact at ``t = 0``. From a Taylor-model initial set ``x0(xi) + [-e0, e0]`` (the state entering a
-mode after a switch) the error starts inside that box, so ``r_0 = sqrt(e0' |S| e0) >= |e(0)|_S``.
+``P_{k-1}(xi, 1)``; the piecewise polynomial ``x~(xi, t)`` is continuous and exact at ``t = 0``.
 
 Error bound. The defect ``delta = dx~/dt - f(x~)`` is enclosed on the whole step by Taylor-model
 arithmetic (:mod:`.tm`). The error ``e = x - x~`` solves ``e' = Jbar e - delta`` with ``Jbar`` the mean
@@ -18,8 +16,7 @@ such segment and ``D >= sup |delta|_S``, Gronwall's lemma bounds the error radiu
 whose largest value on the step is ``max(r_k, r_{k+1})``. ``Z`` is the range of ``x~`` on the step
 widened by ``w rho`` (``w_i = sqrt((S^-1)_ii)``, since ``|e_i| <= w_i |e|_S``) for an a priori radius
 ``rho``, accepted once ``max(r_k, r_{k+1}) < rho`` (an error leaving the ball first would contradict the
-bound up to its exit). A component whose row of ``Df`` is zero on ``Z`` (a clock, a switch time) has
-``e_i' = -delta_i``, so ``|e_i|`` is also bounded by its start error plus the integrated defect bound. ``mu`` comes from the interval Jacobian ``[Jc - Jr, Jc + Jr]`` on ``Z``
+bound up to its exit). ``mu`` comes from the interval Jacobian ``[Jc - Jr, Jc + Jr]`` on ``Z``
 (:mod:`.interval`): ``mu_2(T Jc T^-1) + || |T| Jr |T^-1| ||_2``, ``T = S^(1/2)``. The metric ``S`` solves the
 Lyapunov equation of a step's Jacobian shifted by ``alpha`` and follows the flow: at a node it is
 replaced by the metric of the next step's Jacobian when that lowers the growth, the radius carried
@@ -50,7 +47,6 @@ from reach.backends.taylor.interval import Jet
 from reach.backends.taylor.tm import TM
 
 ROUNDING = 1e-12              # relative allowance for floating-point rounding
-RATE_DECAY = 1e-2             # step control: rates are counted at least this share of their largest
 SHIFTS = (1e-3, 1e-2, 1e-1, 1.0)   # Lyapunov shifts alpha, relative to the spectral radius
 
 
@@ -131,10 +127,7 @@ def polynomial_steps(f, x0: list[DA], nodes: np.ndarray, stop=None, rel_tol: flo
     """Phase 1: the polynomials ``P_k`` and their defect bounds from ``nodes[0]`` to ``nodes[-1]``.
 
     The first step is the nominal run's first step; a step is accepted when its defect is at
-    most ``rel_tol`` times the size of the rates, each component counted at least ``RATE_DECAY``
-    times its largest on the stretch so far (the time series converges on it; in a stiff mode the
-    fast rates decay by orders of magnitude, and a defect held to the decayed rates would shrink
-    the steps without end). The time
+    most ``rel_tol`` times the size of the rates (the time series converges on it). The time
     part of the defect scales as ``h^n``, so the next (or retried) step is ``0.9 h (rel_tol
     size/defect)^(1/n)``, at most doubling. Part of the defect does not shrink with ``h``: the
     order-``n`` truncation of ``f(P)`` in the deviations (large for a wide subdomain of a
@@ -147,15 +140,13 @@ def polynomial_steps(f, x0: list[DA], nodes: np.ndarray, stop=None, rel_tol: flo
     t, end = float(nodes[0]), float(nodes[-1])
     h = float(nodes[1] - nodes[0]) if len(nodes) > 1 else end - t
     floor = 0.0                                  # the defect ratio that steps cannot go below
-    rates = None                                 # the largest rates met so far on the stretch
     while t < end * (1 - 1e-15) - 1e-300:
         h = min(h, end - t)
         threshold, previous = max(1.0, 2.0 * floor), None
         for _ in range(max_halvings + 1):
             step = polynomial_step(f, X, t, h)
             with np.errstate(divide="ignore", invalid="ignore"):
-                scale = step.rate_size if rates is None else np.maximum(step.rate_size, RATE_DECAY * rates)
-                ratio = float(np.max(step.defect / (rel_tol * scale + 1e-300)))
+                ratio = float(np.max(step.defect / (rel_tol * step.rate_size + 1e-300)))
             if np.isfinite(ratio) and ratio <= threshold:
                 break
             if previous is not None and np.isfinite(ratio) and ratio > 0.5 * previous:
@@ -167,7 +158,6 @@ def polynomial_steps(f, x0: list[DA], nodes: np.ndarray, stop=None, rel_tol: flo
         else:
             raise ArithmeticError(f"the time series does not converge on a step at t = {t:g}")
         steps.append(step)
-        rates = step.rate_size if rates is None else np.maximum(rates, step.rate_size)
         X = [at_sigma(p, 1.0) for p in step.poly]
         t += step.h
         factor = 0.9 * (threshold / ratio) ** (1.0 / max(n, 1)) if ratio > 0 else 2.0
@@ -215,10 +205,9 @@ def _log_norm(T: np.ndarray, Tinv: np.ndarray, Jc: np.ndarray, Jr: np.ndarray) -
     return float(np.linalg.eigvalsh(0.5 * (M + M.T))[-1]) + float(np.linalg.norm(np.abs(T) @ Jr @ np.abs(Tinv), 2))
 
 
-def error_radii(f, steps: list[Step], shift: float, e0: np.ndarray | None = None):
+def error_radii(f, steps: list[Step], shift: float):
     """Phase 2: the proved error radii at the step nodes and the error box of each step, or None
-    if the a priori radius cannot be closed on some step. ``e0`` bounds ``|e_i|`` at the start
-    (a Taylor-model initial set); its radius in the first metric is ``sqrt(e0' |S| e0)``.
+    if the a priori radius cannot be closed on some step.
 
     The metric follows the flow: before each step, the Lyapunov metric of the step's own
     Jacobian (shift ``shift``) replaces the current one when that lowers the growth over the
@@ -227,7 +216,6 @@ def error_radii(f, steps: list[Step], shift: float, e0: np.ndarray | None = None
     ``t_k`` in step ``k``'s metric (``radii[-1]`` at the end, in the last one), ``boxes[k]``
     bounds ``|e_i|`` on step ``k``."""
     current, r, boxes = None, [0.0], []
-    drift = np.zeros(len(steps[0].defect)) if e0 is None else np.array(e0, dtype=float)
     for step in steps:
         Jc0, Jr0 = jacobian_box(f, step.low, step.high)
         if not (np.all(np.isfinite(Jc0)) and np.all(np.isfinite(Jr0))):
@@ -238,8 +226,6 @@ def error_radii(f, steps: list[Step], shift: float, e0: np.ndarray | None = None
             T_new, Tinv_new, w_new = _metric_factors(S_new)
             if current is None:
                 current = (S_new, T_new, Tinv_new, w_new)
-                if e0 is not None:
-                    rk = r[0] = float(np.sqrt(e0 @ np.abs(S_new) @ e0))
             else:
                 _, T, Tinv, _ = current
                 factor = float(np.linalg.norm(T_new @ Tinv, 2))
@@ -266,24 +252,18 @@ def error_radii(f, steps: list[Step], shift: float, e0: np.ndarray | None = None
             rho = 2.0 * max(rk, r_next)
         else:
             return None
-        # a component whose rate does not depend on the state (a clock, a switch time) has
-        # e_i' = -delta_i: its error is its start error plus the integrated defect
-        constant = np.all((Jc == 0) & (Jr == 0), axis=1)
-        drift = drift + step.defect * step.h
-        boxes.append(np.where(constant, np.minimum(w * max(rk, r_next), drift), w * max(rk, r_next)))
+        boxes.append(w * max(rk, r_next))
         r.append(r_next)
     return np.array(r), boxes
 
 
-def enclose_stretch(f, x0: list[DA], nodes: np.ndarray, stop=None, rel_tol: float = 1e-6,
-                    e0: np.ndarray | None = None) -> Enclosure | None:
-    """The verified enclosure of the flow from the initial set ``x0 + [-e0, e0]`` (the polynomial
-    ``x0`` and, for a Taylor-model start, its remainder box ``e0``); of the metric shifts tried,
-    the one with the smallest final error box is kept."""
+def enclose_stretch(f, x0: list[DA], nodes: np.ndarray, stop=None, rel_tol: float = 1e-6) -> Enclosure | None:
+    """The verified enclosure of the flow from the polynomial initial set ``x0`` (no remainder);
+    of the metric shifts tried, the one with the smallest final error box is kept."""
     steps = polynomial_steps(f, x0, nodes, stop, rel_tol)
     best = None
     for shift in SHIFTS:
-        out = error_radii(f, steps, shift, e0)
+        out = error_radii(f, steps, shift)
         if out is not None and (best is None or np.max(out[1][-1]) < np.max(best[1][-1])):
             best = out
     if best is None:
