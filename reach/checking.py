@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import difflib
 
-from reach.backends import registry, validate_options
+from reach.backends import available, backend, validate_options
 from reach.backends.base import input_reason, run, unsupported
 from reach.errors import InputError
 from reach.model import load_model
@@ -24,10 +24,11 @@ from reach.spec import bind, load_properties
 
 
 def resolve_backend(name: str):
-    backends = registry()
-    if name not in backends:
-        raise InputError(f"unknown back-end '{name}' (available: {', '.join(backends)})", field="--backend")
-    return backends[name]
+    """The named back-end; only its module is imported (a check does not pay for the others)."""
+    names = available()
+    if name not in names:
+        raise InputError(f"unknown back-end '{name}' (available: {', '.join(names)})", field="--backend")
+    return backend(name)
 
 
 def check_files(model_path, property_path, backend_name: str, options: dict | None = None,

@@ -32,5 +32,6 @@ def available() -> list[str]:
     return names
 
 
-def registry() -> dict:
-    return {name: importlib.import_module(BACKENDS[name]).BACKEND for name in available()}
+def backend(name: str):
+    """The back-end object of ``name`` (its module imported on first use)."""
+    return importlib.import_module(BACKENDS[name]).BACKEND
