@@ -17,6 +17,7 @@ import io
 import math
 import os
 import re
+import warnings
 from pathlib import Path
 
 import pytest
@@ -70,19 +71,24 @@ def patched_model(case: dict) -> str:
 
 
 def run(argv: list[str], cwd: Path) -> tuple[int, str, str]:
-    """``reach ARGV`` in-process from ``cwd``: (exit code, stdout, stderr)."""
+    """``reach ARGV`` in-process from ``cwd``: (exit code, stdout, stderr). Warnings count as
+    stderr lines, as a user's terminal shows them."""
     out, err = io.StringIO(), io.StringIO()
     before = os.getcwd()
     os.chdir(cwd)
     try:
-        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err), \
+                warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
             try:
                 code = main(argv)
             except SystemExit as exc:
                 code = exc.code if isinstance(exc.code, int) else 2
     finally:
         os.chdir(before)
-    return code, out.getvalue(), err.getvalue()
+    shown = "".join(warnings.formatwarning(w.message, w.category, w.filename, w.lineno, "")
+                    for w in caught)
+    return code, out.getvalue(), shown + err.getvalue()
 
 
 def prepare(case: dict, tmp: Path) -> list[str]:

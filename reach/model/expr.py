@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import ast
 import math
+import warnings
 from dataclasses import dataclass, field
 from fractions import Fraction
 from typing import Mapping
@@ -298,7 +299,7 @@ def _parse_tree(text, where: Where) -> ast.AST:
     if not text.strip():
         raise where.error("empty expression")
     try:
-        return ast.parse(text.strip(), mode="eval").body
+        return _parse(text)
     except SyntaxError as exc:
         raise where.error(f"cannot parse '{text}': {exc.msg}") from None
     except (ValueError, RecursionError, MemoryError):
@@ -353,12 +354,20 @@ def parse_comparison(text, names: Mapping[str, sympy.Expr], where: Where,
     return result
 
 
+def _parse(text: str) -> ast.expr:
+    """The expression tree of ``text``; Python's warnings about it (``1abc``: "invalid decimal
+    literal") are not printed, since a bad input is reported in one line."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", SyntaxWarning)
+        return ast.parse(text.strip(), mode="eval").body
+
+
 def side_text(text, shown: str) -> str:
     """How an error shows an expression: ``100[N]`` as written, anything else followed by its
     dimension ``shown`` (``abs(vx) [m/min]``)."""
     if isinstance(text, str):
         try:
-            if _is_literal(ast.parse(text.strip(), mode="eval").body):
+            if _is_literal(_parse(text)):
                 return text.strip()
         except (SyntaxError, ValueError, RecursionError):
             pass

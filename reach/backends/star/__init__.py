@@ -254,7 +254,7 @@ def _run_details(explorer: _Explorer) -> dict:
             "touch_tolerance": {"relative": opt.touch_tolerance, "largest": s.tolerance},
             "stars": s.chains, "cells": s.cells, "refined_cells": s.refined,
             "deepest_refinement": s.deepest, "lps": s.lps, "replays": explorer.replayed,
-            "jumps": s.jumps, "time_reached": s.reached, "aggregates": s.aggregated,
+            "jumps": s.jumps, "latest_chain_start": s.reached, "aggregates": s.aggregated,
             "aggregated_stars": s.members, "refined_aggregates": s.deaggregated}
 
 
