@@ -34,14 +34,12 @@ An UNSAFE needs a counterexample replayed on the nonlinear simulator.
 
 from __future__ import annotations
 
-import weakref
-
 import numpy as np
 
 from reach.backends.star.explorer import _Stop
 from reach.backends.star.flowpipe import AffineFlow, _chain_abs_bounds, _chain_bounds
 from reach.backends.star.remainder import Linearisation, unsupported
-from reach.backends.star.transitions import _LinearModel, _normalised, _unsubsumed
+from reach.backends.star.transitions import _cached, _LinearModel, _normalised, _unsubsumed
 from reach.result import Result, Status
 from reach.sets import Box, Star
 
@@ -94,12 +92,7 @@ class LinearisedModel(_LinearModel):
 
     @classmethod
     def of(cls, model) -> "LinearisedModel":
-        key = id(model)
-        ref, value = _CACHE.get(key, (None, None))
-        if ref is None or ref() is not model:
-            value = cls(model)
-            _CACHE[key] = (weakref.ref(model, lambda _: _CACHE.pop(key, None)), value)
-        return value
+        return _cached(model, cls)
 
     def flow_over(self, mode: str, box: Box):
         """``(flow, remainder)``: the mode's flow linearised over ``box`` (explored states), the
@@ -116,7 +109,6 @@ class LinearisedModel(_LinearModel):
         return AffineFlow(A, b, np.eye(self.n)[:, active], radius), rem
 
 
-_CACHE: dict[int, tuple[weakref.ref, LinearisedModel]] = {}
 
 
 def chain_hull(centers, bases, box, error, cells: int):

@@ -47,12 +47,13 @@ class _Jump:
     window: tuple[int, float, float] | None
 
 
-_CACHE: dict[int, tuple[weakref.ref, object]] = {}
+_CACHE: dict[tuple[int, str], tuple[weakref.ref, object]] = {}
 
 
 def _cached(obj, build):
-    """``build(obj)``, computed once per live object (symbolic extraction is slow)."""
-    key = id(obj)
+    """``build(obj)``, computed once per live object and kind of build (symbolic extraction is
+    slow); the kind is the builder's qualified name, so several builders may cache one object."""
+    key = (id(obj), build.__qualname__)
     ref, value = _CACHE.get(key, (None, None))
     if ref is None or ref() is not obj:
         value = build(obj)

@@ -35,7 +35,25 @@ def _ipow_real(lo, hi, p: float):
     return (np.where(positive, np.minimum(a, b), -INF), np.where(positive, np.maximum(a, b), INF))
 
 
-class Jet:
+class PowerQuotients:
+    """Quotients and square roots of a jet type through its ``*`` and ``**`` (whose ``__pow__``
+    carries the chain rule): ``a / b = a * b**-1``, ``sqrt(a) = a**0.5``."""
+
+    __slots__ = ()
+
+    def __truediv__(self, other):
+        if isinstance(other, PowerQuotients):
+            return self * other ** -1.0
+        return self * (1.0 / np.asarray(other, dtype=float))
+
+    def __rtruediv__(self, other):
+        return (self ** -1.0) * other
+
+    def sqrt(self):
+        return self ** 0.5
+
+
+class Jet(PowerQuotients):
     """Interval value ``[lo, hi]`` (shape ``S``) and interval gradient ``[glo, ghi]`` (``S + (n,)``)."""
 
     __slots__ = ("lo", "hi", "glo", "ghi")
@@ -100,17 +118,6 @@ class Jet:
         dlo, dhi = _ipow_real(self.lo, self.hi, p - 1)
         dlo, dhi = _imul(dlo, dhi, p, p)
         return self._chain(lo, hi, dlo, dhi)
-
-    def __truediv__(self, other):
-        if isinstance(other, Jet):
-            return self * other ** -1.0
-        return self * (1.0 / np.asarray(other, dtype=float))
-
-    def __rtruediv__(self, other):
-        return (self ** -1.0) * other
-
-    def sqrt(self):
-        return self ** 0.5
 
     def _lipschitz_one(self, fn):
         mid, rad = 0.5 * (self.lo + self.hi), 0.5 * (self.hi - self.lo)

@@ -30,6 +30,7 @@ from __future__ import annotations
 import numpy as np
 
 from reach.backends.taylor.da import DA, algebra
+from reach.backends.taylor.interval import PowerQuotients
 from reach.backends.taylor.tm import TM
 
 
@@ -39,13 +40,7 @@ def _trailing(t: TM) -> TM:
     return TM(DA(t.alg, t.poly.c[..., None, :]), lo[..., None], hi[..., None])
 
 
-def _scale(t: TM, c) -> TM:
-    """``t`` times the array ``c`` (shape of ``t``'s batch)."""
-    c = np.asarray(c, dtype=float)
-    return t * c if c.ndim == 0 else t * c
-
-
-class TMJet:
+class TMJet(PowerQuotients):
     """A Taylor model ``v`` of a value (batch shape ``S``) and ``g`` of its gradient (``S + (n,)``)."""
 
     __array_priority__ = 300
@@ -107,17 +102,6 @@ class TMJet:
         if p == 1:
             return self
         return self._chain(self.v ** p, self.v ** (p - 1) * p)
-
-    def __truediv__(self, other):
-        if isinstance(other, TMJet):
-            return self * other ** -1.0
-        return self * (1.0 / np.asarray(other, dtype=float))
-
-    def __rtruediv__(self, other):
-        return (self ** -1.0) * other
-
-    def sqrt(self):
-        return self ** 0.5
 
     def sin(self):
         return self._chain(self.v.sin(), self.v.cos())
