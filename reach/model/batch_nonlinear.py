@@ -64,6 +64,16 @@ class SplitFlow:
         return out
 
 
+def rk4_step(f, Y: np.ndarray, h) -> np.ndarray:
+    """One classical Runge-Kutta step of ``y' = f(y)`` from ``Y`` with step ``h`` (a number, or
+    an array broadcasting against ``Y``: one step per run)."""
+    k1 = f(Y)
+    k2 = f(Y + 0.5 * h * k1)
+    k3 = f(Y + 0.5 * h * k2)
+    k4 = f(Y + h * k3)
+    return Y + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+
 class RK4Blocks:
     """Grid states of a nonlinear mode, a block at a time, by classical RK4 with ``substeps``
     steps per grid step ``dt`` (the general path's scheme)."""
@@ -73,18 +83,8 @@ class RK4Blocks:
 
     def step(self, Z: np.ndarray) -> np.ndarray:
         """The state one grid step after ``Z`` (n, R)."""
-        f, h = self.flow, self.h
         for _ in range(self.substeps):
-            k1 = f(Z)
-            k2 = f(Z + (0.5 * h) * k1)
-            k3 = f(Z + (0.5 * h) * k2)
-            k4 = f(Z + h * k3)
-            k2 += k3
-            k2 *= 2.0
-            k2 += k1
-            k2 += k4
-            k2 *= h / 6.0
-            Z = Z + k2
+            Z = rk4_step(self.flow, Z, self.h)
         return Z
 
     def block(self, Z: np.ndarray, count: int) -> np.ndarray:

@@ -41,6 +41,7 @@ import scipy.linalg
 
 from reach.model import batch
 from reach.model.automaton import HybridAutomaton
+from reach.model.batch_nonlinear import rk4_step
 from reach.model.constraints import lambdify_margins
 
 BISECTION_STEPS = 40
@@ -169,11 +170,7 @@ class Simulator:
         step = (h / count)[:, None]
         Y = X.copy()
         for _ in range(count):
-            k1 = rhs(Y)
-            k2 = rhs(Y + 0.5 * step * k1)
-            k3 = rhs(Y + 0.5 * step * k2)
-            k4 = rhs(Y + step * k3)
-            Y = Y + step / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+            Y = rk4_step(rhs, Y, step)
         return Y
 
     def _grid_states(self, mode: str, Y0: np.ndarray, count: int, met=None) -> np.ndarray:
