@@ -9,7 +9,7 @@ import sympy
 from scipy.integrate import solve_ivp
 
 from reach.backends.star.flowpipe import AffineFlow
-from reach.backends.star.witnesses import extremal_signal
+from reach.backends.star.witnesses import SIGNAL_GRID_FACTOR, SIGNAL_PIECES, extremal_signal, signal_pieces
 from reach.checking import check_spaceex
 from reach.errors import Where
 from reach.model.constraints import Constraint, violation_test
@@ -86,3 +86,19 @@ def test_an_equality_is_met_up_to_rounding_and_the_other_rows_robustly():
     assert np.all(depth[2:] >= 0)
     closed = violation_test(piece[:2], [x, t])                  # no equality: the robust test as before
     assert closed(np.array([[0.5, 20.0]]))[0].tolist() == [False]
+
+
+def test_signal_pieces_keep_the_replay_grid_bounded():
+    """An instant early on a long horizon (2 pi of 63000, the simulator's default step 26.25)
+    gets fewer, longer pieces, so the replay's grid (a divisor of the piece length) stays within
+    SIGNAL_GRID_FACTOR times the default grid; the coarser bang-bang signal still reaches past
+    3.9 at 2 pi (closed-form maximum 4, one switch at pi), checked by scipy."""
+    base = 63000 / 2400
+    pieces = signal_pieces(2 * np.pi, base)
+    assert 1 <= pieces < SIGNAL_PIECES
+    assert 2 * np.pi / pieces >= base / SIGNAL_GRID_FACTOR
+    assert signal_pieces(20.0, 20 / 2400) == SIGNAL_PIECES          # the Building's instant: unchanged
+    flow = AffineFlow(np.array([[0.0, 1.0], [-1.0, 0.0]]), np.zeros(2), np.array([[0.0], [1.0]]),
+                      np.array([1.0]))
+    step, values = extremal_signal(flow, np.array([1.0, 0.0]), 2 * np.pi, [-1.0], [1.0], pieces)
+    assert _run(step, values, 2 * np.pi) > 3.9

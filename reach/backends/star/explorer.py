@@ -16,7 +16,7 @@ from reach.backends.star.options import (ERROR_RATIO, MAX_CELLS, MAX_CHAIN_BYTES
                                          STALL_JUMPS, TIGHT_RATIO, StarOptions)
 from reach.backends.star.transitions import (_LinearModel, _modes_leading_to, _Piece,
                                              _unsafe_pieces, kept_rows)
-from reach.backends.star.witnesses import _Witness, extremal_signal, nearest_point, trace
+from reach.backends.star.witnesses import _Witness, extremal_signal, nearest_point, signal_pieces, trace
 from reach.result import Status
 from reach.sets import Box, Star
 
@@ -647,18 +647,18 @@ class _Explorer:
         if not t > 0:
             return None
         x0, switch = self.initial_point(aimed)
+        base = self._replay_step()
         step, values = extremal_signal(flow, -piece.H[r], t, [u.low for u in self.data.varying],
-                                       [u.high for u in self.data.varying])
+                                       [u.high for u in self.data.varying], signal_pieces(t, base))
         signal = {"step": step, "inputs": [u.name for u in self.data.varying], "values": values.tolist()}
-        return aimed, x0, switch, signal, self._signal_dt(step)
+        return aimed, x0, switch, signal, step / max(1, int(np.ceil(step / base - 1e-9)))
 
-    def _signal_dt(self, step: float) -> float:
-        """The replay step for pieces of length ``step``: the largest ``step / k`` not above the
-        replay step asked for (or the simulator's default), so that every piece -- and the
-        instant ``t`` the signal aims at -- starts on the simulator's grid."""
+    def _replay_step(self) -> float:
+        """The replay step asked for, or the simulator's default. A signal's replay uses the
+        largest ``step / k`` not above it, so that every piece -- and the instant ``t`` the
+        signal aims at -- starts on the simulator's grid."""
         from reach.model.simulate import default_dt
-        base = self.opt.replay_dt or default_dt(self.model)
-        return step / max(1, int(np.ceil(step / base - 1e-9)))
+        return self.opt.replay_dt or default_dt(self.model)
 
     def initial_point(self, witness: _Witness):
         """Initial state and abort time of a witness, read off its coefficients."""

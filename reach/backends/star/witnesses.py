@@ -76,11 +76,22 @@ def trace(alpha, path, nearest):
     return alpha, entries
 
 
-#: pieces of the extremal input signal over ``[0, t]`` (:func:`extremal_signal`)
+#: pieces of the extremal input signal over ``[0, t]`` (:func:`extremal_signal`), at most
 SIGNAL_PIECES = 1000
+
+#: a piece of the extremal signal is at least the replay grid step over this factor, so that
+#: the replay (whose grid must divide the pieces) stays within 100 times its usual grid
+SIGNAL_GRID_FACTOR = 100
 
 #: quadrature sub-samples per piece of the extremal input signal
 SIGNAL_SUBSAMPLES = 8
+
+
+def signal_pieces(t: float, replay_step: float) -> int:
+    """Pieces of the extremal signal over ``[0, t]``: :data:`SIGNAL_PIECES`, fewer where a
+    piece would be shorter than ``replay_step / SIGNAL_GRID_FACTOR`` (an early instant on a
+    long horizon), at least one."""
+    return int(min(SIGNAL_PIECES, max(1, np.floor(t * SIGNAL_GRID_FACTOR / replay_step))))
 
 
 def extremal_signal(flow, c, t: float, u_low, u_high, pieces: int = SIGNAL_PIECES):
