@@ -31,6 +31,20 @@ def test_units_convert_to_model_base_units():
     assert float(parse_expr("3.986e14[m**3/s**2]", {}, W, minutes)) == pytest.approx(3.986e14 * 3600)
 
 
+@pytest.mark.parametrize("caret, power", [
+    ("x^2", "x**2"), ("-x^2 + y", "-x**2 + y"), ("k*x^3/y^2", "k*x**3/y**2"), ("2^-1*x", "2**-1*x")])
+def test_caret_is_the_power(caret, power):
+    """``^`` reads as ``**`` with the power's precedence (``-x^2`` is ``-(x^2)``)."""
+    assert sympy.simplify(parse_expr(caret, NAMES, W) - parse_expr(power, NAMES, W)) == 0
+
+
+def test_caret_in_a_unit_is_the_power_of_the_last_name():
+    """``[m/s^2]`` is metres per second squared, not ``(m/s)^2``."""
+    minutes = UnitSystem(length="m", time="min", mass="kg")
+    assert float(parse_expr("1[m/s^2]", {}, W, minutes)) == pytest.approx(3600.0)
+    assert float(parse_expr("2[kg*m/s^2]", {}, W, minutes)) == pytest.approx(7200.0)
+
+
 @pytest.mark.parametrize("text, message", [
     ("__import__('os').system('true')", "only plain function calls"),
     ("eval('1')", "unknown function 'eval'"),

@@ -2,8 +2,8 @@
 
 Model and property files hold expressions as strings (``"3*n**2*x + 2*n*vy + Fx/mc"``,
 ``"abs(Fx) <= 10[N]"``). They are parsed with :mod:`ast` and only numbers, known names,
-``+ - * / **``, calls of the functions in :data:`FUNCTIONS`, comparisons, and unit brackets
-are accepted; everything else is an :class:`~reach.errors.InputError`. Nothing is ever
+``+ - * / **`` (``^`` is read as ``**``), calls of the functions in :data:`FUNCTIONS`,
+comparisons, and unit brackets are accepted; everything else is an :class:`~reach.errors.InputError`. Nothing is ever
 passed to ``eval`` or ``exec``, so a model file from a stranger cannot run code.
 
 With a :class:`DimensionContext` the parser also computes each subexpression's dimension
@@ -307,7 +307,14 @@ def _parse_tree(text, where: Where) -> ast.AST:
 
 
 def _source(text) -> str:
-    return text.strip() if isinstance(text, str) else ""
+    return _python_syntax(text) if isinstance(text, str) else ""
+
+
+def _python_syntax(text: str) -> str:
+    """``text`` as Python writes it: ``^`` is the power, as engineers and SpaceEx write it
+    (``x^2``, ``[m/s^2]``), so it becomes ``**`` (with its precedence: ``m/s^2`` is
+    ``m/(s^2)``); Python's ``^`` (exclusive or) has no meaning here."""
+    return text.strip().replace("^", "**")
 
 
 def parse_quantity(text, names: Mapping[str, sympy.Expr], where: Where, units: UnitSystem = SI,
@@ -359,7 +366,7 @@ def _parse(text: str) -> ast.expr:
     literal") are not printed, since a bad input is reported in one line."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", SyntaxWarning)
-        return ast.parse(text.strip(), mode="eval").body
+        return ast.parse(_python_syntax(text), mode="eval").body
 
 
 def side_text(text, shown: str) -> str:
