@@ -66,10 +66,26 @@ def requirement(prop) -> str:
                                    for piece in pieces for con in piece))
         if texts and all(t.startswith("not (") and t.endswith(")") for t in texts):
             return ", ".join(t[len("not ("):-1] for t in texts)
-        return "avoid " + " and ".join(texts) if texts else ""
+        return _avoid_text(prop.pieces) if texts else ""
     if kind in ("reach", "reach_avoid") and prop.at_least is not None:
         return f"P >= {number(prop.at_least)}"
     return ""
+
+
+def _avoid_text(pieces_by_mode) -> str:
+    """An unsafe set as written: the union of its pieces (conjunctions of constraints), each
+    named once, with the modes it applies in where that is not every mode of the property:
+    ``avoid I >= 20 or t >= 0.2 (in move_free)``."""
+    modes: dict[str, list[str]] = {}
+    for mode, pieces in pieces_by_mode.items():
+        for piece in pieces:
+            text = " and ".join(con.text for con in piece)
+            modes.setdefault(f"({text})" if len(piece) > 1 else text, []).append(mode)
+    every = len(pieces_by_mode)
+    if len(modes) == 1 and next(iter(modes)).startswith("("):
+        modes = {next(iter(modes))[1:-1]: next(iter(modes.values()))}
+    return "avoid " + " or ".join(text if len(where) == every else f"{text} (in {', '.join(where)})"
+                                  for text, where in modes.items())
 
 
 def _bound_value(prop) -> str:

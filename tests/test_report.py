@@ -168,3 +168,19 @@ def test_a_model_without_units_shows_no_unit_of_time():
     text = line(Result("montecarlo", "thermostat", prop.id, Status.UNSAFE, counterexample=cex),
                 bind(prop, thermostat), thermostat)
     assert "violated at t=1.25 in heating" in text
+
+
+def test_an_avoided_union_reads_as_a_union(tmp_path):
+    """A forbidden set of several pieces is their union, ``avoid A or B``, with the modes named
+    where a piece does not apply in all (the Gearbox cfg forbids ``move_free & t >= 0.2`` or
+    ``I >= 20``); one piece of several constraints reads as their conjunction."""
+    from reach.checking import check_spaceex
+    from reach.report import requirement
+    gearbox = "models/spaceex/Gearbox/GRBX01-MES01"
+    _, _, _, merged = check_spaceex(gearbox + ".xml", gearbox + ".cfg", "montecarlo", {"samples": 10})
+    assert requirement(merged["GRBX01-MES01"]) == "avoid I >= 20 or t >= 0.2 (in loc01__move_free)"
+    model = load_model("models/thermostat.yaml")
+    (tmp_path / "p.yaml").write_text(
+        "properties:\n  - {id: band, kind: safety, modes: [heating], avoid: ['T >= 30', 'T <= 31']}\n")
+    prop = bind(load_properties(tmp_path / "p.yaml")[0], model)
+    assert requirement(prop) == "avoid T >= 30 and T <= 31"
