@@ -250,12 +250,17 @@ def _run_details(explorer: _Explorer) -> dict:
                       f"replace ({s.deaggregated} refined back into their members)")
     if explorer.data.added_clock:
         soundness += "; the model has no global clock: one was added (rate 1, 0 initially, never reset)"
+    if explorer.covered is not None and explorer.covered.pruned:
+        soundness += (f"; {explorer.covered.pruned} aggregates not explored: their states lie in an earlier "
+                      "aggregate of the same mode entered no later, and the automaton does not depend "
+                      "on time (the added clock), so their runs are time-shifted runs of that one's")
     return {"method": "generalized star sets", "semantics": soundness, "step": explorer.h,
             "touch_tolerance": {"relative": opt.touch_tolerance, "largest": s.tolerance},
             "stars": s.chains, "cells": s.cells, "refined_cells": s.refined,
             "deepest_refinement": s.deepest, "lps": s.lps, "replays": explorer.replayed,
             "jumps": s.jumps, "latest_chain_start": s.reached, "aggregates": s.aggregated,
-            "aggregated_stars": s.members, "refined_aggregates": s.deaggregated}
+            "aggregated_stars": s.members, "refined_aggregates": s.deaggregated,
+            "covered_aggregates": 0 if explorer.covered is None else explorer.covered.pruned}
 
 
 BACKEND = StarBackend()

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from reach.backends.star.aggregation import _Aggregate, interval_hull
+from reach.backends.star.fixpoint import Covered
 from reach.backends.star.flowpipe import (_block_spreads, _chain_abs_bounds, _chain_bounds, _depth,
                                           _plus_box, _segment, _tightened)
 from reach.backends.star.options import (ERROR_RATIO, MAX_CELLS, MAX_CHAIN_BYTES, NAME, PROGRESS_SECONDS,
@@ -121,6 +122,9 @@ class _Explorer:
         from reach.model.lint import zero_dwell_cycles
         self.stall_limit = STALL_JUMPS if zero_dwell_cycles(model)[0] else np.inf
         self.aggregate_after = None if self.sweep else options.aggregate_after
+        windows = any(j.window is not None for js in data.jumps.values() for j in js)
+        self.covered = (Covered(self.clock) if data.added_clock and not windows and not options.keep_sets
+                        else None)
         self.last_progress = time.perf_counter()
         self.pieces = {mode: [_Piece(data.widen(p.H, p.g)[0], p.g, p.strict, p.label) for p in pieces]
                        for mode, pieces in _unsafe_pieces(prop).items()} if data.added_clock \
@@ -357,6 +361,11 @@ class _Explorer:
             for star, path in kept:
                 self._chain(mode, star, path)
             return
+        if self.covered is not None:
+            if self.covered.covers(mode, hull, self._lp_count):
+                return
+            mark = self.covered.mark()
+            hull = self.covered.record(mode, hull, (H, g), rows)
         agg = _Aggregate(mode, hull, kept)
         self.stats.aggregated += 1
         self.stats.members += len(kept)
@@ -371,6 +380,8 @@ class _Explorer:
             if failure.target is not agg:
                 raise
             del self.sets[kept_sets:]               # the members' own segments replace the hull's
+            if self.covered is not None:
+                self.covered.forget(mark)
             agg.refined = True
             self.stats.deaggregated += 1
             LOG.info("aggregate of %d stars entering '%s' refined into its members (%s)",

@@ -1,0 +1,117 @@
+"""Aggregates covered by an earlier one: the fixpoint check of time-invariant automata.
+
+When the model has no global clock, the explorer adds its own (:class:`.transitions._LinearModel`,
+``added_clock``), and nothing in the automaton or the property depends on time itself: flows,
+invariants, guards, resets and unsafe pieces are rows over the model's states, and a
+time-varying input may take any value of its box at any instant. A run that enters mode ``m``
+in state ``x`` at time ``t`` is then the run entering ``m`` in ``x`` at any ``t' <= t``, shifted
+by ``t - t'``; its states are the same, and the earlier run reaches the horizon later.
+
+An aggregate (:func:`.aggregation.interval_hull`) is a box cut by rows over the model's
+states only, so it is the product of a set of states ``X'`` with its whole clock interval
+``[t'_lo, t'_hi]``. A later aggregate ``S`` entering the same mode whose states lie in ``X'``
+(its box inside the box of ``X'`` in every model coordinate, and every row of ``X'`` holding on
+``S``) and whose clock starts no earlier (``t_lo >= t'_lo``) adds no state: every ``(x, t)`` of
+``S`` has ``(x, t'_lo)`` in the earlier aggregate, whose runs are explored to the horizon. It is
+not explored (SpaceEx's and PHAVer's fixpoint check, with time as the order).
+
+This holds while the earlier aggregate's exploration stands: an aggregate refined back into
+its members (:meth:`.explorer._Explorer._aggregate`) is forgotten with everything recorded
+after it (explored depth first, so those are its descendants, whose exploration is redone
+from the members). The check is off for models with their own clock, for abort windows
+(they date switches) and when the explored sets are kept for pictures (the pruned time would
+be missing from a plot against time).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from reach import lp
+from reach.sets import Box, Star
+
+
+#: relative margin by which a recorded aggregate is enlarged (box and jump rows): a later
+#: aggregate's bounds carry LP and rounding errors of about 1e-9 (1 + |x|), and one inside
+#: the earlier set up to those errors is then inside the enlarged one exactly
+MARGIN = 1e-8
+
+
+@dataclass
+class _Explored:
+    """A recorded aggregate's states: its box (every explored coordinate), the rows
+    ``H x <= g`` it has besides the box and its mode's invariant, and ``start``, the lower end
+    of its clock interval."""
+
+    mode: str
+    low: np.ndarray
+    high: np.ndarray
+    H: np.ndarray
+    g: np.ndarray
+    start: float
+
+
+@dataclass
+class Covered:
+    """The explored aggregates, in the order they were entered."""
+
+    clock: int
+    entries: list[_Explored] = field(default_factory=list)
+    pruned: int = 0
+
+    def mark(self) -> int:
+        """A point to :meth:`forget` back to."""
+        return len(self.entries)
+
+    def forget(self, mark: int) -> None:
+        """Drop every aggregate recorded since ``mark`` (an aggregate refined into its members,
+        and its descendants)."""
+        del self.entries[mark:]
+
+    def record(self, mode: str, hull: Star, invariant, rows) -> Star:
+        """Record the aggregate ``hull`` entering ``mode`` (a box star cut by the mode's
+        ``invariant`` and the jump's ``rows``, each ``(H, g)``) and return the star to explore
+        in its place: the same with its box and ``rows`` pushed out by :data:`MARGIN`
+        ``(1 + |.|)``. It contains ``hull``, so exploring it is sound."""
+        box = hull.box_bound()
+        pad = MARGIN * (1.0 + np.maximum(np.abs(box.low), np.abs(box.high)))
+        low, high = box.low - pad, box.high + pad
+        H, g = np.asarray(rows[0], float), np.asarray(rows[1], float)
+        g = g + MARGIN * (1.0 + np.abs(g)) * np.linalg.norm(H, axis=1)
+        self.entries.append(_Explored(mode, low, high, H, g, float(low[self.clock])))
+        return Star.from_box(Box(low, high)).intersect_halfspaces(
+            np.vstack([invariant[0], H]), np.concatenate([invariant[1], g]))
+
+    def covers(self, mode: str, hull: Star, count_lps) -> bool:
+        """Whether an earlier aggregate of ``mode`` holds every state of ``hull`` (a star inside
+        the mode's invariant) and started no later (module docstring); each jump row not
+        settled by the boxes costs one LP over ``hull`` (reported to ``count_lps``)."""
+        box = hull.box_bound()
+        low, high, start = box.low, box.high, float(box.low[self.clock])
+        states = np.arange(low.size) != self.clock
+        for entry in self.entries:
+            if entry.mode != mode or entry.start > start:
+                continue
+            if np.any(low[states] < entry.low[states]) or np.any(high[states] > entry.high[states]):
+                continue
+            if self._rows_hold(entry, hull, count_lps):
+                self.pruned += 1
+                return True
+        return False
+
+    @staticmethod
+    def _rows_hold(entry: _Explored, hull: Star, count_lps) -> bool:
+        """``H x <= g`` of ``entry`` on all of ``hull``: by the box bound where it settles a row,
+        else by the row's support over ``hull`` (an LP; a failed LP settles nothing)."""
+        if not entry.g.size:
+            return True
+        open_rows = hull.support_bounds(entry.H) > entry.g
+        if not np.any(open_rows):
+            return True
+        H, g = entry.H[open_rows], entry.g[open_rows]
+        count_lps(len(g))
+        support = lp.maximize_many(H @ hull.basis, hull.predicate.A, hull.predicate.b,
+                                   (hull.box.low, hull.box.high)) + H @ hull.center
+        return bool(np.all(support <= g))          # a failed LP (nan) settles nothing
