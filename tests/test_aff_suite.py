@@ -31,9 +31,21 @@ SOURCES = {
     "bball-height": ("BouncingBall/bball.xml", "BouncingBall/bball-height.cfg"),
     "bball-speed": ("BouncingBall/bball.xml", "BouncingBall/bball-speed.cfg"),
     "PLAD01-BND42": ("Platoon/PLAD01-BND.xml", "Platoon/PLAD01-BND42-forbidden.cfg"),
+    "PLAD01-BND30": ("Platoon/PLAD01-BND.xml", "Platoon/PLAD01-BND30-forbidden.cfg"),
+    "SRA01-SR0-LOS": ("Rendezvous_ARCH18/SRA01-SR0_.xml", "Rendezvous_ARCH18/SRA01-SR0_-LOS.cfg"),
+    "SRA01-SR0-collision": ("Rendezvous_ARCH18/SRA01-SR0_.xml", "Rendezvous_ARCH18/SRA01-SR0_-collision.cfg"),
+    "SRNA01-SR0-LOS": ("Rendezvous_ARCH18/SRNA01-SR0_.xml", "Rendezvous_ARCH18/SRNA01-SR0_-LOS.cfg"),
+    "filtered_oscillator-x07": ("FilteredOscillator/filtered_oscillator.xml",
+                                "FilteredOscillator/filtered_oscillator-x07.cfg"),
+    "filtered_oscillator-x06": ("FilteredOscillator/filtered_oscillator.xml",
+                                "FilteredOscillator/filtered_oscillator-x06.cfg"),
+    "DTN-2theta-30": ("Powertrain/drivetrain_2theta_30percent.xml",
+                      "Powertrain/drivetrain_2theta_30percent-forbidden.cfg"),
 }
 #: the imported file's name where it is not the instance's
-FILE = {"PLAD01-BND42": "PLAD01-BND42-forbidden"}
+FILE = {"PLAD01-BND42": "PLAD01-BND42-forbidden", "PLAD01-BND30": "PLAD01-BND30-forbidden",
+        "SRA01-SR0-LOS": "SRA01-SR0_-LOS", "SRA01-SR0-collision": "SRA01-SR0_-collision",
+        "SRNA01-SR0-LOS": "SRNA01-SR0_-LOS", "DTN-2theta-30": "drivetrain_2theta_30percent-forbidden"}
 THRESHOLD = -0.00078                     # BDU02: forbidden x25 < -7.8e-4 at t = 20
 T_END = 20.0
 
@@ -166,6 +178,76 @@ def test_hylaa_automaton_of_the_imported_bouncing_ball():
     H, g = np.array(init["H"]), np.array(init["g"])
     for point, inside in (([10.1, 0, 1], True), ([10.3, 0, 1], False), ([10.1, 0, 0], False)):
         assert bool(np.all(H @ point <= g + 1e-12)) is inside
+
+
+def _imported(name):
+    model = load_model(IMPORTED / "models" / f"{FILE.get(name, name)}.yaml")
+    return model, [bind(p, model) for p in load_properties(IMPORTED / "properties" / f"{FILE.get(name, name)}.yaml")]
+
+
+def _platoon_least_spacing(model, horizon, h=0.002):
+    """The least e1, e2, e3 any lead acceleration aL(t) in [-9, 1] reaches by ``horizon`` (PLAD01).
+
+    From the rest state x(0) = 0, e(T) = int_0^T g(T, s) aL(s) ds with g(T, s) the e row of
+    Phi(T, s) B (Phi the transition matrix of the mode schedule: communication on [0, 5),
+    [10, 15), ..., no communication between), so min e(T) = int min(-9 g, g) ds: bang-bang on
+    the sign of g. Evaluated exactly for aL piecewise constant on steps of ``h`` (expm of the
+    augmented step), for T on a grid of 0.25; returns the least value over the grid."""
+    u = model.bounded_inputs[0]
+    keep = [i for i, name in enumerate(model.state) if name not in ("t", "break_pattern_t", u.name)]
+    rows = [keep.index(model.state.index(e)) for e in ("e1", "e2", "e3")]
+    steps = []
+    for name in ("communication__communication__loc1", "no_communication__no_communication__loc1"):
+        A = model.modes[name].linear[0]
+        n = len(keep)
+        M = np.zeros((n + 1, n + 1))
+        M[:n, :n], M[:n, n] = A[np.ix_(keep, keep)], A[keep, u.index]
+        E = sl.expm(h * M)
+        steps.append((E[:n, :n], E[:n, n]))
+    least = np.zeros(3)
+    for T in np.arange(0.25, horizon + 1e-9, 0.25):
+        c, low = np.eye(len(keep))[rows], np.zeros(3)
+        for k in range(int(round(T / h)) - 1, -1, -1):
+            E, G = steps[int((k + 0.5) * h // 5) % 2]
+            g = c @ G
+            low += np.minimum(u.low * g, u.high * g)
+            c = c @ E
+        least = np.minimum(least, low)
+    return least
+
+
+def test_plad01_least_spacing_over_the_published_horizon_clears_30():
+    """PLAD01-BND30 (e1, e2, e3 >= -30) is safe over the cfg's horizon 5: the least spacing the
+    worst lead acceleration reaches is about -18.98 (e1 at t = 5); star agrees, and the worst
+    Monte Carlo run stays above it."""
+    model, props = _imported("PLAD01-BND30")
+    assert model.horizon == 5.0 and model.bounded_inputs[0].varying
+    least = _platoon_least_spacing(model, model.horizon)
+    assert -19.0 < least[0] < -18.9 and least[1] > -6.1 and least[2] > -2.4
+    assert all(STAR.check(model, prop, {}).status.value == "SAFE" for prop in props)
+
+
+def test_filtered_oscillator_x_flows_towards_plus_minus_0p7():
+    """The closed form behind filtered_oscillator-x07/-x06: every location's x flow is
+    x' = -2 (x - x*) with x* = +-0.7, so x stays in [-0.7, 0.7] from the initial x in [0.2, 0.3];
+    in pp (x* = 0.7, y' = -(y + 0.7)) the corner x0 = 0.3, y0 = 0.1 reaches x = 0.6 at
+    t = ln(4)/2 with y = -0.3 still above the switching line y = -x/1.4 (a solve_ivp run agrees)."""
+    model, (prop,) = _imported("filtered_oscillator-x07")
+    ix, iy = model.state.index("x"), model.state.index("y")
+    targets = set()
+    for mode in model.modes.values():
+        A, b = mode.linear
+        assert A[ix, ix] == -2 and not np.any(np.delete(A[ix], ix))
+        targets.add(round(-b[ix] / A[ix, ix], 12))
+    assert targets == {0.7, -0.7}
+    (A, b) = model.modes[model.initial.mode].linear
+    x0 = np.zeros(len(model.state))
+    x0[ix], x0[iy] = 0.3, 0.1
+    t_hit = np.log(4) / 2
+    sol = solve_ivp(lambda t, x: A @ x + b, (0, t_hit), x0, rtol=1e-10, atol=1e-12)
+    x, y = sol.y[ix, -1], sol.y[iy, -1]
+    assert x == pytest.approx(0.6, abs=1e-8) and y == pytest.approx(-0.3, abs=1e-8) and y > -x / 1.4
+    assert model.initial.mode.startswith("pp")
 
 
 def test_bench_plots_a_one_state_suite_model(tmp_path):
