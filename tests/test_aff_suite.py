@@ -155,15 +155,21 @@ def test_star_bouncing_ball_verdicts_match_the_closed_form():
     assert replay(model, prop, cex.initial_state, cex.switch_time, cex.dt, cex.input_signal).violated
 
 
-def test_hylaa_automaton_of_the_imported_bouncing_ball():
-    """benchmarks/hylaa_vs_star.py turns the imported automaton into Hylaa's matrices over
-    (x, v, 1): x' = v, v' = -1; the bounce guard x <= 0, v <= 0 (closed) and reset v := -0.75 v;
-    the forbidden v <= -4.5 as a guard into the error mode; the initial box with 1 == 1."""
+def _hylaa_bench():
+    """benchmarks/hylaa_vs_star.py as a module (it is a script, not a package)."""
     import importlib.util
 
     spec_ = importlib.util.spec_from_file_location("hylaa_vs_star", ROOT / "benchmarks" / "hylaa_vs_star.py")
     bench = importlib.util.module_from_spec(spec_)
     spec_.loader.exec_module(bench)
+    return bench
+
+
+def test_hylaa_automaton_of_the_imported_bouncing_ball():
+    """benchmarks/hylaa_vs_star.py turns the imported automaton into Hylaa's matrices over
+    (x, v, 1): x' = v, v' = -1; the bounce guard x <= 0, v <= 0 (closed) and reset v := -0.75 v;
+    the forbidden v <= -4.5 as a guard into the error mode; the initial box with 1 == 1."""
+    bench = _hylaa_bench()
     model, prop = _ball("bball-speed")
     assert model.state == ["x", "v"]
     spec = bench.automaton_spec(model, prop, 0.1)
@@ -248,6 +254,25 @@ def test_filtered_oscillator_x_flows_towards_plus_minus_0p7():
     x, y = sol.y[ix, -1], sol.y[iy, -1]
     assert x == pytest.approx(0.6, abs=1e-8) and y == pytest.approx(-0.3, abs=1e-8) and y > -x / 1.4
     assert model.initial.mode.startswith("pp")
+
+
+def test_hylaa_automaton_of_unguarded_hops_and_a_model_with_its_own_error_mode():
+    """The filtered oscillator's hops have no guard: Hylaa gets the true row 0 <= 1 for each.
+    The drivetrain has a mode named error: Hylaa's error mode is named apart from it, and the
+    forbidden pieces (t >= 2 in three modes) become guards from those modes only."""
+    bench = _hylaa_bench()
+    model, prop, _ = bench.load_aff("filtered_oscillator-x06")
+    spec = bench.automaton_spec(model, prop, 0.02)
+    assert len(spec["transitions"]) == 4
+    for tr in spec["transitions"]:
+        assert not np.any(tr["H"]) and tr["g"] == [1.0]
+    model, prop, _ = bench.load_aff("DTN-2theta-30")
+    spec = bench.automaton_spec(model, prop, 5e-4)
+    assert "error" in spec["modes"] and spec["error_mode"] not in spec["modes"]
+    assert sorted(e["source"] for e in spec["errors"]) == ["deadzone", "negAngle", "negAngleInit"]
+    t = model.state.index("t")
+    for e in spec["errors"]:
+        assert np.allclose(e["H"], [np.eye(len(spec["modes"]["error"]["A"]))[t] * -1]) and e["g"] == [-2.0]
 
 
 def test_bench_plots_a_one_state_suite_model(tmp_path):
