@@ -155,6 +155,26 @@ def test_star_bouncing_ball_verdicts_match_the_closed_form():
     assert replay(model, prop, cex.initial_state, cex.switch_time, cex.dt, cex.input_signal).violated
 
 
+def test_drivetrain_initial_set_is_dtn02s_segment_scaled_by_0p3():
+    """The ARCH-COMP DTN initial set for theta = 2 (JuliaReach's ARCH2022_AFF_RE Powertrain.jl)
+    is the segment c + [-1, 1] g with c = (-0.0432, -11, 0, 30, 0, 30, 360, -0.0013, 30,
+    -0.0013, 30), g = (0.0056, 4.67, 0, 10, 0, 10, 120, 0.0006, 10, 0.0006, 10). The published
+    30 % file (Hyst's generator) is c' + [-0.3, 0.3] g with c' = c except x8 = x10 = -0.00132:
+    Hyst places those two offsets 2e-5 rad lower than JuliaReach."""
+    model, _ = _imported("DTN-2theta-30")
+    c = np.array([-0.0432, -11, 0, 30, 0, 30, 360, -0.0013, 30, -0.0013, 30, 0])
+    g = np.array([0.0056, 4.67, 0, 10, 0, 10, 120, 0.0006, 10, 0.0006, 10, 0])
+    hyst = c.copy()
+    hyst[[model.state.index("x8"), model.state.index("x10")]] = -0.00132
+    P = model.initial.polytope
+    for s, inside in ((-0.3, True), (0.3, True), (0.0, True), (0.31, False), (-1.0, False)):
+        x = hyst + s * g
+        member = np.all(P.A @ x <= P.b + 1e-9) and np.allclose(P.E @ x, P.f, atol=1e-12)
+        assert member == inside
+    assert not np.allclose(P.E @ c, P.f, atol=1e-6)            # JuliaReach's centre is not in it
+    assert model.initial.mode == "negAngleInit" and model.horizon == 2.0
+
+
 def _hylaa_bench():
     """benchmarks/hylaa_vs_star.py as a module (it is a script, not a package)."""
     import importlib.util
