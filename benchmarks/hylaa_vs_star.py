@@ -144,7 +144,7 @@ def hylaa_automaton_worker(spec: dict) -> None:
             mode.set_inputs(np.array(m["B"], dtype=float), spec["inputs"]["C"], spec["inputs"]["d"])
         if m["inv_g"]:
             mode.set_invariant(np.array(m["inv_H"], dtype=float), m["inv_g"])
-    error = ha.new_mode("error")
+    error = ha.new_mode(spec["error_mode"])
     for k, t in enumerate(spec["transitions"]):
         tr = ha.new_transition(modes[t["source"]], modes[t["target"]], f"t{k}")
         tr.set_guard(np.array(t["H"], dtype=float), t["g"])
@@ -180,7 +180,8 @@ def automaton_spec(model, prop, step: float) -> dict:
     becomes a Hylaa input with ``B = A[:, j]`` and constraints ``l <= u_j <= h``; a constant
     input stays a state with zero flow (exact). Invariants and guards are the constraints'
     half-spaces (strict ones closed); resets ``x := R x + c`` are the matrix ``[[R, c], [0, 1]]``.
-    The unsafe pieces become guards into one ``error`` mode. A timeless initial mode (SpaceEx
+    The unsafe pieces become guards into one ``error`` mode (named apart from the model's modes);
+    a guard without constraints gets the row ``0 <= 1``. A timeless initial mode (SpaceEx
     flow ``false``) is passed over: its successors (initial set and guard) start in the
     targets. Another timeless mode gets the flow ``0``: while Hylaa's steps pass its states stay
     the entry states, which is the set a timeless mode reaches. Raises :class:`Inexpressible`
@@ -204,7 +205,10 @@ def automaton_spec(model, prop, step: float) -> dict:
         hs = halfspaces(constraints, model.symbols)
         if hs is None:
             raise Inexpressible("a nonlinear constraint")
-        return lift(hs[0]), hs[1]
+        H, g = lift(hs[0]), np.asarray(hs[1], dtype=float)
+        if not len(H):                # a guard "true": Hylaa wants at least one row
+            H, g = np.zeros((1, n)), np.ones(1)
+        return H, g
 
     start = model.initial.mode
     skipped = start if model.modes[start].timeless else None
@@ -280,7 +284,11 @@ def automaton_spec(model, prop, step: float) -> dict:
         lo = [u.low for u in model.varying_inputs]
         hi = [u.high for u in model.varying_inputs]
         inputs = {"C": np.vstack([np.eye(len(varying)), -np.eye(len(varying))]).tolist(), "d": hi + [-v for v in lo]}
+    error_mode = "error"
+    while error_mode in model.modes:   # the model may have its own mode of that name
+        error_mode = "_" + error_mode
     return {"kind": "automaton", "name": model.name, "modes": modes, "transitions": transitions,
+            "error_mode": error_mode,
             "errors": errors, "initial": initial, "inputs": inputs, "step": step, "horizon": float(model.horizon)}
 
 
@@ -331,8 +339,11 @@ def hylaa_verdict(result: dict) -> str:
 
 
 #: imported SpaceEx instances under models/spaceex/: (model, cfg, Hylaa time step); the cfgs give
-#: no usable sampling time, so the steps are those of the ARCH-COMP AFF reports' Hylaa runs
-#: (0.01 s for Building), 1/500 of the horizon for Gearbox and 1/1000 for the drivetrain.
+#: no usable sampling time, so the steps are those of Hylaa's ARCH-COMP AFF runs where there is
+#: one (0.01 s for Building; 5e-4 s in Hylaa's examples/drivetrain, the ARCH-COMP 2018 drivetrain
+#: encoding; 0.1 min in its examples/rendezvous), 1/500 of the horizon for Gearbox, 0.01 s for
+#: Platoon (no Hylaa Platoon run in the reports) and the cfg's sampling-time 0.02 for the
+#: filtered oscillator (no ARCH instance).
 AFF = {
     "BLDC01-BDS01": ("Building/BLDC01.xml", "Building/BLDC01-BDS01.cfg", 0.01),
     "BLDF01-BDS01": ("Building/BLDF01.xml", "Building/BLDF01-BDS01.cfg", 0.01),
@@ -341,7 +352,20 @@ AFF = {
     "BLDF01-BDU02": ("Building/BLDF01.xml", "Building/BLDF01-BDU02.cfg", 0.01),
     "GRBX01-MES01": ("Gearbox/GRBX01-MES01.xml", "Gearbox/GRBX01-MES01.cfg", 0.001),
     "DTN-2theta-30": ("Powertrain/drivetrain_2theta_30percent.xml",
-                      "Powertrain/drivetrain_2theta_30percent.cfg", 0.002),
+                      "Powertrain/drivetrain_2theta_30percent-forbidden.cfg", 5e-4),
+    "PLAD01-BND42": ("Platoon/PLAD01-BND.xml", "Platoon/PLAD01-BND42-forbidden.cfg", 0.01),
+    "PLAD01-BND30": ("Platoon/PLAD01-BND.xml", "Platoon/PLAD01-BND30-forbidden.cfg", 0.01),
+    "PLAA01-BND50": ("Platoon/PLAA01-BND.xml", "Platoon/PLAA01-BND50-forbidden.cfg", 0.01),
+    "PLAN01-UNB50": ("Platoon/PLAN01-UNB.xml", "Platoon/PLAN01-UNB50-forbidden.cfg", 0.01),
+    "SRA01-SR0-LOS": ("Rendezvous_ARCH18/SRA01-SR0_.xml", "Rendezvous_ARCH18/SRA01-SR0_-LOS.cfg", 0.1),
+    "SRA01-SR0-collision": ("Rendezvous_ARCH18/SRA01-SR0_.xml", "Rendezvous_ARCH18/SRA01-SR0_-collision.cfg", 0.1),
+    "SRNA01-SR0-LOS": ("Rendezvous_ARCH18/SRNA01-SR0_.xml", "Rendezvous_ARCH18/SRNA01-SR0_-LOS.cfg", 0.1),
+    "bball-height": ("BouncingBall/bball.xml", "BouncingBall/bball-height.cfg", 0.01),
+    "bball-speed": ("BouncingBall/bball.xml", "BouncingBall/bball-speed.cfg", 0.01),
+    "filtered_oscillator-x07": ("FilteredOscillator/filtered_oscillator.xml",
+                                "FilteredOscillator/filtered_oscillator-x07.cfg", 0.02),
+    "filtered_oscillator-x06": ("FilteredOscillator/filtered_oscillator.xml",
+                                "FilteredOscillator/filtered_oscillator-x06.cfg", 0.02),
 }
 
 

@@ -31,9 +31,21 @@ SOURCES = {
     "bball-height": ("BouncingBall/bball.xml", "BouncingBall/bball-height.cfg"),
     "bball-speed": ("BouncingBall/bball.xml", "BouncingBall/bball-speed.cfg"),
     "PLAD01-BND42": ("Platoon/PLAD01-BND.xml", "Platoon/PLAD01-BND42-forbidden.cfg"),
+    "PLAD01-BND30": ("Platoon/PLAD01-BND.xml", "Platoon/PLAD01-BND30-forbidden.cfg"),
+    "SRA01-SR0-LOS": ("Rendezvous_ARCH18/SRA01-SR0_.xml", "Rendezvous_ARCH18/SRA01-SR0_-LOS.cfg"),
+    "SRA01-SR0-collision": ("Rendezvous_ARCH18/SRA01-SR0_.xml", "Rendezvous_ARCH18/SRA01-SR0_-collision.cfg"),
+    "SRNA01-SR0-LOS": ("Rendezvous_ARCH18/SRNA01-SR0_.xml", "Rendezvous_ARCH18/SRNA01-SR0_-LOS.cfg"),
+    "filtered_oscillator-x07": ("FilteredOscillator/filtered_oscillator.xml",
+                                "FilteredOscillator/filtered_oscillator-x07.cfg"),
+    "filtered_oscillator-x06": ("FilteredOscillator/filtered_oscillator.xml",
+                                "FilteredOscillator/filtered_oscillator-x06.cfg"),
+    "DTN-2theta-30": ("Powertrain/drivetrain_2theta_30percent.xml",
+                      "Powertrain/drivetrain_2theta_30percent-forbidden.cfg"),
 }
 #: the imported file's name where it is not the instance's
-FILE = {"PLAD01-BND42": "PLAD01-BND42-forbidden"}
+FILE = {"PLAD01-BND42": "PLAD01-BND42-forbidden", "PLAD01-BND30": "PLAD01-BND30-forbidden",
+        "SRA01-SR0-LOS": "SRA01-SR0_-LOS", "SRA01-SR0-collision": "SRA01-SR0_-collision",
+        "SRNA01-SR0-LOS": "SRNA01-SR0_-LOS", "DTN-2theta-30": "drivetrain_2theta_30percent-forbidden"}
 THRESHOLD = -0.00078                     # BDU02: forbidden x25 < -7.8e-4 at t = 20
 T_END = 20.0
 
@@ -143,15 +155,41 @@ def test_star_bouncing_ball_verdicts_match_the_closed_form():
     assert replay(model, prop, cex.initial_state, cex.switch_time, cex.dt, cex.input_signal).violated
 
 
-def test_hylaa_automaton_of_the_imported_bouncing_ball():
-    """benchmarks/hylaa_vs_star.py turns the imported automaton into Hylaa's matrices over
-    (x, v, 1): x' = v, v' = -1; the bounce guard x <= 0, v <= 0 (closed) and reset v := -0.75 v;
-    the forbidden v <= -4.5 as a guard into the error mode; the initial box with 1 == 1."""
+def test_drivetrain_initial_set_is_dtn02s_segment_scaled_by_0p3():
+    """The ARCH-COMP DTN initial set for theta = 2 (JuliaReach's ARCH2022_AFF_RE Powertrain.jl)
+    is the segment c + [-1, 1] g with c = (-0.0432, -11, 0, 30, 0, 30, 360, -0.0013, 30,
+    -0.0013, 30), g = (0.0056, 4.67, 0, 10, 0, 10, 120, 0.0006, 10, 0.0006, 10). The published
+    30 % file (Hyst's generator) is c' + [-0.3, 0.3] g with c' = c except x8 = x10 = -0.00132:
+    Hyst places those two offsets 2e-5 rad lower than JuliaReach."""
+    model, _ = _imported("DTN-2theta-30")
+    c = np.array([-0.0432, -11, 0, 30, 0, 30, 360, -0.0013, 30, -0.0013, 30, 0])
+    g = np.array([0.0056, 4.67, 0, 10, 0, 10, 120, 0.0006, 10, 0.0006, 10, 0])
+    hyst = c.copy()
+    hyst[[model.state.index("x8"), model.state.index("x10")]] = -0.00132
+    P = model.initial.polytope
+    for s, inside in ((-0.3, True), (0.3, True), (0.0, True), (0.31, False), (-1.0, False)):
+        x = hyst + s * g
+        member = np.all(P.A @ x <= P.b + 1e-9) and np.allclose(P.E @ x, P.f, atol=1e-12)
+        assert member == inside
+    assert not np.allclose(P.E @ c, P.f, atol=1e-6)            # JuliaReach's centre is not in it
+    assert model.initial.mode == "negAngleInit" and model.horizon == 2.0
+
+
+def _hylaa_bench():
+    """benchmarks/hylaa_vs_star.py as a module (it is a script, not a package)."""
     import importlib.util
 
     spec_ = importlib.util.spec_from_file_location("hylaa_vs_star", ROOT / "benchmarks" / "hylaa_vs_star.py")
     bench = importlib.util.module_from_spec(spec_)
     spec_.loader.exec_module(bench)
+    return bench
+
+
+def test_hylaa_automaton_of_the_imported_bouncing_ball():
+    """benchmarks/hylaa_vs_star.py turns the imported automaton into Hylaa's matrices over
+    (x, v, 1): x' = v, v' = -1; the bounce guard x <= 0, v <= 0 (closed) and reset v := -0.75 v;
+    the forbidden v <= -4.5 as a guard into the error mode; the initial box with 1 == 1."""
+    bench = _hylaa_bench()
     model, prop = _ball("bball-speed")
     assert model.state == ["x", "v"]
     spec = bench.automaton_spec(model, prop, 0.1)
@@ -166,6 +204,95 @@ def test_hylaa_automaton_of_the_imported_bouncing_ball():
     H, g = np.array(init["H"]), np.array(init["g"])
     for point, inside in (([10.1, 0, 1], True), ([10.3, 0, 1], False), ([10.1, 0, 0], False)):
         assert bool(np.all(H @ point <= g + 1e-12)) is inside
+
+
+def _imported(name):
+    model = load_model(IMPORTED / "models" / f"{FILE.get(name, name)}.yaml")
+    return model, [bind(p, model) for p in load_properties(IMPORTED / "properties" / f"{FILE.get(name, name)}.yaml")]
+
+
+def _platoon_least_spacing(model, horizon, h=0.002):
+    """The least e1, e2, e3 any lead acceleration aL(t) in [-9, 1] reaches by ``horizon`` (PLAD01).
+
+    From the rest state x(0) = 0, e(T) = int_0^T g(T, s) aL(s) ds with g(T, s) the e row of
+    Phi(T, s) B (Phi the transition matrix of the mode schedule: communication on [0, 5),
+    [10, 15), ..., no communication between), so min e(T) = int min(-9 g, g) ds: bang-bang on
+    the sign of g. Evaluated exactly for aL piecewise constant on steps of ``h`` (expm of the
+    augmented step), for T on a grid of 0.25; returns the least value over the grid."""
+    u = model.bounded_inputs[0]
+    keep = [i for i, name in enumerate(model.state) if name not in ("t", "break_pattern_t", u.name)]
+    rows = [keep.index(model.state.index(e)) for e in ("e1", "e2", "e3")]
+    steps = []
+    for name in ("communication__communication__loc1", "no_communication__no_communication__loc1"):
+        A = model.modes[name].linear[0]
+        n = len(keep)
+        M = np.zeros((n + 1, n + 1))
+        M[:n, :n], M[:n, n] = A[np.ix_(keep, keep)], A[keep, u.index]
+        E = sl.expm(h * M)
+        steps.append((E[:n, :n], E[:n, n]))
+    least = np.zeros(3)
+    for T in np.arange(0.25, horizon + 1e-9, 0.25):
+        c, low = np.eye(len(keep))[rows], np.zeros(3)
+        for k in range(int(round(T / h)) - 1, -1, -1):
+            E, G = steps[int((k + 0.5) * h // 5) % 2]
+            g = c @ G
+            low += np.minimum(u.low * g, u.high * g)
+            c = c @ E
+        least = np.minimum(least, low)
+    return least
+
+
+def test_plad01_least_spacing_over_the_published_horizon_clears_30():
+    """PLAD01-BND30 (e1, e2, e3 >= -30) is safe over the cfg's horizon 5: the least spacing the
+    worst lead acceleration reaches is about -18.98 (e1 at t = 5); star agrees, and the worst
+    Monte Carlo run stays above it."""
+    model, props = _imported("PLAD01-BND30")
+    assert model.horizon == 5.0 and model.bounded_inputs[0].varying
+    least = _platoon_least_spacing(model, model.horizon)
+    assert -19.0 < least[0] < -18.9 and least[1] > -6.1 and least[2] > -2.4
+    assert all(STAR.check(model, prop, {}).status.value == "SAFE" for prop in props)
+
+
+def test_filtered_oscillator_x_flows_towards_plus_minus_0p7():
+    """The closed form behind filtered_oscillator-x07/-x06: every location's x flow is
+    x' = -2 (x - x*) with x* = +-0.7, so x stays in [-0.7, 0.7] from the initial x in [0.2, 0.3];
+    in pp (x* = 0.7, y' = -(y + 0.7)) the corner x0 = 0.3, y0 = 0.1 reaches x = 0.6 at
+    t = ln(4)/2 with y = -0.3 still above the switching line y = -x/1.4 (a solve_ivp run agrees)."""
+    model, (prop,) = _imported("filtered_oscillator-x07")
+    ix, iy = model.state.index("x"), model.state.index("y")
+    targets = set()
+    for mode in model.modes.values():
+        A, b = mode.linear
+        assert A[ix, ix] == -2 and not np.any(np.delete(A[ix], ix))
+        targets.add(round(-b[ix] / A[ix, ix], 12))
+    assert targets == {0.7, -0.7}
+    (A, b) = model.modes[model.initial.mode].linear
+    x0 = np.zeros(len(model.state))
+    x0[ix], x0[iy] = 0.3, 0.1
+    t_hit = np.log(4) / 2
+    sol = solve_ivp(lambda t, x: A @ x + b, (0, t_hit), x0, rtol=1e-10, atol=1e-12)
+    x, y = sol.y[ix, -1], sol.y[iy, -1]
+    assert x == pytest.approx(0.6, abs=1e-8) and y == pytest.approx(-0.3, abs=1e-8) and y > -x / 1.4
+    assert model.initial.mode.startswith("pp")
+
+
+def test_hylaa_automaton_of_unguarded_hops_and_a_model_with_its_own_error_mode():
+    """The filtered oscillator's hops have no guard: Hylaa gets the true row 0 <= 1 for each.
+    The drivetrain has a mode named error: Hylaa's error mode is named apart from it, and the
+    forbidden pieces (t >= 2 in three modes) become guards from those modes only."""
+    bench = _hylaa_bench()
+    model, prop, _ = bench.load_aff("filtered_oscillator-x06")
+    spec = bench.automaton_spec(model, prop, 0.02)
+    assert len(spec["transitions"]) == 4
+    for tr in spec["transitions"]:
+        assert not np.any(tr["H"]) and tr["g"] == [1.0]
+    model, prop, _ = bench.load_aff("DTN-2theta-30")
+    spec = bench.automaton_spec(model, prop, 5e-4)
+    assert "error" in spec["modes"] and spec["error_mode"] not in spec["modes"]
+    assert sorted(e["source"] for e in spec["errors"]) == ["deadzone", "negAngle", "negAngleInit"]
+    t = model.state.index("t")
+    for e in spec["errors"]:
+        assert np.allclose(e["H"], [np.eye(len(spec["modes"]["error"]["A"]))[t] * -1]) and e["g"] == [-2.0]
 
 
 def test_bench_plots_a_one_state_suite_model(tmp_path):
