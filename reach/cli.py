@@ -130,7 +130,7 @@ def cmd_check_spaceex(args) -> int:
     _verbose(args)
     results, model, docs, bound = check_spaceex(args.model, args.properties, args.backend,
                                                 _parse_options(args.option))
-    for finding in model.lints:
+    for finding in _import_findings(docs) + model.lints:
         print(printable(f"warning: {finding}"), file=sys.stderr)
     saved = {}
     for r in results:
@@ -165,9 +165,17 @@ def _term_hit(docs, model, cex) -> str:
 def cmd_import(args) -> int:
     from reach.model.spaceex import documents, write_yaml
 
-    model_file, prop_file = write_yaml(documents(args.model, args.config), args.out)
+    docs = documents(args.model, args.config)
+    model_file, prop_file = write_yaml(docs, args.out)
+    for finding in _import_findings(docs):
+        print(printable(f"warning: {finding}"), file=sys.stderr)
     print(f"wrote {model_file}" + (f" and {prop_file}" if prop_file else " (the cfg forbids nothing)"))
     return 0
+
+
+def _import_findings(docs) -> list[str]:
+    """What the SpaceEx import noticed about the network (labels that block transitions)."""
+    return [f"{docs.model['notes']['source']}: {line}" for line in docs.model["notes"].get("blocked", [])]
 
 
 def _writable(path: Path, option: str) -> None:

@@ -215,6 +215,26 @@ def test_network_synchronises_on_labels_and_keeps_reachable_locations(tmp_path):
     assert props[0].raw == {"id": "m", "kind": "safety", "modes": ["on__busy"], "avoid": ["y >= 3"]}
 
 
+def test_a_label_no_transition_of_a_declaring_component_takes_blocks_and_is_reported(tmp_path, capsys):
+    """Component b declares 'go' but takes it nowhere: a's 'go' transitions can never
+    synchronise. The composition has none (SpaceEx semantics), and import and check say why."""
+    idle_b = NETWORK.replace('<transition source="1" target="2" asap="true"><label>go</label></transition>\n', "")
+    xml, cfg = write(tmp_path, idle_b, 'system = sys\ninitially = "loc(A)==off & loc(B)==idle & '
+                     '0 <= x <= 0.5 & y == 0"\nforbidden = "y >= 3"\ntime-horizon = 4\n')
+    model, _, _ = load_spaceex(xml, cfg)
+    assert list(model.modes) == ["off__idle"] and not model.transitions
+    for argv in (["import", str(xml), str(cfg), "--out", str(tmp_path / "out")],
+                 ["check", str(xml), str(cfg), "-b", "montecarlo", "-o", "samples=20"]):
+        main(argv)
+        err = capsys.readouterr().err.splitlines()
+        assert err == [f"warning: {xml}: label 'go': B declares it but no transition of it takes it, so "
+                       "the transitions labelled 'go' in A are never taken (synchronisation on shared labels)"]
+    xml, cfg = write(tmp_path, NETWORK, 'system = sys\ninitially = "loc(A)==off & loc(B)==idle & '
+                     '0 <= x <= 0.5 & y == 0"\nforbidden = "y >= 3"\ntime-horizon = 4\n')
+    main(["import", str(xml), str(cfg), "--out", str(tmp_path / "out2")])
+    assert capsys.readouterr().err == ""
+
+
 def test_unknown_names_in_initially_are_dropped_when_satisfiable(tmp_path):
     xml, cfg = write(tmp_path, NETWORK, 'system = sys\ninitially = "loc(A)==off & loc(B)==idle & '
                      'x == 0 & y == 0 & t == 0 & loc(C) == c"\ntime-horizon = 1\n')

@@ -192,6 +192,26 @@ def compose(flat: Flat, initial_locations: list[set[str] | None], file: str) -> 
                     raise InputError(f"the composition has more than {MAX_LOCATIONS} locations", file)
 
 
+def blocked_labels(flat: Flat) -> list[str]:
+    """One line per label that blocks transitions for good: an instance has the label in its
+    alphabet (a label param) but no transition takes it, so the transitions of the other
+    instances labelled with it can never synchronise (a slip more often than a wish)."""
+    takers: dict[str, list[str]] = {}
+    for instance in flat.instances:
+        for label in {instance.label(t.label) for t in instance.component.transitions if t.label}:
+            takers.setdefault(label, []).append(instance.path or instance.component.id)
+    found = []
+    for label, taking in takers.items():
+        idle = [i.path or i.component.id for i in flat.instances
+                if label in i.alphabet and (i.path or i.component.id) not in taking]
+        if idle:
+            found.append(f"label '{label}': {', '.join(idle)} declare{'s' if len(idle) == 1 else ''} it "
+                         f"but no transition of {'it' if len(idle) == 1 else 'theirs'} takes it, so the "
+                         f"transitions labelled '{label}' in {', '.join(taking)} are never taken "
+                         f"(synchronisation on shared labels)")
+    return found
+
+
 def _product_location(inst: list[Instance], key) -> ProductLocation:
     locs: list[Location] = [i.component.locations[k] for i, k in zip(inst, key)]
     return ProductLocation(key, tuple(loc.name for loc in locs),

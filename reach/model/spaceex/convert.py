@@ -30,7 +30,7 @@ from reach import lp
 from reach.errors import InputError, Where
 from reach.model.constraints import affine_coefficients
 from reach.model.expr import CONSTANTS, FUNCTIONS, parse_expr
-from reach.model.spaceex.compose import Flat, Instance, Part
+from reach.model.spaceex.compose import Flat, Instance, Part, blocked_labels
 from reach.model.spaceex.formula import (Const, FormulaError, Loc, Relation, Token, conjunction, formula_error,
                                          is_primed_name, names_in, parse_formula, to_python)
 
@@ -526,6 +526,9 @@ class DocumentBuilder(Converter):
                 notes[key] = cfg.number(key)
         if self.notes:
             notes["dropped"] = list(self.notes)
+        blocked = blocked_labels(self.flat)
+        if blocked:
+            notes["blocked"] = blocked
         data["notes"] = notes
         props, plines, pid = self.forbidden_doc()
         return Documents(data, lines, props, plines, pid)
