@@ -206,6 +206,9 @@ class _Explorer:
         if self.stats.chains > self.opt.max_stars:
             raise _Stop(Status.UNKNOWN, f"star budget of {self.opt.max_stars} exhausted "
                                         f"(option max_stars)")
+        if mode in self.data.timeless:
+            self._instant(mode, star, path, point)
+            return
         flow, h = self.flows[mode], self.h
         count = max(1, int(np.ceil((self.horizon - t0) / h - 1e-9)))
         handoff = block is not None and block < count
@@ -304,6 +307,25 @@ class _Explorer:
             end = grid_star(count) if dev is None else _plus_box(grid_star(count), dev[count])
             return end.intersect_halfspaces(Hi, gi), np.concatenate([point, np.zeros(end.nvars - point.size)])
         return None
+
+    def _instant(self, mode: str, star: Star, path: _Path, point):
+        """Explore ``star`` in a mode where no time passes (``flow false``): the star itself is
+        everything the mode holds, checked once, and its jumps fire from it at once.
+
+        Why this covers the mode: every state keeps its value there (rate 0) and only the
+        explored clock, which the model added and no guard, invariant, reset or property
+        mentions, could advance. A run that waited would leave with the same state later, and
+        the automaton does not depend on that clock, so all it could do after is a time-shifted
+        part of what the run that jumped at once does, cut earlier by the horizon. The instant
+        owns no coefficients: it can neither be bisected nor blamed."""
+        if self.sweep and min(path.abort, -star.support_bounds(-np.eye(self.n)[self.clock])[0]) >= self.cutoff:
+            return
+        self.stats.cells += 1
+        block = star.nvars
+        if self.opt.keep_sets:
+            self._keep(mode, (star,))
+        self._check_segment(mode, star, path, block, False)
+        self._jump_from(mode, star, path, block, False, point)
 
     def _keep_chain(self, mode: str, grid_star, centers, bases, error, cells):
         """The screened-out cells of a chain as set pieces (option ``keep_sets``; the others are
