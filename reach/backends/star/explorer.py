@@ -118,8 +118,7 @@ class _Explorer:
                              f"cells; at most {MAX_CELLS:.0e} (use a larger step)", field="options.star.step")
         self.flows, self.invariants, self.jumps = dict(data.flows), data.invariants, data.fired
         self.max_jumps = np.inf if options.max_jumps is None else options.max_jumps
-        from reach.model.lint import zero_dwell_cycles
-        self.stall_limit = STALL_JUMPS if zero_dwell_cycles(model)[0] else np.inf
+        self.stall_limit = STALL_JUMPS if data.zero_dwell else np.inf
         self.aggregate_after = None if self.sweep else options.aggregate_after
         self.last_progress = time.perf_counter()
         self.pieces = {mode: [_Piece(data.widen(p.H, p.g)[0], p.g, p.strict, p.label) for p in pieces]

@@ -90,9 +90,12 @@ class _LinearModel:
     extended ones (``n`` is then ``model.n + 1`` and ``added_clock`` is True).
 
     ``timeless``: the modes where no time may pass (SpaceEx ``flow false``; every state has
-    rate 0 there, so such a model always gets its own clock)."""
+    rate 0 there, so such a model always gets its own clock); ``zero_dwell``: whether the
+    model may have a zero-dwell cycle (:mod:`reach.model.lint`)."""
 
     def __init__(self, model):
+        from reach.model.lint import zero_dwell_cycles
+
         clock = _global_clock(model)
         self.added_clock = clock is None
         self.n = model.n + self.added_clock
@@ -104,6 +107,7 @@ class _LinearModel:
                        and all(j is not None for js in self.jumps.values() for j in js))
         self.varying = [u for u in getattr(model, "bounded_inputs", []) if u.varying]
         self.timeless = {name for name, mode in model.modes.items() if mode.timeless}
+        self.zero_dwell = bool(zero_dwell_cycles(model)[0])        # a search with LPs: once
         if self.linear:
             self.flows = {name: self._flow(*self._with_clock(*mode.linear))
                           for name, mode in model.modes.items()}
