@@ -125,6 +125,7 @@ class _Explorer:
                        for mode, pieces in _unsafe_pieces(prop).items()} if data.added_clock \
             else _unsafe_pieces(prop)
         self.relevant = _modes_leading_to(model, set(self.pieces))
+        self._guard_rows: dict[str, np.ndarray] = {}       # per mode, see _transient
         self.stats = _Stats()
         self.unresolved: list[_Witness] = []
         self.replayed: list = []
@@ -449,8 +450,7 @@ class _Explorer:
         block = start.nvars
         kept_sets = len(self.sets)
         try:
-            hull = seg.box_bound()
-            if not final and np.any(error > ERROR_RATIO * np.maximum(-hull.low, hull.high)):
+            if not final and self._transient(mode, seg, error):
                 raise _Refine(None, block)          # a fast transient: refine before checking
             if self.opt.keep_sets:
                 self._keep(mode, (seg,))
@@ -470,6 +470,22 @@ class _Explorer:
             mid_point = self._point(mid, point)
             if mid_point is not None:
                 self._cell(mode, mid, half, path, depth + 1, mid_point, pending, spread)
+
+    def _transient(self, mode: str, seg: Star, error) -> bool:
+        """Whether the interpolation error of a segment, along a guard row of the mode's
+        relevant jumps, exceeds ``ERROR_RATIO`` of the row's magnitude over the segment. The
+        error enters nothing but the segment (the grid stars are exact): a fast transient in
+        a state no guard reads is left alone, and along the unsafe pieces the check itself
+        refines where the error is what keeps the segment from clearing a piece
+        (:meth:`_check_segment`)."""
+        rows = self._guard_rows.get(mode)
+        if rows is None:
+            rows = self._guard_rows[mode] = np.vstack(
+                [np.zeros((0, self.n))] + [j.H for j in self.jumps[mode] if j.target in self.relevant])
+        if not rows.shape[0]:
+            return False
+        magnitude = seg.support_bounds(np.vstack([rows, -rows])).reshape(2, -1).max(axis=0)
+        return bool(np.any(np.abs(rows) @ error > ERROR_RATIO * magnitude))
 
     def _check_segment(self, mode: str, seg: Star, path: _Path, block: int, own_open: bool):
         """Check every unsafe piece of ``mode`` on a segment.
@@ -586,8 +602,10 @@ class _Explorer:
                 if successor is None:
                     continue
             descended = path.descend(clock, block, own_open, earliest, self.h)
-            if pending is not None:
-                pending.setdefault(index, []).append((successor, descended))
+            if pending is not None:             # bound propagation drops a member proved empty
+                member = _tightened(successor, len(g) + len(self.invariants[jump.target][1]))
+                if member is not None:
+                    pending.setdefault(index, []).append((member, descended))
                 continue
             # the known point's own chord: (a, lam a, lam, 0) from lam = 0 to 1, or its ray
             # (a, s) from s = 0 to 1 in a constant-flow mode
