@@ -308,6 +308,14 @@ class _Explorer:
             return end.intersect_halfspaces(Hi, gi), np.concatenate([point, np.zeros(end.nvars - point.size)])
         return None
 
+    def _past_cutoff(self, start: Star, path: _Path) -> bool:
+        """In the safe-abort sweep: whether every run from ``start`` aborted, or (without an
+        abort on its path) is, at or after the cutoff (nothing later needs a check)."""
+        if not self.sweep:
+            return False
+        since = path.abort if path.abort < np.inf else -start.support_bounds(-np.eye(self.n)[self.clock])[0]
+        return since >= self.cutoff
+
     def _instant(self, mode: str, star: Star, path: _Path, point):
         """Explore ``star`` in a mode where no time passes (``flow false``): the star itself is
         everything the mode holds, checked once, and its jumps fire from it at once.
@@ -318,7 +326,7 @@ class _Explorer:
         the automaton does not depend on that clock, so all it could do after is a time-shifted
         part of what the run that jumped at once does, cut earlier by the horizon. The instant
         owns no coefficients: it can neither be bisected nor blamed."""
-        if self.sweep and min(path.abort, -star.support_bounds(-np.eye(self.n)[self.clock])[0]) >= self.cutoff:
+        if self._past_cutoff(star, path):
             return
         self.stats.cells += 1
         block = star.nvars
@@ -440,11 +448,8 @@ class _Explorer:
         ``spread``: bound of the input effect on the cell (None without inputs); halves keep
         it (it only grows with time).
         """
-        if self.sweep:
-            since = path.abort if path.abort < np.inf else \
-                -start.support_bounds(-np.eye(self.n)[self.clock])[0]
-            if since >= self.cutoff:
-                return
+        if self._past_cutoff(start, path):
+            return
         seg, error = self._segment(mode, start, h, spread)
         final = depth >= self.opt.max_refinements or self.opt.discrete_time or self.flows[mode].drift
         block = start.nvars
