@@ -4,8 +4,10 @@ Problems have the form
 
     minimize  c^T x   subject to  A_ub x <= b_ub,  A_eq x = b_eq,  lo <= x <= hi
 
-with free variables unless ``bounds`` says otherwise (scipy's default of ``x >= 0`` is
-*not* used). They are solved with HiGHS through :func:`scipy.optimize.linprog`. The result
+with free variables unless ``bounds`` says otherwise (no default of ``x >= 0``). They are
+solved with HiGHS through highspy's bare solver (the model passed once, the solver run
+directly: scipy's ``linprog`` around the same solver costs milliseconds a call in option
+checks and matrix conversions, more than the small LPs of a check take). The result
 is an :class:`LPResult` whose ``status`` is one of ``"optimal"``, ``"infeasible"`` or
 ``"unbounded"``; anything else (iteration limit, numerical trouble) raises
 :class:`LPError`, so a caller never mistakes a solver failure for an answer.
@@ -24,7 +26,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import linprog
 
 OPTIMAL, INFEASIBLE, UNBOUNDED = "optimal", "infeasible", "unbounded"
 
@@ -64,13 +65,40 @@ class LPResult:
 
 
 def _bounds(bounds, n: int):
+    """``(lo, hi)`` arrays from None (all free), ``(lo, hi)`` pairs (None for infinite) or a
+    pair of arrays."""
     if bounds is None:
-        return [(None, None)] * n
+        return np.full(n, -np.inf), np.full(n, np.inf)
     if isinstance(bounds, tuple) and len(bounds) == 2 and np.ndim(bounds[0]) == 1:
-        lo, hi = bounds
-        return [(None if not np.isfinite(a) else float(a), None if not np.isfinite(b) else float(b))
-                for a, b in zip(lo, hi)]
-    return bounds
+        return np.asarray(bounds[0], dtype=float), np.asarray(bounds[1], dtype=float)
+    lo = np.array([-np.inf if a is None else a for a, _ in bounds], dtype=float)
+    hi = np.array([np.inf if b is None else b for _, b in bounds], dtype=float)
+    return lo, hi
+
+
+def _model(n: int, bounds, A_ub=None, b_ub=None, A_eq=None, b_eq=None, options=None):
+    """A HiGHS model (highspy's bare solver: the wrapper class prints a banner) over ``n``
+    variables with ``lo <= x <= hi`` (``bounds`` as in :func:`_bounds`), the rows
+    ``A_ub x <= b_ub`` and ``A_eq x = b_eq`` (None or empty: none) and HiGHS ``options``."""
+    from highspy import _core as highspy
+
+    infinity = highspy.kHighsInf
+    lo, hi = _bounds(bounds, n)
+    solver = highspy._Highs()
+    solver.setOptionValue("output_flag", False)
+    for key, value in (options or {}).items():
+        solver.setOptionValue(key, value)
+    solver.addVars(n, np.where(np.isfinite(lo), lo, -infinity), np.where(np.isfinite(hi), hi, infinity))
+    for A, low, high in ((A_ub, None, b_ub), (A_eq, b_eq, b_eq)):
+        if A is None or np.size(A) == 0:
+            continue
+        A = np.asarray(A, dtype=float).reshape(-1, n)
+        high = np.asarray(high, dtype=float).reshape(-1)
+        low = np.full(A.shape[0], -infinity) if low is None else np.asarray(low, dtype=float).reshape(-1)
+        nz = A != 0
+        starts = np.concatenate([[0], np.cumsum(nz.sum(axis=1))[:-1]]).astype(np.int32)
+        solver.addRows(A.shape[0], low, high, int(nz.sum()), starts, np.nonzero(nz)[1].astype(np.int32), A[nz])
+    return solver
 
 
 def minimize(c, A_ub=None, b_ub=None, *, A_eq=None, b_eq=None, bounds=None,
@@ -78,30 +106,41 @@ def minimize(c, A_ub=None, b_ub=None, *, A_eq=None, b_eq=None, bounds=None,
     """Minimize ``c^T x`` over the polyhedron; ``bounds`` is None (all free), a list of
     ``(lo, hi)`` pairs (None for infinite) or a pair of arrays ``(lo, hi)``. ``tolerance``:
     HiGHS's primal and dual feasibility tolerance (None: its default, about 1e-7)."""
+    from highspy import _core as highspy
+
     c = np.asarray(c, dtype=float)
     n = c.size
     if n == 0:                  # no variables: the constraints are plain inequalities
         ok = (A_ub is None or np.all(np.asarray(b_ub) >= -1e-9)) and \
              (A_eq is None or np.allclose(b_eq, 0.0, atol=1e-9))
         return LPResult(OPTIMAL, 0.0, np.zeros(0)) if ok else LPResult(INFEASIBLE)
-    if A_ub is not None and np.size(A_ub) == 0:
-        A_ub, b_ub = None, None
-    if A_eq is not None and np.size(A_eq) == 0:
-        A_eq, b_eq = None, None
     options = {} if tolerance is None else {"primal_feasibility_tolerance": tolerance,
                                             "dual_feasibility_tolerance": tolerance}
-    res = linprog(c, A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=b_eq, bounds=_bounds(bounds, n),
-                  method="highs", options=options)
-    if res.status not in (0, 3):    # presolve's "infeasible" or "unknown": ask again without it
-        res = linprog(c, A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=b_eq, bounds=_bounds(bounds, n),
-                      method="highs", options={**options, "presolve": False})
-    if res.status == 0:
-        return LPResult(OPTIMAL, float(res.fun), np.asarray(res.x, dtype=float))
-    if res.status == 2:
+    solver = _model(n, bounds, A_ub, b_ub, A_eq, b_eq, options)
+    solver.changeColsCost(n, np.arange(n, dtype=np.int32), c)
+    status = highspy.HighsModelStatus
+    s = _run(solver)
+    if s not in (status.kOptimal, status.kUnbounded):   # presolve's "infeasible" or "unknown": again without it
+        solver.setOptionValue("presolve", "off")
+        solver.clearSolver()
+        s = _run(solver)
+    if s == status.kOptimal:
+        return LPResult(OPTIMAL, float(solver.getInfo().objective_function_value),
+                        np.asarray(solver.getSolution().col_value, dtype=float))
+    if s == status.kInfeasible:
         return LPResult(INFEASIBLE)
-    if res.status == 3:
+    if s == status.kUnbounded:
         return LPResult(UNBOUNDED)
-    raise LPError(f"LP solver stopped without a verdict: {res.message}")
+    raise LPError(f"LP solver stopped without a verdict: {solver.modelStatusToString(s)}")
+
+
+def _run(solver):
+    """Solve; the model status (``kSolveError`` if the run itself failed)."""
+    from highspy import _core as highspy
+
+    if solver.run() == highspy.HighsStatus.kError:
+        return highspy.HighsModelStatus.kSolveError
+    return solver.getModelStatus()
 
 
 def maximize(c, A_ub=None, b_ub=None, *, A_eq=None, b_eq=None, bounds=None,
@@ -125,50 +164,34 @@ def feasible_point(A_ub=None, b_ub=None, *, A_eq=None, b_eq=None, bounds=None, n
 
 def maximize_many(C, A_ub, b_ub, bounds) -> np.ndarray:
     """``max_x C_k . x`` over ``{A_ub x <= b_ub, lo <= x <= hi}`` for every row ``C_k``:
-    one HiGHS model (highspy), re-solved from the previous basis with each objective (the
-    polyhedron is passed once). ``bounds``: a pair of arrays ``(lo, hi)``. Values are read
-    as support functions: ``-inf`` for all rows if the polyhedron is empty, ``+inf`` where
-    unbounded. A row the warm start does not decide as optimal or unbounded is solved again
-    from scratch (an infeasible verdict is trusted only then); ``nan`` where that decides
-    nothing either (the caller falls back to a bound it can argue without the LP)."""
-    from highspy import _core as highspy     # the bare solver: the wrapper class prints a banner
+    one HiGHS model, re-solved from the previous basis with each objective (the polyhedron
+    is passed once), without presolve (these LPs are small and many: presolve costs more
+    than it saves, about a quarter of the time on the aggregates of GRBX01-MES01).
+    ``bounds``: a pair of arrays ``(lo, hi)``. Values are read as support functions:
+    ``-inf`` for all rows if the polyhedron is empty, ``+inf`` where unbounded. A row the
+    warm start does not decide as optimal or unbounded is solved again from scratch (an
+    infeasible verdict is trusted only then); ``nan`` where that decides nothing either (the
+    caller falls back to a bound it can argue without the LP)."""
+    from highspy import _core as highspy
 
     C = np.atleast_2d(np.asarray(C, dtype=float))
-    A = np.asarray(A_ub, dtype=float).reshape(-1, C.shape[1])
-    b = np.asarray(b_ub, dtype=float).reshape(-1)
-    lo, hi = (np.where(np.isfinite(v), v, s * highspy.kHighsInf) for v, s in
-              ((np.asarray(bounds[0], dtype=float), -1), (np.asarray(bounds[1], dtype=float), 1)))
     n = C.shape[1]
-    solver = highspy._Highs()
-    solver.setOptionValue("output_flag", False)
-    solver.addVars(n, lo, hi)
-    if A.shape[0]:
-        nz = A != 0
-        starts = np.concatenate([[0], np.cumsum(nz.sum(axis=1))[:-1]]).astype(np.int32)
-        cols = np.nonzero(nz)[1].astype(np.int32)
-        solver.addRows(A.shape[0], np.full(A.shape[0], -highspy.kHighsInf), b, int(nz.sum()),
-                       starts, cols, A[nz])
+    solver = _model(n, bounds, A_ub, b_ub, options={"presolve": "off"})
     solver.changeObjectiveSense(highspy.ObjSense.kMaximize)
     index = np.arange(n, dtype=np.int32)
     values = np.empty(C.shape[0])
     status = highspy.HighsModelStatus
-    k, fresh, presolve = 0, False, True
+    k, fresh = 0, True                  # the first run starts from scratch
     while k < C.shape[0]:
         solver.changeColsCost(n, index, C[k])
-        solver.run()
-        s = solver.getModelStatus()
+        s = _run(solver)
         if s == status.kOptimal:
             values[k] = solver.getInfo().objective_function_value
         elif s == status.kUnbounded:
             values[k] = np.inf
-        elif not fresh:         # anything else (infeasible too) once more, from scratch
+        elif not fresh:                 # anything else (infeasible too) once more, from scratch
             solver.clearSolver()
             fresh = True
-            continue
-        elif presolve:          # infeasible or undecided: once more without presolve (module doc)
-            solver.setOptionValue("presolve", "off")
-            solver.clearSolver()
-            presolve = False
             continue
         elif s == status.kInfeasible:
             return np.full(C.shape[0], -np.inf)

@@ -167,9 +167,14 @@ class Star:
         return value
 
     def box_bound(self) -> Box:
-        """An interval enclosure from the coefficient box alone (no LP)."""
-        eye = np.eye(self.dim)
-        return Box(-self.support_bounds(-eye), self.support_bounds(eye))
+        """An interval enclosure from the coefficient box alone (no LP): the support bounds
+        along ``+-e_i``, ``c_i + V_i a_c +- |V_i| a_r``."""
+        if not np.all(np.isfinite(self.box.radius)):
+            eye = np.eye(self.dim)
+            return Box(-self.support_bounds(-eye), self.support_bounds(eye))
+        mid = self.center + self.basis @ self.box.center
+        rad = np.abs(self.basis) @ self.box.radius
+        return Box(mid - rad, mid + rad)
 
 
 # ---------------------------------------------------------------------- the segment

@@ -50,6 +50,11 @@ within the source invariant, lies inside the guard of another transition with th
 target and reset is *subsumed* (its successors are contained in the other's) and is not
 fired separately (an urgent time-out at the end of a window, for example).
 
+Timeless modes. Where no time may pass (SpaceEx ``flow false``, e.g. the ``start`` mode an
+import adds for several initial locations) the entry star is the whole of what the mode holds:
+it is checked once and its jumps fire from it at once, one successor per transition instead of
+one per cell of a chain (:meth:`_Explorer._instant`).
+
 Jumps. ``max_jumps`` bounds the jumps along a path (none by default). When the model may
 have a zero-dwell cycle (:mod:`reach.model.lint`), a path may take at most ``STALL_JUMPS``
 jumps while its earliest clock advances by less than one time step; beyond, UNKNOWN (a
@@ -254,6 +259,10 @@ def _run_details(explorer: _Explorer) -> dict:
         soundness += (f"; {explorer.covered.pruned} aggregates not explored: their states lie in an earlier "
                       "aggregate of the same mode entered no later, and the automaton does not depend "
                       "on time (the added clock), so their runs are time-shifted runs of that one's")
+    if explorer.data.timeless:
+        soundness += (f"; modes where no time passes ({', '.join(sorted(explorer.data.timeless))}): "
+                      f"each entry star is checked once and jumps out at once (every state has rate 0 "
+                      f"there; waiting only delays the same state on the added clock, which nothing reads)")
     return {"method": "generalized star sets", "semantics": soundness, "step": explorer.h,
             "touch_tolerance": {"relative": opt.touch_tolerance, "largest": s.tolerance},
             "stars": s.chains, "cells": s.cells, "refined_cells": s.refined,

@@ -28,46 +28,51 @@ class _Aggregate:
 
 
 def interval_hull(members, invariant, count_lps):
-    """``(hull, kept)``: the interval hull of the member stars (``2 n`` supports each, reported to
-    ``count_lps``; every bound pushed out by a relative 1e-9 against rounding) intersected with
-    ``invariant = (H, g)``, a box star with fresh coefficients, and the non-empty members.
-    ``hull`` is None when a member is unbounded. The hull contains every member: everything
-    reachable from them is reachable from it, and its LPs stay small however many jumps and
-    cells came before."""
-    bounds, kept = [], []
-    for star, path in members:
-        low, high = _interval(star, count_lps)
-        if np.any(high == -np.inf):
-            continue                                           # an empty member
-        kept.append((star, path))
-        if bounds is not None and np.all(np.isfinite(high)) and np.all(np.isfinite(low)):
-            bounds.append((low, high))
-        else:
-            bounds = None
-    if not kept or bounds is None:
+    """``(hull, kept)``: the interval hull of the member stars (LPs reported to
+    ``count_lps``; every bound pushed out by a relative 1e-9 against rounding) intersected
+    with ``invariant = (H, g)``, a box star with fresh coefficients, and the non-empty
+    members. ``hull`` is None when a member is unbounded. The hull contains every member:
+    everything reachable from them is reachable from it, and its LPs stay small however many
+    jumps and cells came before.
+
+    Each bound ``max_k h_k(w)`` over the members ``k`` (``w = +-e_i``) is exact, with fewer LPs
+    than ``2 n`` per member (:func:`_supports`): members are taken largest box bound first, and
+    a member's LP along ``w`` is skipped where its box bound (no LP) is already at most the
+    best value found, since its support cannot raise the maximum."""
+    n = members[0][0].dim if members else 0
+    W = np.vstack([np.eye(n), -np.eye(n)])
+    best = np.full(2 * n, -np.inf)
+    bounds = [star.support_bounds(W) for star, _ in members]
+    nonempty = []
+    for k in sorted(range(len(members)), key=lambda k: -np.sum(np.minimum(bounds[k], 1e300))):
+        values = _supports(members[k][0], W, bounds[k], bounds[k] > best, count_lps)
+        if values is not None:                                 # else an empty member
+            nonempty.append(k)
+            best = np.maximum(best, values)
+    kept = [members[k] for k in sorted(nonempty)]
+    if not kept or not np.all(np.isfinite(best)):
         return None, kept
-    low = np.min([b[0] for b in bounds], axis=0)
-    high = np.max([b[1] for b in bounds], axis=0)
-    if not np.all(np.isfinite(low)):
-        return None, kept
+    low, high = -best[n:], best[:n]
     pad = 1e-9 * (1.0 + np.maximum(np.abs(low), np.abs(high)))
     return Star.from_box(Box(low - pad, high + pad)).intersect_halfspaces(*invariant), kept
 
 
-def _interval(star: Star, count_lps):
-    """``(low, high)``: the exact interval hull of ``star``, ``2 n`` supports on one LP model
-    (:func:`reach.lp.maximize_many`); from the coefficient box alone, with no LP, when the
-    star has no predicate rows (the box then is the whole coefficient set), and for a
-    direction whose LP fails (the box bound contains the star's support). All ``-inf`` in
-    ``high`` if the star is empty."""
-    eye = np.eye(star.dim)
-    W = np.vstack([eye, -eye])
-    if not star.predicate.A.shape[0]:
-        values = star.support_bounds(W)
-    else:
-        count_lps(2 * star.dim)
-        values = lp.maximize_many(W @ star.basis, star.predicate.A, star.predicate.b,
-                                  (star.box.low, star.box.high)) + W @ star.center
-        undecided = np.isnan(values)                  # the LP failed: the box's bound (outer)
-        values[undecided] = star.support_bounds(W[undecided])
-    return -values[star.dim:], values[:star.dim]
+def _supports(star: Star, W, bound, need, count_lps):
+    """Upper bounds of the supports of ``star`` along the rows of ``W``, exact where ``need``:
+    ``bound`` (its box bounds, no LP) elsewhere; None if the star is empty. The exact values
+    come from one LP model (:func:`reach.lp.maximize_many`), except along a row ``w`` with
+    ``w^T V = 0``, where the support is ``w^T c`` and the box bound already is that; without
+    predicate rows the box is the whole coefficient set and its bounds are exact. A direction
+    whose LP fails keeps the box bound (it contains the star's support)."""
+    values = bound.copy()
+    G = W @ star.basis
+    need = need & np.any(G != 0, axis=1)
+    if not star.predicate.A.shape[0] or not np.any(need):
+        return values
+    count_lps(int(need.sum()))
+    exact = lp.maximize_many(G[need], star.predicate.A, star.predicate.b,
+                             (star.box.low, star.box.high)) + W[need] @ star.center
+    if np.all(exact == -np.inf):
+        return None
+    values[need] = np.where(np.isnan(exact), bound[need], exact)
+    return values

@@ -119,8 +119,7 @@ class _Explorer:
                              f"cells; at most {MAX_CELLS:.0e} (use a larger step)", field="options.star.step")
         self.flows, self.invariants, self.jumps = dict(data.flows), data.invariants, data.fired
         self.max_jumps = np.inf if options.max_jumps is None else options.max_jumps
-        from reach.model.lint import zero_dwell_cycles
-        self.stall_limit = STALL_JUMPS if zero_dwell_cycles(model)[0] else np.inf
+        self.stall_limit = STALL_JUMPS if data.zero_dwell else np.inf
         self.aggregate_after = None if self.sweep else options.aggregate_after
         windows = any(j.window is not None for js in data.jumps.values() for j in js)
         self.covered = (Covered(self.clock) if data.added_clock and not windows and not options.keep_sets
@@ -130,6 +129,7 @@ class _Explorer:
                        for mode, pieces in _unsafe_pieces(prop).items()} if data.added_clock \
             else _unsafe_pieces(prop)
         self.relevant = _modes_leading_to(model, set(self.pieces))
+        self._guard_rows: dict[str, np.ndarray] = {}       # per mode, see _transient
         self.stats = _Stats()
         self.unresolved: list[_Witness] = []
         self.replayed: list = []
@@ -210,6 +210,9 @@ class _Explorer:
         if self.stats.chains > self.opt.max_stars:
             raise _Stop(Status.UNKNOWN, f"star budget of {self.opt.max_stars} exhausted "
                                         f"(option max_stars)")
+        if mode in self.data.timeless:
+            self._instant(mode, star, path, point)
+            return
         flow, h = self.flows[mode], self.h
         count = max(1, int(np.ceil((self.horizon - t0) / h - 1e-9)))
         handoff = block is not None and block < count
@@ -308,6 +311,33 @@ class _Explorer:
             end = grid_star(count) if dev is None else _plus_box(grid_star(count), dev[count])
             return end.intersect_halfspaces(Hi, gi), np.concatenate([point, np.zeros(end.nvars - point.size)])
         return None
+
+    def _past_cutoff(self, start: Star, path: _Path) -> bool:
+        """In the safe-abort sweep: whether every run from ``start`` aborted, or (without an
+        abort on its path) is, at or after the cutoff (nothing later needs a check)."""
+        if not self.sweep:
+            return False
+        since = path.abort if path.abort < np.inf else -start.support_bounds(-np.eye(self.n)[self.clock])[0]
+        return since >= self.cutoff
+
+    def _instant(self, mode: str, star: Star, path: _Path, point):
+        """Explore ``star`` in a mode where no time passes (``flow false``): the star itself is
+        everything the mode holds, checked once, and its jumps fire from it at once.
+
+        Why this covers the mode: every state keeps its value there (rate 0) and only the
+        explored clock, which the model added and no guard, invariant, reset or property
+        mentions, could advance. A run that waited would leave with the same state later, and
+        the automaton does not depend on that clock, so all it could do after is a time-shifted
+        part of what the run that jumped at once does, cut earlier by the horizon. The instant
+        owns no coefficients: it can neither be bisected nor blamed."""
+        if self._past_cutoff(star, path):
+            return
+        self.stats.cells += 1
+        block = star.nvars
+        if self.opt.keep_sets:
+            self._keep(mode, (star,))
+        self._check_segment(mode, star, path, block, False)
+        self._jump_from(mode, star, path, block, False, point)
 
     def _keep_chain(self, mode: str, grid_star, centers, bases, error, cells):
         """The screened-out cells of a chain as set pieces (option ``keep_sets``; the others are
@@ -429,18 +459,14 @@ class _Explorer:
         ``spread``: bound of the input effect on the cell (None without inputs); halves keep
         it (it only grows with time).
         """
-        if self.sweep:
-            since = path.abort if path.abort < np.inf else \
-                -start.support_bounds(-np.eye(self.n)[self.clock])[0]
-            if since >= self.cutoff:
-                return
+        if self._past_cutoff(start, path):
+            return
         seg, error = self._segment(mode, start, h, spread)
         final = depth >= self.opt.max_refinements or self.opt.discrete_time or self.flows[mode].drift
         block = start.nvars
         kept_sets = len(self.sets)
         try:
-            hull = seg.box_bound()
-            if not final and np.any(error > ERROR_RATIO * np.maximum(-hull.low, hull.high)):
+            if not final and self._transient(mode, seg, error):
                 raise _Refine(None, block)          # a fast transient: refine before checking
             if self.opt.keep_sets:
                 self._keep(mode, (seg,))
@@ -460,6 +486,22 @@ class _Explorer:
             mid_point = self._point(mid, point)
             if mid_point is not None:
                 self._cell(mode, mid, half, path, depth + 1, mid_point, pending, spread)
+
+    def _transient(self, mode: str, seg: Star, error) -> bool:
+        """Whether the interpolation error of a segment, along a guard row of the mode's
+        relevant jumps, exceeds ``ERROR_RATIO`` of the row's magnitude over the segment. The
+        error enters nothing but the segment (the grid stars are exact): a fast transient in
+        a state no guard reads is left alone, and along the unsafe pieces the check itself
+        refines where the error is what keeps the segment from clearing a piece
+        (:meth:`_check_segment`)."""
+        rows = self._guard_rows.get(mode)
+        if rows is None:
+            rows = self._guard_rows[mode] = np.vstack(
+                [np.zeros((0, self.n))] + [j.H for j in self.jumps[mode] if j.target in self.relevant])
+        if not rows.shape[0]:
+            return False
+        magnitude = seg.support_bounds(np.vstack([rows, -rows])).reshape(2, -1).max(axis=0)
+        return bool(np.any(np.abs(rows) @ error > ERROR_RATIO * magnitude))
 
     def _check_segment(self, mode: str, seg: Star, path: _Path, block: int, own_open: bool):
         """Check every unsafe piece of ``mode`` on a segment.
@@ -576,8 +618,10 @@ class _Explorer:
                 if successor is None:
                     continue
             descended = path.descend(clock, block, own_open, earliest, self.h)
-            if pending is not None:
-                pending.setdefault(index, []).append((successor, descended))
+            if pending is not None:             # bound propagation drops a member proved empty
+                member = _tightened(successor, len(g) + len(self.invariants[jump.target][1]))
+                if member is not None:
+                    pending.setdefault(index, []).append((member, descended))
                 continue
             # the known point's own chord: (a, lam a, lam, 0) from lam = 0 to 1, or its ray
             # (a, s) from s = 0 to 1 in a constant-flow mode

@@ -148,14 +148,14 @@ def _abs_chord_integral(a, b, delta):
 def _chain_bounds(center, basis, box, W):
     """Support bounds ``max_{x in Y_j} w^T x`` for every grid star ``j`` and row ``w`` of
     ``W`` from the coefficient box: ``(J, rows)``; ``center (J, n)``, ``basis (J, n, m)``."""
-    G = np.einsum("rn,jnm->jrm", W, basis)
+    G = np.matmul(W, basis)                                      # (J, rows, m)
     return center @ W.T + G @ box.center + np.abs(G) @ box.radius
 
 
 def _chain_abs_bounds(center, basis, box, D, d):
     """``max |D_l x + d_l|`` over each ``Y_j``, per sample ``l`` and component: ``(J, L, n)``."""
-    G = np.einsum("lin,jnm->jlim", D, basis)
-    mid = np.einsum("lin,jn->jli", D, center) + d[None] + G @ box.center
+    G = np.matmul(D[None], basis[:, None])                       # (J, L, n, m)
+    mid = np.matmul(center[:, None, None], np.swapaxes(D, 1, 2)[None])[:, :, 0] + d[None] + G @ box.center
     return np.abs(mid) + np.abs(G) @ box.radius
 
 
@@ -169,10 +169,13 @@ def _segment(flow: AffineFlow, start: Star, h: float):
     if flow.drift:
         return _drift_segment(start, flow.b, h), end, np.zeros(flow.n)
     D, d, F, _ = flow.curvature(h)
-    n = flow.n
-    upper = start.support_bounds(np.concatenate([D, -D]).reshape(-1, n))
-    upper = upper.reshape(2, -1) + np.concatenate([d, -d]).reshape(2, -1)
-    error = h * h / 8 * (F @ upper.max(axis=0).reshape(-1, n).max(axis=0))
+    if np.all(np.isfinite(start.box.radius)):
+        samples = _chain_abs_bounds(start.center[None], start.basis[None], start.box, D, d)[0]
+    else:
+        n = flow.n
+        upper = start.support_bounds(np.concatenate([D, -D]).reshape(-1, n))
+        samples = np.maximum(*(upper.reshape(2, -1) + np.concatenate([d, -d]).reshape(2, -1))).reshape(-1, n)
+    error = h * h / 8 * (F @ samples.max(axis=0))
     return chord_hull(start, end.center, end.basis, error), end, error
 
 

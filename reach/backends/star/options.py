@@ -10,8 +10,9 @@ from reach.backends.options import parse_options, ranged
 NAME = "star"
 
 
-#: a cell is bisected before any check while its interpolation error exceeds this fraction
-#: of the state's magnitude (fast transients, e.g. right after a controller switch)
+#: a cell is bisected before any check while its interpolation error along a guard row of its
+#: mode exceeds this fraction of the row's magnitude over the segment (fast transients, e.g.
+#: right after a controller switch)
 ERROR_RATIO = 0.25
 
 

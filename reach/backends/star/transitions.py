@@ -87,9 +87,15 @@ class _LinearModel:
     A model without one (no state of rate 1 in every mode) gets its own: state ``n`` with
     rate 1 everywhere, 0 initially, never reset and absent from every guard, invariant
     and property, so the reachable states of the model are the projections of the
-    extended ones (``n`` is then ``model.n + 1`` and ``added_clock`` is True)."""
+    extended ones (``n`` is then ``model.n + 1`` and ``added_clock`` is True).
+
+    ``timeless``: the modes where no time may pass (SpaceEx ``flow false``; every state has
+    rate 0 there, so such a model always gets its own clock); ``zero_dwell``: whether the
+    model may have a zero-dwell cycle (:mod:`reach.model.lint`)."""
 
     def __init__(self, model):
+        from reach.model.lint import zero_dwell_cycles
+
         clock = _global_clock(model)
         self.added_clock = clock is None
         self.n = model.n + self.added_clock
@@ -100,6 +106,8 @@ class _LinearModel:
                            for m in model.modes.values())
                        and all(j is not None for js in self.jumps.values() for j in js))
         self.varying = [u for u in getattr(model, "bounded_inputs", []) if u.varying]
+        self.timeless = {name for name, mode in model.modes.items() if mode.timeless}
+        self.zero_dwell = bool(zero_dwell_cycles(model)[0])        # a search with LPs: once
         if self.linear:
             self.flows = {name: self._flow(*self._with_clock(*mode.linear))
                           for name, mode in model.modes.items()}

@@ -1,0 +1,75 @@
+"""The LP layer (reach.lp, highspy's bare solver) against scipy's ``linprog`` on random LPs:
+the same verdict (optimal, infeasible, unbounded), the same optimum, and a feasible optimiser;
+``maximize_many`` gives the supports one LP each would."""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.optimize import linprog
+
+from reach import lp
+
+
+@st.composite
+def problems(draw):
+    """``(c, A_ub, b_ub, A_eq, b_eq, lo, hi)``: 1-4 variables, some bounds infinite (so some
+    problems are unbounded), a few random rows (so some are infeasible)."""
+    rng = np.random.default_rng(draw(st.integers(0, 2 ** 31 - 1)))
+    n = draw(st.integers(1, 4))
+    rows, eqs = draw(st.integers(0, 4)), draw(st.integers(0, 1))
+    lo = np.where(rng.random(n) < 0.3, -np.inf, -rng.uniform(0, 2, n))
+    hi = np.where(rng.random(n) < 0.3, np.inf, rng.uniform(0, 2, n))
+    A = rng.normal(size=(rows, n))
+    b = rng.normal(size=rows)
+    E = rng.normal(size=(eqs, n))
+    f = rng.normal(size=eqs)
+    return rng.normal(size=n), A, b, E, f, lo, hi
+
+
+def reference(c, A, b, E, f, lo, hi):
+    bounds = [(None if not np.isfinite(a) else a, None if not np.isfinite(z) else z) for a, z in zip(lo, hi)]
+    res = linprog(c, A_ub=A if A.size else None, b_ub=b if A.size else None,
+                  A_eq=E if E.size else None, b_eq=f if E.size else None, bounds=bounds, method="highs",
+                  options={"presolve": False})
+    return {0: lp.OPTIMAL, 2: lp.INFEASIBLE, 3: lp.UNBOUNDED}.get(res.status), res.fun
+
+
+@settings(max_examples=150, deadline=None)
+@given(problems())
+def test_minimize_agrees_with_linprog(problem):
+    c, A, b, E, f, lo, hi = problem
+    status, value = reference(*problem)
+    res = lp.minimize(c, A, b, A_eq=E, b_eq=f, bounds=(lo, hi))
+    if status is None:                     # the reference itself undecided: nothing to compare
+        return
+    assert res.status == status
+    if res.optimal:
+        assert abs(res.value - value) <= 1e-6 * (1 + abs(value))
+        x = res.x
+        assert np.all(x >= lo - 1e-7) and np.all(x <= hi + 1e-7)
+        assert np.all(A @ x <= b + 1e-6) and np.allclose(E @ x, f, atol=1e-6)
+        assert abs(c @ x - res.value) <= 1e-6 * (1 + abs(value))
+
+
+@settings(max_examples=60, deadline=None)
+@given(problems())
+def test_maximize_many_gives_each_support(problem):
+    c, A, b, _, _, lo, hi = problem
+    directions = np.vstack([c, -c, np.eye(c.size)])
+    many = lp.maximize_many(directions, A, b, (lo, hi))
+    for w, value in zip(directions, many):
+        one = lp.maximize(w, A, b, bounds=(lo, hi))
+        expected = one.support_value()
+        if np.isfinite(expected):
+            assert abs(value - expected) <= 1e-6 * (1 + abs(expected))
+        else:
+            assert value == expected
+
+
+def test_bounds_as_pairs_and_none():
+    res = lp.maximize([1.0, 1.0], [[1.0, 2.0]], [4.0], bounds=[(0, None), (0, 1)])
+    assert res.optimal and res.value == 4.0
+    assert lp.maximize([1.0], bounds=None).unbounded
+    assert lp.feasible_point([[1.0], [-1.0]], [1.0, -2.0]) is None
