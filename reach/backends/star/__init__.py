@@ -145,7 +145,7 @@ from reach import lp
 from reach.backends.star.explorer import LOG, _Explorer, _Stop
 from reach.backends.star.flowpipe import AffineFlow, flowpipe
 from reach.backends.star.linearise import LinearisedModel, check_linearised
-from reach.backends.star.options import DEPTH_LP_TOLERANCE, NAME, StarOptions
+from reach.backends.star.options import DEPTH_LP_TOLERANCE, NAME, StarOptions, clockless_hints
 from reach.backends.star.transitions import _LinearModel, _unsafe_pieces
 from reach.backends.star.witnesses import witness_details
 from reach.result import Result, Status
@@ -195,7 +195,8 @@ class StarBackend:
         reason = self.supports(model, prop)
         if reason is not None:
             return Result(NAME, model.name, prop.id, Status.UNSUPPORTED, details={"reason": reason})
-        opt = StarOptions.from_dict(options)
+        opt = (options if isinstance(options, StarOptions)
+               else StarOptions.from_dict(clockless_hints(model, options)))
         if not _LinearModel.of(model).linear:
             return check_linearised(model, prop, opt, lambda data, blocks: self._explore(
                 model, prop, opt, start, data, blocks))

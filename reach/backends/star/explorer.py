@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from reach.backends.star.aggregation import _Aggregate, interval_hull
-from reach.backends.star.fixpoint import Covered
+from reach.backends.star.fixpoint import Covered, enlarged
 from reach.backends.star.flowpipe import (_block_spreads, _chain_abs_bounds, _chain_bounds, _depth,
                                           _plus_box, _segment, _tightened)
 from reach.backends.star.options import (ERROR_RATIO, MAX_CELLS, MAX_CHAIN_BYTES, NAME, PROGRESS_SECONDS,
@@ -380,7 +380,10 @@ class _Explorer:
         cut by the invariant and ``rows``) contains every member, so a SAFE
         under it covers them. When a check under it fails and its witness does not replay,
         the members are explored instead, each with its own exact history (no cell before the
-        aggregation is bisected again).
+        aggregation is bisected again). Where the fixpoint check is on (:mod:`.fixpoint`), an
+        aggregate inside an earlier one is not explored, and the hull is first explored
+        slightly enlarged (:func:`.fixpoint.enlarged`, so that later ones equal to it up to
+        rounding fall inside); a failure under the enlarged hull falls back to the exact one.
         """
         H, g = self.invariants[mode]
         hull, kept = interval_hull(members, (np.vstack([H, rows[0]]), np.concatenate([g, rows[1]])),
@@ -391,33 +394,42 @@ class _Explorer:
             for star, path in kept:
                 self._chain(mode, star, path)
             return
+        candidates = [(hull, rows)]
         if self.covered is not None:
             if self.covered.covers(mode, hull, self._lp_count):
                 return
-            mark = self.covered.mark()
-            hull = self.covered.record(mode, hull, (H, g), rows)
-        agg = _Aggregate(mode, hull, kept)
+            candidates.insert(0, enlarged(hull, (H, g), rows))
         self.stats.aggregated += 1
         self.stats.members += len(kept)
         start = min(path.since for _, path in kept)
         jumps = max(path.jumps for _, path in kept)
         stalled = min(path.stalled for _, path in kept)
         kept_sets = len(self.sets)
-        try:
-            self._chain(mode, hull, _Path(jumps=jumps, stalled=stalled, origin=agg, since=start),
-                        hull.box.center)
-        except _Deaggregate as failure:
-            if failure.target is not agg:
-                raise
-            del self.sets[kept_sets:]               # the members' own segments replace the hull's
+        for k, (star, star_rows) in enumerate(candidates):
+            agg = _Aggregate(mode, star, kept)
             if self.covered is not None:
-                self.covered.forget(mark)
-            agg.refined = True
-            self.stats.deaggregated += 1
-            LOG.info("aggregate of %d stars entering '%s' refined into its members (%s)",
-                     len(kept), mode, failure.witness.piece)
-            for star, path in kept:
-                self._chain(mode, star, path.closed())
+                mark = self.covered.mark()
+                self.covered.record(mode, star, star_rows)
+            try:
+                self._chain(mode, star, _Path(jumps=jumps, stalled=stalled, origin=agg, since=start),
+                            star.box.center)
+                return
+            except _Deaggregate as failure:
+                if failure.target is not agg:
+                    raise
+                del self.sets[kept_sets:]           # what replaces it has its own segments
+                if self.covered is not None:
+                    self.covered.forget(mark)
+                if k + 1 < len(candidates):
+                    LOG.info("enlarged aggregate entering '%s' replaced by the exact hull (%s)",
+                             mode, failure.witness.piece)
+                    continue
+                agg.refined = True
+                self.stats.deaggregated += 1
+                LOG.info("aggregate of %d stars entering '%s' refined into its members (%s)",
+                         len(kept), mode, failure.witness.piece)
+                for member, path in kept:
+                    self._chain(mode, member, path.closed())
 
     def _screen(self, centers, bases, box, error, H, g, cells) -> set[int]:
         """Cells whose segment may meet ``{H x <= g}`` by support bounds (cheap)."""

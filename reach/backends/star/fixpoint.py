@@ -7,6 +7,10 @@ time-varying input may take any value of its box at any instant. A run that ente
 in state ``x`` at time ``t`` is then the run entering ``m`` in ``x`` at any ``t' <= t``, shifted
 by ``t - t'``; its states are the same, and the earlier run reaches the horizon later.
 
+The sets computed along two paths that reach the same states differ by rounding (about
+1e-9 relative), so an aggregate is explored enlarged by :data:`MARGIN` where that decides
+nothing (a check that fails under the enlarged hull is redone under the exact one).
+
 An aggregate (:func:`.aggregation.interval_hull`) is a box cut by rows over the model's
 states only, so it is the product of a set of states ``X'`` with its whole clock interval
 ``[t'_lo, t'_hi]``. A later aggregate ``S`` entering the same mode whose states lie in ``X'``
@@ -37,6 +41,20 @@ from reach.sets import Box, Star
 #: aggregate's bounds carry LP and rounding errors of about 1e-9 (1 + |x|), and one inside
 #: the earlier set up to those errors is then inside the enlarged one exactly
 MARGIN = 1e-8
+
+
+def enlarged(hull: Star, invariant, rows) -> tuple[Star, tuple]:
+    """``(star, rows)``: the aggregate ``hull`` (a box star cut by the mode's ``invariant`` and
+    the jump's ``rows``, each ``(H, g)``) with its box and ``rows`` pushed out by
+    :data:`MARGIN` ``(1 + |.|)``. It contains ``hull``, so exploring it in its place is sound,
+    and a later aggregate equal to it up to rounding lies inside it exactly."""
+    box = hull.box_bound()
+    pad = MARGIN * (1.0 + np.maximum(np.abs(box.low), np.abs(box.high)))
+    H, g = np.asarray(rows[0], float), np.asarray(rows[1], float)
+    g = g + MARGIN * (1.0 + np.abs(g)) * np.linalg.norm(H, axis=1)
+    star = Star.from_box(Box(box.low - pad, box.high + pad)).intersect_halfspaces(
+        np.vstack([invariant[0], H]), np.concatenate([invariant[1], g]))
+    return star, (H, g)
 
 
 @dataclass
@@ -70,19 +88,12 @@ class Covered:
         and its descendants)."""
         del self.entries[mark:]
 
-    def record(self, mode: str, hull: Star, invariant, rows) -> Star:
-        """Record the aggregate ``hull`` entering ``mode`` (a box star cut by the mode's
-        ``invariant`` and the jump's ``rows``, each ``(H, g)``) and return the star to explore
-        in its place: the same with its box and ``rows`` pushed out by :data:`MARGIN`
-        ``(1 + |.|)``. It contains ``hull``, so exploring it is sound."""
-        box = hull.box_bound()
-        pad = MARGIN * (1.0 + np.maximum(np.abs(box.low), np.abs(box.high)))
-        low, high = box.low - pad, box.high + pad
-        H, g = np.asarray(rows[0], float), np.asarray(rows[1], float)
-        g = g + MARGIN * (1.0 + np.abs(g)) * np.linalg.norm(H, axis=1)
-        self.entries.append(_Explored(mode, low, high, H, g, float(low[self.clock])))
-        return Star.from_box(Box(low, high)).intersect_halfspaces(
-            np.vstack([invariant[0], H]), np.concatenate([invariant[1], g]))
+    def record(self, mode: str, star: Star, rows) -> None:
+        """Record the aggregate ``star`` entering ``mode``: a box star cut by the mode's
+        invariant and the jump's ``rows = (H, g)``."""
+        box = star.box_bound()
+        self.entries.append(_Explored(mode, box.low, box.high, np.asarray(rows[0], float),
+                                      np.asarray(rows[1], float), float(box.low[self.clock])))
 
     def covers(self, mode: str, hull: Star, count_lps) -> bool:
         """Whether an earlier aggregate of ``mode`` holds every state of ``hull`` (a star inside

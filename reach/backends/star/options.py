@@ -124,3 +124,17 @@ def cfg_hints(notes: dict, horizon: float, options: dict | None) -> dict:
     if "max_jumps" not in options and iterations is not None and iterations >= 0:
         options["max_jumps"] = int(iterations)
     return options
+
+
+def clockless_hints(model, options: dict | None) -> dict:
+    """Star options for a model without a global clock where the user set none: successors are
+    aggregated from the first jump (``aggregate_after = 0``; 2 otherwise). Such a model does
+    not depend on time (:mod:`.fixpoint`), so runs that cycle through the same modes collapse
+    into aggregates that the fixpoint check closes, instead of one family of stars per cell
+    of the first chains."""
+    options = dict(options or {})
+    if ("aggregate_after" not in options and model.global_clock is None
+            and not any(t.window is not None for t in model.transitions)):
+        options["aggregate_after"] = 0
+    return options
+
