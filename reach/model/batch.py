@@ -33,6 +33,7 @@ from __future__ import annotations
 import numpy as np
 
 BLOCK_VALUES = 1 << 19           # numbers in one block product (4 MiB)
+MAX_BLOCK_STEPS = 512            # grid steps of one block at most (the size of a mode's table)
 FIRST_BLOCK = 16                 # grid steps of a segment's first block
 SUB_BITS = 4                     # a guard entry is searched on sub-grids of 2^4 pieces per round
 
@@ -44,8 +45,8 @@ class LinearTable:
 
     def __init__(self, sim, name: str):
         self.L, self.guards, self.invariant = stacked_rows(sim, name)
+        self.rows = ExtendedRows(self.L)
         self.powers = sim.powers[name]
-        self.table = np.zeros((0,) + self.L.shape)
         from reach.model.simulate import BISECTION_STEPS
         self.sub = SubSteps(sim.generators[name], SUB_BITS, BISECTION_STEPS // SUB_BITS)
         self.sim, self.name = sim, name
@@ -68,12 +69,42 @@ class LinearTable:
         h = np.broadcast_to(np.asarray(h, dtype=float), X.shape[:1])[:, None]
         return X * np.exp(a * h) + (b * np.expm1(a * h) / a if a != 0 else b * h)
 
-    def __call__(self, j0: int, j1: int) -> np.ndarray:
-        """``W_j`` for ``j0 <= j < j1``: (j1 - j0, K, n+1)."""
-        if j1 > self.table.shape[0]:
-            size = min(self.powers.limit, max(j1, 2 * self.table.shape[0], 64))
-            self.table = np.einsum("kl,jlm->jkm", self.L, self.powers[:size])
-        return self.table[j0:j1]
+    def weights(self, extra: list) -> tuple:
+        """``(W, offsets)``: ``W_j = [L; E] P^j`` for ``j = 0..J`` (the block product's
+        matrices, (J + 1, K, n+1)), ``E`` the observers' rows ``extra`` stacked after ``L``
+        (:class:`ExtendedRows`), ``offsets`` where each starts. ``J``, the longest block, is
+        :data:`MAX_BLOCK_STEPS`, fewer where ``W`` would hold more than :data:`BLOCK_VALUES`
+        numbers."""
+        from reach.model.simulate import _powers
+
+        def build(L):
+            K, m = L.shape
+            powers = _powers(self.powers.step, 1 + min(MAX_BLOCK_STEPS, max(1, BLOCK_VALUES // (K * m))))
+            return np.einsum("kl,jlm->jkm", L, powers)
+
+        return self.rows.get(extra, build)
+
+
+class ExtendedRows:
+    """``L`` with observers' margin rows appended, and what is built from it, cached per list
+    of row arrays (observers compile their rows once per model and property, so the same
+    arrays come back run after run)."""
+
+    def __init__(self, L: np.ndarray):
+        self.L, self.cache = L, {}
+
+    def get(self, extra: list, build) -> tuple:
+        """``(build(L_ext), offsets)`` for ``L_ext = [L; H_1, -g_1; ...]`` (``extra = [(H_i,
+        g_i)]``), ``offsets[i]`` the row of ``L_ext`` where ``H_i`` starts."""
+        key = tuple(id(H) for H, _ in extra)
+        hit = self.cache.get(key)
+        if hit is None or any(H is not K for (H, _), K in zip(extra, hit[0])):
+            if len(self.cache) > 16:
+                self.cache.clear()
+            L = np.vstack([self.L] + [np.hstack([H, -g[:, None]]) for H, g in extra])
+            offsets = np.cumsum([self.L.shape[0]] + [H.shape[0] for H, _ in extra])[:-1]
+            hit = self.cache[key] = ([H for H, _ in extra], build(L), list(offsets))
+        return hit[1], hit[2]
 
 
 def stacked_rows(sim, name: str):
@@ -201,13 +232,14 @@ def eligible(sim, name: str) -> bool:
             and all(model.guard_halfspaces(tr) is not None for tr, _ in sim.urgent[name]))
 
 
-def notify_block(watchers, t, S, seen, m_index, rows, absmax):
-    """Hand visited grid states to the observers: whole blocks to those with ``block``, the
-    states one by one (in time order per run) to the others."""
+def notify_block(watchers, t, S, seen, m_index, rows, margins=None):
+    """Hand visited grid states to the observers: whole blocks to those with ``block`` (with
+    ``margins[i]``, the values of the rows watcher ``i`` asked for, where given), the states
+    one by one (in time order per run) to the others."""
     plain = [f for f in watchers if not hasattr(f, "block")]
-    for f in watchers:
+    for i, f in enumerate(watchers):
         if hasattr(f, "block"):
-            f.block(t, S, seen, m_index, rows, absmax)
+            f.block(t, S, seen, m_index, rows, None if margins is None else margins[i])
     if plain:
         run, j = np.nonzero(seen.T)                    # by run, then time
         if run.size:
@@ -215,9 +247,21 @@ def notify_block(watchers, t, S, seen, m_index, rows, absmax):
                 f(t[j, run], S[j, :, run], np.full(run.size, m_index), rows[run])
 
 
+def margin_rows(watchers, m_index: int) -> tuple:
+    """``(extra, wanted)``: the rows ``(H, g)`` the watchers ask for in mode ``m_index`` (those
+    with ``margin_rows``), and per watcher the index of its rows in ``extra`` or None."""
+    extra, wanted = [], []
+    for f in watchers:
+        rows = f.margin_rows(m_index) if hasattr(f, "margin_rows") else None
+        wanted.append(None if rows is None else len(extra))
+        if rows is not None:
+            extra.append(rows)
+    return extra, wanted
+
+
 def segment_chunk(sim, name, rows, X, mode, t, tau, blocked_at, next_kick, watchers, horizon, table):
-    """Advance ``rows`` (all in linear mode ``name``) to their next event, kick or the horizon,
-    in blocks of grid steps (see the module docstring)."""
+    """Advance ``rows`` (all in mode ``name``) to their next event, kick or the horizon, in
+    blocks of grid steps (see the module docstring)."""
     from reach.model.simulate import INVARIANT_TOLERANCE
 
     n, dt = sim.n, sim.dt
@@ -226,10 +270,12 @@ def segment_chunk(sim, name, rows, X, mode, t, tau, blocked_at, next_kick, watch
     t0, k0, end, window, win_time, stop_at, count = sim.segment_limits(name, rows, t, tau, next_kick, horizon)
     count = max(1, min(count, sim.steps + 2 - int(k0.min())))
     Y0 = table.propagate(X[rows], np.maximum(k0 * dt - t0, 0.0))
-    Z = np.vstack([Y0.T, np.ones((1, n_rows))])                          # (n+1, R)
-    steps = table.steps if table.nonlinear else None
+    Z = np.vstack([Y0.T, np.ones((1, n_rows))])                          # (n+1, R), at the block start
+    extra, wanted = margin_rows(watchers, m_index)
+    W, offsets = table.weights(extra)
+    K = W.shape[-2]
+    spans = [None if i is None else (offsets[i], extra[i][0].shape[0]) for i in wanted]
 
-    guards = sim.urgent[name]
     event_time = win_time.copy()
     event_tr = np.where(np.isfinite(win_time), 0, -1)
     blocked = np.zeros(n_rows, dtype=bool)
@@ -238,26 +284,31 @@ def segment_chunk(sim, name, rows, X, mode, t, tau, blocked_at, next_kick, watch
     last_t, last_x = t0.copy(), X[rows].copy()                       # last visited grid state
     prev_t, prev_x = t0.copy(), X[rows].copy()                       # grid state before the block
     done = np.zeros(n_rows, dtype=bool)
-    K = table.L.shape[0]
-    most = max(1, BLOCK_VALUES // (K * n_rows))
+    longest = MAX_BLOCK_STEPS if table.nonlinear else W.shape[0] - 1
+    most = max(1, min(longest, BLOCK_VALUES // (K * n_rows)))
     step_block = min(FIRST_BLOCK, most)                 # doubled each block: short segments stay cheap
+    buffer = np.empty(min(most, count) * K * n_rows)    # the block product, reused block after block
     inv_offset, inv_rows = table.invariant
     j0 = 0
     while j0 < count and not done.all():
         j1 = min(count, j0 + step_block)
         act = np.flatnonzero(~done)
-        B = j1 - j0
+        A, B = act.size, j1 - j0
+        Za = Z if A == n_rows else Z[:, act]
+        out = buffer[:B * K * A].reshape(B, K, A)
         gt = (k0[act][None, :] + np.arange(j0, j1)[:, None]) * dt         # (B, A)
         valid = gt <= stop_at[act] + 1e-12
-        if steps is None:
-            O = (table(j0, j1).reshape(-1, n + 1) @ Z[:, act]).reshape(B, K, act.size)
-            S = O[:, :n, :]
-        else:                           # the states from the integrator, the margins from L
-            S_next = steps.block(Z[:n, act], B + 1)
+        if table.nonlinear:             # the states from the integrator, the margins from L
+            S_next = table.steps.block(Za[:n], B + 1)
             Z[:n, act] = S_next[B]
             S = S_next[:B]
-            O = table.outputs(S)
+            O = np.matmul(W[:, :n], S, out=out)
+            O += W[:, n][None, :, None]
             valid &= np.isfinite(S).all(axis=1)
+        else:                           # [x_j; 1] = P^j z: states and margins in one product
+            O = np.matmul(W[:B].reshape(B * K, n + 1), Za, out=out.reshape(B * K, A)).reshape(B, K, A)
+            S = O[:, :n, :]
+            Z[:n, act] = W[B, :n] @ Za
         for j_tr, (off, m, guard) in enumerate(table.guards, start=1):
             inside = valid & np.all(O[:, off:off + m, :] <= 0, axis=1)
             hit = np.flatnonzero(inside.any(axis=0))
@@ -272,21 +323,28 @@ def segment_chunk(sim, name, rows, X, mode, t, tau, blocked_at, next_kick, watch
                 better = when < event_time[rows_hit]
                 event_time[rows_hit[better]] = when[better]
                 event_tr[rows_hit[better]] = j_tr
-        absmax = np.abs(S).max(axis=1)
-        M = O[:, inv_offset:inv_offset + inv_rows, :]
-        outside = (np.any(M > (INVARIANT_TOLERANCE * (1.0 + absmax))[:, None, :], axis=1)
-                   & valid & (gt < event_time[act]))
-        out_any = outside.any(axis=0)
-        limit_j = np.full(act.size, B)
-        if out_any.any():
-            b = np.flatnonzero(out_any)
-            jb = outside[:, b].argmax(axis=0)
-            limit_j[b] = jb
-            blocked[act[b]] = True
-            block_x[act[b]] = S[jb, :, b]
-            block_t[act[b]] = gt[jb, b]
+        limit_j = np.full(A, B)
+        out_any = np.zeros(A, dtype=bool)
+        if inv_rows:
+            # outside: a margin above INVARIANT_TOLERANCE (1 + |x|_inf), so above the tolerance
+            # itself; |x|_inf only for the runs with such a margin
+            worst = O[:, inv_offset:inv_offset + inv_rows, :].max(axis=1)
+            near = (worst > INVARIANT_TOLERANCE) & valid & (gt < event_time[act])
+            c = np.flatnonzero(near.any(axis=0))
+            if c.size:
+                absmax = np.abs(S[:, :, c]).max(axis=1)
+                outside = near[:, c] & (worst[:, c] > INVARIANT_TOLERANCE * (1.0 + absmax))
+                b = c[outside.any(axis=0)]
+                if b.size:
+                    jb = outside[:, outside.any(axis=0)].argmax(axis=0)
+                    out_any[b] = True
+                    limit_j[b] = jb
+                    blocked[act[b]] = True
+                    block_x[act[b]] = S[jb, :, b]
+                    block_t[act[b]] = gt[jb, b]
         seen = valid & (gt < event_time[act]) & (np.arange(B)[:, None] <= limit_j)
-        notify_block(watchers, gt, S, seen, m_index, rows[act], absmax)
+        notify_block(watchers, gt, S, seen, m_index, rows[act],
+                     [None if sp is None else O[:, sp[0]:sp[0] + sp[1], :] for sp in spans])
         n_seen = seen.sum(axis=0)
         some = np.flatnonzero(n_seen)
         if some.size:
