@@ -130,3 +130,26 @@ def test_scalar_entry_is_the_bisections_entry(fraction, h, mode_level):
     want = sim._first_entry(mode, X, np.array([h]), guard)[0]
     tol = 2 * h * 2.0 ** -40 + 1e-12
     assert abs(got - s) <= tol and abs(want - s) <= tol
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2 ** 32 - 1), st.sampled_from(["approach", "rendezvous", "passive"]), st.floats(0.0, 3.0))
+def test_taylor_flow_is_the_exact_flow(seed, mode, steps):
+    """Each run's own duration (up to ``steps`` grid steps): the series summed on the vectors
+    (batch.taylor_flow) against scipy.linalg.expm of the augmented generator, run by run."""
+    import scipy.linalg
+
+    from reach.model import batch
+
+    model = load_model("models/SRA01.yaml")
+    sim = Simulator(model)
+    rng = np.random.default_rng(seed)
+    X, _ = random_plan(model, None, 5, rng)
+    h = rng.random(5) * steps * sim.dt
+    M = sim.generators[mode]
+    got = batch.taylor_flow(M, X, h)
+    for x, d, y in zip(X, h, got):
+        want = scipy.linalg.expm(M * d) @ np.append(x, 1.0)
+        np.testing.assert_allclose(y, want[:-1], rtol=1e-12, atol=1e-12 * np.abs(want).max())
+    # beyond TAYLOR_PIECES pieces the caller falls back to the matrix exponential
+    assert batch.taylor_flow(M, X, np.full(5, 2 * batch.TAYLOR_PIECES / np.linalg.norm(M, 1))) is None
