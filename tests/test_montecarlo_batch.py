@@ -153,3 +153,38 @@ def test_taylor_flow_is_the_exact_flow(seed, mode, steps):
         np.testing.assert_allclose(y, want[:-1], rtol=1e-12, atol=1e-12 * np.abs(want).max())
     # beyond TAYLOR_PIECES pieces the caller falls back to the matrix exponential
     assert batch.taylor_flow(M, X, np.full(5, 2 * batch.TAYLOR_PIECES / np.linalg.norm(M, 1))) is None
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2 ** 32 - 1), st.floats(0.05, 1.0))
+def test_linear_guard_entry_is_the_bisections_entry(seed, fraction):
+    """SRA01's approach runs one grid step before they enter the rendezvous octagon (states on
+    its boundary flowed back by ``s = fraction dt`` with scipy's expm): the sub-grid search
+    (batch.first_entry, margins from one product per round) and the general path's bisection
+    (Simulator._first_entry) both find ``s`` to the bisection's resolution ``dt 2^-40``."""
+    import scipy.linalg
+
+    from reach.model import batch
+
+    model = load_model("models/SRA01.yaml")
+    sim = Simulator(model)
+    table = batch.table_for(sim, "approach")
+    (_, _, guard), = table.guards
+    rng = np.random.default_rng(seed)
+    angle = rng.uniform(np.pi / 2 + 0.3, 3 * np.pi / 2 - 0.3, 20)          # the octagon's left side
+    on = np.column_stack([100 * np.cos(angle), 100 * np.sin(angle), 0.3 * np.cos(angle + np.pi),
+                          0.3 * np.sin(angle + np.pi), np.full(20, 50.0)])   # heading inwards
+    on[:, 0] = np.maximum(on[:, 0], -100.0)
+    H, g = guard.rows
+    on *= np.min(g / np.maximum(on[:, :2] @ H[:, :2].T, 1e-12), axis=1)[:, None] ** np.r_[1, 1, 0, 0, 0]
+    s = fraction * sim.dt
+    back = scipy.linalg.expm(-sim.generators["approach"] * s)
+    X = (np.hstack([on, np.ones((20, 1))]) @ back.T)[:, :-1]
+    keep = np.all(guard(X) <= 0, axis=1) == False                           # noqa: E712 (outside at 0)
+    assert keep.sum() >= 10
+    X, h = X[keep], np.full(int(keep.sum()), sim.dt)
+    got = batch.first_entry(sim, "approach", X, h, guard, table.sub)
+    want = sim._first_entry("approach", X, h, guard)
+    tol = 2 * sim.dt * 2.0 ** -40 + 1e-12
+    np.testing.assert_allclose(got, want, rtol=0, atol=tol)
+    np.testing.assert_allclose(got, s, rtol=0, atol=tol)

@@ -169,7 +169,8 @@ def table_for(sim, name: str):
 class SubSteps:
     """``expm(M h k 2^-(b r))`` for ``k = 1..2^b`` at each level ``r = 1..rounds``: the
     sub-grids a search for a guard entry in ``(0, h]`` walks down, cached for the few durations
-    ``h`` the searches start from (mostly one grid step)."""
+    ``h`` the searches start from (mostly one grid step), and a guard's margins at their ends as
+    rows acting on ``[x; 1]``."""
 
     def __init__(self, generator: np.ndarray, bits: int, rounds: int):
         self.generator, self.bits, self.rounds, self.cache = generator, bits, rounds, {}
@@ -184,32 +185,44 @@ class SubSteps:
             self.cache[h] = np.stack(levels)            # (rounds, 2^bits, n+1, n+1)
         return self.cache[h]
 
+    def margins(self, h: float, guard) -> np.ndarray:
+        """``(rounds, m 2^b, n+1)``: row ``i 2^b + k`` of level ``r`` is ``[H_i, -g_i] E_rk``, the
+        margin of guard row ``i`` (``rows = (H, g)``) at the end ``k`` of that sub-grid as a row
+        acting on ``[x; 1]``."""
+        key = (h, id(guard))
+        if key not in self.cache:
+            H, g = guard.rows
+            G = np.einsum("in,rknm->rikm", H, self(h)[:, :, :-1, :])     # (rounds, m, 2^b, n+1)
+            G[..., -1] -= g[:, None]
+            self.cache[key] = (guard, G.reshape(G.shape[0], -1, G.shape[-1]))
+        return self.cache[key][1]
+
 
 def first_entry(sim, name: str, X: np.ndarray, h: np.ndarray, guard, sub: SubSteps) -> np.ndarray:
     """Earliest time in ``(0, h]`` at which ``guard`` holds (it holds at ``h``), to ``h 2^-(b
     rounds)`` (the resolution of ``Simulator._first_entry``'s bisection): in each round the
-    interval ``(lo, lo + w]`` known to hold the entry is cut into ``2^b`` pieces, the states at
-    their ends are ``expm(M w k 2^-b) x(lo)``, and the first end where the guard holds becomes
-    the new right end. The first end, not any sign change: an entry is never skipped between
-    two ends that both hold. Runs sharing a duration share the exponentials; with many
-    distinct durations, ``Simulator._first_entry``."""
+    interval ``(lo, lo + w]`` known to hold the entry is cut into ``2^b`` pieces, the guard's
+    margins at their ends are ``[H, -g] expm(M w k 2^-b) [x(lo); 1]`` (one product for all the
+    ends, :meth:`SubSteps.margins`), and the first end where the guard holds becomes the new
+    right end. The first end, not any sign change: an entry is never skipped between two ends
+    that both hold. Runs sharing a duration share the exponentials; with many distinct
+    durations, ``Simulator._first_entry``."""
     durations, which = np.unique(h, return_inverse=True)
     if durations.size > 4:
         return sim._first_entry(name, X, h, guard)
-    n, K = sim.n, 2 ** sub.bits
+    K = 2 ** sub.bits
     out = np.empty_like(h)
     for d_index, d in enumerate(durations):
         sel = np.flatnonzero(which.reshape(-1) == d_index)
-        E = sub(float(d))
-        x_lo, lo = X[sel], np.zeros(sel.size)
+        E, G = sub(float(d)), sub.margins(float(d), guard)
+        z = np.vstack([X[sel].T, np.ones((1, sel.size))])               # [x(lo); 1], (n+1, R)
+        lo = np.zeros(sel.size)
         for r in range(sub.rounds):
-            P = E[r, :, :n, :]                                        # (K, n, n+1)
-            Z = x_lo @ P[:, :, :n].reshape(-1, n).T + P[:, :, n].reshape(-1)
-            Z = Z.reshape(sel.size * K, n)
-            inside = np.all(guard(Z) <= 0, axis=1).reshape(sel.size, K)
-            inside[:, -1] = True                                      # the right end holds
-            k = inside.argmax(axis=1)                                 # first end that holds
-            x_lo = np.where((k > 0)[:, None], Z.reshape(sel.size, K, n)[np.arange(sel.size), k - 1], x_lo)
+            inside = (G[r] @ z).reshape(-1, K, sel.size).max(axis=0) <= 0  # (2^b, R)
+            inside[-1] = True                                         # the right end holds
+            k = inside.argmax(axis=0)                                 # first end that holds
+            moved = np.flatnonzero(k > 0)
+            z[:, moved] = np.einsum("aij,ja->ia", E[r, k[moved] - 1], z[:, moved])
             lo = lo + k * d * 2.0 ** (-sub.bits * (r + 1))
         out[sel] = lo + d * 2.0 ** (-sub.bits * sub.rounds)
     return out
