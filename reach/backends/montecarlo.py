@@ -193,11 +193,20 @@ class SafetyMonitor:
             self.violation_mode[rows[r]] = m_index
 
     def __call__(self, t, X, mode, rows):
+        """States one by one (``t``, ``X`` (N, n), ``mode``, ``rows`` per state; a run may appear
+        several times, in time order): the property's own test, or where its pieces are
+        stacked the same test from their rows (as :meth:`block`)."""
         for m_index, test in self.tests.items():
             sel = np.flatnonzero(mode == m_index)
             if sel.size == 0:
                 continue
-            violated, d = test(X[sel])
+            if m_index in self.stacked:
+                L, c, starts = self.stacked[m_index]
+                Y = X[sel]
+                d = _piece_depth((L @ Y.T - c[:, None])[None], starts)[0]
+                violated = d < -NUMERICAL_TOLERANCE * (1.0 + np.abs(Y).max(axis=1))
+            else:
+                violated, d = test(X[sel])
             r = rows[sel]                      # a run may appear many times, in time order
             np.minimum.at(self.min_depth, r, d)
             hits = np.flatnonzero(violated & np.isnan(self.violation_time[r]))

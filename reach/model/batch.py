@@ -36,7 +36,7 @@ BLOCK_VALUES = 1 << 19           # numbers in one block product (4 MiB)
 MAX_BLOCK_STEPS = 512            # grid steps of one block at most (the size of a mode's table)
 FIRST_BLOCK = 16                 # grid steps of a segment's first block
 SUB_BITS = 4                     # a guard entry is searched on sub-grids of 2^4 pieces per round
-TAYLOR_DEGREE = 18               # terms of the series in taylor_flow, per piece of ||M h||_1 <= 1
+TAYLOR_TOLERANCE = 1e-17        # the terms taylor_flow leaves out weigh at most this (relative)
 TAYLOR_PIECES = 16               # pieces taylor_flow cuts a duration into at most
 
 
@@ -114,21 +114,27 @@ class ExtendedRows:
 def taylor_flow(M: np.ndarray, X: np.ndarray, h) -> np.ndarray | None:
     """``[x_r; 1] <- expm(M h_r) [x_r; 1]`` for every run ``r`` (``X`` (R, n), ``h`` one
     duration per run or one for all), the Taylor series summed on the vectors: no exponential
-    per distinct duration. Each ``h_r`` is cut into ``p = ceil(theta)`` equal pieces, ``theta =
-    ||M||_1 max_r |h_r|``, so ``||M h_r / p||_1 <= 1``; a piece is the series to degree ``d =``
-    :data:`TAYLOR_DEGREE` by Horner, ``y <- z + (h/(p k)) M y`` for ``k = d..1``, whose left-out
-    terms weigh at most ``1/(d+1)! / (1 - 1/(d+2)) < 9e-18`` of ``||z||_1``. None when ``p``
-    would exceed :data:`TAYLOR_PIECES`."""
+    per distinct duration. Each ``h_r`` is cut into ``p = ceil(theta / 3)`` equal pieces, ``theta
+    = ||M||_1 max_r |h_r|``, so ``||M h_r / p||_1 <= u = theta / p <= 3``; a piece is the series
+    to the least degree ``d`` whose left-out terms weigh at most ``u^(d+1)/(d+1)! / (1 - u/(d+2))
+    <=`` :data:`TAYLOR_TOLERANCE` of ``||z||_1`` (``d <= 28``), summed by Horner, ``y <- z + (h/(p
+    k)) M y`` for ``k = d..1`` (its terms stay below ``e^u <= 20`` times ``||z||_1``, so rounding
+    stays near the unit roundoff). None when ``p`` would exceed :data:`TAYLOR_PIECES`."""
     h = np.broadcast_to(np.asarray(h, dtype=float), X.shape[:1])
-    pieces = max(1, int(np.ceil(np.linalg.norm(M, 1) * float(np.max(np.abs(h), initial=0.0)))))
+    theta = np.linalg.norm(M, 1) * float(np.max(np.abs(h), initial=0.0))
+    pieces = max(1, int(np.ceil(theta / 3.0)))
     if pieces > TAYLOR_PIECES:
         return None
+    u, degree, term = theta / pieces, 0, 1.0
+    while u >= degree + 2 or term * u / (degree + 1) / (1.0 - u / (degree + 2)) > TAYLOR_TOLERANCE:
+        degree += 1
+        term *= u / degree                                # u^d / d!
     Mt = np.ascontiguousarray(M.T)
-    steps = [(h / (pieces * k))[:, None] for k in range(1, TAYLOR_DEGREE + 1)]
+    steps = [(h / (pieces * k))[:, None] for k in range(1, degree + 1)]
     Z = np.hstack([X, np.ones((X.shape[0], 1))])
     for _ in range(pieces):
         Y = Z
-        for k in range(TAYLOR_DEGREE, 0, -1):
+        for k in range(degree, 0, -1):
             Y = Y @ Mt
             Y *= steps[k - 1]
             Y += Z
