@@ -23,7 +23,8 @@ where the run's switching signal says so and a guard holds (each with probabilit
 
 The structured and i.i.d. runs are one simulation shared by all safety properties of the call
 (one monitor each; whole blocks of grid states are tested at once, every unsafe piece of a
-mode stacked in one matrix). The i.i.d. runs are simulated in fixed blocks of
+mode stacked in one matrix whose rows the simulator's block product evaluates with the guards
+and invariants: :mod:`reach.model.batch`). The i.i.d. runs are simulated in fixed blocks of
 :data:`SAMPLE_BLOCK`, grouped into batches of ``batch`` runs that run in this process, on
 ``jobs`` local processes or on a Dask ``scheduler`` (:mod:`reach.executors`): a seed gives the
 same answer whatever the split and the executor.

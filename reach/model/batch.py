@@ -1,31 +1,40 @@
-"""Segments in blocks of grid steps: states, guard and invariant margins in one product.
+"""Segments in blocks of grid steps: states, guard, invariant and monitor margins in one product.
 
 In a linear mode every quantity the simulator tests on the grid is affine in the state, and
-the state at grid step ``j`` of a segment is ``[x_j; 1] = P^j [x_0; 1]`` with ``P`` the exact
+the state ``j`` grid steps after a block's start ``z = [x; 1]`` is ``P^j z``, ``P`` the exact
 one-step matrix (``expm`` of the augmented generator). Stacking the rows
 
-    ``L = [[I_n, 0], [H_guard, -g_guard] (each urgent transition), [H_inv, -g_inv]]``
+    ``L = [[I_n, 0], [H_guard, -g_guard] (each urgent transition), [H_inv, -g_inv],
+           [H_obs, -g_obs] (each observer's margin rows)]``
 
-gives ``W_j = L P^j`` once per mode; then a block of ``B`` grid steps for ``R`` runs is one
-matrix product ``(B K, n+1) @ (n+1, R)``: the states and every margin at every grid point,
-runs along the last axis (so the reductions over rows and steps are contiguous). Blocks hold
-about :data:`BLOCK_VALUES` numbers (memory bounded, cache-sized); the block loop stops as soon
-as every run of the chunk has met its event, its blocking point or the end of its segment
-(the first block is short and each next one twice as long, up to that size).
+gives ``W_j = L P^j`` once per mode and set of observers (``j`` up to the longest block); then
+a block of ``B`` grid steps for ``R`` runs is one matrix product ``(B K, n+1) @ (n+1, R)``,
+written into one buffer reused block after block: the states and every margin at every grid
+point, runs along the last axis (so the reductions over rows and steps are contiguous), and
+the next block starts from ``P^B z``. Blocks hold about :data:`BLOCK_VALUES` numbers (memory
+bounded, cache-sized); the block loop stops as soon as every run of the chunk has met its
+event, its blocking point or the end of its segment (the first block is short and each next
+one twice as long, up to that size). ``|x|_inf``, which scales the invariant and violation
+tolerances, is computed only for the runs whose margin already exceeds the unscaled tolerance.
 
 The semantics are the general path's (:meth:`reach.model.simulate.Simulator._segment_chunk`)
 step for step: the same grid points are visited, an urgent guard that holds at a grid point
-is located by the same bisection (``Simulator._first_entry``) inside the grid interval
-before it, the window switch is taken at ``tau``, the first grid point outside the invariant
-(beyond ``INVARIANT_TOLERANCE (1 + |x|_inf)``) blocks the run. Only rounding differs (``(L
-P^j) z`` against ``L (P^j z)``). In a mode with a scalar state (``x' = a x + b``) the
-guard entry and the propagation to events are in closed form instead (:func:`scalar_entry`,
-``h 2^-40`` late as the bisection's right end). A nonlinear mode with linear guards and
-invariant takes the same block loop with the states of a block from the batched RK4 of
-:mod:`reach.model.batch_nonlinear` and the margins from ``L [x; 1]``; its guard entries are
-the general path's bisection. Observers with a ``block`` method receive the visited grid
-states a block at a time (``block(t (B, R), X (B, n, R), seen (B, R), mode, rows, absmax)``);
-the event instants go through the ordinary call.
+is located inside the grid interval before it to the resolution of the general path's
+bisection (``Simulator._first_entry``; here :func:`first_entry`, sub-grids of that interval),
+the window switch is taken at ``tau``, the first grid point outside the invariant (beyond
+``INVARIANT_TOLERANCE (1 + |x|_inf)``) blocks the run. Only rounding differs (``(L P^j) z``
+against ``L (P^j z)``; the states at segment starts and events by :func:`taylor_flow`). In a
+mode with a scalar state (``x' = a x + b``) the guard entry and the propagation to events are
+in closed form instead (:func:`scalar_entry`, ``h 2^-40`` late as the bisection's right end).
+A nonlinear mode with linear guards and invariant takes the same block loop with the states
+of a block from the batched RK4 of :mod:`reach.model.batch_nonlinear` and the margins from
+``L [x; 1]``; its guard entries are the general path's bisection.
+
+Observers with a ``block`` method receive the visited grid states a block at a time,
+``block(t (B, R), X (B, n, R), seen (B, R), mode, rows, margins)``; one that also has
+``margin_rows(mode) -> (H, g) or None`` gets ``margins`` (B, k, R), the values of ``H x - g``
+at those states, from the block product (else None). The event instants go through the
+ordinary call.
 """
 
 from __future__ import annotations
@@ -41,7 +50,9 @@ TAYLOR_PIECES = 16               # pieces taylor_flow cuts a duration into at mo
 
 
 class LinearTable:
-    """``W_j = L P^j`` of one linear mode, extended as far as segments ask."""
+    """What :func:`segment_chunk` needs of one linear mode: the rows ``L`` (guards and
+    invariant located in them), the block matrices ``W_j = [L; observers' rows] P^j``, guard
+    entries and propagation to off-grid instants."""
 
     nonlinear = False
 
