@@ -202,3 +202,22 @@ def test_linear_guard_entry_is_the_bisections_entry(seed, fraction):
     tol = 2 * sim.dt * 2.0 ** -40 + 1e-12
     np.testing.assert_allclose(got, want, rtol=0, atol=tol)
     np.testing.assert_allclose(got, s, rtol=0, atol=tol)
+
+
+@pytest.mark.parametrize("model_file,prop_file", [("models/SRA01.yaml", "properties/rendezvous.yaml"),
+                                                  ("models/thermostat.yaml", "properties/thermostat.yaml")])
+def test_a_runs_outcome_does_not_depend_on_the_runs_simulated_with_it(model_file, prop_file):
+    """The block schedule (block lengths depend on how many runs share a chunk) leaves each
+    run's states alone: products restart from the state at fixed multiples of the table length,
+    so 37 runs simulated alone or among 700 give the same depths, bit for bit."""
+    model = load_model(model_file)
+    props = [p for p in (bind(q, model) for q in load_properties(prop_file)) if p.modes]
+    X, tau = random_plan(model, switch_window(model), 700, np.random.default_rng(3))
+    sim = Simulator(model)
+    depths = []
+    for count in (700, 37):
+        monitors = [SafetyMonitor(model, p, count) for p in props]
+        sim.run(X[:count], None if tau is None else tau[:count], observers=monitors)
+        depths.append([m.min_depth[:37] for m in monitors])
+    for among, alone in zip(*depths):
+        np.testing.assert_array_equal(among, alone)

@@ -1,17 +1,18 @@
 """Segments in blocks of grid steps: states, guard, invariant and monitor margins in one product.
 
 In a linear mode every quantity the simulator tests on the grid is affine in the state, and
-the state ``j`` grid steps after a block's start ``z = [x; 1]`` is ``P^j z``, ``P`` the exact
-one-step matrix (``expm`` of the augmented generator). Stacking the rows
+the state ``j`` grid steps after ``z = [x; 1]`` is ``P^j z``, ``P`` the exact one-step matrix
+(``expm`` of the augmented generator). Stacking the rows
 
     ``L = [[I_n, 0], [H_guard, -g_guard] (each urgent transition), [H_inv, -g_inv],
            [H_obs, -g_obs] (each observer's margin rows)]``
 
-gives ``W_j = L P^j`` once per mode and set of observers (``j`` up to the longest block); then
-a block of ``B`` grid steps for ``R`` runs is one matrix product ``(B K, n+1) @ (n+1, R)``,
-written into one buffer reused block after block: the states and every margin at every grid
-point, runs along the last axis (so the reductions over rows and steps are contiguous), and
-the next block starts from ``P^B z``. Blocks hold about :data:`BLOCK_VALUES` numbers (memory
+gives ``W_j = L P^j`` for ``j <= J`` once per mode and set of observers; then a block of ``B``
+grid steps for ``R`` runs is one matrix product ``(B K, n+1) @ (n+1, R)``, written into one
+buffer reused block after block: the states and every margin at every grid point, runs along
+the last axis (so the reductions over rows and steps are contiguous). ``z`` is the state at
+the last multiple of ``J`` steps into the segment (the next one ``P^J z``, the state rows of
+``W_J z``), so a run's states do not depend on which runs share its chunk. Blocks hold about :data:`BLOCK_VALUES` numbers (memory
 bounded, cache-sized); the block loop stops as soon as every run of the chunk has met its
 event, its blocking point or the end of its segment (the first block is short and each next
 one twice as long, up to that size). ``|x|_inf``, which scales the invariant and violation
@@ -349,9 +350,11 @@ def segment_chunk(sim, name, rows, X, mode, t, tau, blocked_at, next_kick, watch
     buffer = np.empty(min(most, count) * K * n_rows)    # the block product, reused block after block
     inv_offset, inv_rows = table.invariant
     k0f = k0.astype(float)
-    j0 = 0
+    # linear: Z is the state at step r0, a multiple of J; blocks stay within [r0, r0 + J]
+    period = count if table.nonlinear else W.shape[0] - 1
+    j0 = r0 = 0
     while j0 < count and not done.all():
-        j1 = min(count, j0 + step_block)
+        j1 = min(count, j0 + step_block, r0 + period)
         act = np.flatnonzero(~done)
         A, B = act.size, j1 - j0
         sel = act if A < n_rows else slice(None)        # the active runs (a view while all are)
@@ -367,9 +370,11 @@ def segment_chunk(sim, name, rows, X, mode, t, tau, blocked_at, next_kick, watch
             O += W[:, n][None, :, None]
             valid &= np.isfinite(S).all(axis=1)
         else:                           # [x_j; 1] = P^j z: states and margins in one product
-            O = np.matmul(W[:B].reshape(B * K, n + 1), Za, out=out.reshape(B * K, A)).reshape(B, K, A)
+            O = np.matmul(W[j0 - r0:j1 - r0].reshape(B * K, n + 1), Za, out=out.reshape(B * K, A)).reshape(B, K, A)
             S = O[:, :n, :]
-            Z[:n, sel] = W[B, :n] @ Za
+            if j1 == r0 + period:
+                Z[:n, sel] = W[period, :n] @ Za
+                r0 = j1
         for j_tr, (off, m, guard) in enumerate(table.guards, start=1):
             inside = valid & np.all(O[:, off:off + m, :] <= 0, axis=1)
             hit = np.flatnonzero(inside.any(axis=0))
