@@ -244,7 +244,7 @@ class _Recording:
 def test_block_states_and_margins_follow_solve_ivp():
     """SRA01's approach mode, 40 runs: the grid states the block product hands its observers,
     and the margins of rows an observer asked for, at a dozen grid instants per run, against
-    scipy's solve_ivp (DOP853, rtol 1e-12: itself within about 1e-9 of the exact flow over
+    scipy's solve_ivp (DOP853, rtol 1e-12: itself within about 1e-8 of the exact flow over
     these 110 min) and scipy.linalg.expm of the augmented generator (the exact flow)."""
     import scipy.linalg
     from scipy.integrate import solve_ivp
@@ -266,6 +266,6 @@ def test_block_states_and_margins_follow_solve_ivp():
                         t_eval=t[pick], rtol=1e-12, atol=1e-12)
         exact = np.array([(scipy.linalg.expm(M * s) @ np.append(X0[r], 1.0))[:-1] for s in t[pick]])
         scale = 1.0 + np.abs(exact).max()
-        np.testing.assert_allclose(X[pick], sol.y.T, rtol=0, atol=1e-8 * scale)
+        np.testing.assert_allclose(X[pick], sol.y.T, rtol=0, atol=1e-7 * scale)
         np.testing.assert_allclose(X[pick], exact, rtol=0, atol=1e-12 * scale)
         np.testing.assert_allclose(margins[pick], exact @ H.T - g, rtol=0, atol=1e-12 * scale * np.abs(H).sum())
