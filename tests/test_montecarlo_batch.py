@@ -185,15 +185,15 @@ def test_linear_guard_entry_is_the_bisections_entry(seed, fraction):
     table = batch.table_for(sim, "approach")
     (_, _, guard), = table.guards
     rng = np.random.default_rng(seed)
-    angle = rng.uniform(np.pi / 2 + 0.3, 3 * np.pi / 2 - 0.3, 20)          # the octagon's left side
+    angle = rng.uniform(np.pi / 2 + 0.3, 3 * np.pi / 2 - 0.3, 60)          # the octagon's left side
     on = np.column_stack([100 * np.cos(angle), 100 * np.sin(angle), 0.3 * np.cos(angle + np.pi),
-                          0.3 * np.sin(angle + np.pi), np.full(20, 50.0)])   # heading inwards
+                          0.3 * np.sin(angle + np.pi), np.full(60, 50.0)])   # heading inwards
     on[:, 0] = np.maximum(on[:, 0], -100.0)
     H, g = guard.rows
     on *= np.min(g / np.maximum(on[:, :2] @ H[:, :2].T, 1e-12), axis=1)[:, None] ** np.r_[1, 1, 0, 0, 0]
     s = fraction * sim.dt
     back = scipy.linalg.expm(-sim.generators["approach"] * s)
-    X = (np.hstack([on, np.ones((20, 1))]) @ back.T)[:, :-1]
+    X = (np.hstack([on, np.ones((60, 1))]) @ back.T)[:, :-1]
     keep = np.all(guard(X) <= 0, axis=1) == False                           # noqa: E712 (outside at 0)
     assert keep.sum() >= 10
     X, h = X[keep], np.full(int(keep.sum()), sim.dt)

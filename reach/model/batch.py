@@ -12,10 +12,10 @@ grid steps for ``R`` runs is one matrix product ``(B K, n+1) @ (n+1, R)``, writt
 buffer reused block after block: the states and every margin at every grid point, runs along
 the last axis (so the reductions over rows and steps are contiguous). ``z`` is the state at
 the last multiple of ``J`` steps into the segment (the next one ``P^J z``, the state rows of
-``W_J z``), so a run's states do not depend on which runs share its chunk. Blocks hold about :data:`BLOCK_VALUES` numbers (memory
-bounded, cache-sized); the block loop stops as soon as every run of the chunk has met its
-event, its blocking point or the end of its segment (the first block is short and each next
-one twice as long, up to that size). ``|x|_inf``, which scales the invariant and violation
+``W_J z``), so a run's states do not depend on which runs share its chunk. Blocks hold about
+:data:`BLOCK_VALUES` numbers (memory bounded, cache-sized); the block loop stops as soon as
+every run of the chunk has met its event, its blocking point or the end of its segment (the
+first block is short and each next one twice as long, up to that size). ``|x|_inf``, which scales the invariant and violation
 tolerances, is computed only for the runs whose margin already exceeds the unscaled tolerance.
 
 The semantics are the general path's (:meth:`reach.model.simulate.Simulator._segment_chunk`)
@@ -112,14 +112,14 @@ class ExtendedRows:
     def get(self, extra: list, build) -> tuple:
         """``(build(L_ext), offsets)`` for ``L_ext = [L; H_1, -g_1; ...]`` (``extra = [(H_i,
         g_i)]``), ``offsets[i]`` the row of ``L_ext`` where ``H_i`` starts."""
-        key = tuple(id(H) for H, _ in extra)
+        key = tuple((id(H), id(g)) for H, g in extra)
         hit = self.cache.get(key)
-        if hit is None or any(H is not K for (H, _), K in zip(extra, hit[0])):
+        if hit is None or any(a is not b for pair, kept in zip(extra, hit[0]) for a, b in zip(pair, kept)):
             if len(self.cache) > 16:
                 self.cache.clear()
             L = np.vstack([self.L] + [np.hstack([H, -g[:, None]]) for H, g in extra])
             offsets = np.cumsum([self.L.shape[0]] + [H.shape[0] for H, _ in extra])[:-1]
-            hit = self.cache[key] = ([H for H, _ in extra], build(L), list(offsets))
+            hit = self.cache[key] = (list(extra), build(L), list(offsets))
         return hit[1], hit[2]
 
 
