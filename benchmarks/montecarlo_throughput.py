@@ -14,6 +14,8 @@ properties/thermostat.yaml. For each, the median over ``repeat`` repetitions of
   substeps on SRNA01), urgent guards tested at the grid points and taken there (no event
   location), the abort at the first grid point at or after the run's instant, every property
   tested at every step with its own vectorised test;
+* both again timed by this process's CPU seconds (median of ``repeat``): on a shared machine
+  the wall seconds carry the other processes' load, the CPU seconds much less of it;
 * ``reach check --backend montecarlo`` on the thermostat, end to end (wall and CPU seconds,
   once: on a shared machine the CPU seconds are the process's own cost).
 
@@ -24,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import resource
 import statistics
 import subprocess
@@ -112,12 +115,15 @@ def simulate(model, props, X0, tau, sim):
     return [m.min_depth for m in monitors]
 
 
-def timed(fn, repeat):
+def timed(fn, repeat, cpu=False):
+    """Median wall seconds of ``repeat`` calls (CPU seconds of this process with ``cpu``) and the
+    last call's value."""
+    clock = time.process_time if cpu else time.perf_counter
     times, value = [], None
     for _ in range(repeat):
-        start = time.perf_counter()
+        start = clock()
         value = fn()
-        times.append(time.perf_counter() - start)
+        times.append(clock() - start)
     return statistics.median(times), value
 
 
@@ -128,10 +134,13 @@ def measure(label, model_file, prop_file, runs, repeat):
     sim = Simulator(model)
     ours, depths = timed(lambda: simulate(model, props, X0, tau, sim), repeat)
     plain, ref_depths = timed(lambda: reference_loop(model, props, X0, tau, sim.dt), repeat)
+    ours_cpu, _ = timed(lambda: simulate(model, props, X0, tau, sim), repeat, cpu=True)
+    plain_cpu, _ = timed(lambda: reference_loop(model, props, X0, tau, sim.dt), repeat, cpu=True)
     gap = max(float(np.max(np.abs(a - b) / (1 + np.abs(b)), initial=0.0)) for a, b in zip(depths, ref_depths))
     return {"instance": label, "runs": runs, "steps": sim.steps, "properties": [p.id for p in props],
             "seconds": ours, "runs_per_s": runs / ours, "reference_seconds": plain,
             "reference_runs_per_s": runs / plain, "ratio": plain / ours,
+            "cpu_runs_per_s": runs / ours_cpu, "reference_cpu_runs_per_s": runs / plain_cpu,
             "largest_relative_depth_gap": gap}
 
 
@@ -156,6 +165,7 @@ def main() -> None:
     parser.add_argument("--out", default="results/montecarlo_throughput")
     args = parser.parse_args()
     rows = []
+    started, load_before = time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()), os.getloadavg()[0]
     for label, model_file, prop_file in INSTANCES:
         with single_threaded():         # both sides: one BLAS thread (see Simulator)
             rows.append(measure(label, model_file, prop_file, args.runs, args.repeat))
@@ -163,19 +173,25 @@ def main() -> None:
         print(f"{label}: {r['runs_per_s']:,.0f} runs/s, reference {r['reference_runs_per_s']:,.0f} runs/s, "
               f"ratio {r['ratio']:.2f} (depth gap {r['largest_relative_depth_gap']:.1e})", flush=True)
     check = thermostat_check()
+    load_after = os.getloadavg()[0]
     print(f"thermostat check: {check['seconds_end_to_end']:.2f} s end to end ({check['cpu_seconds']:.2f} s CPU), "
           f"exit {check['exit']}")
     out = Path(args.out)
-    out.with_suffix(".json").write_text(json.dumps({"instances": rows, "thermostat_check": check}, indent=2))
+    out.with_suffix(".json").write_text(json.dumps({"started": started, "load_average": [load_before, load_after],
+                                                    "instances": rows, "thermostat_check": check}, indent=2))
     lines = ["# Monte Carlo throughput", "",
-             f"`python benchmarks/montecarlo_throughput.py --runs {args.runs} --repeat {args.repeat}`: median of "
-             f"{args.repeat}; every property of the file monitored; the reference is the plain numpy loop of the "
-             "benchmark's docstring, measured in the same run.", "",
-             "| instance | runs x steps | runs/s | reference runs/s | ratio | largest depth gap to the reference |",
-             "| --- | --- | --- | --- | --- | --- |"]
+             f"`python benchmarks/montecarlo_throughput.py --runs {args.runs} --repeat {args.repeat}` ({started}, "
+             f"load average {load_before:.1f} before, {load_after:.1f} after): median of {args.repeat}; every "
+             "property of the file monitored; the reference is the plain numpy loop of the benchmark's docstring, "
+             "measured in the same run. Wall seconds, and CPU seconds of the process (less sensitive to other "
+             "processes on a shared machine).", "",
+             "| instance | runs x steps | runs/s | reference runs/s | ratio | runs/s (CPU) | reference runs/s (CPU) "
+             "| largest depth gap to the reference |",
+             "| --- | --- | --- | --- | --- | --- | --- | --- |"]
     for r in rows:
         lines.append(f"| {r['instance']} | {r['runs']} x {r['steps']} | {r['runs_per_s']:,.0f} | "
-                     f"{r['reference_runs_per_s']:,.0f} | {r['ratio']:.2f} | {r['largest_relative_depth_gap']:.1e} |")
+                     f"{r['reference_runs_per_s']:,.0f} | {r['ratio']:.2f} | {r['cpu_runs_per_s']:,.0f} | "
+                     f"{r['reference_cpu_runs_per_s']:,.0f} | {r['largest_relative_depth_gap']:.1e} |")
     per = ", ".join(f"{k} {v} s" for k, v in check["seconds_per_property"].items())
     lines += ["", f"`{check['command']}`: {check['seconds_end_to_end']:.2f} s end to end, "
               f"{check['cpu_seconds']:.2f} s CPU (user + system), once "

@@ -3,14 +3,14 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy import stats
+from scipy import special
 
 
 def wilson(successes: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
     """Wilson score interval for a binomial proportion."""
     if n == 0:
         return 0.0, 1.0
-    z = stats.norm.ppf(0.5 + confidence / 2)
+    z = special.ndtri(0.5 + confidence / 2)                  # the standard normal quantile
     p = successes / n
     denom = 1 + z ** 2 / n
     centre = (p + z ** 2 / (2 * n)) / denom
@@ -24,4 +24,4 @@ def clopper_pearson_upper(failures: int, n: int, confidence: float = 0.95) -> fl
         return 1.0
     if failures >= n:
         return 1.0
-    return float(stats.beta.ppf(confidence, failures + 1, n - failures))
+    return float(special.betaincinv(failures + 1, n - failures, confidence))   # the Beta quantile

@@ -15,7 +15,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 
-from reach.backends.falsify import Parameterisation
+from reach.backends.falsify import Parameterisation, latin_hypercube
 from reach.backends.montecarlo import BACKEND, replay, switch_window
 from reach.model import load_model
 from reach.result import Status
@@ -163,3 +163,20 @@ def test_a_model_without_free_parameters_is_one_optimiser_run():
     prop = bind(load_properties(DATA / "tank_level.yaml")[0], model)
     result = BACKEND.check(model, prop, {"samples": 5})
     assert result.status is Status.UNKNOWN and result.details["optimiser_runs"] == 1
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2 ** 32 - 1), st.integers(1, 60), st.integers(1, 8))
+def test_the_latin_hypercube_is_scipys(seed, count, dim):
+    """The initial population's Latin hypercube: the points of scipy.stats.qmc.LatinHypercube
+    for the same generator, one per slice of every axis, and the generator left in the same
+    state (the evolution that follows draws the same numbers)."""
+    from scipy.stats import qmc
+
+    ours_rng, ref_rng = np.random.default_rng(seed), np.random.default_rng(seed)
+    ours = latin_hypercube(ours_rng, count, dim)
+    ref = qmc.LatinHypercube(d=dim, rng=ref_rng).random(count)
+    np.testing.assert_array_equal(ours, ref)
+    assert ours_rng.random() == ref_rng.random()
+    for axis in ours.T:
+        assert np.array_equal(np.sort(np.floor(axis * count)), np.arange(count))

@@ -6,6 +6,8 @@ import sys
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from scipy import stats
 
 from reach.backends.montecarlo import BACKEND, replay
@@ -105,6 +107,21 @@ def test_confidence_intervals():
     assert clopper_pearson_upper(0, 1000) == pytest.approx(1 - 0.05 ** (1 / 1000), rel=1e-9)
     lo, hi = wilson(640, 1000)
     assert lo < 0.64 < hi and hi - lo == pytest.approx(2 * 1.96 * np.sqrt(0.64 * 0.36 / 1000), rel=0.02)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 10 ** 6), st.floats(0, 1), st.sampled_from([0.5, 0.9, 0.95, 0.99, 0.999]))
+def test_confidence_bounds_are_the_scipy_stats_quantiles(n, fraction, confidence):
+    """The Clopper-Pearson bound is the Beta(f + 1, n - f) quantile and the Wilson interval's z
+    the normal quantile, as scipy.stats computes them."""
+    f = min(n - 1, int(fraction * n))
+    assert clopper_pearson_upper(f, n, confidence) == pytest.approx(
+        stats.beta.ppf(confidence, f + 1, n - f), rel=1e-12, abs=1e-300)
+    z = stats.norm.ppf(0.5 + confidence / 2)
+    p = f / n
+    centre = (p + z ** 2 / (2 * n)) / (1 + z ** 2 / n)
+    half = z * np.sqrt(p * (1 - p) / n + z ** 2 / (4 * n ** 2)) / (1 + z ** 2 / n)
+    assert wilson(f, n, confidence) == pytest.approx((max(0.0, centre - half), min(1.0, centre + half)), rel=1e-12)
 
 
 def test_cli_check_json_and_replay(tmp_path):

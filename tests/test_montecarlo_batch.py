@@ -72,18 +72,29 @@ def test_thermostat_switches_at_the_closed_form_instants():
 
 
 def _state_by_state(model, prop, t, X, seen, m_index, rows):
-    mon = SafetyMonitor(model, prop, rows.max() + 1)
-    run, j = np.nonzero(seen.T)                                  # by run, then time
-    if run.size:
-        mon(t[j, run], X[j, :, run], np.full(run.size, m_index), rows[run])
-    return mon
+    """The reference: the property's own vectorised test (``prop.violation``, lambdified from
+    its constraints) state by state, in time order (``t`` grows along the first axis)."""
+    from types import SimpleNamespace
+
+    ref = SimpleNamespace(min_depth=np.full(rows.max() + 1, np.inf), violation_time=np.full(rows.max() + 1, np.nan),
+                          violation_state=np.full((rows.max() + 1, model.n), np.nan))
+    test = prop.violation(list(model.modes)[m_index])
+    for j, r in zip(*np.nonzero(seen)) if test is not None else ():
+        violated, depth = test(X[j, :, r][None, :])
+        ref.min_depth[rows[r]] = min(ref.min_depth[rows[r]], depth[0])
+        if violated[0] and np.isnan(ref.violation_time[rows[r]]):
+            ref.violation_time[rows[r]] = t[j, r]
+            ref.violation_state[rows[r]] = X[j, :, r]
+    return ref
 
 
 @settings(max_examples=40, deadline=None)
-@given(st.integers(0, 2 ** 32 - 1), st.integers(1, 7), st.integers(1, 6))
-def test_block_monitor_equals_the_state_by_state_monitor(seed, B, R):
+@given(st.integers(0, 2 ** 32 - 1), st.integers(1, 7), st.integers(1, 6), st.booleans())
+def test_block_monitor_equals_the_state_by_state_monitor(seed, B, R, given_margins):
     """Random blocks of rendezvous-mode states around the requirements' boundaries: the
-    block test gives the same closest depths and the same first violations."""
+    block test gives the same closest depths and the same first violations as the property's
+    own test state by state, whether it computes the margins of its rows itself or is handed
+    them (as the block product does); so does the monitor's state-by-state call."""
     model = load_model("models/SRA01.yaml")
     props = [p for p in (bind(q, model) for q in load_properties("properties/rendezvous.yaml")) if p.modes]
     rng = np.random.default_rng(seed)
@@ -95,12 +106,20 @@ def test_block_monitor_equals_the_state_by_state_monitor(seed, B, R):
     for prop in props:
         ref = _state_by_state(model, prop, t, X, seen, m_index, rows)
         mon = SafetyMonitor(model, prop, rows.max() + 1)
-        mon.block(t, X, seen, m_index, rows, np.abs(X).max(axis=1))
-        np.testing.assert_allclose(mon.min_depth, ref.min_depth, rtol=1e-12)
-        assert np.array_equal(np.isnan(mon.violation_time), np.isnan(ref.violation_time))
-        np.testing.assert_array_equal(mon.violation_time[~np.isnan(ref.violation_time)],
-                                      ref.violation_time[~np.isnan(ref.violation_time)])
-        np.testing.assert_allclose(mon.violation_state, ref.violation_state, rtol=1e-12)
+        margins = None
+        if given_margins and mon.margin_rows(m_index) is not None:
+            H, g = mon.margin_rows(m_index)
+            margins = np.einsum("kn,bnr->bkr", H, X) - g[None, :, None]
+        mon.block(t, X, seen, m_index, rows, margins)
+        one = SafetyMonitor(model, prop, rows.max() + 1)             # the states one by one
+        j, r = np.nonzero(seen)
+        one(t[j, r], X[j, :, r], np.full(j.size, m_index), rows[r])
+        for got in (mon, one):
+            np.testing.assert_allclose(got.min_depth, ref.min_depth, rtol=1e-12)
+            assert np.array_equal(np.isnan(got.violation_time), np.isnan(ref.violation_time))
+            np.testing.assert_array_equal(got.violation_time[~np.isnan(ref.violation_time)],
+                                          ref.violation_time[~np.isnan(ref.violation_time)])
+            np.testing.assert_allclose(got.violation_state, ref.violation_state, rtol=1e-12)
 
 
 @settings(max_examples=60, deadline=None)
@@ -125,3 +144,128 @@ def test_scalar_entry_is_the_bisections_entry(fraction, h, mode_level):
     want = sim._first_entry(mode, X, np.array([h]), guard)[0]
     tol = 2 * h * 2.0 ** -40 + 1e-12
     assert abs(got - s) <= tol and abs(want - s) <= tol
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2 ** 32 - 1), st.sampled_from(["approach", "rendezvous", "passive"]), st.floats(0.0, 3.0))
+def test_taylor_flow_is_the_exact_flow(seed, mode, steps):
+    """Each run's own duration (up to ``steps`` grid steps): the series summed on the vectors
+    (batch.taylor_flow) against scipy.linalg.expm of the augmented generator, run by run."""
+    import scipy.linalg
+
+    from reach.model import batch
+
+    model = load_model("models/SRA01.yaml")
+    sim = Simulator(model)
+    rng = np.random.default_rng(seed)
+    X, _ = random_plan(model, None, 5, rng)
+    h = rng.random(5) * steps * sim.dt
+    M = sim.generators[mode]
+    got = batch.taylor_flow(M, X, h)
+    for x, d, y in zip(X, h, got):
+        want = scipy.linalg.expm(M * d) @ np.append(x, 1.0)
+        np.testing.assert_allclose(y, want[:-1], rtol=1e-12, atol=1e-12 * np.abs(want).max())
+    # beyond TAYLOR_PIECES pieces the caller falls back to the matrix exponential
+    assert batch.taylor_flow(M, X, np.full(5, 4 * batch.TAYLOR_PIECES / np.linalg.norm(M, 1))) is None
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2 ** 32 - 1), st.floats(0.05, 1.0))
+def test_linear_guard_entry_is_the_bisections_entry(seed, fraction):
+    """SRA01's approach runs one grid step before they enter the rendezvous octagon (states on
+    its boundary flowed back by ``s = fraction dt`` with scipy's expm): the sub-grid search
+    (batch.first_entry, margins from one product per round) and the general path's bisection
+    (Simulator._first_entry) both find ``s`` to the bisection's resolution ``dt 2^-40``."""
+    import scipy.linalg
+
+    from reach.model import batch
+
+    model = load_model("models/SRA01.yaml")
+    sim = Simulator(model)
+    table = batch.table_for(sim, "approach")
+    (_, _, guard), = table.guards
+    rng = np.random.default_rng(seed)
+    angle = rng.uniform(np.pi / 2 + 0.3, 3 * np.pi / 2 - 0.3, 60)          # the octagon's left side
+    on = np.column_stack([100 * np.cos(angle), 100 * np.sin(angle), 0.3 * np.cos(angle + np.pi),
+                          0.3 * np.sin(angle + np.pi), np.full(60, 50.0)])   # heading inwards
+    on[:, 0] = np.maximum(on[:, 0], -100.0)
+    H, g = guard.rows
+    on *= np.min(g / np.maximum(on[:, :2] @ H[:, :2].T, 1e-12), axis=1)[:, None] ** np.r_[1, 1, 0, 0, 0]
+    s = fraction * sim.dt
+    back = scipy.linalg.expm(-sim.generators["approach"] * s)
+    X = (np.hstack([on, np.ones((60, 1))]) @ back.T)[:, :-1]
+    keep = np.all(guard(X) <= 0, axis=1) == False                           # noqa: E712 (outside at 0)
+    assert keep.sum() >= 10
+    X, h = X[keep], np.full(int(keep.sum()), sim.dt)
+    got = batch.first_entry(sim, "approach", X, h, guard, table.sub)
+    want = sim._first_entry("approach", X, h, guard)
+    tol = 2 * sim.dt * 2.0 ** -40 + 1e-12
+    np.testing.assert_allclose(got, want, rtol=0, atol=tol)
+    np.testing.assert_allclose(got, s, rtol=0, atol=tol)
+
+
+@pytest.mark.parametrize("model_file,prop_file", [("models/SRA01.yaml", "properties/rendezvous.yaml"),
+                                                  ("models/thermostat.yaml", "properties/thermostat.yaml")])
+def test_a_runs_outcome_does_not_depend_on_the_runs_simulated_with_it(model_file, prop_file):
+    """The block schedule (block lengths depend on how many runs share a chunk) leaves each
+    run's states alone: products restart from the state at fixed multiples of the table length,
+    so 37 runs simulated alone or among 700 give the same depths, bit for bit."""
+    model = load_model(model_file)
+    props = [p for p in (bind(q, model) for q in load_properties(prop_file)) if p.modes]
+    X, tau = random_plan(model, switch_window(model), 700, np.random.default_rng(3))
+    sim = Simulator(model)
+    depths = []
+    for count in (700, 37):
+        monitors = [SafetyMonitor(model, p, count) for p in props]
+        sim.run(X[:count], None if tau is None else tau[:count], observers=monitors)
+        depths.append([m.min_depth[:37] for m in monitors])
+    for among, alone in zip(*depths):
+        np.testing.assert_array_equal(among, alone)
+
+
+class _Recording:
+    """A block observer asking for the margins of fixed rows ``H x - g`` in one mode."""
+
+    def __init__(self, m_index, H, g):
+        self.m_index, self.rows, self.seen = m_index, (H, g), []
+
+    def margin_rows(self, m_index):
+        return self.rows if m_index == self.m_index else None
+
+    def block(self, t, X, seen, m_index, rows, margins=None):
+        if m_index == self.m_index:
+            j, r = np.nonzero(seen)
+            self.seen.append((rows[r], t[j, r], X[j, :, r], margins[j, :, r]))
+
+    def __call__(self, t, X, mode, rows):
+        pass
+
+
+def test_block_states_and_margins_follow_solve_ivp():
+    """SRA01's approach mode, 40 runs: the grid states the block product hands its observers,
+    and the margins of rows an observer asked for, at a dozen grid instants per run, against
+    scipy's solve_ivp (DOP853, rtol 1e-12: itself within about 1e-8 of the exact flow over
+    these 110 min) and scipy.linalg.expm of the augmented generator (the exact flow)."""
+    import scipy.linalg
+    from scipy.integrate import solve_ivp
+
+    model = load_model("models/SRA01.yaml")
+    sim = Simulator(model)
+    X0, tau = random_plan(model, switch_window(model), 40, np.random.default_rng(7))
+    A, b = model.modes["approach"].linear
+    M = sim.generators["approach"]
+    rng = np.random.default_rng(8)
+    H, g = rng.normal(size=(3, model.n)), rng.normal(size=3)
+    obs = _Recording(list(model.modes).index("approach"), H, g)
+    sim.run(X0, tau, observers=[obs])
+    run, t, X, margins = (np.concatenate(part) for part in zip(*obs.seen))
+    for r in range(40):
+        pick = np.flatnonzero(run == r)
+        pick = pick[np.linspace(0, pick.size - 1, 12).astype(int)]
+        sol = solve_ivp(lambda s, x: A @ x + b, (0.0, t[pick].max()), X0[r], method="DOP853",
+                        t_eval=t[pick], rtol=1e-12, atol=1e-12)
+        exact = np.array([(scipy.linalg.expm(M * s) @ np.append(X0[r], 1.0))[:-1] for s in t[pick]])
+        scale = 1.0 + np.abs(exact).max()
+        np.testing.assert_allclose(X[pick], sol.y.T, rtol=0, atol=1e-7 * scale)
+        np.testing.assert_allclose(X[pick], exact, rtol=0, atol=1e-12 * scale)
+        np.testing.assert_allclose(margins[pick], exact @ H.T - g, rtol=0, atol=1e-12 * scale * np.abs(H).sum())

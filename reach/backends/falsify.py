@@ -26,7 +26,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.optimize
-import scipy.stats
 
 from reach.backends.initial_sampling import PolytopeSampler
 
@@ -137,7 +136,7 @@ def falsify(model, prop, window, sim, monitor_factory, elite, budget: Budget, se
     rng = np.random.default_rng(seed)
     size = max(5, budget.population)
     seeds = param.encode(*elite)[: size // 2]
-    fill = scipy.stats.qmc.LatinHypercube(d=param.dim, seed=rng).random(size - seeds.shape[0])
+    fill = latin_hypercube(rng, size - seeds.shape[0], param.dim)
     init = np.concatenate([seeds, fill])
     scipy.optimize.differential_evolution(
         lambda U: evaluate(U.T), [(0.0, 1.0)] * param.dim, init=init, maxiter=budget.generations,
@@ -157,6 +156,20 @@ def falsify(model, prop, window, sim, monitor_factory, elite, budget: Budget, se
         except _Found:
             pass
     return _outcome(best)
+
+
+def latin_hypercube(rng: np.random.Generator, count: int, dim: int) -> np.ndarray:
+    """``count`` points of ``[0, 1]^dim``, one in each of the ``count`` slices ``[(k-1)/count,
+    k/count)`` of every axis: point ``i`` is ``(pi_j(i) - u_ij) / count`` with ``pi_j`` a random
+    permutation of ``1..count`` per axis and ``u_ij`` uniform on ``[0, 1)``. The draws come from
+    a child of ``rng`` (``rng.spawn(1)``), in the order of ``scipy.stats.qmc.LatinHypercube(dim,
+    rng=rng).random(count)``, so the points are that sampler's (without importing scipy.stats)."""
+    child = rng.spawn(1)[0]
+    u = child.uniform(size=(count, dim))
+    perms = np.tile(np.arange(1, count + 1), (dim, 1))
+    for row in perms:
+        child.shuffle(row)
+    return (perms.T - u) / count
 
 
 def _grid_polish(evaluate, best, start: np.ndarray, budget: int) -> None:

@@ -23,7 +23,8 @@ where the run's switching signal says so and a guard holds (each with probabilit
 
 The structured and i.i.d. runs are one simulation shared by all safety properties of the call
 (one monitor each; whole blocks of grid states are tested at once, every unsafe piece of a
-mode stacked in one matrix). The i.i.d. runs are simulated in fixed blocks of
+mode stacked in one matrix whose rows the simulator's block product evaluates with the guards
+and invariants: :mod:`reach.model.batch`). The i.i.d. runs are simulated in fixed blocks of
 :data:`SAMPLE_BLOCK`, grouped into batches of ``batch`` runs that run in this process, on
 ``jobs`` local processes or on a Dask ``scheduler`` (:mod:`reach.executors`): a seed gives the
 same answer whatever the split and the executor.
@@ -153,12 +154,20 @@ class SafetyMonitor:
         self.violation_state = np.full((n_runs, model.n), np.nan)
         self.violation_mode = np.full(n_runs, -1)
 
-    def block(self, t, X, seen, m_index, rows, scale):
+    def margin_rows(self, m_index: int):
+        """``(H, g)``: every unsafe piece of the property in mode ``m_index`` stacked, whose
+        margins ``H x - g`` :meth:`block` reads; None where it tests state by state."""
+        stacked = self.stacked.get(m_index)
+        return None if stacked is None else stacked[:2]
+
+    def block(self, t, X, seen, m_index, rows, margins=None):
         """A whole block of grid states of one mode at once: ``X`` (B, n, R) at times ``t``
-        (B, R), ``seen`` (B, R) the states the runs ``rows`` (distinct) visit, ``scale`` (B, R)
-        their ``max_i |x_i|``. The same test as :meth:`__call__`: a piece's depth is the
-        largest of its margins ``H x - g``, the depth the smallest over the pieces, a
-        violation a depth below ``-NUMERICAL_TOLERANCE (1 + scale)``."""
+        (B, R), ``seen`` (B, R) the states the runs ``rows`` (distinct) visit, ``margins`` (B,
+        k, R) the values of :meth:`margin_rows` there if the simulator computed them. The same
+        test as :meth:`__call__`: a piece's depth is the largest of its margins ``H x - g``, the
+        depth the smallest over the pieces, a violation a depth below ``-NUMERICAL_TOLERANCE (1
+        + |x|_inf)``. That bound is at most ``-NUMERICAL_TOLERANCE``, so only the runs whose
+        smallest depth in the block is below it are searched for their first violation."""
         if m_index not in self.tests or not seen.any():
             return
         if m_index not in self.stacked:            # a nonlinear piece: the state-by-state test
@@ -166,32 +175,39 @@ class SafetyMonitor:
             self(t[j, r], np.moveaxis(X, 1, 2)[j, r], np.full(j.size, m_index), rows[r])
             return
         L, c, starts = self.stacked[m_index]
-        G = np.matmul(L, X)
-        G -= c[:, None]
-        if starts.size == G.shape[1]:                  # one constraint per piece
-            depth = G.min(axis=1)
+        if margins is None:
+            margins = np.matmul(L, X)
+            margins -= c[:, None]
+        if seen.all() and starts.size == margins.shape[1]:        # one constraint per piece
+            low = margins.min(axis=(0, 1))
         else:
-            bounds = list(starts) + [G.shape[1]]
-            depth = G[:, bounds[0]:bounds[1]].max(axis=1)
-            for a, b in zip(bounds[1:-1], bounds[2:]):
-                np.minimum(depth, G[:, a:b].max(axis=1), out=depth)
-        depth = np.where(seen, depth, np.inf)
-        self.min_depth[rows] = np.minimum(self.min_depth[rows], depth.min(axis=0))
-        violated = depth < -NUMERICAL_TOLERANCE * (1.0 + scale)
-        fresh = violated.any(axis=0) & np.isnan(self.violation_time[rows])
-        if fresh.any():
-            r = np.flatnonzero(fresh)
-            j = violated[:, r].argmax(axis=0)
+            low = np.where(seen, _piece_depth(margins, starts), np.inf).min(axis=0)
+        self.min_depth[rows] = np.minimum(self.min_depth[rows], low)
+        r = np.flatnonzero((low < -NUMERICAL_TOLERANCE) & np.isnan(self.violation_time[rows]))
+        if r.size:
+            depth = _piece_depth(margins[:, :, r], starts)
+            violated = seen[:, r] & (depth < -NUMERICAL_TOLERANCE * (1.0 + np.abs(X[:, :, r]).max(axis=1)))
+            first = violated.any(axis=0)
+            r, j = r[first], violated[:, first].argmax(axis=0)
             self.violation_time[rows[r]] = t[j, r]
             self.violation_state[rows[r]] = X[j, :, r]
             self.violation_mode[rows[r]] = m_index
 
     def __call__(self, t, X, mode, rows):
+        """States one by one (``t``, ``X`` (N, n), ``mode``, ``rows`` per state; a run may appear
+        several times, in time order): the property's own test, or where its pieces are
+        stacked the same test from their rows (as :meth:`block`)."""
         for m_index, test in self.tests.items():
             sel = np.flatnonzero(mode == m_index)
             if sel.size == 0:
                 continue
-            violated, d = test(X[sel])
+            if m_index in self.stacked:
+                L, c, starts = self.stacked[m_index]
+                Y = X[sel]
+                d = _piece_depth((L @ Y.T - c[:, None])[None], starts)[0]
+                violated = d < -NUMERICAL_TOLERANCE * (1.0 + np.abs(Y).max(axis=1))
+            else:
+                violated, d = test(X[sel])
             r = rows[sel]                      # a run may appear many times, in time order
             np.minimum.at(self.min_depth, r, d)
             hits = np.flatnonzero(violated & np.isnan(self.violation_time[r]))
@@ -220,6 +236,18 @@ class SafetyMonitor:
         """The violating run that went deepest into the unsafe set, if any."""
         hit = np.flatnonzero(np.isfinite(self.violation_time))
         return None if hit.size == 0 else int(hit[np.argmin(self.min_depth[hit])])
+
+
+def _piece_depth(G: np.ndarray, starts: np.ndarray) -> np.ndarray:
+    """``(B, R)``: the smallest over the pieces (starting at rows ``starts`` of ``G`` (B, k,
+    R)) of the largest of their margins."""
+    if starts.size == G.shape[1]:
+        return G.min(axis=1)
+    bounds = list(starts) + [G.shape[1]]
+    depth = G[:, bounds[0]:bounds[1]].max(axis=1)
+    for a, b in zip(bounds[1:-1], bounds[2:]):
+        np.minimum(depth, G[:, a:b].max(axis=1), out=depth)
+    return depth
 
 
 @dataclass

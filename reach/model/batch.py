@@ -1,31 +1,41 @@
-"""Segments in blocks of grid steps: states, guard and invariant margins in one product.
+"""Segments in blocks of grid steps: states, guard, invariant and monitor margins in one product.
 
 In a linear mode every quantity the simulator tests on the grid is affine in the state, and
-the state at grid step ``j`` of a segment is ``[x_j; 1] = P^j [x_0; 1]`` with ``P`` the exact
-one-step matrix (``expm`` of the augmented generator). Stacking the rows
+the state ``j`` grid steps after ``z = [x; 1]`` is ``P^j z``, ``P`` the exact one-step matrix
+(``expm`` of the augmented generator). Stacking the rows
 
-    ``L = [[I_n, 0], [H_guard, -g_guard] (each urgent transition), [H_inv, -g_inv]]``
+    ``L = [[I_n, 0], [H_guard, -g_guard] (each urgent transition), [H_inv, -g_inv],
+           [H_obs, -g_obs] (each observer's margin rows)]``
 
-gives ``W_j = L P^j`` once per mode; then a block of ``B`` grid steps for ``R`` runs is one
-matrix product ``(B K, n+1) @ (n+1, R)``: the states and every margin at every grid point,
-runs along the last axis (so the reductions over rows and steps are contiguous). Blocks hold
-about :data:`BLOCK_VALUES` numbers (memory bounded, cache-sized); the block loop stops as soon
-as every run of the chunk has met its event, its blocking point or the end of its segment
-(the first block is short and each next one twice as long, up to that size).
+gives ``W_j = L P^j`` for ``j <= J`` once per mode and set of observers; then a block of ``B``
+grid steps for ``R`` runs is one matrix product ``(B K, n+1) @ (n+1, R)``, written into one
+buffer reused block after block: the states and every margin at every grid point, runs along
+the last axis (so the reductions over rows and steps are contiguous). ``z`` is the state at
+the last multiple of ``J`` steps into the segment (the next one ``P^J z``, the state rows of
+``W_J z``), so a run's states do not depend on which runs share its chunk. Blocks hold about
+:data:`BLOCK_VALUES` numbers (memory bounded, cache-sized); the block loop stops as soon as
+every run of the chunk has met its event, its blocking point or the end of its segment (the
+first block is short and each next one twice as long, up to that size). ``|x|_inf``, which scales the invariant and violation
+tolerances, is computed only for the runs whose margin already exceeds the unscaled tolerance.
 
 The semantics are the general path's (:meth:`reach.model.simulate.Simulator._segment_chunk`)
 step for step: the same grid points are visited, an urgent guard that holds at a grid point
-is located by the same bisection (``Simulator._first_entry``) inside the grid interval
-before it, the window switch is taken at ``tau``, the first grid point outside the invariant
-(beyond ``INVARIANT_TOLERANCE (1 + |x|_inf)``) blocks the run. Only rounding differs (``(L
-P^j) z`` against ``L (P^j z)``). In a mode with a scalar state (``x' = a x + b``) the
-guard entry and the propagation to events are in closed form instead (:func:`scalar_entry`,
-``h 2^-40`` late as the bisection's right end). A nonlinear mode with linear guards and
-invariant takes the same block loop with the states of a block from the batched RK4 of
-:mod:`reach.model.batch_nonlinear` and the margins from ``L [x; 1]``; its guard entries are
-the general path's bisection. Observers with a ``block`` method receive the visited grid
-states a block at a time (``block(t (B, R), X (B, n, R), seen (B, R), mode, rows, absmax)``);
-the event instants go through the ordinary call.
+is located inside the grid interval before it to the resolution of the general path's
+bisection (``Simulator._first_entry``; here :func:`first_entry`, sub-grids of that interval),
+the window switch is taken at ``tau``, the first grid point outside the invariant (beyond
+``INVARIANT_TOLERANCE (1 + |x|_inf)``) blocks the run. Only rounding differs (``(L P^j) z``
+against ``L (P^j z)``; the states at segment starts and events by :func:`taylor_flow`). In a
+mode with a scalar state (``x' = a x + b``) the guard entry and the propagation to events are
+in closed form instead (:func:`scalar_entry`, ``h 2^-40`` late as the bisection's right end).
+A nonlinear mode with linear guards and invariant takes the same block loop with the states
+of a block from the batched RK4 of :mod:`reach.model.batch_nonlinear` and the margins from
+``L [x; 1]``; its guard entries are the general path's bisection.
+
+Observers with a ``block`` method receive the visited grid states a block at a time,
+``block(t (B, R), X (B, n, R), seen (B, R), mode, rows, margins)``; one that also has
+``margin_rows(mode) -> (H, g) or None`` gets ``margins`` (B, k, R), the values of ``H x - g``
+at those states, from the block product (else None). The event instants go through the
+ordinary call.
 """
 
 from __future__ import annotations
@@ -33,19 +43,24 @@ from __future__ import annotations
 import numpy as np
 
 BLOCK_VALUES = 1 << 19           # numbers in one block product (4 MiB)
+MAX_BLOCK_STEPS = 512            # grid steps of one block at most (the size of a mode's table)
 FIRST_BLOCK = 16                 # grid steps of a segment's first block
 SUB_BITS = 4                     # a guard entry is searched on sub-grids of 2^4 pieces per round
+TAYLOR_TOLERANCE = 1e-17        # the terms taylor_flow leaves out weigh at most this (relative)
+TAYLOR_PIECES = 16               # pieces taylor_flow cuts a duration into at most
 
 
 class LinearTable:
-    """``W_j = L P^j`` of one linear mode, extended as far as segments ask."""
+    """What :func:`segment_chunk` needs of one linear mode: the rows ``L`` (guards and
+    invariant located in them), the block matrices ``W_j = [L; observers' rows] P^j``, guard
+    entries and propagation to off-grid instants."""
 
     nonlinear = False
 
     def __init__(self, sim, name: str):
         self.L, self.guards, self.invariant = stacked_rows(sim, name)
+        self.rows = ExtendedRows(self.L)
         self.powers = sim.powers[name]
-        self.table = np.zeros((0,) + self.L.shape)
         from reach.model.simulate import BISECTION_STEPS
         self.sub = SubSteps(sim.generators[name], SUB_BITS, BISECTION_STEPS // SUB_BITS)
         self.sim, self.name = sim, name
@@ -60,20 +75,83 @@ class LinearTable:
         return first_entry(self.sim, self.name, X, h, guard, self.sub)
 
     def propagate(self, X: np.ndarray, h) -> np.ndarray:
-        """``Simulator.propagate`` in this mode; a scalar flow in closed form,
-        ``x(h) = x e^(a h) + b expm1(a h) / a`` (``x + b h`` for ``a = 0``)."""
+        """The states after time ``h`` (one per run) with no event: :func:`taylor_flow` (or,
+        beyond its reach, ``Simulator.propagate``); a scalar flow in closed form, ``x(h) = x
+        e^(a h) + b expm1(a h) / a`` (``x + b h`` for ``a = 0``)."""
         if self.scalar is None:
-            return self.sim.propagate(self.name, X, h)
+            Y = taylor_flow(self.sim.generators[self.name], X, h)
+            return self.sim.propagate(self.name, X, h) if Y is None else Y
         a, b = self.scalar
         h = np.broadcast_to(np.asarray(h, dtype=float), X.shape[:1])[:, None]
         return X * np.exp(a * h) + (b * np.expm1(a * h) / a if a != 0 else b * h)
 
-    def __call__(self, j0: int, j1: int) -> np.ndarray:
-        """``W_j`` for ``j0 <= j < j1``: (j1 - j0, K, n+1)."""
-        if j1 > self.table.shape[0]:
-            size = min(self.powers.limit, max(j1, 2 * self.table.shape[0], 64))
-            self.table = np.einsum("kl,jlm->jkm", self.L, self.powers[:size])
-        return self.table[j0:j1]
+    def weights(self, extra: list) -> tuple:
+        """``(W, offsets)``: ``W_j = [L; E] P^j`` for ``j = 0..J`` (the block product's
+        matrices, (J + 1, K, n+1)), ``E`` the observers' rows ``extra`` stacked after ``L``
+        (:class:`ExtendedRows`), ``offsets`` where each starts. ``J``, the longest block, is
+        :data:`MAX_BLOCK_STEPS`, fewer where ``W`` would hold more than :data:`BLOCK_VALUES`
+        numbers."""
+        from reach.model.simulate import _powers
+
+        def build(L):
+            K, m = L.shape
+            powers = _powers(self.powers.step, 1 + min(MAX_BLOCK_STEPS, max(1, BLOCK_VALUES // (K * m))))
+            return np.einsum("kl,jlm->jkm", L, powers)
+
+        return self.rows.get(extra, build)
+
+
+class ExtendedRows:
+    """``L`` with observers' margin rows appended, and what is built from it, cached per list
+    of row arrays (observers compile their rows once per model and property, so the same
+    arrays come back run after run)."""
+
+    def __init__(self, L: np.ndarray):
+        self.L, self.cache = L, {}
+
+    def get(self, extra: list, build) -> tuple:
+        """``(build(L_ext), offsets)`` for ``L_ext = [L; H_1, -g_1; ...]`` (``extra = [(H_i,
+        g_i)]``), ``offsets[i]`` the row of ``L_ext`` where ``H_i`` starts."""
+        key = tuple((id(H), id(g)) for H, g in extra)
+        hit = self.cache.get(key)
+        if hit is None or any(a is not b for pair, kept in zip(extra, hit[0]) for a, b in zip(pair, kept)):
+            if len(self.cache) > 16:
+                self.cache.clear()
+            L = np.vstack([self.L] + [np.hstack([H, -g[:, None]]) for H, g in extra])
+            offsets = np.cumsum([self.L.shape[0]] + [H.shape[0] for H, _ in extra])[:-1]
+            hit = self.cache[key] = (list(extra), build(L), list(offsets))
+        return hit[1], hit[2]
+
+
+def taylor_flow(M: np.ndarray, X: np.ndarray, h) -> np.ndarray | None:
+    """``[x_r; 1] <- expm(M h_r) [x_r; 1]`` for every run ``r`` (``X`` (R, n), ``h`` one
+    duration per run or one for all), the Taylor series summed on the vectors: no exponential
+    per distinct duration. Each ``h_r`` is cut into ``p = ceil(theta / 3)`` equal pieces, ``theta
+    = ||M||_1 max_r |h_r|``, so ``||M h_r / p||_1 <= u = theta / p <= 3``; a piece is the series
+    to the least degree ``d`` whose left-out terms weigh at most ``u^(d+1)/(d+1)! / (1 - u/(d+2))
+    <=`` :data:`TAYLOR_TOLERANCE` of ``||z||_1`` (``d <= 28``), summed by Horner, ``y <- z + (h/(p
+    k)) M y`` for ``k = d..1`` (its terms stay below ``e^u <= 20`` times ``||z||_1``, so rounding
+    stays near the unit roundoff). None when ``p`` would exceed :data:`TAYLOR_PIECES`."""
+    h = np.broadcast_to(np.asarray(h, dtype=float), X.shape[:1])
+    theta = np.linalg.norm(M, 1) * float(np.max(np.abs(h), initial=0.0))
+    pieces = max(1, int(np.ceil(theta / 3.0)))
+    if pieces > TAYLOR_PIECES:
+        return None
+    u, degree, term = theta / pieces, 0, 1.0
+    while u >= degree + 2 or term * u / (degree + 1) / (1.0 - u / (degree + 2)) > TAYLOR_TOLERANCE:
+        degree += 1
+        term *= u / degree                                # u^d / d!
+    Mt = np.ascontiguousarray(M.T)
+    steps = [(h / (pieces * k))[:, None] for k in range(1, degree + 1)]
+    Z = np.hstack([X, np.ones((X.shape[0], 1))])
+    for _ in range(pieces):
+        Y = Z
+        for k in range(degree, 0, -1):
+            Y = Y @ Mt
+            Y *= steps[k - 1]
+            Y += Z
+        Z = Y
+    return Z[:, :-1]
 
 
 def stacked_rows(sim, name: str):
@@ -109,7 +187,8 @@ def table_for(sim, name: str):
 class SubSteps:
     """``expm(M h k 2^-(b r))`` for ``k = 1..2^b`` at each level ``r = 1..rounds``: the
     sub-grids a search for a guard entry in ``(0, h]`` walks down, cached for the few durations
-    ``h`` the searches start from (mostly one grid step)."""
+    ``h`` the searches start from (mostly one grid step), and a guard's margins at their ends as
+    rows acting on ``[x; 1]``."""
 
     def __init__(self, generator: np.ndarray, bits: int, rounds: int):
         self.generator, self.bits, self.rounds, self.cache = generator, bits, rounds, {}
@@ -124,32 +203,44 @@ class SubSteps:
             self.cache[h] = np.stack(levels)            # (rounds, 2^bits, n+1, n+1)
         return self.cache[h]
 
+    def margins(self, h: float, guard) -> np.ndarray:
+        """``(rounds, m 2^b, n+1)``: row ``i 2^b + k`` of level ``r`` is ``[H_i, -g_i] E_rk``, the
+        margin of guard row ``i`` (``rows = (H, g)``) at the end ``k`` of that sub-grid as a row
+        acting on ``[x; 1]``."""
+        key = (h, id(guard))
+        if key not in self.cache:
+            H, g = guard.rows
+            G = np.einsum("in,rknm->rikm", H, self(h)[:, :, :-1, :])     # (rounds, m, 2^b, n+1)
+            G[..., -1] -= g[:, None]
+            self.cache[key] = (guard, G.reshape(G.shape[0], -1, G.shape[-1]))
+        return self.cache[key][1]
+
 
 def first_entry(sim, name: str, X: np.ndarray, h: np.ndarray, guard, sub: SubSteps) -> np.ndarray:
     """Earliest time in ``(0, h]`` at which ``guard`` holds (it holds at ``h``), to ``h 2^-(b
     rounds)`` (the resolution of ``Simulator._first_entry``'s bisection): in each round the
-    interval ``(lo, lo + w]`` known to hold the entry is cut into ``2^b`` pieces, the states at
-    their ends are ``expm(M w k 2^-b) x(lo)``, and the first end where the guard holds becomes
-    the new right end. The first end, not any sign change: an entry is never skipped between
-    two ends that both hold. Runs sharing a duration share the exponentials; with many
-    distinct durations, ``Simulator._first_entry``."""
+    interval ``(lo, lo + w]`` known to hold the entry is cut into ``2^b`` pieces, the guard's
+    margins at their ends are ``[H, -g] expm(M w k 2^-b) [x(lo); 1]`` (one product for all the
+    ends, :meth:`SubSteps.margins`), and the first end where the guard holds becomes the new
+    right end. The first end, not any sign change: an entry is never skipped between two ends
+    that both hold. Runs sharing a duration share the exponentials; with many distinct
+    durations, ``Simulator._first_entry``."""
     durations, which = np.unique(h, return_inverse=True)
     if durations.size > 4:
         return sim._first_entry(name, X, h, guard)
-    n, K = sim.n, 2 ** sub.bits
+    K = 2 ** sub.bits
     out = np.empty_like(h)
     for d_index, d in enumerate(durations):
         sel = np.flatnonzero(which.reshape(-1) == d_index)
-        E = sub(float(d))
-        x_lo, lo = X[sel], np.zeros(sel.size)
+        E, G = sub(float(d)), sub.margins(float(d), guard)
+        z = np.vstack([X[sel].T, np.ones((1, sel.size))])               # [x(lo); 1], (n+1, R)
+        lo = np.zeros(sel.size)
         for r in range(sub.rounds):
-            P = E[r, :, :n, :]                                        # (K, n, n+1)
-            Z = x_lo @ P[:, :, :n].reshape(-1, n).T + P[:, :, n].reshape(-1)
-            Z = Z.reshape(sel.size * K, n)
-            inside = np.all(guard(Z) <= 0, axis=1).reshape(sel.size, K)
-            inside[:, -1] = True                                      # the right end holds
-            k = inside.argmax(axis=1)                                 # first end that holds
-            x_lo = np.where((k > 0)[:, None], Z.reshape(sel.size, K, n)[np.arange(sel.size), k - 1], x_lo)
+            inside = (G[r] @ z).reshape(-1, K, sel.size).max(axis=0) <= 0  # (2^b, R)
+            inside[-1] = True                                         # the right end holds
+            k = inside.argmax(axis=0)                                 # first end that holds
+            moved = np.flatnonzero(k > 0)
+            z[:, moved] = np.einsum("aij,ja->ia", E[r, k[moved] - 1], z[:, moved])
             lo = lo + k * d * 2.0 ** (-sub.bits * (r + 1))
         out[sel] = lo + d * 2.0 ** (-sub.bits * sub.rounds)
     return out
@@ -201,13 +292,14 @@ def eligible(sim, name: str) -> bool:
             and all(model.guard_halfspaces(tr) is not None for tr, _ in sim.urgent[name]))
 
 
-def notify_block(watchers, t, S, seen, m_index, rows, absmax):
-    """Hand visited grid states to the observers: whole blocks to those with ``block``, the
-    states one by one (in time order per run) to the others."""
+def notify_block(watchers, t, S, seen, m_index, rows, margins=None):
+    """Hand visited grid states to the observers: whole blocks to those with ``block`` (with
+    ``margins[i]``, the values of the rows watcher ``i`` asked for, where given), the states
+    one by one (in time order per run) to the others."""
     plain = [f for f in watchers if not hasattr(f, "block")]
-    for f in watchers:
+    for i, f in enumerate(watchers):
         if hasattr(f, "block"):
-            f.block(t, S, seen, m_index, rows, absmax)
+            f.block(t, S, seen, m_index, rows, None if margins is None else margins[i])
     if plain:
         run, j = np.nonzero(seen.T)                    # by run, then time
         if run.size:
@@ -215,9 +307,21 @@ def notify_block(watchers, t, S, seen, m_index, rows, absmax):
                 f(t[j, run], S[j, :, run], np.full(run.size, m_index), rows[run])
 
 
+def margin_rows(watchers, m_index: int) -> tuple:
+    """``(extra, wanted)``: the rows ``(H, g)`` the watchers ask for in mode ``m_index`` (those
+    with ``margin_rows``), and per watcher the index of its rows in ``extra`` or None."""
+    extra, wanted = [], []
+    for f in watchers:
+        rows = f.margin_rows(m_index) if hasattr(f, "margin_rows") else None
+        wanted.append(None if rows is None else len(extra))
+        if rows is not None:
+            extra.append(rows)
+    return extra, wanted
+
+
 def segment_chunk(sim, name, rows, X, mode, t, tau, blocked_at, next_kick, watchers, horizon, table):
-    """Advance ``rows`` (all in linear mode ``name``) to their next event, kick or the horizon,
-    in blocks of grid steps (see the module docstring)."""
+    """Advance ``rows`` (all in mode ``name``) to their next event, kick or the horizon, in
+    blocks of grid steps (see the module docstring)."""
     from reach.model.simulate import INVARIANT_TOLERANCE
 
     n, dt = sim.n, sim.dt
@@ -226,10 +330,12 @@ def segment_chunk(sim, name, rows, X, mode, t, tau, blocked_at, next_kick, watch
     t0, k0, end, window, win_time, stop_at, count = sim.segment_limits(name, rows, t, tau, next_kick, horizon)
     count = max(1, min(count, sim.steps + 2 - int(k0.min())))
     Y0 = table.propagate(X[rows], np.maximum(k0 * dt - t0, 0.0))
-    Z = np.vstack([Y0.T, np.ones((1, n_rows))])                          # (n+1, R)
-    steps = table.steps if table.nonlinear else None
+    Z = np.vstack([Y0.T, np.ones((1, n_rows))])                          # (n+1, R), at the block start
+    extra, wanted = margin_rows(watchers, m_index)
+    W, offsets = table.weights(extra)
+    K = W.shape[-2]
+    spans = [None if i is None else (offsets[i], extra[i][0].shape[0]) for i in wanted]
 
-    guards = sim.urgent[name]
     event_time = win_time.copy()
     event_tr = np.where(np.isfinite(win_time), 0, -1)
     blocked = np.zeros(n_rows, dtype=bool)
@@ -238,26 +344,37 @@ def segment_chunk(sim, name, rows, X, mode, t, tau, blocked_at, next_kick, watch
     last_t, last_x = t0.copy(), X[rows].copy()                       # last visited grid state
     prev_t, prev_x = t0.copy(), X[rows].copy()                       # grid state before the block
     done = np.zeros(n_rows, dtype=bool)
-    K = table.L.shape[0]
-    most = max(1, BLOCK_VALUES // (K * n_rows))
+    longest = MAX_BLOCK_STEPS if table.nonlinear else W.shape[0] - 1
+    most = max(1, min(longest, BLOCK_VALUES // (K * n_rows)))
     step_block = min(FIRST_BLOCK, most)                 # doubled each block: short segments stay cheap
+    buffer = np.empty(min(most, count) * K * n_rows)    # the block product, reused block after block
     inv_offset, inv_rows = table.invariant
-    j0 = 0
+    k0f = k0.astype(float)
+    # linear: Z is the state at step r0, a multiple of J; blocks stay within [r0, r0 + J]
+    period = count if table.nonlinear else W.shape[0] - 1
+    j0 = r0 = 0
     while j0 < count and not done.all():
-        j1 = min(count, j0 + step_block)
+        j1 = min(count, j0 + step_block, r0 + period)
         act = np.flatnonzero(~done)
-        B = j1 - j0
-        gt = (k0[act][None, :] + np.arange(j0, j1)[:, None]) * dt         # (B, A)
-        valid = gt <= stop_at[act] + 1e-12
-        if steps is None:
-            O = (table(j0, j1).reshape(-1, n + 1) @ Z[:, act]).reshape(B, K, act.size)
-            S = O[:, :n, :]
-        else:                           # the states from the integrator, the margins from L
-            S_next = steps.block(Z[:n, act], B + 1)
-            Z[:n, act] = S_next[B]
+        A, B = act.size, j1 - j0
+        sel = act if A < n_rows else slice(None)        # the active runs (a view while all are)
+        Za = Z[:, sel]
+        out = buffer[:B * K * A].reshape(B, K, A)
+        gt = (k0f[sel][None, :] + np.arange(j0, j1)[:, None]) * dt        # (B, A) grid times
+        valid = gt <= stop_at[sel] + 1e-12
+        if table.nonlinear:             # the states from the integrator, the margins from L
+            S_next = table.steps.block(Za[:n], B + 1)
+            Z[:n, sel] = S_next[B]
             S = S_next[:B]
-            O = table.outputs(S)
+            O = np.matmul(W[:, :n], S, out=out)
+            O += W[:, n][None, :, None]
             valid &= np.isfinite(S).all(axis=1)
+        else:                           # [x_j; 1] = P^j z: states and margins in one product
+            O = np.matmul(W[j0 - r0:j1 - r0].reshape(B * K, n + 1), Za, out=out.reshape(B * K, A)).reshape(B, K, A)
+            S = O[:, :n, :]
+            if j1 == r0 + period:
+                Z[:n, sel] = W[period, :n] @ Za
+                r0 = j1
         for j_tr, (off, m, guard) in enumerate(table.guards, start=1):
             inside = valid & np.all(O[:, off:off + m, :] <= 0, axis=1)
             hit = np.flatnonzero(inside.any(axis=0))
@@ -272,29 +389,38 @@ def segment_chunk(sim, name, rows, X, mode, t, tau, blocked_at, next_kick, watch
                 better = when < event_time[rows_hit]
                 event_time[rows_hit[better]] = when[better]
                 event_tr[rows_hit[better]] = j_tr
-        absmax = np.abs(S).max(axis=1)
-        M = O[:, inv_offset:inv_offset + inv_rows, :]
-        outside = (np.any(M > (INVARIANT_TOLERANCE * (1.0 + absmax))[:, None, :], axis=1)
-                   & valid & (gt < event_time[act]))
-        out_any = outside.any(axis=0)
-        limit_j = np.full(act.size, B)
-        if out_any.any():
-            b = np.flatnonzero(out_any)
-            jb = outside[:, b].argmax(axis=0)
-            limit_j[b] = jb
-            blocked[act[b]] = True
-            block_x[act[b]] = S[jb, :, b]
-            block_t[act[b]] = gt[jb, b]
-        seen = valid & (gt < event_time[act]) & (np.arange(B)[:, None] <= limit_j)
-        notify_block(watchers, gt, S, seen, m_index, rows[act], absmax)
-        n_seen = seen.sum(axis=0)
-        some = np.flatnonzero(n_seen)
-        if some.size:
+        limit_j = np.full(A, B)
+        out_any = np.zeros(A, dtype=bool)
+        if inv_rows:
+            # outside: a margin above INVARIANT_TOLERANCE (1 + |x|_inf), so above the tolerance
+            # itself; |x|_inf only for the runs with such a margin
+            worst = O[:, inv_offset:inv_offset + inv_rows, :].max(axis=1)
+            near = (worst > INVARIANT_TOLERANCE) & valid & (gt < event_time[sel])
+            c = np.flatnonzero(near.any(axis=0))
+            if c.size:
+                absmax = np.abs(S[:, :, c]).max(axis=1)
+                outside = near[:, c] & (worst[:, c] > INVARIANT_TOLERANCE * (1.0 + absmax))
+                b = c[outside.any(axis=0)]
+                if b.size:
+                    jb = outside[:, outside.any(axis=0)].argmax(axis=0)
+                    out_any[b] = True
+                    limit_j[b] = jb
+                    blocked[act[b]] = True
+                    block_x[act[b]] = S[jb, :, b]
+                    block_t[act[b]] = gt[jb, b]
+        seen = valid & (gt < event_time[sel]) & (np.arange(B)[:, None] <= limit_j)
+        notify_block(watchers, gt, S, seen, m_index, rows[sel],
+                     [None if sp is None else O[:, sp[0]:sp[0] + sp[1], :] for sp in spans])
+        prev_t[sel], prev_x[sel] = gt[-1], S[-1].T
+        if seen.all():
+            last_t[sel], last_x[sel] = gt[-1], S[-1].T
+        else:
+            n_seen = seen.sum(axis=0)
+            some = np.flatnonzero(n_seen)
             last = n_seen[some] - 1
             last_t[act[some]] = gt[last, some]
             last_x[act[some]] = S[last, :, some]
-        prev_t[act], prev_x[act] = gt[-1], S[-1].T
-        done[act] |= out_any | (gt[-1] >= np.minimum(stop_at[act], event_time[act]) - 1e-12) | ~valid.any(axis=0)
+        done[sel] |= out_any | (gt[-1] >= np.minimum(stop_at[sel], event_time[sel]) - 1e-12) | ~valid.any(axis=0)
         j0 = j1
         step_block = min(2 * step_block, most)
     finish(sim, name, rows, X, mode, t, tau, blocked_at, watchers, horizon, end, event_time, event_tr,

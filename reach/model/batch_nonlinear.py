@@ -104,18 +104,17 @@ class NonlinearTable:
     nonlinear = True
 
     def __init__(self, sim, name: str):
-        from reach.model.batch import stacked_rows
+        from reach.model.batch import ExtendedRows, stacked_rows
         self.L, self.guards, self.invariant = stacked_rows(sim, name)
+        self.rows = ExtendedRows(self.L)
         self.name, self.sim, self.mode = name, sim, sim.model.modes[name]
         self.flow = SplitFlow(self.mode.flow, sim.model.symbols)
         self.steps = RK4Blocks(self.flow, sim.dt, sim.substeps)
 
-    def outputs(self, S: np.ndarray) -> np.ndarray:
-        """``(B, K, R)``: the rows of ``L`` at the block's states ``S`` (B, n, R)."""
-        n = S.shape[1]
-        O = np.matmul(self.L[:, :n], S)
-        O += self.L[:, n][None, :, None]
-        return O
+    def weights(self, extra: list) -> tuple:
+        """``(L_ext, offsets)``: the rows ``L`` with the observers' rows ``extra`` appended
+        (:class:`reach.model.batch.ExtendedRows`); a block's margins are ``L_ext [x; 1]``."""
+        return self.rows.get(extra, lambda L: L)
 
     def entry(self, X: np.ndarray, h: np.ndarray, guard) -> np.ndarray:
         return self.sim._first_entry(self.name, X, h, guard)

@@ -490,8 +490,7 @@ class Simulator:
             outside &= blocked[:, None]
         limit = np.where(blocked, grid_t[np.arange(n_rows), block_j], np.minimum(event_time, stop_at))
         seen = valid & (grid_t <= limit[:, None]) & (grid_t < event_time[:, None])
-        batch.notify_block(watchers, grid_t.T, Y.transpose(1, 2, 0), seen.T, int(mode[rows[0]]), rows,
-                           absmax.T)
+        batch.notify_block(watchers, grid_t.T, Y.transpose(1, 2, 0), seen.T, int(mode[rows[0]]), rows)
         # runs that are blocked
         b = np.flatnonzero(blocked)
         X[rows[b]] = Y[b, block_j[b]]
