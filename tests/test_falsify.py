@@ -165,6 +165,22 @@ def test_a_model_without_free_parameters_is_one_optimiser_run():
     assert result.status is Status.UNKNOWN and result.details["optimiser_runs"] == 1
 
 
+def test_a_property_of_a_mode_no_run_reaches_is_unknown(tmp_path):
+    """x' = 1 from [0, 1] reaches the guard x >= 10 of mode 'far' after the horizon 5: no run
+    visits the property's mode, so the search has no margin to descend (it used to fail on
+    that); the answer is UNKNOWN, with no violation."""
+    (tmp_path / "m.yaml").write_text(
+        "name: far\nstate: [x]\nmodes:\n  near: {flow: {x: 1}}\n  far: {flow: {x: 1}}\n"
+        "transitions: [{from: near, to: far, guard: ['x >= 10'], urgent: true}]\n"
+        "initial: {mode: near, box: {x: [0, 1]}}\nhorizon: 5\n")
+    (tmp_path / "p.yaml").write_text(
+        "properties: [{id: low, kind: safety, modes: [far], require: ['x <= 1']}]\n")
+    model = load_model(tmp_path / "m.yaml")
+    prop = bind(load_properties(tmp_path / "p.yaml")[0], model)
+    result = BACKEND.check(model, prop, {"samples": 20})
+    assert result.status is Status.UNKNOWN and result.counterexample is None
+
+
 @settings(max_examples=40, deadline=None)
 @given(st.integers(0, 2 ** 32 - 1), st.integers(1, 60), st.integers(1, 8))
 def test_the_latin_hypercube_is_scipys(seed, count, dim):

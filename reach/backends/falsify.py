@@ -124,7 +124,8 @@ def falsify(model, prop, window, sim, monitor_factory, elite, budget: Budget, se
         best["runs"] += X.shape[0]
         hit = monitor.first_violation()
         i = hit if hit is not None else int(np.argmin(monitor.min_depth))
-        if (hit is not None and not best["violated"]) or monitor.min_depth[i] < best["depth"]:
+        if (best["run"] is None or (hit is not None and not best["violated"])
+                or monitor.min_depth[i] < best["depth"]):      # the first run stands until a closer one
             if not best["violated"]:
                 best.update(depth=float(monitor.min_depth[i]), violated=hit is not None,
                             run=(X[i:i + 1], None if tau is None else tau[i:i + 1], _row(signal, i), monitor, i))
