@@ -138,6 +138,7 @@ time up to which every abort is proven safe (Fig. 5 of the rendezvous benchmark)
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -145,7 +146,8 @@ from reach import lp
 from reach.backends.star.explorer import LOG, _Explorer, _Stop
 from reach.backends.star.flowpipe import AffineFlow, flowpipe
 from reach.backends.star.linearise import LinearisedModel, check_linearised
-from reach.backends.star.options import DEPTH_LP_TOLERANCE, NAME, StarOptions, clockless_hints
+from reach.backends.star.options import (CLOCKLESS_FIRST_STARS, DEPTH_LP_TOLERANCE, NAME, StarOptions,
+                                         clockless_retry)
 from reach.backends.star.transitions import _LinearModel, _unsafe_pieces
 from reach.backends.star.witnesses import witness_details
 from reach.result import Result, Status
@@ -195,8 +197,20 @@ class StarBackend:
         reason = self.supports(model, prop)
         if reason is not None:
             return Result(NAME, model.name, prop.id, Status.UNSUPPORTED, details={"reason": reason})
-        opt = (options if isinstance(options, StarOptions)
-               else StarOptions.from_dict(clockless_hints(model, options)))
+        opt = StarOptions.from_dict(options)
+        retry = None if isinstance(options, StarOptions) else clockless_retry(model, options, opt)
+        if retry is None:
+            return self._check(model, prop, opt, start)
+        budget = min(opt.max_stars, CLOCKLESS_FIRST_STARS)
+        first = self._check(model, prop, replace(opt, max_stars=budget), start)
+        if first.status is not Status.UNKNOWN or first.details.get("stars", 0) <= budget:
+            return first
+        result = self._check(model, prop, retry, start)
+        result.details["semantics"] += (f"; the default aggregation took more than {budget} stars, so "
+                                        f"the check started over aggregating from the first jump")
+        return result
+
+    def _check(self, model, prop, opt, start) -> Result:
         if not _LinearModel.of(model).linear:
             return check_linearised(model, prop, opt, lambda data, blocks: self._explore(
                 model, prop, opt, start, data, blocks))

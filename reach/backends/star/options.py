@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from reach.backends.options import parse_options, ranged
 
@@ -126,15 +126,20 @@ def cfg_hints(notes: dict, horizon: float, options: dict | None) -> dict:
     return options
 
 
-def clockless_hints(model, options: dict | None) -> dict:
-    """Star options for a model without a global clock where the user set none: successors are
-    aggregated from the first jump (``aggregate_after = 0``; 2 otherwise). Such a model does
-    not depend on time (:mod:`.fixpoint`), so runs that cycle through the same modes collapse
-    into aggregates that the fixpoint check closes, instead of one family of stars per cell
-    of the first chains."""
-    options = dict(options or {})
-    if ("aggregate_after" not in options and model.global_clock is None
-            and not any(t.window is not None for t in model.transitions)):
-        options["aggregate_after"] = 0
-    return options
+#: stars the default aggregation may take on a clockless model before the check starts over
+#: aggregating from the first jump (:func:`clockless_retry`)
+CLOCKLESS_FIRST_STARS = 100
 
+
+def clockless_retry(model, options: dict | None, opt: StarOptions) -> StarOptions | None:
+    """The options of a second pass for a model without a global clock where the user set no
+    ``aggregate_after``: successors aggregated from the first jump, taken when the default
+    pass runs past :data:`CLOCKLESS_FIRST_STARS` stars. Such a model does not depend on time
+    (:mod:`.fixpoint`): runs that cycle through the same modes then collapse into aggregates
+    that the fixpoint check closes, instead of one family of stars per cell of the first
+    chains. The default comes first since an aggregate refined into its members leaves the
+    cells before it unrefined. None when no second pass applies."""
+    if ("aggregate_after" in (options or {}) or model.global_clock is not None
+            or any(t.window is not None for t in model.transitions)):
+        return None
+    return replace(opt, aggregate_after=0)
