@@ -140,11 +140,11 @@ class Siren:
                 h = h.affine(W, b).sin()
             return h.affine(*self._output).unstack()
         X = np.stack(np.broadcast_arrays(*[np.asarray(v, dtype=float) for v in inputs]))
-        h = X.reshape(self.n_inputs, -1)
+        h = X.reshape(self.n_inputs, -1).T[:, :, None]        # (N, inputs, 1): a column per state
         for W, b in self._hidden:
-            h = np.sin(W @ h + b[:, None])
+            h = np.sin(np.matmul(W, h) + b[:, None])
         W, b = self._output
-        out = (W @ h + b[:, None]).reshape((self.n_outputs,) + X.shape[1:])
+        out = (np.matmul(W, h) + b[:, None])[:, :, 0].T.reshape((self.n_outputs,) + X.shape[1:])
         return [float(o) for o in out] if X.ndim == 1 else list(out)
 
     def __call__(self, *inputs) -> list:

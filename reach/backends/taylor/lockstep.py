@@ -1,15 +1,21 @@
-"""Many subdomains' expansions in lockstep: their DA propagations batched into one array run.
+"""Many subdomains' expansions in lockstep: their nominal runs and DA propagations batched.
 
 The candidate maps of a subdomain (:meth:`.problem.EventProblem.candidate_steps`) are written as a
-generator that yields a :class:`Propagation` (a mode's flow, a DA state, the RK8 step sizes) each
-time it needs a state carried along its nominal run, and receives the propagated state back.
-:func:`run_one` answers one generator directly (:func:`.flow.rk8`, step by step);
-:func:`run_batch` advances a whole ADS level's generators together: the pending propagations of
-the same flow and algebra are stacked along a leading batch axis (state ``i`` of run ``b`` is row
-``b`` of one DA of shape ``(B,)``) and stepped together, each run with its own step sizes, the
+generator that yields a request each time it needs a run: a :class:`Propagation` (a mode's flow,
+a DA state, the RK8 step sizes: the state carried along its nominal run) or a
+:class:`.nominal.NominalRun` (the nominal run itself), and receives the answer back. A request
+has a ``key`` (requests with the same key can be answered together), ``batch`` (the most answered
+at once, None for no limit) and ``answer(requests) -> answers``. :func:`run_one` answers one
+generator's requests one at a time; :func:`run_batch` advances a whole ADS level's generators
+together, answering their pending requests group by group.
+
+A batch of propagations stacks the states along a leading axis (state ``i`` of run ``b`` is row
+``b`` of one DA of shape ``(B,)``) and steps them together, each run with its own step sizes, the
 shorter step lists padded with zero steps (an RK step of size 0 returns its state exactly). The
 flow sees a batch of ``B`` states, so a network layer is one ``(k, m) x (m, B, M)`` product and one
 series evaluation for all ``B`` subdomains: the per-operation overhead is paid once per level.
+Nominal runs are batched the same way (:mod:`.nominal`: rows of one array, each with its own step
+control).
 
 Each run's arithmetic is the same as on its own (the batch only adds independent rows), so the
 maps agree with the one-at-a-time path to rounding.
@@ -34,12 +40,15 @@ class Propagation:
     x: list
     steps: list
 
+    batch = BATCH
 
-def propagate_one(req: Propagation) -> list:
-    x = req.x
-    for h in req.steps:
-        x = rk8(req.f, x, h, 1)
-    return x
+    def key(self):
+        alg = next(v.alg for v in self.x if isinstance(v, DA))
+        return ("propagation", id(self.f), alg.order, alg.nvars, len(self.x))
+
+    @staticmethod
+    def answer(requests: list["Propagation"]) -> list[list]:
+        return propagate_batch(requests)
 
 
 def propagate_batch(requests: list[Propagation]) -> list[list]:
@@ -61,7 +70,7 @@ def run_one(gen):
     try:
         req = next(gen)
         while True:
-            req = gen.send(propagate_one(req))
+            req = gen.send(req.answer([req])[0])
     except StopIteration as stop:
         return stop.value
 
@@ -82,12 +91,12 @@ def run_batch(gens: list) -> list:
     while pending:
         groups: dict = {}
         for i, req in pending.items():
-            alg = next(v.alg for v in req.x if isinstance(v, DA))
-            groups.setdefault((id(req.f), alg.order, alg.nvars, len(req.x)), []).append(i)
+            groups.setdefault(req.key(), []).append(i)
         for members in groups.values():
-            for start in range(0, len(members), BATCH):
-                part = members[start:start + BATCH]
-                results = propagate_batch([pending[i] for i in part])
-                for i, x in zip(part, results):
-                    advance(i, x)
+            size = pending[members[0]].batch or len(members)
+            for start in range(0, len(members), size):
+                part = members[start:start + size]
+                answers = pending[part[0]].answer([pending[i] for i in part])
+                for i, answer in zip(part, answers):
+                    advance(i, answer)
     return out
