@@ -100,6 +100,7 @@ class NominalRun:
     stop: object = None
 
     batch = None            # no limit: a nominal batch is a few small arrays
+    length = 0
 
     def key(self):
         return ("nominal", id(self.f_numeric), self.tol)
