@@ -92,7 +92,7 @@ class Algebra:
                 S[np.arange(len(target)), target] = 1.0
 
                 def total(products):
-                    rows = products.reshape(int(np.prod(products.shape[:-1])), len(target))
+                    rows = products.reshape(math.prod(products.shape[:-1]), len(target))
                     return (rows @ S).reshape(products.shape[:-1] + (self.size,))
             else:
                 starts = np.flatnonzero(np.r_[True, target[1:] != target[:-1]]) if len(target) else target
@@ -176,7 +176,8 @@ class DA:
     def affine(self, W: np.ndarray, b: np.ndarray | None = None) -> "DA":
         """``W a + b`` for a vector DA ``a`` of shape ``(m, *batch)`` (a layer's inputs, for each of
         a batch of subdomains): one matrix product on the coefficients, shape ``(k, *batch)``."""
-        c = np.tensordot(np.asarray(W, dtype=float), self.c, axes=([1], [0]))
+        W = np.asarray(W, dtype=float)
+        c = (W @ self.c.reshape(W.shape[1], -1)).reshape((W.shape[0],) + self.c.shape[1:])
         if b is not None:
             b = np.asarray(b, dtype=float)
             c[..., 0] += b.reshape(b.shape + (1,) * (c.ndim - 2))
@@ -187,7 +188,7 @@ class DA:
         """``sum_k w_k a_k`` for scalar DAs and floats (one product on the stacked coefficients)."""
         alg = next(v.alg for v in items if isinstance(v, DA))
         rows = np.stack(np.broadcast_arrays(*[v.c if isinstance(v, DA) else DA.const(alg, v).c for v in items]))
-        return DA(alg, np.tensordot(weights, rows, axes=1))
+        return DA(alg, (weights @ rows.reshape(len(rows), -1)).reshape(rows.shape[1:]))
 
     def unstack(self) -> list["DA"]:
         """The scalar DAs of a vector DA."""

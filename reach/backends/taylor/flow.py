@@ -187,10 +187,15 @@ def rk8(f, x: list, h, steps: int) -> list:
     K = np.empty((len(B_DOP853),) + X.shape)
     for _ in range(steps):
         for i in range(len(B_DOP853)):
-            Xi = X if i == 0 else X + h * np.tensordot(A_DOP853[i, :i], K[:i], axes=1)
+            Xi = X if i == 0 else X + h * _combine(A_DOP853[i, :i], K[:i])
             K[i] = pack(f(unpack(Xi)))
-        X = X + h * np.tensordot(B_DOP853, K, axes=1)
+        X = X + h * _combine(B_DOP853, K)
     return unpack(X)
+
+
+def _combine(weights: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """``sum_i w_i K[i]`` (one matrix-vector product)."""
+    return (weights @ K.reshape(len(K), -1)).reshape(K.shape[1:])
 
 
 def step_sizes(nodes: np.ndarray, t_end: float) -> list[float]:
