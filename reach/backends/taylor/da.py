@@ -70,39 +70,52 @@ class Algebra:
     def multiply_graded(self, a: np.ndarray, b: np.ndarray, low_a: int, low_b: int) -> np.ndarray:
         """``a b`` when ``a`` has no terms of degree below ``low_a`` and ``b`` none below ``low_b``
         (powers of a deviation): only the pairs that can be non-zero are formed."""
-        left, right, total = self._pairs(low_a, low_b)
+        left, right, total = self._pairs(low_a, low_b, False)
         return total(np.take(a, left, axis=-1) * np.take(b, right, axis=-1))
+
+    def square_graded(self, a: np.ndarray, low: int) -> np.ndarray:
+        """``a a`` when ``a`` has no terms of degree below ``low``: each pair ``{alpha, beta}`` is
+        formed once and counted twice when ``alpha != beta``."""
+        left, right, total = self._pairs(low, low, True)
+        return total(np.take(a, left, axis=-1) * np.take(a, right, axis=-1))
 
     def multiply(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         return self.multiply_graded(a, b, 0, 0)
 
-    def _pairs(self, low_a: int, low_b: int):
-        """``(left, right, total)``: the monomial pairs of a graded product and the function that sums
-        their products ``(..., pairs)`` into the coefficients ``(..., size)``. In a small algebra the
-        sum is one matrix product with the 0/1 matrix ``S[p, target_p] = 1``, otherwise a segmented
-        sum (``np.add.reduceat``, over the pairs sorted by target): per pair and run, the matrix
-        product costs about ``size`` multiply-adds in BLAS, and ``reduceat`` about as much as 30 of
-        them (order 4 in 2 variables, 15 monomials: the matrix product takes half the time)."""
-        key = (low_a, low_b)
+    def _pairs(self, low_a: int, low_b: int, square: bool):
+        """``(left, right, total)``: the monomial pairs of a graded product (unordered pairs of a
+        square) and the function that sums their products ``(..., pairs)`` into the coefficients
+        ``(..., size)``, each with its weight (2 for the two orders of an unordered pair). In a
+        small algebra the sum is one matrix product with the matrix ``S[p, target_p] = weight_p``,
+        otherwise a segmented sum (``np.add.reduceat``, over the pairs sorted by target): per pair
+        and run, the matrix product costs about ``size`` multiply-adds in BLAS, and ``reduceat``
+        about as much as 30 of them (order 4 in 2 variables, 15 monomials: the matrix product
+        takes half the time)."""
+        key = (low_a, low_b, square)
         if key not in self._graded:
             keep = (self.degree[self.left] >= low_a) & (self.degree[self.right] >= low_b)
-            target = self.target[keep]
+            if square:
+                keep &= self.left <= self.right
+            left, right, target = self.left[keep], self.right[keep], self.target[keep]
+            weight = np.where(left < right, 2.0, 1.0) if square else np.ones(len(left))
             if self.size <= DENSE_SUM_SIZE:
                 S = np.zeros((len(target), self.size))
-                S[np.arange(len(target)), target] = 1.0
+                S[np.arange(len(target)), target] = weight
 
                 def total(products):
                     rows = products.reshape(math.prod(products.shape[:-1]), len(target))
                     return (rows @ S).reshape(products.shape[:-1] + (self.size,))
             else:
                 starts = np.flatnonzero(np.r_[True, target[1:] != target[:-1]]) if len(target) else target
+                scaled = square
 
                 def total(products):
                     out = np.zeros(products.shape[:-1] + (self.size,))
                     if len(starts):     # else every product has degree above the order
-                        out[..., target[starts]] = np.add.reduceat(products, starts, axis=-1)
+                        out[..., target[starts]] = np.add.reduceat(products * weight if scaled else products,
+                                                                   starts, axis=-1)
                     return out
-            self._graded[key] = (self.left[keep], self.right[keep], total)
+            self._graded[key] = (left, right, total)
         return self._graded[key]
 
 
@@ -214,6 +227,8 @@ class DA:
         return (-self) + other
 
     def __mul__(self, other):
+        if other is self:
+            return DA(self.alg, self.alg.square_graded(self.c, 0))
         if isinstance(other, DA):
             return DA(self.alg, self.alg.multiply(self.c, other.c))
         return DA(self.alg, self.c * np.asarray(other, dtype=float)[..., None])
@@ -250,7 +265,7 @@ class DA:
         c[..., 0] += coefficient(a0, 0)
         power = d
         for k in range(2, self.alg.order + 1):
-            power = self.alg.multiply_graded(power, d, k - 1, 1)
+            power = self.alg.square_graded(d, 1) if k == 2 else self.alg.multiply_graded(power, d, k - 1, 1)
             c += np.asarray(coefficient(a0, k))[..., None] * power
         return DA(self.alg, c)
 
@@ -336,10 +351,12 @@ def _rebuild(order: int, nvars: int, c: np.ndarray) -> DA:
 
 def integer_power(x, k: int):
     """``x**k`` for ``k >= 0`` by repeated squaring (any series type with ``*`` and ``const_like``)."""
-    out, base = x.const_like(np.ones(x.shape)), x
+    if k == 0:
+        return x.const_like(np.ones(x.shape))
+    out, base = None, x
     while k:
         if k & 1:
-            out = out * base
+            out = base if out is None else out * base
         k >>= 1
         if k:
             base = base * base
