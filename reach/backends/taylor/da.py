@@ -321,9 +321,12 @@ class DA:
         """``self(args)``: substitute a DA (of any algebra) for each variable."""
         values = self.monomials(args)
         target = args[0].alg
-        c = np.zeros(self.shape + (target.size,))
-        for k, v in enumerate(values):
-            c += self.c[..., k, None] * v.c
+        V = np.stack(np.broadcast_arrays(*[v.c for v in values]))     # (size, *args shape, target size)
+        if V.ndim == 2:             # scalar arguments: one matrix product
+            return DA(target, self.c @ V)
+        c = np.zeros(np.broadcast_shapes(self.shape + (1,) * (V.ndim - 2), V.shape[1:-1]) + (target.size,))
+        for k in range(len(V)):
+            c += self.c[..., k, None] * V[k]
         return DA(target, c)
 
     # ------------------------------------------------------------ sizes
