@@ -11,7 +11,9 @@ The file holds ``W1..WL``, ``b1..bL``, ``omega`` (a scalar) and ``input_offset``
 are folded into the affine maps once, so each layer is one ``A x + c`` followed by ``sin``.
 
 The same forward pass runs on floats, on numpy arrays (each input of shape ``(N,)``: a batch of
-states, as the vectorised simulator passes them) and on differential-algebra numbers: an input
+states, as the vectorised simulator passes them; each layer is a matrix-vector product per state,
+so a state's outputs are bit for bit those it has alone, whatever the batch, which a matrix-matrix
+product in BLAS does not guarantee) and on differential-algebra numbers: an input
 with an ``affine`` method is a DA, and the layers become ``stack -> affine -> sin -> ...
 -> unstack`` on the DA's own type, so this module does not depend on any back-end.
 

@@ -19,8 +19,13 @@ running. For run ``b`` with step ``h``, error estimates ``e5 = h sum_i E5_i K_i 
 the step is accepted when ``err < 1`` and the next step is ``h min(10, 0.9 err^(-1/8))``
 (at most ``h`` right after a rejection); a rejected step is retried with
 ``h max(0.2, 0.9 err^(-1/8))``. The first step is the usual estimate from ``f(x0)`` and one Euler
-step (``select_initial_step``). A row's arithmetic is the same as on its own, so each run takes
-scipy's steps (to rounding; tests/test_taylor_nominal.py compares them with ``solve_ivp``).
+step (``select_initial_step``). A row's arithmetic does not depend on the other rows: its sums
+are matrix-vector products per row (so is the SIREN network's evaluation,
+:meth:`reach.model.network.Siren.evaluate`), and ``err^(-1/8)`` is the C library's ``pow``, as
+in scipy. A run in a batch is therefore bit for bit the run on its own, and takes scipy's steps
+(tests/test_taylor_nominal.py); adaptive steps amplify last-bit differences in a flow's
+evaluation (scipy evaluates ``x**2`` of a float by ``pow``, numpy's arrays by ``x*x``), so a run
+can occasionally take a slightly different sequence of steps, each within the tolerance.
 
 A run may stop at an urgent guard: ``stop(X) -> (k,)`` is positive until the run should end (the
 guard's largest margin). The coarse run then ends where ``stop`` first crosses zero from above
