@@ -14,9 +14,8 @@ A batch of propagations stacks the states along a leading axis (state ``i`` of r
 ``b`` of one DA of shape ``(B,)``) and steps them together, each run with its own step sizes; a
 run leaves the batch after its last step. The flow sees a batch of ``B`` states, so a network
 layer is one ``(k, m) x (m, B, M)`` product and one series evaluation for all ``B`` subdomains:
-the per-operation overhead is paid once per batch.
-Nominal runs are batched the same way (:mod:`.nominal`: rows of one array, each with its own step
-control).
+the per-operation overhead is paid once per batch. Nominal runs are batched the same way
+(:mod:`.nominal`: rows of one array, each with its own step control).
 
 Each run's arithmetic is the same as on its own (the batch only adds independent rows), so the
 maps agree with the one-at-a-time path to rounding.
