@@ -6,6 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import sympy
+from hypothesis import given, settings, strategies as st
 
 from reach.backends.taylor.da import DA, algebra
 from reach.backends.taylor.flow import compile_expressions
@@ -64,6 +65,20 @@ def test_shipped_forward_pass_matches_reference():
     net = load(WEIGHTS)
     s = [480.0, -560.0, 0.01, -0.02]
     assert np.allclose(net.evaluate(*s), reference(arrays, s), rtol=1e-10, atol=1e-12)
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.lists(st.tuples(*[st.floats(-2000.0, 2000.0)] * 2, *[st.floats(-1.0, 1.0)] * 2), min_size=1, max_size=40))
+def test_a_state_in_a_batch_gets_its_outputs_alone(states):
+    """The shipped network on a batch of states: every state's outputs are bit for bit those of
+    the state evaluated alone (so a batched integrator's runs do not depend on their batch)."""
+    net = Siren.load(WEIGHTS, Where("test"))
+    S = np.array(states, dtype=float)
+    batch = net.evaluate(*S.T)
+    for k, s in enumerate(S):
+        alone = net.evaluate(*[np.array([v]) for v in s])
+        assert all(batch[j][k] == alone[j][0] for j in range(net.n_outputs))
+        assert all(batch[j][k] == float(v) for j, v in enumerate(net.evaluate(*s)))
 
 
 def test_da_evaluation_matches_numpy_and_finite_differences(small):

@@ -13,7 +13,8 @@ from reach.backends.event_sampling import outside_bounds, sample_extrema
 from reach.backends.taylor import BACKEND
 from reach.backends.taylor.da import DA, algebra
 from reach.backends.taylor.event import event_map, initial_state, refine_time
-from reach.backends.taylor.flow import compile_expressions, compile_numeric, flow_map, nominal
+from reach.backends.taylor.flow import compile_expressions, compile_numeric, flow_map
+from reach.backends.taylor.nominal import nominal
 from reach.model.loader import load_model
 from reach.result import Status
 from reach.spec.properties import bind, load_properties

@@ -1,9 +1,12 @@
 """The DA engine against sympy series, and the ADS splitting and polynomial bounds on functions
 with a known radius of convergence."""
 
+import math
+
 import numpy as np
 import pytest
 import sympy
+from hypothesis import given, settings, strategies as st
 
 from reach.backends.taylor.ads import split_domain
 from reach.backends.taylor.bound import contenders, estimated_remainder, next_order_remainder, polynomial_range, truncate
@@ -160,3 +163,37 @@ def test_contenders_drop_only_candidates_that_cannot_hold_the_extremum():
     ends = lambda cands: (min(polynomial_range(p)[0] for p in cands.values()),
                           min(polynomial_range(p)[1] for p in cands.values()))
     assert ends(kept) == ends(candidates)
+
+
+def _reference_product(alg, a, b):
+    """Truncated product by the exponents: every pair of monomials, added at ``alpha + beta``."""
+    out = np.zeros(alg.size)
+    for i, ea in enumerate(alg.exps):
+        for j, eb in enumerate(alg.exps):
+            key = tuple(ea + eb)
+            if key in alg.index:
+                out[alg.index[key]] += a[i] * b[j]
+    return out
+
+
+@settings(max_examples=20, deadline=None)
+@given(st.sampled_from([(4, 2), (2, 5), (4, 3), (3, 4)]), st.integers(0, 2 ** 31))
+def test_product_and_sine_in_small_and_large_algebras(shape, seed):
+    """Products summed by the 0/1 matrix (up to 32 monomials) or by segments (more) equal the
+    product by exponents; the sine's series (graded powers) equals sin a0 cos da + cos a0 sin da
+    expanded with those products."""
+    alg = algebra(*shape)
+    rng = np.random.default_rng(seed)
+    a, b = rng.normal(size=(3, alg.size)), rng.normal(size=(3, alg.size))
+    got = DA(alg, a) * DA(alg, b)
+    for k in range(3):
+        np.testing.assert_allclose(got.c[k], _reference_product(alg, a[k], b[k]), rtol=1e-12, atol=1e-12)
+    d = a[0].copy()
+    d[0] = 0.0
+    powers = [np.eye(1, alg.size)[0], d]
+    for _ in range(2, alg.order + 1):
+        powers.append(_reference_product(alg, powers[-1], d))
+    s, c = np.sin(a[0, 0]), np.cos(a[0, 0])
+    derivatives = [s, c, -s, -c]
+    expected = sum(derivatives[k % 4] / math.factorial(k) * p for k, p in enumerate(powers))
+    np.testing.assert_allclose(DA(alg, a[0]).sin().c, expected, rtol=1e-12, atol=1e-12)

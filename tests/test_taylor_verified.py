@@ -15,7 +15,8 @@ from scipy.integrate import solve_ivp
 from reach.backends.event_sampling import outside_bounds, sample_extrema
 from reach.backends.taylor import BACKEND
 from reach.backends.taylor.da import DA, algebra
-from reach.backends.taylor.flow import compile_expressions, compile_numeric, nominal
+from reach.backends.taylor.flow import compile_expressions, compile_numeric
+from reach.backends.taylor.nominal import nominal
 from reach.backends.taylor.interval import Jet
 from reach.backends.taylor.tm import TM
 from reach.backends.taylor.verified import at_sigma, enclose_stretch

@@ -11,7 +11,9 @@ The file holds ``W1..WL``, ``b1..bL``, ``omega`` (a scalar) and ``input_offset``
 are folded into the affine maps once, so each layer is one ``A x + c`` followed by ``sin``.
 
 The same forward pass runs on floats, on numpy arrays (each input of shape ``(N,)``: a batch of
-states, as the vectorised simulator passes them) and on differential-algebra numbers: an input
+states, as the vectorised simulator passes them; each layer is a matrix-vector product per state,
+so a state's outputs are bit for bit those it has alone, whatever the batch, which a matrix-matrix
+product in BLAS does not guarantee) and on differential-algebra numbers: an input
 with an ``affine`` method is a DA, and the layers become ``stack -> affine -> sin -> ...
 -> unstack`` on the DA's own type, so this module does not depend on any back-end.
 
@@ -140,11 +142,11 @@ class Siren:
                 h = h.affine(W, b).sin()
             return h.affine(*self._output).unstack()
         X = np.stack(np.broadcast_arrays(*[np.asarray(v, dtype=float) for v in inputs]))
-        h = X.reshape(self.n_inputs, -1)
+        h = X.reshape(self.n_inputs, -1).T[:, :, None]        # (N, inputs, 1): a column per state
         for W, b in self._hidden:
-            h = np.sin(W @ h + b[:, None])
+            h = np.sin(np.matmul(W, h) + b[:, None])
         W, b = self._output
-        out = (W @ h + b[:, None]).reshape((self.n_outputs,) + X.shape[1:])
+        out = (np.matmul(W, h) + b[:, None])[:, :, 0].T.reshape((self.n_outputs,) + X.shape[1:])
         return [float(o) for o in out] if X.ndim == 1 else list(out)
 
     def __call__(self, *inputs) -> list:

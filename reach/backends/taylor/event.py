@@ -23,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from reach.backends.taylor.da import DA, algebra, invert
+from reach.backends.taylor.da import DA, algebra, invert, stack
 from reach.backends.taylor.flow import step_sizes
 from reach.backends.taylor.lockstep import Propagation, run_one
 
@@ -99,7 +99,7 @@ def event_map_steps(f, event, x0: list[DA], nodes: np.ndarray, t_e: float, order
     target = algebra(order, m)
     xi = [DA.var(target, j) for j in range(m)]
     dt = G[m].compose(xi + [DA.const(target, -E.cons)])            # E = 0 enforced
-    state = [xk.compose(xi + [dt]) for xk in x]                    # eq. (14)
+    state = stack(x).compose(xi + [dt]).unstack()                   # eq. (14)
     return EventMap(dt + t_e, state)
 
 

@@ -4,20 +4,16 @@ and an 8th-order Runge-Kutta on DA states.
 
 Integrator: explicit Runge-Kutta with the 8th-order Dormand-Prince tableau (the DOP853
 coefficients, as shipped with scipy), with the step sequence chosen on the constant part: the
-nominal run is integrated by scipy's adaptive DOP853 at the requested tolerance and the DA run
-steps through the same accepted nodes, each step cut in two. Every DA coefficient is propagated by
-the same RK formula, so the nominal accuracy is the step-size control (as in the paper's DA
-integrators). The nominal run itself (event detection, start points of the refinement) is a dense
-DOP853 solution at 1e-12.
+nominal run is integrated by an adaptive DOP853 at the requested tolerance (:mod:`.nominal`) and
+the DA run steps through the same accepted nodes, each step cut in two. Every DA coefficient is
+propagated by the same RK formula, so the nominal accuracy is the step-size control (as in the
+paper's DA integrators).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 import sympy
-from scipy.integrate import solve_ivp
 
 from reach.backends.taylor.da import DA
 
@@ -191,65 +187,15 @@ def rk8(f, x: list, h, steps: int) -> list:
     K = np.empty((len(B_DOP853),) + X.shape)
     for _ in range(steps):
         for i in range(len(B_DOP853)):
-            Xi = X if i == 0 else X + h * np.tensordot(A_DOP853[i, :i], K[:i], axes=1)
+            Xi = X if i == 0 else X + h * _combine(A_DOP853[i, :i], K[:i])
             K[i] = pack(f(unpack(Xi)))
-        X = X + h * np.tensordot(B_DOP853, K, axes=1)
+        X = X + h * _combine(B_DOP853, K)
     return unpack(X)
 
 
-@dataclass
-class Nominal:
-    """The nominal (constant-part) run: dense solution and the step nodes of the DA runs."""
-
-    solution: object        # scipy OdeSolution, callable on times
-    nodes: np.ndarray       # 0 = t_0 < t_1 < ... < t_N = T
-
-    def grid(self, last: int | None = None) -> np.ndarray:
-        """States at the nodes ``t_0..t_last`` (all by default): ``(last + 1, n)``."""
-        last = len(self.nodes) - 1 if last is None else last
-        return self.solution(self.nodes[: last + 1]).T
-
-    def sharpen(self, k: int, score, samples: int = 64) -> float:
-        """The time in ``[t_{k-1}, t_{k+1}]`` maximising ``score(states (n, N))`` on a dense sampling."""
-        lo, hi = self.nodes[max(k - 1, 0)], self.nodes[min(k + 1, len(self.nodes) - 1)]
-        times = np.linspace(lo, hi, samples + 1)
-        return float(times[int(np.argmax(score(self.solution(times))))])
-
-
-def nominal(f_numeric, x0: np.ndarray, T: float, tol: float = 1e-9, refine: int = 2,
-            stop=None) -> Nominal:
-    """Nominal run: the accepted steps of an adaptive DOP853 (``rtol = tol``), each cut into
-    ``refine`` equal steps, are the DA step nodes; a dense DOP853 solution at 1e-12 is the
-    nominal state for detection and refinement.
-
-    ``stop(x) -> float``, if given, is positive until the run should end (an urgent guard's
-    largest margin): the run ends one accepted step after ``stop`` first crosses zero from above,
-    or at ``T``, so the nodes bracket the crossing and no work is spent past it.
-    """
-    def fun(_, x):
-        return np.array(f_numeric(list(x)), dtype=float)
-
-    scale = np.maximum(1.0, np.abs(np.asarray(x0, dtype=float)))
-    events = None
-    if stop is not None:
-        def events(_, x):
-            return stop(x)
-        events.terminal, events.direction = True, -1
-    coarse = solve_ivp(fun, (0.0, T), x0, method="DOP853", rtol=tol, atol=tol * scale, events=events)
-    t, end = coarse.t, T
-    if coarse.status == 1:                       # stopped at the crossing: one step further
-        last_step = t[-1] - t[-2] if len(t) > 1 else T
-        end = min(T, t[-1] + last_step)
-        if end > t[-1]:
-            rest = solve_ivp(fun, (t[-1], end), coarse.y[:, -1], method="DOP853", rtol=tol,
-                             atol=tol * scale, first_step=min(last_step, end - t[-1]))
-            t = np.concatenate([t, rest.t[1:]])
-    dense = solve_ivp(fun, (0.0, end), x0, method="DOP853", rtol=1e-12, atol=1e-12 * scale,
-                      dense_output=True)
-    if not (coarse.success and dense.success):
-        raise RuntimeError(f"nominal run failed: {dense.message}")
-    nodes = np.concatenate([np.linspace(a, b, refine + 1)[:-1] for a, b in zip(t[:-1], t[1:])] + [t[-1:]])
-    return Nominal(dense.sol, nodes)
+def _combine(weights: np.ndarray, K: np.ndarray) -> np.ndarray:
+    """``sum_i w_i K[i]`` (one matrix-vector product)."""
+    return (weights @ K.reshape(len(K), -1)).reshape(K.shape[1:])
 
 
 def step_sizes(nodes: np.ndarray, t_end: float) -> list[float]:

@@ -25,10 +25,11 @@ import sympy
 from reach.backends.taylor.da import DA, algebra
 from reach.backends.taylor.event import (event_map_steps, fixed_time_map_steps, initial_state, local_extrema,
                                          refine_time)
-from reach.backends.taylor.flow import compile_expressions, compile_numeric, nominal
+from reach.backends.taylor.flow import compile_expressions, compile_numeric
 from reach.backends.taylor.interval import Jet
 from reach.backends.taylor.keys import fingerprint
 from reach.backends.taylor.lockstep import run_batch, run_one
+from reach.backends.taylor.nominal import NominalRun, nominal
 from reach.backends.taylor.tm import TM
 from reach.backends.taylor.verified import at_sigma, enclose_stretch
 from reach.model.constraints import affine_coefficients, lambdify_margins
@@ -88,16 +89,17 @@ class ModeCode:
         return best
 
     def stop(self, x0: np.ndarray):
-        """The nominal run's stop function (:func:`.flow.nominal`): the smallest over the urgent
-        exits of the guard's largest margin, or None when the mode has no urgent exit or the start
-        already lies in a guard (:meth:`exit` ignores guards held at the start)."""
-        if not self.exits:
+        """The nominal run's stop function (:mod:`.nominal`), :meth:`guard_margin`, or None when
+        the mode has no urgent exit or the start already lies in a guard (:meth:`exit` ignores
+        guards held at the start)."""
+        if not self.exits or self.guard_margin(np.asarray(x0, dtype=float)[None, :])[0] <= 0:
             return None
+        return self.guard_margin
 
-        def margin(x):
-            return min(float(np.max(ex.margins(np.asarray(x)[None, :])[0])) for ex in self.exits)
-
-        return margin if margin(x0) > 0 else None
+    def guard_margin(self, X: np.ndarray) -> np.ndarray:
+        """For states ``X`` ``(k, n)``: the smallest over the urgent exits of the guard's largest
+        margin (positive outside every guard)."""
+        return np.min([np.max(ex.margins(X), axis=1) for ex in self.exits], axis=0)
 
     def may_enter(self, ex: Exit, X) -> bool:
         """Whether the guard of ``ex`` may hold for some deviation of the Taylor models ``X``."""
@@ -180,11 +182,11 @@ class EventProblem:
                     out[f"{mode}:entry"] = code.q(X)
                 return out
             x_nominal = np.array([x.cons for x in X])
-            run = nominal(code.f_numeric, x_nominal, T - t0, tol, stop=code.stop(x_nominal))
+            run = yield NominalRun(code.f_numeric, x_nominal, T - t0, tol, code.stop(x_nominal))
             grid = run.grid()
             leave = code.exit(grid)
             if leave is None and run.nodes[-1] < T - t0:     # grazed the guard: run to the horizon
-                run = nominal(code.f_numeric, x_nominal, T - t0, tol)
+                run = yield NominalRun(code.f_numeric, x_nominal, T - t0, tol)
                 grid = run.grid()
                 leave = code.exit(grid)
             last = len(run.nodes) - 1 if leave is None else leave[0]
