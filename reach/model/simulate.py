@@ -20,8 +20,9 @@ together:
   leave the source invariant, if its guard holds there (the exit instant, by bisection: one
   of the automaton's runs, the one that stays longest); Gaussian kicks (if asked for) are
   applied at ``k * step``, and so are the pieces of a time-varying input signal (and its
-  switching decisions); an urgent transition whose guard holds right after a kick is taken
-  at that instant;
+  switching decisions; a piece start on the grid where a run's inputs keep their values and no
+  switch is asked for changes nothing and does not end its segment); an urgent transition
+  whose guard holds right after a kick is taken at that instant;
 * a run found outside its mode's invariant at a grid point with no transition taken is
   *blocked* (it has no continuation in the automaton's semantics) and stops there;
 * a run that takes more than ``MAX_PASSES_PER_STEP`` events inside one grid step is Zeno (its
@@ -258,11 +259,15 @@ class Simulator:
                     jumped.append(self._take_may(X, mode, sel[switch[sel, piece]]))
 
             kicks(0, np.arange(N))
+            following = self._signal_stops(kick_step, values, switch)
         elif kick_step:
             disturbance = kicks
 
             def kicks(k, sel):
                 X[sel] += disturbance(k, sel.size)
+
+            def following(k, sel):
+                return k + 1
         next_kick = np.zeros(N) if kick_step else np.full(N, np.inf)
         kick_count = np.zeros(N, dtype=int)
         recorder = _Recorder() if record else None
@@ -297,8 +302,8 @@ class Simulator:
                     jumped.clear()
                     for k in np.unique(kick_count[due]):
                         kicks(int(k), due[kick_count[due] == k])
-                    kick_count[due] += 1
-                    next_kick[due] = kick_count[due] * kick_step
+                    kick_count[due] = following(kick_count[due], due)
+                    next_kick[due] = np.where(kick_count[due] >= 0, kick_count[due] * kick_step, np.inf)
                     self._urgent_now(X, mode, due)       # a kick may land a run inside a guard
                     moved = due[(mode[due] != before) | np.isin(due, np.concatenate(jumped or [[]]))]
                     if moved.size:
@@ -309,6 +314,39 @@ class Simulator:
                 if rows.size:
                     self._segment(name, rows, X, mode, t, tau, blocked_at, next_kick, watchers)
         return Trajectories(X, mode, blocked_at, recorder.paths(N) if recorder else {})
+
+    def _signal_stops(self, step: float, values: np.ndarray, switch: np.ndarray | None):
+        """``following(k, rows)``: for each run of ``rows`` at piece start ``k``, the next piece
+        start at which its segment must stop (-1: none before the horizon).
+
+        A piece start changes nothing where the inputs keep their values and no switch is asked
+        for; if it lies on the grid (``step`` a multiple of ``dt``), the states a segment visits
+        through it are those it would visit stopping there, so only the other piece starts stop a
+        segment: where the values change, where a switch is asked (every start past the last
+        piece if its switch is asked). Off the grid, every piece start stops (the run is watched
+        there).
+        """
+        N, K = values.shape[:2]
+        ratio = step / self.dt
+        pieces = int(np.ceil(self.model.horizon / step))
+        if abs(ratio - round(ratio)) * pieces * self.dt > 1e-9 * max(1.0, self.model.horizon) or round(ratio) < 1:
+            return lambda k, rows: k + 1
+        stop = np.zeros((N, K + 1), dtype=bool)
+        stop[:, 1:K] = np.any(values[:, 1:] != values[:, :-1], axis=2)
+        if switch is not None:
+            stop[:, 1:K] |= switch[:, 1:]
+        # after[r, k]: the first stop of run r after piece start k (K if none among the pieces)
+        index = np.where(stop, np.arange(K + 1), K)
+        index[:, K] = K
+        after = np.minimum.accumulate(index[:, ::-1], axis=1)[:, ::-1][:, 1:]
+        every = np.zeros(N, dtype=bool) if switch is None else switch[:, -1]
+
+        def following(k, rows):
+            nxt = after[rows, np.minimum(k, K - 1)]
+            beyond = np.where(every[rows], np.maximum(k + 1, K), -1)
+            return np.where(nxt < K, nxt, beyond)
+
+        return following
 
     def _eventless(self) -> bool:
         """One linear mode with no transitions and no invariant: nothing can happen but the flow."""
