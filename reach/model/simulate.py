@@ -6,8 +6,9 @@ stretch of time in one mode up to the run's next event, and all runs of a mode a
 together:
 
 * linear modes use the exact flow ``[x; 1](t) = expm([[A, b], [0, 0]] t) [x; 1]``: the states
-  on the grid ``t_k = k dt`` of a whole segment come from precomputed powers of the one-step
-  matrix, so a segment of thousands of steps is one batched matrix product; where the mode's
+  on the grid ``t_k = k dt`` of a segment come from precomputed powers of the one-step
+  matrix, hundreds of steps in one batched matrix product, up to the first event (off the
+  grid: the series of the flow, :func:`reach.model.batch.taylor_flow`); where the mode's
   urgent guards and invariant are linear (and it has no may-transition with a general guard),
   the states and those margins come together, block by block of grid steps
   (:mod:`reach.model.batch`), and observers with a ``block`` method take whole blocks;
