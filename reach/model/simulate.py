@@ -186,31 +186,31 @@ class Simulator:
         return Y
 
     def _grid_states(self, mode: str, Y0: np.ndarray, count: int, met=None) -> np.ndarray:
-        """States at ``count`` successive grid points, ``Y0`` being the first: (N, count, n).
+        """States at up to ``count`` successive grid points, ``Y0`` being the first: (N, K, n),
+        ``K <= count`` ending where every run has met its event (``met(states, j0)`` says which
+        runs meet one among the columns ``j0...`` of ``states``).
 
         Linear: in windows of grid points, :data:`FIRST_WINDOW` and each next one twice as
         long up to :data:`MAX_WINDOW`, the states ``[x_j; 1] = P^(j - a) [x_a; 1]`` from the
         last state ``x_a`` of the window before (``P`` the one-step matrix: one product per
         window, and at most ``MAX_WINDOW + 1`` powers). Nonlinear: RK4 steps, checked every 16.
-        Both end early (the rest left NaN) once every run has met its event; ``met(states,
-        j0)`` says which runs meet one among the columns ``j0...`` of ``states``.
         """
         N = Y0.shape[0]
-        out = np.full((N, count, self.n), np.nan)
         done = np.zeros(N, dtype=bool)
         if mode in self.powers:
             Z = np.concatenate([Y0, np.ones((N, 1))], axis=1)            # (N, n+1): [x_a; 1]
-            a, j0 = 0, 0
+            windows, a, j0 = [], 0, 0
             width = FIRST_WINDOW if met is not None else MAX_WINDOW
             while j0 < count and not done.all():
                 j1 = min(count, j0 + width)
                 P = self.powers[mode][j0 - a:j1 - a, :self.n, :]         # (j1 - j0, n, n+1)
-                out[:, j0:j1] = (Z @ P.reshape(-1, self.n + 1).T).reshape(N, j1 - j0, self.n)
+                windows.append((Z @ P.reshape(-1, self.n + 1).T).reshape(N, j1 - j0, self.n))
                 if met is not None:
-                    done |= met(out[:, j0:j1], j0)
-                a, Z[:, :self.n] = j1 - 1, out[:, j1 - 1]
+                    done |= met(windows[-1], j0)
+                a, Z[:, :self.n] = j1 - 1, windows[-1][:, -1]
                 j0, width = j1, min(2 * width, MAX_WINDOW)
-            return out
+            return np.concatenate(windows, axis=1)
+        out = np.empty((N, count, self.n))
         out[:, 0] = Y0
         checked = 0
         for j in range(1, count):
@@ -219,8 +219,9 @@ class Simulator:
                 done |= met(out[:, checked:j + 1], checked)
                 checked = j + 1
                 if done.all():
-                    break
+                    return out[:, :j + 1]
         return out
+
     def _first_entry(self, mode: str, X: np.ndarray, h: np.ndarray, guard) -> np.ndarray:
         """Earliest time in ``(0, h]`` at which ``guard`` holds (it holds at ``h``), by bisection."""
         return self._bisect(mode, X, h, lambda Z: np.all(guard(Z) <= 0, axis=1))[1]
@@ -544,6 +545,8 @@ class Simulator:
             return done
 
         Y = self._grid_states(name, Y0, count, met)
+        count = Y.shape[1]
+        grid_t = grid_t[:, :count]
         finite = np.isfinite(Y[:, :, 0])
         valid = (grid_t <= stop_at[:, None] + 1e-12) & finite
         flat = (Y if finite.all() else np.where(finite[:, :, None], Y, 0.0)).reshape(-1, self.n)
