@@ -178,3 +178,15 @@ def test_linear_bisections_equal_a_plain_bisection(tmp_path, p0, q0, u):
     inside = sim._last_inside("out", x[None, :], np.array([h]))[0]
     want = _plain_bisection(M, x, h, lambda z: z[0] - 0.6 > 1e-7 * (1 + np.abs(z).max()))[0]
     assert inside == pytest.approx(want, abs=2 * h * 2.0 ** -BISECTION_STEPS)
+
+
+def test_piece_starts_off_the_grid_are_still_visited(tmp_path):
+    """With pieces that are no multiple of the grid step, every piece start, even one that keeps
+    the input's value, stays an instant the run is watched at (as grid points and events are)."""
+    model, _ = _load(tmp_path)
+    sim = Simulator(model, dt=0.3)
+    values = np.full((1, 16, 1), 0.25)
+    traj = sim.run(np.array([[0.0, 0.0, 0.25]]), record=True, signal=(STEP, values))
+    times = traj.path[0][0]
+    starts = STEP * np.arange(1, 16)
+    assert np.all(np.min(np.abs(times[None, :] - starts[:, None]), axis=1) < 1e-12)
