@@ -6,8 +6,9 @@ stretch of time in one mode up to the run's next event, and all runs of a mode a
 together:
 
 * linear modes use the exact flow ``[x; 1](t) = expm([[A, b], [0, 0]] t) [x; 1]``: the states
-  on the grid ``t_k = k dt`` of a whole segment come from precomputed powers of the one-step
-  matrix, so a segment of thousands of steps is one batched matrix product; where the mode's
+  on the grid ``t_k = k dt`` of a segment come from precomputed powers of the one-step
+  matrix, hundreds of steps in one batched matrix product, up to the first event (off the
+  grid: the series of the flow, :func:`reach.model.batch.taylor_flow`); where the mode's
   urgent guards and invariant are linear (and it has no may-transition with a general guard),
   the states and those margins come together, block by block of grid steps
   (:mod:`reach.model.batch`), and observers with a ``block`` method take whole blocks;
@@ -20,8 +21,9 @@ together:
   leave the source invariant, if its guard holds there (the exit instant, by bisection: one
   of the automaton's runs, the one that stays longest); Gaussian kicks (if asked for) are
   applied at ``k * step``, and so are the pieces of a time-varying input signal (and its
-  switching decisions); an urgent transition whose guard holds right after a kick is taken
-  at that instant;
+  switching decisions; a piece start on the grid where a run's inputs keep their values and no
+  switch is asked for changes nothing and does not end its segment); an urgent transition
+  whose guard holds right after a kick is taken at that instant;
 * a run found outside its mode's invariant at a grid point with no transition taken is
   *blocked* (it has no continuation in the automaton's semantics) and stops there;
 * a run that takes more than ``MAX_PASSES_PER_STEP`` events inside one grid step is Zeno (its
@@ -46,9 +48,12 @@ from reach.model.constraints import lambdify_margins
 
 BISECTION_STEPS = 40
 INVARIANT_TOLERANCE = 1e-7
+FIRST_WINDOW = 64                 # grid points of a linear segment's first window of states
+MAX_WINDOW = 256                  # grid points of its longest window
 CHUNK_VALUES = 4_000_000          # states x steps x dims held at once in a linear segment
 BATCH_RUNS = 4096                 # runs of one linear segment advanced together
 MAX_STEPS = 5_000_000             # grid steps over the horizon (horizon / dt)
+EXPONENTIALS_BYTES = 64 * 2 ** 20  # exponentials kept for recurring durations (Simulator._exponentials)
 MAX_PASSES_PER_STEP = 50          # events of one run inside one grid step before it counts as Zeno
 MEMORY_BUDGET = 4 * 2 ** 30       # bytes the simulator may plan to hold at once
 RUN_BYTES_PER_VALUE = 8 * 24      # per run and state value: the arrays a batch of runs carries
@@ -130,7 +135,7 @@ class Simulator:
         self.mode_names = list(model.modes)
         self.n = model.n
         self.steps = int(np.ceil(model.horizon / self.dt - 1e-9))
-        self.generators, self.powers, self.tables = {}, {}, {}
+        self.generators, self.powers, self.tables, self.exponentials = {}, {}, {}, {}
         for name, mode in model.modes.items():
             if mode.linear is not None:
                 A, b = mode.linear
@@ -152,15 +157,22 @@ class Simulator:
 
     # --------------------------------------------------------------- propagation
     def propagate(self, mode: str, X: np.ndarray, h) -> np.ndarray:
-        """States after time ``h`` (scalar or one per run) in ``mode``, with no event."""
+        """States after time ``h`` (scalar or one per run) in ``mode``, with no event: a linear
+        mode by the Taylor series of ``expm(M h) [x; 1]`` summed on the vectors
+        (:func:`reach.model.batch.taylor_flow`; for long durations, exponentials), a nonlinear
+        one by RK4 (``substeps`` per grid step)."""
         h = np.broadcast_to(np.asarray(h, dtype=float), X.shape[:1])
         if X.shape[0] == 0:
             return X.copy()
         if mode in self.generators:
-            # runs usually share a few durations (a whole step, the rest of a step): one
-            # exponential per distinct duration, gathered per run
+            Y = batch.taylor_flow(self.generators[mode], X, h)
+            if Y is not None:
+                return Y
+            # beyond the series' reach: one exponential per distinct duration, gathered per run
             durations, which = np.unique(h, return_inverse=True)
-            if durations.size <= max(8, X.shape[0] // 8):
+            if durations.size <= 8:
+                E = self._exponentials(mode, durations, (1.0,))[:, 0][which.reshape(-1)]
+            elif durations.size <= X.shape[0] // 8:
                 E = batched_expm(self.generators[mode], durations)[which.reshape(-1)]
             else:
                 E = batched_expm(self.generators[mode], h)
@@ -174,20 +186,32 @@ class Simulator:
         return Y
 
     def _grid_states(self, mode: str, Y0: np.ndarray, count: int, met=None) -> np.ndarray:
-        """States at ``count`` successive grid points, ``Y0`` being the first: (N, count, n).
+        """States at up to ``count`` successive grid points, ``Y0`` being the first: (N, K, n),
+        ``K <= count`` ending where every run has met its event (``met(states, j0)`` says which
+        runs meet one among the columns ``j0...`` of ``states``).
 
-        Linear: powers of the one-step matrix. Nonlinear: RK4 steps, ending early (the rest
-        left NaN) once every run has met its event; ``met(states, j0)`` says which runs meet
-        one among the columns ``j0...`` of ``states``.
+        Linear: in windows of grid points, :data:`FIRST_WINDOW` and each next one twice as
+        long up to :data:`MAX_WINDOW`, the states ``[x_j; 1] = P^(j - a) [x_a; 1]`` from the
+        last state ``x_a`` of the window before (``P`` the one-step matrix: one product per
+        window, and at most ``MAX_WINDOW + 1`` powers). Nonlinear: RK4 steps, checked every 16.
         """
         N = Y0.shape[0]
-        if mode in self.powers:
-            P = self.powers[mode][:count, :self.n, :]                    # (count, n, n+1)
-            Z = np.concatenate([Y0, np.ones((N, 1))], axis=1)            # (N, n+1)
-            return (Z @ P.reshape(-1, self.n + 1).T).reshape(N, count, self.n)
-        out = np.full((N, count, self.n), np.nan)
-        out[:, 0] = Y0
         done = np.zeros(N, dtype=bool)
+        if mode in self.powers:
+            Z = np.concatenate([Y0, np.ones((N, 1))], axis=1)            # (N, n+1): [x_a; 1]
+            windows, a, j0 = [], 0, 0
+            width = FIRST_WINDOW if met is not None else MAX_WINDOW
+            while j0 < count and not done.all():
+                j1 = min(count, j0 + width)
+                P = self.powers[mode][j0 - a:j1 - a, :self.n, :]         # (j1 - j0, n, n+1)
+                windows.append((Z @ P.reshape(-1, self.n + 1).T).reshape(N, j1 - j0, self.n))
+                if met is not None:
+                    done |= met(windows[-1], j0)
+                a, Z[:, :self.n] = j1 - 1, windows[-1][:, -1]
+                j0, width = j1, min(2 * width, MAX_WINDOW)
+            return np.concatenate(windows, axis=1)
+        out = np.empty((N, count, self.n))
+        out[:, 0] = Y0
         checked = 0
         for j in range(1, count):
             out[:, j] = self.propagate(mode, out[:, j - 1], self.dt)
@@ -195,31 +219,72 @@ class Simulator:
                 done |= met(out[:, checked:j + 1], checked)
                 checked = j + 1
                 if done.all():
-                    break
+                    return out[:, :j + 1]
         return out
+
     def _first_entry(self, mode: str, X: np.ndarray, h: np.ndarray, guard) -> np.ndarray:
         """Earliest time in ``(0, h]`` at which ``guard`` holds (it holds at ``h``), by bisection."""
-        lo, hi = np.zeros_like(h), h.copy()
-        for _ in range(BISECTION_STEPS):
-            mid = 0.5 * (lo + hi)
-            inside = np.all(guard(self.propagate(mode, X, mid)) <= 0, axis=1)
-            hi = np.where(inside, mid, hi)
-            lo = np.where(inside, lo, mid)
-        return hi
+        return self._bisect(mode, X, h, lambda Z: np.all(guard(Z) <= 0, axis=1))[1]
 
     def _last_inside(self, mode: str, X: np.ndarray, h: np.ndarray) -> np.ndarray:
         """Latest time in ``[0, h)`` at which the runs are still inside the invariant
         (inside at 0, outside at ``h``), by bisection."""
         inv = self.model.modes[mode].invariant_margins
-        lo, hi = np.zeros_like(h), h.copy()
-        for _ in range(BISECTION_STEPS):
-            mid = 0.5 * (lo + hi)
-            Z = self.propagate(mode, X, mid)
+
+        def outside(Z):
             tol = INVARIANT_TOLERANCE * (1.0 + np.abs(Z).max(axis=1))
-            inside = np.all(inv(Z) <= tol[:, None], axis=1)
-            lo = np.where(inside, mid, lo)
-            hi = np.where(inside, hi, mid)
-        return lo
+            return ~np.all(inv(Z) <= tol[:, None], axis=1)
+
+        return self._bisect(mode, X, h, outside)[0]
+
+    def _bisect(self, mode: str, X: np.ndarray, h: np.ndarray, before) -> tuple:
+        """``(lo, hi)``, ``hi - lo = h 2^-BISECTION_STEPS``: :data:`BISECTION_STEPS` halvings of
+        ``[0, h]`` (one interval per run), keeping the left half where ``before(x(mid))`` holds
+        (the instant sought is at or before the midpoint), the right one otherwise.
+
+        A linear mode carries the state at ``lo``: the midpoint lies ``w_j = h 2^-j`` after it
+        at halving ``j``, so ``[x(mid); 1] = expm(M w_j) [x(lo); 1]``, with the exponentials of
+        :meth:`_exponentials` (shared by every search from the same ``h``). A nonlinear mode
+        integrates from 0 to each midpoint."""
+        lo, hi = np.zeros_like(h), h.copy()
+        if mode not in self.generators:
+            for _ in range(BISECTION_STEPS):
+                mid = 0.5 * (lo + hi)
+                left = before(self.propagate(mode, X, mid))
+                hi = np.where(left, mid, hi)
+                lo = np.where(left, lo, mid)
+            return lo, hi
+        durations, which = np.unique(h, return_inverse=True)
+        which = which.reshape(-1)
+        halvings = tuple(2.0 ** -np.arange(1, BISECTION_STEPS + 1))
+        kept = self._exponentials(mode, durations, halvings) if durations.size <= 8 else None
+        x_lo = X.copy()
+        n = self.n
+        for j in range(BISECTION_STEPS):
+            w = 2.0 ** (-j - 1)
+            E = (kept[:, j] if kept is not None else batched_expm(self.generators[mode], durations * w))[which]
+            Z = np.einsum("kij,kj->ki", E[:, :n, :n], x_lo) + E[:, :n, n]
+            mid = lo + h * w
+            left = before(Z)
+            hi = np.where(left, mid, hi)
+            lo = np.where(left, lo, mid)
+            x_lo = np.where(left[:, None], x_lo, Z)
+        return lo, hi
+
+    def _exponentials(self, mode: str, durations: np.ndarray, fractions: tuple) -> np.ndarray:
+        """``expm(M d f)`` for each duration ``d`` and fraction ``f``: (D, F, n+1, n+1), kept
+        per mode, duration and fractions (a few durations recur: a grid step, the rest of one)
+        within :data:`EXPONENTIALS_BYTES`."""
+        found = {d: self.exponentials.get((mode, d, fractions)) for d in durations}
+        missing = np.array([d for d, E in found.items() if E is None])
+        if missing.size:
+            M = self.generators[mode]
+            fresh = np.stack([batched_expm(M, missing * f) for f in fractions], axis=1)
+            if sum(E.nbytes for E in self.exponentials.values()) + fresh.nbytes > EXPONENTIALS_BYTES:
+                self.exponentials.clear()
+            for d, E in zip(missing, fresh):
+                found[d] = self.exponentials[mode, d, fractions] = E
+        return np.stack([found[d] for d in durations])
 
     # --------------------------------------------------------------- runs
     def run(self, x0: np.ndarray, switch_times: np.ndarray | None = None, record: bool = False,
@@ -258,11 +323,15 @@ class Simulator:
                     jumped.append(self._take_may(X, mode, sel[switch[sel, piece]]))
 
             kicks(0, np.arange(N))
+            following = self._signal_stops(kick_step, values, switch)
         elif kick_step:
             disturbance = kicks
 
             def kicks(k, sel):
                 X[sel] += disturbance(k, sel.size)
+
+            def following(k, sel):
+                return k + 1
         next_kick = np.zeros(N) if kick_step else np.full(N, np.inf)
         kick_count = np.zeros(N, dtype=int)
         recorder = _Recorder() if record else None
@@ -297,8 +366,8 @@ class Simulator:
                     jumped.clear()
                     for k in np.unique(kick_count[due]):
                         kicks(int(k), due[kick_count[due] == k])
-                    kick_count[due] += 1
-                    next_kick[due] = kick_count[due] * kick_step
+                    kick_count[due] = following(kick_count[due], due)
+                    next_kick[due] = np.where(kick_count[due] >= 0, kick_count[due] * kick_step, np.inf)
                     self._urgent_now(X, mode, due)       # a kick may land a run inside a guard
                     moved = due[(mode[due] != before) | np.isin(due, np.concatenate(jumped or [[]]))]
                     if moved.size:
@@ -309,6 +378,39 @@ class Simulator:
                 if rows.size:
                     self._segment(name, rows, X, mode, t, tau, blocked_at, next_kick, watchers)
         return Trajectories(X, mode, blocked_at, recorder.paths(N) if recorder else {})
+
+    def _signal_stops(self, step: float, values: np.ndarray, switch: np.ndarray | None):
+        """``following(k, rows)``: for each run of ``rows`` at piece start ``k``, the next piece
+        start at which its segment must stop (-1: none before the horizon).
+
+        A piece start changes nothing where the inputs keep their values and no switch is asked
+        for; if it lies on the grid (``step`` a multiple of ``dt``), the states a segment visits
+        through it are those it would visit stopping there, so only the other piece starts stop a
+        segment: where the values change, where a switch is asked (every start past the last
+        piece if its switch is asked). Off the grid, every piece start stops (the run is watched
+        there).
+        """
+        N, K = values.shape[:2]
+        ratio = step / self.dt
+        pieces = int(np.ceil(self.model.horizon / step))
+        if abs(ratio - round(ratio)) * pieces * self.dt > 1e-9 * max(1.0, self.model.horizon) or round(ratio) < 1:
+            return lambda k, rows: k + 1
+        stop = np.zeros((N, K + 1), dtype=bool)
+        stop[:, 1:K] = np.any(values[:, 1:] != values[:, :-1], axis=2)
+        if switch is not None:
+            stop[:, 1:K] |= switch[:, 1:]
+        # after[r, k]: the first stop of run r after piece start k (K if none among the pieces)
+        index = np.where(stop, np.arange(K + 1), K)
+        index[:, K] = K
+        after = np.minimum.accumulate(index[:, ::-1], axis=1)[:, ::-1][:, 1:]
+        every = np.zeros(N, dtype=bool) if switch is None else switch[:, -1]
+
+        def following(k, rows):
+            nxt = after[rows, np.minimum(k, K - 1)]
+            beyond = np.where(every[rows], np.maximum(k + 1, K), -1)
+            return np.where(nxt < K, nxt, beyond)
+
+        return following
 
     def _eventless(self) -> bool:
         """One linear mode with no transitions and no invariant: nothing can happen but the flow."""
@@ -443,6 +545,8 @@ class Simulator:
             return done
 
         Y = self._grid_states(name, Y0, count, met)
+        count = Y.shape[1]
+        grid_t = grid_t[:, :count]
         finite = np.isfinite(Y[:, :, 0])
         valid = (grid_t <= stop_at[:, None] + 1e-12) & finite
         flat = (Y if finite.all() else np.where(finite[:, :, None], Y, 0.0)).reshape(-1, self.n)
@@ -568,9 +672,12 @@ class _Powers:
         if need > self.table.shape[0]:
             size = min(self.limit, max(need, 2 * self.table.shape[0]))
             more = np.empty((size,) + self.step.shape)
-            more[:self.table.shape[0]] = self.table
-            for k in range(self.table.shape[0], size):
-                more[k] = more[k - 1] @ self.step
+            k = self.table.shape[0]
+            more[:k] = self.table
+            while k < size:                     # P^(k + j) = P^k P^j for j < k: doubling
+                m = min(k, size - k)
+                np.matmul(more[k - 1] @ self.step, more[:m], out=more[k:k + m])
+                k += m
             self.table = more
         return self.table[index]
 
