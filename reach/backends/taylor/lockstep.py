@@ -13,12 +13,14 @@ together, answering their pending requests group by group.
 A batch of propagations stacks the states along a leading axis (state ``i`` of run ``b`` is row
 ``b`` of one DA of shape ``(B,)``) and steps them together, each run with its own step sizes; a
 run leaves the batch after its last step. The flow sees a batch of ``B`` states, so a network
-layer is one ``(k, m) x (m, B, M)`` product and one series evaluation for all ``B`` subdomains:
-the per-operation overhead is paid once per batch. Nominal runs are batched the same way
-(:mod:`.nominal`: rows of one array, each with its own step control).
+layer (coefficient-major, :class:`.da.Layer`) is one stacked ``(k, m) x (M, m, B)`` product and
+one series evaluation for all ``B`` subdomains: the per-operation overhead is paid once per
+batch. Nominal runs are batched the same way (:mod:`.nominal`: rows of one array, each with its
+own step control).
 
-Each run's arithmetic is the same as on its own (the batch only adds independent rows), so the
-maps agree with the one-at-a-time path to rounding.
+Each run's arithmetic is the same as on its own up to the order in which BLAS sums a matrix
+product's terms, which can depend on the batch's size: the maps agree with the one-at-a-time path
+to rounding (the nominal runs, whose step control would amplify it, are bit for bit).
 """
 
 from __future__ import annotations
