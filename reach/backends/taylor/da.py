@@ -118,14 +118,20 @@ class Algebra:
         if self.size <= DENSE_SUM_SIZE:
             S = np.zeros((len(target), self.size))
             S[np.arange(len(target)), target] = weight
-            ST = np.ascontiguousarray(S.T)
+            # coefficient-major: only the rows from the lowest target on (the lower ones are zero;
+            # a power da^k has no terms of degree below k)
+            low = int(target.min()) if len(target) else self.size
+            ST = np.ascontiguousarray(S.T[low:])
 
             def total(products):
                 rows = products.reshape(math.prod(products.shape[:-1]), len(target))
                 return (rows @ S).reshape(products.shape[:-1] + (self.size,))
 
             def leading(products):
-                return (ST @ products.reshape(len(target), -1)).reshape((self.size,) + products.shape[1:])
+                out = np.empty((self.size,) + products.shape[1:])
+                out[:low] = 0.0
+                np.matmul(ST, products.reshape(len(target), -1), out=out[low:].reshape(self.size - low, -1))
+                return out
 
             return (left, right, total), leading
         starts = np.flatnonzero(np.r_[True, target[1:] != target[:-1]]) if len(target) else target
