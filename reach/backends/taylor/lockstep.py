@@ -1,9 +1,12 @@
-"""Many subdomains' expansions in lockstep: their nominal runs and DA propagations batched.
+"""Many subdomains' expansions in lockstep: their nominal runs, DA propagations and Picard
+expansions batched.
 
 The candidate maps of a subdomain (:meth:`.problem.EventProblem.candidate_steps`) are written as a
 generator that yields a request each time it needs a run: a :class:`Propagation` (a mode's flow,
-a DA state, the RK8 step sizes: the state carried along its nominal run) or a
-:class:`.nominal.NominalRun` (the nominal run itself), and receives the answer back. A request
+a DA state, the RK8 step sizes: the state carried along its nominal run), a
+:class:`.nominal.NominalRun` (the nominal run itself) or a :class:`.event.Picard` (the expansion
+in time about an event and the event function on it: each pass of the time refinement and each
+event map), and receives the answer back. A request
 has a ``key`` (requests with the same key can be answered together), ``batch`` (the most answered
 at once, None for no limit), a ``length`` (the work it asks for: batches are formed of requests of
 similar lengths) and ``answer(requests) -> answers``. :func:`run_one` answers one
