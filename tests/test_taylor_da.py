@@ -10,7 +10,7 @@ from hypothesis import given, settings, strategies as st
 
 from reach.backends.taylor.ads import split_domain
 from reach.backends.taylor.bound import contenders, estimated_remainder, next_order_remainder, polynomial_range, truncate
-from reach.backends.taylor.da import DA, algebra, invert
+from reach.backends.taylor.da import DA, Layer, algebra, invert
 
 X, Y = sympy.symbols("X Y")
 
@@ -197,3 +197,21 @@ def test_product_and_sine_in_small_and_large_algebras(shape, seed):
     derivatives = [s, c, -s, -c]
     expected = sum(derivatives[k % 4] / math.factorial(k) * p for k, p in enumerate(powers))
     np.testing.assert_allclose(DA(alg, a[0]).sin().c, expected, rtol=1e-12, atol=1e-12)
+
+
+@settings(max_examples=20, deadline=None)
+@given(st.sampled_from([(4, 2), (3, 4)]), st.sampled_from([(), (1,), (5,)]), st.integers(0, 2 ** 31))
+def test_layer_layout_equals_scalar_series(shape, batch, seed):
+    """A network layer in the coefficient-major :class:`Layer` (stack, affine, sine, unstack)
+    equals each neuron of each run computed alone: its weighted sum of the inputs, then its sine."""
+    alg = algebra(*shape)
+    rng = np.random.default_rng(seed)
+    inputs = [DA(alg, rng.normal(size=batch + (alg.size,))) for _ in range(3)]
+    W, b = rng.normal(size=(4, 3)), rng.normal(size=4)
+    out = DA.stack(inputs).affine(W, b).sin().unstack()
+    assert isinstance(DA.stack(inputs), Layer) and len(out) == 4
+    for i in range(4):
+        assert out[i].shape == batch
+        for run in np.ndindex(*batch):
+            alone = (DA.weighted_sum(W[i], [x[run] for x in inputs]) + b[i]).sin()
+            np.testing.assert_allclose(out[i].c[run], alone.c, rtol=1e-12, atol=1e-12)

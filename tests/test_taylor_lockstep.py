@@ -12,7 +12,7 @@ from scipy.integrate import solve_ivp
 from reach.backends.taylor import BACKEND
 from reach.backends.taylor.bound import enclose, estimated_remainder
 from reach.backends.taylor.da import DA, algebra
-from reach.backends.taylor.event import initial_state
+from reach.backends.taylor.event import Picard, initial_state
 from reach.backends.taylor.flow import rk8
 from reach.backends.taylor.lockstep import Propagation, propagate_batch
 from reach.backends.taylor.units import expand_box, problem
@@ -55,6 +55,24 @@ def test_batched_network_steps_equal_each_run_alone_and_solve_ivp(siren):
         ref = solve_ivp(lambda t, x: np.array(code.f_numeric(list(x)), dtype=float), (0, sum(req.steps)),
                         np.array([x.cons for x in req.x]), method="DOP853", rtol=1e-12, atol=1e-12)
         np.testing.assert_allclose([x.cons for x in got], ref.y[:, -1], rtol=1e-9, atol=1e-9)
+
+
+@settings(max_examples=10, deadline=None)
+@given(st.lists(st.tuples(st.floats(0, 1), st.floats(0, 1)), min_size=1, max_size=5))
+def test_picard_requests_in_a_batch_equal_each_alone(siren, fractions):
+    """The Picard expansions and events of a batch (time refinement, eq. 6, through the network)
+    equal each request answered alone, and their first-order term in the time deviation is the
+    rate of the numeric flow at the state."""
+    model, prop = siren
+    code = problem(model, prop).code("transfer")
+    alg = algebra(4, 1)
+    states = [_box(model, fx, fy, 1, 1)[0] for fx, fy in fractions]
+    requests = [Picard(code.f, code.qdot, [DA.const(alg, v) for v in x], 0, 4) for x in states]
+    for req, x0, (x, E) in zip(requests, states, Picard.answer(requests)):
+        x_alone, E_alone = Picard.answer([req])[0]
+        for a, b in zip(x_alone + [E_alone], x + [E]):
+            np.testing.assert_allclose(b.c, a.c, rtol=1e-12, atol=1e-12 * np.max(np.abs(a.c)))
+        np.testing.assert_allclose([xi.c[1] for xi in x], code.f_numeric(list(x0)), rtol=1e-12, atol=1e-15)
 
 
 def test_zero_steps_leave_a_run_exactly(siren):

@@ -25,7 +25,7 @@ import numpy as np
 
 from reach.backends.taylor.da import DA, algebra, invert, stack
 from reach.backends.taylor.flow import step_sizes
-from reach.backends.taylor.lockstep import Propagation, run_one
+from reach.backends.taylor.lockstep import BATCH, Propagation, run_one
 
 
 @dataclass
@@ -45,6 +45,36 @@ def picard(f, x_e: list, dt_var: int, order: int) -> list:
     return x
 
 
+@dataclass
+class Picard:
+    """A request (:mod:`.lockstep`): the Picard expansion (eq. 6) of the run through the DA state
+    ``x`` in ``xi_{dt_var}``, and the event ``E`` on it. Requests of the same flow and event
+    are answered as one batch: the states stacked as DAs of shape ``(B,)``."""
+
+    f: object
+    event: object
+    x: list
+    dt_var: int
+    order: int
+
+    batch = BATCH
+    length = 1
+
+    def key(self):
+        alg = self.x[0].alg
+        return ("picard", id(self.f), id(self.event), alg.order, alg.nvars, len(self.x), self.dt_var, self.order)
+
+    @staticmethod
+    def answer(requests: list["Picard"]) -> list[tuple]:
+        """``(x, E)`` of each request."""
+        first = requests[0]
+        alg = first.x[0].alg
+        x_e = [DA(alg, np.stack([r.x[i].c for r in requests])) for i in range(len(first.x))]
+        x = picard(first.f, x_e, first.dt_var, first.order)
+        E = first.event(x)
+        return [([DA(alg, xi.c[b]) for xi in x], DA(alg, E.c[b])) for b in range(len(requests))]
+
+
 def refine_time(f, event, state_at, t_e: float, order: int, passes: int = 8):
     """Nominal event time and state by eqs. (5)-(9): ``(t*, x(t*))``.
 
@@ -53,10 +83,14 @@ def refine_time(f, event, state_at, t_e: float, order: int, passes: int = 8):
     times); restarting from ``state_at`` keeps the Picard truncation error of a long first
     correction out of the result.
     """
+    return run_one(refine_time_steps(f, event, state_at, t_e, order, passes))
+
+
+def refine_time_steps(f, event, state_at, t_e: float, order: int, passes: int = 8):
+    """:func:`refine_time` as a generator that yields its Picard expansions (:class:`Picard`)."""
     alg = algebra(order, 1)
     for _ in range(passes):
-        x = picard(f, [DA.const(alg, v) for v in state_at(t_e)], 0, order)
-        E = event(x)
+        _, E = yield Picard(f, event, [DA.const(alg, v) for v in state_at(t_e)], 0, order)
         if abs(E.c[1]) == 0.0:
             raise ArithmeticError("degenerate event: dE/dt = 0 at the detected time")
         dt = float(invert([E])[0](np.array([[-E.cons]]))[0])
@@ -92,8 +126,7 @@ def event_map_steps(f, event, x0: list[DA], nodes: np.ndarray, t_e: float, order
     alg = algebra(order, m + 1)
     x_e = yield Propagation(f, list(x0), step_sizes(nodes, t_e))
     x_e = [x.embed(alg) for x in x_e]
-    x = picard(f, x_e, m, order)                                   # eq. (11)
-    E = event(x)                                                   # eq. (12)
+    x, E = yield Picard(f, event, x_e, m, order)                   # eqs. (11), (12)
     identity = [DA.var(alg, j) for j in range(m)]
     G = invert(identity + [E])                                     # eq. (13), inverted
     target = algebra(order, m)

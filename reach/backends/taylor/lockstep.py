@@ -1,9 +1,12 @@
-"""Many subdomains' expansions in lockstep: their nominal runs and DA propagations batched.
+"""Many subdomains' expansions in lockstep: their nominal runs, DA propagations and Picard
+expansions batched.
 
 The candidate maps of a subdomain (:meth:`.problem.EventProblem.candidate_steps`) are written as a
 generator that yields a request each time it needs a run: a :class:`Propagation` (a mode's flow,
-a DA state, the RK8 step sizes: the state carried along its nominal run) or a
-:class:`.nominal.NominalRun` (the nominal run itself), and receives the answer back. A request
+a DA state, the RK8 step sizes: the state carried along its nominal run), a
+:class:`.nominal.NominalRun` (the nominal run itself) or a :class:`.event.Picard` (the expansion
+in time about an event and the event function on it: each pass of the time refinement and each
+event map), and receives the answer back. A request
 has a ``key`` (requests with the same key can be answered together), ``batch`` (the most answered
 at once, None for no limit), a ``length`` (the work it asks for: batches are formed of requests of
 similar lengths) and ``answer(requests) -> answers``. :func:`run_one` answers one
@@ -13,12 +16,14 @@ together, answering their pending requests group by group.
 A batch of propagations stacks the states along a leading axis (state ``i`` of run ``b`` is row
 ``b`` of one DA of shape ``(B,)``) and steps them together, each run with its own step sizes; a
 run leaves the batch after its last step. The flow sees a batch of ``B`` states, so a network
-layer is one ``(k, m) x (m, B, M)`` product and one series evaluation for all ``B`` subdomains:
-the per-operation overhead is paid once per batch. Nominal runs are batched the same way
-(:mod:`.nominal`: rows of one array, each with its own step control).
+layer (coefficient-major, :class:`.da.Layer`) is one stacked ``(k, m) x (M, m, B)`` product and
+one series evaluation for all ``B`` subdomains: the per-operation overhead is paid once per
+batch. Nominal runs are batched the same way (:mod:`.nominal`: rows of one array, each with its
+own step control).
 
-Each run's arithmetic is the same as on its own (the batch only adds independent rows), so the
-maps agree with the one-at-a-time path to rounding.
+Each run's arithmetic is the same as on its own up to the order in which BLAS sums a matrix
+product's terms, which can depend on the batch's size: the maps agree with the one-at-a-time path
+to rounding (the nominal runs, whose step control would amplify it, are bit for bit).
 """
 
 from __future__ import annotations

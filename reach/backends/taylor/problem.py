@@ -24,7 +24,7 @@ import sympy
 
 from reach.backends.taylor.da import DA, algebra
 from reach.backends.taylor.event import (event_map_steps, fixed_time_map_steps, initial_state, local_extrema,
-                                         refine_time)
+                                         refine_time_steps)
 from reach.backends.taylor.flow import compile_expressions, compile_numeric
 from reach.backends.taylor.interval import Jet
 from reach.backends.taylor.keys import fingerprint
@@ -195,7 +195,7 @@ class EventProblem:
                 values = np.asarray(code.q_numeric(list(grid[: last + 1].T)))
                 for k in local_extrema(values, self.prop.sense):
                     tk = run.sharpen(k, lambda Y: sign * np.asarray(code.q_numeric(list(Y))))
-                    t_e, _ = refine_time(code.f, code.qdot, run.solution, tk, order)
+                    t_e, _ = yield from refine_time_steps(code.f, code.qdot, run.solution, tk, order)
                     em = yield from event_map_steps(code.f, code.qdot, X, run.nodes, t_e, order)
                     out[f"{mode}:extremum@{t0 + t_e:.6g}"] = code.q(em.state)
             visited.add(mode)
@@ -211,7 +211,7 @@ class EventProblem:
             _, ex, face = leave
             tk = run.sharpen(last, lambda Y: np.where(np.all(ex.margins(Y.T) <= 0, axis=1),
                                                       -np.arange(Y.shape[1]), -np.inf))
-            t_e, _ = refine_time(code.f, face, run.solution, tk, order)
+            t_e, _ = yield from refine_time_steps(code.f, face, run.solution, tk, order)
             em = yield from event_map_steps(code.f, face, X, run.nodes, t_e, order)
             if code.q is not None:
                 out[f"{mode}:exit@{t0 + t_e:.6g}"] = code.q(em.state)
