@@ -27,7 +27,7 @@ from hypothesis import strategies as st
 from reach.backends.taylor.ads import truncation_estimate
 from reach.backends.taylor.bound import (enclose, estimated_remainder, next_order_remainder, polynomial_range,
                                          truncate)
-from reach.backends.taylor.da import DA, algebra
+from reach.backends.taylor.da import DA, algebra, stack
 
 XI = np.linspace(-1.0, 1.0, 4001)
 
@@ -173,12 +173,12 @@ def test_vectors_are_estimated_component_by_component():
              lambda v: 1.0 / (1.0 - v), lambda v: (2.0 * v).cos(), lambda v: v.exp()]
     low = [f(DA.var(alg, 0, c, w)) for f in parts]
     high = [f(DA.var(high_alg, 0, c, w)) for f in parts]
-    np.testing.assert_allclose(estimated_remainder(DA.stack(low)), [float(estimated_remainder(p)) for p in low])
-    np.testing.assert_allclose(next_order_remainder(DA.stack(high)), [float(next_order_remainder(p)) for p in high])
-    lo, hi = polynomial_range(DA.stack(low))
+    np.testing.assert_allclose(estimated_remainder(stack(low)), [float(estimated_remainder(p)) for p in low])
+    np.testing.assert_allclose(next_order_remainder(stack(high)), [float(next_order_remainder(p)) for p in high])
+    lo, hi = polynomial_range(stack(low))
     np.testing.assert_allclose(lo, [float(polynomial_range(p)[0]) for p in low])
     np.testing.assert_allclose(hi, [float(polynomial_range(p)[1]) for p in low])
-    assert truncation_estimate(DA.stack(low))[0] == max(truncation_estimate(p)[0] for p in low)
+    assert truncation_estimate(stack(low))[0] == max(truncation_estimate(p)[0] for p in low)
 
 
 def test_the_split_variable_is_the_one_carrying_the_truncation_error():
