@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from reach.backends.star.aggregation import _Aggregate, interval_hull
-from reach.backends.star.fixpoint import Covered, enlarged
+from reach.backends.star.fixpoint import Covered, enlarged, time_invariant
 from reach.backends.star.flowpipe import (_block_spreads, _chain_abs_bounds, _chain_bounds, _depth,
                                           _plus_box, _segment, _tightened)
 from reach.backends.star.options import (ERROR_RATIO, MAX_CELLS, MAX_CHAIN_BYTES, NAME, PROGRESS_SECONDS,
@@ -121,9 +121,7 @@ class _Explorer:
         self.max_jumps = np.inf if options.max_jumps is None else options.max_jumps
         self.stall_limit = STALL_JUMPS if data.zero_dwell else np.inf
         self.aggregate_after = None if self.sweep else options.aggregate_after
-        windows = any(j.window is not None for js in data.jumps.values() for j in js)
-        self.covered = (Covered(self.clock) if data.added_clock and not windows and not options.keep_sets
-                        else None)
+        self.covered = Covered(self.clock) if time_invariant(model) and not options.keep_sets else None
         self.last_progress = time.perf_counter()
         self.pieces = {mode: [_Piece(data.widen(p.H, p.g)[0], p.g, p.strict, p.label) for p in pieces]
                        for mode, pieces in _unsafe_pieces(prop).items()} if data.added_clock \

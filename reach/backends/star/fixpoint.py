@@ -37,6 +37,12 @@ from reach import lp
 from reach.sets import Box, Star
 
 
+def time_invariant(model) -> bool:
+    """Whether the check may use this module's argument: the model has no global clock (the
+    explorer adds its own, which nothing reads) and no abort window (windows date switches)."""
+    return model.global_clock is None and not any(t.window is not None for t in model.transitions)
+
+
 #: relative margin by which a recorded aggregate is enlarged (box and jump rows): a later
 #: aggregate's bounds carry LP and rounding errors of about 1e-9 (1 + |x|), and one inside
 #: the earlier set up to those errors is then inside the enlarged one exactly

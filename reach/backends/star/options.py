@@ -139,7 +139,8 @@ def clockless_retry(model, options: dict | None, opt: StarOptions) -> StarOption
     that the fixpoint check closes, instead of one family of stars per cell of the first
     chains. The default comes first since an aggregate refined into its members leaves the
     cells before it unrefined. None when no second pass applies."""
-    if ("aggregate_after" in (options or {}) or model.global_clock is not None
-            or any(t.window is not None for t in model.transitions)):
+    from reach.backends.star.fixpoint import time_invariant
+
+    if "aggregate_after" in (options or {}) or not time_invariant(model):
         return None
     return replace(opt, aggregate_after=0)

@@ -96,7 +96,7 @@ class _LinearModel:
     def __init__(self, model):
         from reach.model.lint import zero_dwell_cycles
 
-        clock = _global_clock(model)
+        clock = model.global_clock
         self.added_clock = clock is None
         self.n = model.n + self.added_clock
         self.clock = model.n if clock is None else clock
@@ -214,15 +214,6 @@ def _unsubsumed(jumps: list[_Jump], H_inv, g_inv) -> list[_Jump]:
                    and implies(region, k) for k in kept):
             kept.append(j)
     return kept
-
-
-def _global_clock(model) -> int | None:
-    """A state that measures elapsed time: rate 1 in every mode, 0 initially, never reset."""
-    for i in model.clocks:
-        if model.initial.low[i] == 0 == model.initial.high[i] and \
-                not any(i in tr.reset for tr in model.transitions):
-            return i
-    return None
 
 
 def _modes_leading_to(model, targets: set[str]) -> set[str]:
