@@ -262,9 +262,13 @@ def _run_details(explorer: _Explorer) -> dict:
         rel=opt.touch_tolerance, tol=s.tolerance)
     if explorer.data.varying:
         soundness += ("; time-varying inputs " + ", ".join(u.name for u in explorer.data.varying)
-                      + ": their effect on a cell [t_j, t_j+1] bounded by the box "
-                        "h sum_{i<=j} (|Phi^i B| + |Phi^i| (e^{|A|h} - I) |B|) u_r (any measurable signal "
-                        "in the input box)")
+                      + ": their effect up to the end of a cell bounded by the box R(t) = int_0^t "
+                        "|e^{A s} B| u_r ds (t since the chain or block started; chords of e^{A s} B plus "
+                        "a curvature bound), for any measurable signal in the input box")
+    if s.rebased:
+        soundness += (f"; {s.rebased} chain blocks restarted the input effect from the previous block's "
+                      f"end star (grid star plus R, cut by the invariant), which holds every run still "
+                      f"in the mode")
     if s.aggregated:
         soundness += (f"; {s.aggregated} aggregates: interval hulls of the successor stars they "
                       f"replace ({s.deaggregated} refined back into their members)")
@@ -284,7 +288,8 @@ def _run_details(explorer: _Explorer) -> dict:
             "deepest_refinement": s.deepest, "lps": s.lps, "replays": explorer.replayed,
             "jumps": s.jumps, "latest_chain_start": s.reached, "aggregates": s.aggregated,
             "aggregated_stars": s.members, "refined_aggregates": s.deaggregated,
-            "covered_aggregates": 0 if explorer.covered is None else explorer.covered.pruned}
+            "covered_aggregates": 0 if explorer.covered is None else explorer.covered.pruned,
+            "rebased_blocks": s.rebased}
 
 
 BACKEND = StarBackend()

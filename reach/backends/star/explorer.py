@@ -24,6 +24,10 @@ from reach.sets import Box, Star
 
 LOG = logging.getLogger("reach.star")
 
+#: the first half of a bisected cell gets its own input-effect bound when that takes a grid of at
+#: most this many cells (:meth:`_Explorer._half_spread`)
+HALF_SPREAD_CELLS = 512
+
 
 @dataclass
 class _Entry:
@@ -92,6 +96,7 @@ class _Stats:
     aggregated: int = 0             # aggregates formed
     members: int = 0                # successor stars they stand for
     deaggregated: int = 0           # aggregates refined back into their members
+    rebased: int = 0                # block ends of chains with inputs (see _rebase_cells)
 
 
 class _Explorer:
@@ -176,11 +181,52 @@ class _Explorer:
         nonlinear flow block by block, each with its own linearisation (``linearise``)."""
         if self.linearise is not None and mode in self.linearise.curved:
             self.linearise.chain(self, mode, star, path, guess, direction)
-        else:
+            return
+        cells = self._rebase_cells(mode)
+        if cells is None:
             self._flow_chain(mode, star, path, guess, direction)
+            return
+        pending: dict[int, list] = {}
+        while star is not None:
+            handed = self._flow_chain(mode, star, path, guess, direction, cells, pending)
+            if handed is None:
+                break
+            star, guess = handed
+            star = _tightened(star, len(self.invariants[mode][1])) or star
+            direction = None
+            self.stats.rebased += 1
+            if self.covered is not None and self.covered.covers(mode, star, self._lp_count):
+                break
+        self._aggregate_pending(mode, pending)
+
+    def _aggregate_pending(self, mode: str, pending: dict[int, list] | None):
+        """Aggregate the successors a chain in ``mode`` collected, per transition."""
+        Hi, gi = self.invariants[mode]
+        for index, members in (pending or {}).items():
+            jump = self.jumps[mode][index]
+            self._aggregate(jump.target, members, kept_rows(jump, Hi, gi))
+
+    def _rebase_cells(self, mode: str) -> int | None:
+        """Cells per block of a chain whose input effect restarts at each block end, or None.
+
+        The input effect ``R_j`` of :meth:`.flowpipe.AffineFlow.deviation` is a box that grows
+        with the time since the chain's start, and the invariant can only cut the input-free
+        runs, relaxed by ``|H| R_j`` (:meth:`_flow_chain`). In a mode whose invariant reads the
+        states an input moves, the runs that left the invariant long ago then stay in the box.
+        Such a chain is explored ``rebase_cells`` cells at a time: the block's end star (its
+        grid star plus ``R``, cut by the exact invariant) is aggregated into its interval hull
+        (:meth:`_aggregate`), from which the next block starts with ``R = 0``. Every run in the
+        mode at the block end is in that star, so the hull holds them; a check that fails under
+        it refines it back into the exact end star."""
+        flow = self.flows[mode]
+        if not self.opt.rebase_cells or not flow.inputs or flow.drift or self.opt.discrete_time:
+            return None
+        Hi = self.invariants[mode][0]
+        moved = np.abs(Hi) @ flow.deviation(self.h, 1)[1] > 0
+        return self.opt.rebase_cells if np.any(moved) else None
 
     def _flow_chain(self, mode: str, star: Star, path: _Path, guess=None, direction=None,
-                    block: int | None = None):
+                    block: int | None = None, collect: dict | None = None):
         """Explore ``star`` in ``mode`` up to the horizon: checks, jumps, refinement.
 
         ``guess`` (and ``direction``): where a point of ``star`` may be (see :meth:`_point`).
@@ -188,7 +234,8 @@ class _Explorer:
         the invariant, without LPs. ``block``: stop after this many cells and return
         ``(star, point)``, the star every run still in the mode is in at that time (the grid
         star plus its input effect, in the invariant) and a point guess for it; None if the
-        chain ended before (or went to the horizon).
+        chain ended before (or went to the horizon). ``collect``: where the successors to be
+        aggregated are gathered, for the caller to aggregate (None: aggregated here).
         """
         if mode not in self.relevant:
             return
@@ -298,13 +345,12 @@ class _Explorer:
 
         aggregate = (self.aggregate_after is not None and not flow.drift
                      and path.jumps >= self.aggregate_after)
-        pending: dict[int, list] | None = {} if aggregate else None
+        pending: dict[int, list] | None = None if not aggregate else {} if collect is None else collect
         for j in sorted(candidates):
             spread = None if dev is None else dev[j] if self.opt.discrete_time else dev[j + 1]
-            self._cell(mode, grid_star(j), h, path, 0, point, pending, spread)
-        for index, members in (pending or {}).items():
-            jump = self.jumps[mode][index]
-            self._aggregate(jump.target, members, kept_rows(jump, Hi, gi))
+            self._cell(mode, grid_star(j), h, path, 0, point, pending, spread, j * h)
+        if collect is None:
+            self._aggregate_pending(mode, pending)
         if handoff and ended_inside:
             end = grid_star(count) if dev is None else _plus_box(grid_star(count), dev[count])
             return end.intersect_halfspaces(Hi, gi), np.concatenate([point, np.zeros(end.nvars - point.size)])
@@ -458,7 +504,7 @@ class _Explorer:
         return (_tightened(seg, len(gi)) or seg) if self.flows[mode].drift else seg, error
 
     def _cell(self, mode: str, start: Star, h: float, path: _Path, depth: int, point, pending=None,
-              spread=None):
+              spread=None, since: float = 0.0):
         """Check one cell and launch its successors; bisect when a failure is blamed on it.
 
         The segment's own coefficients are the block starting at ``start.nvars``; a failure
@@ -466,8 +512,9 @@ class _Explorer:
         the cell owning that block is bisected. ``point``: coefficients of a point of
         ``start`` (passed on as a guess to successors). ``pending``: where successors to be
         aggregated are collected (per outgoing jump), None to explore them at once.
-        ``spread``: bound of the input effect on the cell (None without inputs); halves keep
-        it (it only grows with time).
+        ``spread``: bound of the input effect on the cell (None without inputs), ``since``: the
+        time from the start of the input effect to the cell's start; the second half keeps
+        ``spread``, the first takes the bound at its own end (:meth:`_half_spread`).
         """
         if self._past_cutoff(start, path):
             return
@@ -489,13 +536,28 @@ class _Explorer:
             self.stats.refined += 1
             self.stats.deepest = max(self.stats.deepest, depth + 1)
             half = h / 2
-            self._cell(mode, start, half, path, depth + 1, point, pending, spread)
+            first = self._half_spread(mode, spread, since, half)
+            self._cell(mode, start, half, path, depth + 1, point, pending, first, since)
             mid = start.affine_map(*self.flows[mode].step(half))
             Hi, gi = self.invariants[mode]       # relaxed by the input effect, as on the grid
-            mid = mid.intersect_halfspaces(Hi, gi if spread is None else gi + np.abs(Hi) @ spread)
+            mid = mid.intersect_halfspaces(Hi, gi if first is None else gi + np.abs(Hi) @ first)
             mid_point = self._point(mid, point)
             if mid_point is not None:
-                self._cell(mode, mid, half, path, depth + 1, mid_point, pending, spread)
+                self._cell(mode, mid, half, path, depth + 1, mid_point, pending, spread, since + half)
+
+    def _half_spread(self, mode: str, spread, since: float, half: float):
+        """The input-effect bound ``R(since + half)`` of the first half of a bisected cell
+        (:meth:`.flowpipe.AffineFlow.deviation` on the grid of step ``half``), or ``spread``, the
+        bound of the whole cell (``R`` is non-decreasing), when that grid would exceed
+        :data:`HALF_SPREAD_CELLS` cells. Near the start of the input effect (a jump, or a block
+        start of :meth:`_rebase_cells`) the bound then shrinks with the cell."""
+        if spread is None:
+            return None
+        k = int(round((since + half) / half))
+        if k > HALF_SPREAD_CELLS:
+            return spread
+        count = 1 << (k - 1).bit_length()          # tables of 2^i cells: each built once
+        return np.minimum(spread, self.flows[mode].deviation(half, count)[k])
 
     def _transient(self, mode: str, seg: Star, error) -> bool:
         """Whether the interpolation error of a segment, along a guard row of the mode's

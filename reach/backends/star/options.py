@@ -82,6 +82,10 @@ class StarOptions:
         smaller remainders on strongly nonlinear flows, at a few coefficients per block).
     linearise_inflations: at most this many times a block's box is grown before UNKNOWN.
     linearise_margin: a grown box adds this fraction of the hull's half-width.
+    rebase_cells: in a mode with time-varying inputs whose invariant reads the states they
+        move, the chain is explored this many cells at a time, each block starting from the
+        interval hull of the last one's end, cut by the invariant, with the input effect
+        restarted (:meth:`.explorer._Explorer._rebase_cells`); 0: one chain to the horizon.
     """
 
     step: float | None = None
@@ -102,6 +106,7 @@ class StarOptions:
     linearise_cells: int | None = ranged(None, 1)
     linearise_inflations: int = ranged(8, 1)
     linearise_margin: float = 0.1
+    rebase_cells: int = ranged(2, 0)
 
     @classmethod
     def from_dict(cls, options: dict | None) -> "StarOptions":
