@@ -72,13 +72,13 @@ class Algebra:
         """``a b`` when ``a`` has no terms of degree below ``low_a`` and ``b`` none below ``low_b``
         (powers of a deviation): only the pairs that can be non-zero are formed."""
         left, right, total = self._pairs(low_a, low_b, False)
-        return total(np.take(a, left, axis=-1) * np.take(b, right, axis=-1))
+        return total(a.take(left, axis=-1) * b.take(right, axis=-1))
 
     def square_graded(self, a: np.ndarray, low: int) -> np.ndarray:
         """``a a`` when ``a`` has no terms of degree below ``low``: each pair ``{alpha, beta}`` is
         formed once and counted twice when ``alpha != beta``."""
         left, right, total = self._pairs(low, low, True)
-        return total(np.take(a, left, axis=-1) * np.take(a, right, axis=-1))
+        return total(a.take(left, axis=-1) * a.take(right, axis=-1))
 
     def multiply(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         return self.multiply_graded(a, b, 0, 0)
@@ -89,7 +89,7 @@ class Algebra:
         the last axis for 1,024 series), and a square (``a is b``) forms each pair once."""
         square = a is b
         left, right, _ = self._pairs(low_a, low_b, square)
-        products = np.take(a, left, axis=0) * np.take(b, right, axis=0)
+        products = a.take(left, axis=0) * b.take(right, axis=0)
         return self._leading_totals[(low_a, low_b, square)](products)
 
     def _pairs(self, low_a: int, low_b: int, square: bool):
@@ -390,6 +390,37 @@ def series_leading(alg: Algebra, c: np.ndarray, coefficient) -> np.ndarray:
     return out
 
 
+def sine_leading(alg: Algebra, c: np.ndarray) -> np.ndarray:
+    """``sin(a)`` of coefficient-major ``c`` ``(size, ...)``. With ``a = a0 + da``,
+
+        sin(a) = sin(a0) C(da) + cos(a0) S(da),
+        C(da) = sum_{k even} (-1)^(k/2) da^k / k!,   S(da) = sum_{k odd} (-1)^((k-1)/2) da^k / k!,
+
+    so the powers of ``da`` are summed with scalar weights and the two arrays that depend on
+    ``a0`` scale only ``C - 1`` and ``S`` at the end (:func:`series_leading` scales every power by
+    an array ``f^(k)(a0)/k!``: a third fewer operations, the same terms up to rounding). The
+    powers are graded products; the constant row of ``c`` is never among their pairs."""
+    sin0, cos0 = np.sin(c[0]), np.cos(c[0])
+    odd = c.copy()
+    odd[0] = 0.0
+    even = None                     # C(da) - 1
+    power = c
+    for k in range(2, alg.order + 1):
+        power = alg.multiply_leading(c, c, 1, 1) if k == 2 else alg.multiply_leading(power, c, k - 1, 1)
+        term = ((-1.0) ** (k // 2) / factorial(k)) * power
+        if k % 2:
+            odd += term
+        elif even is None:
+            even = term
+        else:
+            even += term
+    out = cos0 * odd
+    if even is not None:
+        out += sin0 * even
+    out[0] = sin0
+    return out
+
+
 class Layer:
     """A vector of DA numbers stored coefficient-major: ``c[k, i, ...]`` is monomial ``k`` of
     component ``i`` (further axes: a batch of runs). The hidden layers of a network
@@ -415,8 +446,7 @@ class Layer:
         return Layer(self.alg, c)
 
     def sin(self) -> "Layer":
-        derivatives = _sin_derivatives(self.c[0])
-        return Layer(self.alg, series_leading(self.alg, self.c, lambda a0, k: derivatives[k % 4] / factorial(k)))
+        return Layer(self.alg, sine_leading(self.alg, self.c))
 
     def unstack(self) -> list[DA]:
         """The scalar DAs (coefficients last again)."""
