@@ -235,7 +235,13 @@ class DA:
     def weighted_sum(weights: np.ndarray, items: list) -> "DA":
         """``sum_k w_k a_k`` for scalar DAs and floats (one product on the stacked coefficients)."""
         alg = next(v.alg for v in items if isinstance(v, DA))
-        rows = np.stack(np.broadcast_arrays(*[v.c if isinstance(v, DA) else DA.const(alg, v).c for v in items]))
+        shape = np.broadcast_shapes(*[v.c.shape if isinstance(v, DA) else np.shape(v) + (alg.size,) for v in items])
+        rows = np.zeros((len(items),) + shape)
+        for row, v in zip(rows, items):
+            if isinstance(v, DA):
+                row[...] = v.c
+            else:
+                row[..., 0] = v
         return DA(alg, (weights @ rows.reshape(len(rows), -1)).reshape(rows.shape[1:]))
 
     def unstack(self) -> list["DA"]:

@@ -35,9 +35,12 @@ import numpy as np
 from reach.backends.taylor.da import DA
 from reach.backends.taylor.flow import rk8
 
-# runs stepped together: a sine layer (32 neurons, order 4 in 2 variables) costs 8.3 us per run in
-# a batch of 16, 7.7 us in a batch of 32 and 19 us in a batch of 64 (out of the caches)
-BATCH = 32
+# runs stepped together: a SIREN network (5 sine layers of 32 neurons, order 4 in 2 variables)
+# costs 37 us per run in a batch of 16 and 31-35 us in batches of 32 to 96, once the allocator
+# keeps freed blocks (:func:`.units.keep_freed_memory`; 60 us per run at 64 without). Each batch
+# also pays the Python overhead of its sequence of array operations (about 0.8 CPU s for a
+# CW SIREN propagation), so a worker's share of an ADS level is best stepped in few batches
+BATCH = 96
 
 @dataclass
 class Propagation:
