@@ -350,13 +350,15 @@ class DA:
         return np.tensordot(self.c, values, axes=([-1], [0]))
 
     def compose(self, args: list["DA"]) -> "DA":
-        """``self(args)``: substitute a DA (of any algebra) for each variable."""
+        """``self(args)``: substitute a DA (of any algebra) for each variable. Arguments of a batch
+        shape ``S`` are substituted into the batch of the same shape at the end of ``self``'s
+        (``self`` of shape ``(..., *S)``: each run's series into that run's)."""
         values = self.monomials(args)
         target = args[0].alg
         V = np.stack(np.broadcast_arrays(*[v.c for v in values]))     # (size, *args shape, target size)
         if V.ndim == 2:             # scalar arguments: one matrix product
             return DA(target, self.c @ V)
-        c = np.zeros(np.broadcast_shapes(self.shape + (1,) * (V.ndim - 2), V.shape[1:-1]) + (target.size,))
+        c = np.zeros(np.broadcast_shapes(self.c.shape[:-1] + (1,), V.shape[1:]))
         for k in range(len(V)):
             c += self.c[..., k, None] * V[k]
         return DA(target, c)
@@ -529,21 +531,22 @@ def invert(F: list[DA]) -> list[DA]:
     With ``F - F(0) = L + N`` (linear part ``L``, invertible, and nonlinear part ``N``) the
     inverse ``G`` solves ``G = L^-1 (Id - N o G)``; each pass fixes one more order, so ``n``
     passes give the order-``n`` inverse. The returned ``G`` takes ``F - F(0)`` to ``xi``.
+    Components of a batch shape hold a batch of maps, each inverted on its own.
     """
     alg = F[0].alg
     m = alg.nvars
-    C = np.stack([f.c for f in F], axis=0).copy()
-    C[:, 0] = 0.0
+    shape = np.broadcast_shapes(*[f.shape for f in F])        # a batch of maps: one inverse each
+    C = np.stack([np.broadcast_to(f.c, shape + (alg.size,)) for f in F], axis=0)   # (m, *shape, size)
+    C[..., 0] = 0.0
     lin = alg.degree == 1
-    L = C[:, lin]
-    Linv = np.linalg.inv(L)
+    Linv = np.linalg.inv(np.moveaxis(C[..., lin], 0, -2))     # (*shape, m, m)
     N = C.copy()
-    N[:, lin] = 0.0
+    N[..., lin] = 0.0
     nonlinear = DA(alg, N)
     identity = np.zeros((m, alg.size))
     identity[:, lin] = np.eye(m)
-    G = DA(alg, Linv @ identity)
+    G = DA(alg, np.moveaxis(Linv @ identity, -2, 0))
     for _ in range(alg.order):
         NG = nonlinear.compose([G[i] for i in range(m)])
-        G = DA(alg, Linv @ (identity - NG.c))
+        G = DA(alg, np.moveaxis(Linv @ (identity - np.moveaxis(NG.c, 0, -2)), -2, 0))
     return [G[i] for i in range(m)]
