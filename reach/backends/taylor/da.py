@@ -59,6 +59,7 @@ class Algebra:
         self.left, self.right, self.target = P[:, 0], P[:, 1], P[:, 2]
         self._graded: dict = {}
         self._leading_totals: dict = {}
+        self._row_products: dict = {}
         # every monomial beta != 0 is parent[k] * xi_{step[k]} (for evaluation and composition)
         self.parent = np.zeros(self.size, dtype=int)
         self.step = np.zeros(self.size, dtype=int)
@@ -91,6 +92,52 @@ class Algebra:
         left, right, _ = self._pairs(low_a, low_b, square)
         products = a.take(left, axis=0) * b.take(right, axis=0)
         return self._leading_totals[(low_a, low_b, square)](products)
+
+    def first(self, degree: int) -> int:
+        """Index of the first monomial of total degree ``degree`` (monomials are graded)."""
+        return int(np.searchsorted(self.degree, degree))
+
+    def product_rows(self, a: np.ndarray, b: np.ndarray, low_a: int, low_b: int, scale: float) -> np.ndarray:
+        """``scale a b`` of coefficient-major series given by their rows from degree ``low_a``
+        (``a``) and ``low_b`` (``b``) on (the rows below are zero), as its rows from degree
+        ``low_a + low_b`` on; ``a is b`` is a square (each unordered pair formed once). The scale
+        is folded into the sum by target."""
+        key = (low_a, low_b, a is b, scale)
+        if key not in self._row_products:
+            self._row_products[key] = self._tabulate_rows(low_a, low_b, a is b, scale)
+        left, right, total = self._row_products[key]
+        return total(a.take(left, axis=0) * b.take(right, axis=0))
+
+    def _tabulate_rows(self, low_a: int, low_b: int, square: bool, scale: float):
+        """``(left, right, total)`` of :meth:`product_rows`: the pairs' rows in ``a`` and ``b``
+        and the weighted sum of their products ``(pairs, ...)`` into the target rows (a matrix
+        product in a small algebra, else a segmented sum, as :meth:`_pairs`)."""
+        keep = (self.degree[self.left] >= low_a) & (self.degree[self.right] >= low_b)
+        if square:
+            keep &= self.left <= self.right
+        left, right, target = self.left[keep], self.right[keep], self.target[keep]
+        weight = scale * (np.where(left < right, 2.0, 1.0) if square else np.ones(len(left)))
+        low = self.first(low_a + low_b)
+        rows = self.size - low
+        left, right, target = left - self.first(low_a), right - self.first(low_b), target - low
+        if self.size <= DENSE_SUM_SIZE:
+            S = np.zeros((rows, len(target)))
+            S[target, np.arange(len(target))] = weight
+
+            def total(products):
+                return (S @ products.reshape(len(target), -1)).reshape((rows,) + products.shape[1:])
+
+            return left, right, total
+        starts = np.flatnonzero(np.r_[True, target[1:] != target[:-1]]) if len(target) else target
+
+        def total(products):
+            out = np.zeros((rows,) + products.shape[1:])
+            if len(starts):
+                weighted = products * weight.reshape((-1,) + (1,) * (products.ndim - 1))
+                out[target[starts]] = np.add.reduceat(weighted, starts, axis=0)
+            return out
+
+        return left, right, total
 
     def _pairs(self, low_a: int, low_b: int, square: bool):
         """``(left, right, total)``: the monomial pairs of a graded product (unordered pairs of a
@@ -402,30 +449,33 @@ def sine_leading(alg: Algebra, c: np.ndarray) -> np.ndarray:
     """``sin(a)`` of coefficient-major ``c`` ``(size, ...)``. With ``a = a0 + da``,
 
         sin(a) = sin(a0) C(da) + cos(a0) S(da),
-        C(da) = sum_{k even} (-1)^(k/2) da^k / k!,   S(da) = sum_{k odd} (-1)^((k-1)/2) da^k / k!,
+        C(da) = sum_{k even} w_k da^k,   S(da) = sum_{k odd} w_k da^k,   w_k = (-1)^floor(k/2) / k!,
 
     so the powers of ``da`` are summed with scalar weights and the two arrays that depend on
     ``a0`` scale only ``C - 1`` and ``S`` at the end (:func:`series_leading` scales every power by
-    an array ``f^(k)(a0)/k!``: a third fewer operations, the same terms up to rounding). The
-    powers are graded products; the constant row of ``c`` is never among their pairs."""
+    an array ``f^(k)(a0)/k!``). The weighted powers ``w_k da^k = (w_k / w_(k-1)) (w_(k-1) da^(k-1)) da``
+    are graded products with the ratio folded into their sums, each held as its rows from degree
+    ``k`` on (:meth:`Algebra.product_rows`), so no operation touches rows that are zero."""
     sin0, cos0 = np.sin(c[0]), np.cos(c[0])
-    odd = c.copy()
-    odd[0] = 0.0
-    even = None                     # C(da) - 1
-    power = c
-    for k in range(2, alg.order + 1):
-        power = alg.multiply_leading(c, c, 1, 1) if k == 2 else alg.multiply_leading(power, c, k - 1, 1)
-        term = ((-1.0) ** (k // 2) / factorial(k)) * power
-        if k % 2:
-            odd += term
-        elif even is None:
-            even = term
-        else:
-            even += term
-    out = cos0 * odd
-    if even is not None:
-        out += sin0 * even
+    out = np.empty_like(c)
     out[0] = sin0
+    d = c[1:]                       # da, from degree 1
+    odd = d.copy()                  # S(da), from degree 1
+    even = None                     # C(da) - 1, from degree 2
+    power, weight = d, 1.0          # w_k da^k, from degree k
+    for k in range(2, alg.order + 1):
+        w = (-1.0) ** (k // 2) / factorial(k)
+        power = alg.product_rows(power, d, k - 1, 1, w / weight)
+        weight = w
+        if k % 2:
+            odd[alg.first(k) - 1:] += power
+        elif even is None:
+            even = power.copy()
+        else:
+            even[alg.first(k) - alg.first(2):] += power
+    out[1:] = cos0 * odd
+    if even is not None:
+        out[alg.first(2):] += sin0 * even
     return out
 
 
