@@ -50,6 +50,8 @@ class Algebra:
         self.exps = np.array(exps, dtype=int).reshape(-1, nvars)
         self.size = len(self.exps)
         self.degree = self.exps.sum(axis=1)
+        # first[k]: index of the first monomial of total degree k (monomials are graded; k <= order + 1)
+        self.first = [int(np.searchsorted(self.degree, k)) for k in range(order + 2)]
         self.index = {tuple(e): k for k, e in enumerate(self.exps)}
         pairs = [(i, j, self.index[tuple(self.exps[i] + self.exps[j])])
                  for i in range(self.size) for j in range(self.size)
@@ -93,10 +95,6 @@ class Algebra:
         products = a.take(left, axis=0) * b.take(right, axis=0)
         return self._leading_totals[(low_a, low_b, square)](products)
 
-    def first(self, degree: int) -> int:
-        """Index of the first monomial of total degree ``degree`` (monomials are graded)."""
-        return int(np.searchsorted(self.degree, degree))
-
     def product_rows(self, a: np.ndarray, b: np.ndarray, low_a: int, low_b: int, scale: float) -> np.ndarray:
         """``scale a b`` of coefficient-major series given by their rows from degree ``low_a``
         (``a``) and ``low_b`` (``b``) on (the rows below are zero), as its rows from degree
@@ -117,9 +115,9 @@ class Algebra:
             keep &= self.left <= self.right
         left, right, target = self.left[keep], self.right[keep], self.target[keep]
         weight = scale * (np.where(left < right, 2.0, 1.0) if square else np.ones(len(left)))
-        low = self.first(low_a + low_b)
+        low = self.first[low_a + low_b]
         rows = self.size - low
-        left, right, target = left - self.first(low_a), right - self.first(low_b), target - low
+        left, right, target = left - self.first[low_a], right - self.first[low_b], target - low
         if self.size <= DENSE_SUM_SIZE:
             S = np.zeros((rows, len(target)))
             S[target, np.arange(len(target))] = weight
@@ -463,19 +461,20 @@ def sine_leading(alg: Algebra, c: np.ndarray) -> np.ndarray:
     odd = d.copy()                  # S(da), from degree 1
     even = None                     # C(da) - 1, from degree 2
     power, weight = d, 1.0          # w_k da^k, from degree k
+    first = alg.first
     for k in range(2, alg.order + 1):
         w = (-1.0) ** (k // 2) / factorial(k)
         power = alg.product_rows(power, d, k - 1, 1, w / weight)
         weight = w
         if k % 2:
-            odd[alg.first(k) - 1:] += power
+            odd[first[k] - 1:] += power
         elif even is None:
-            even = power.copy()
+            even = power            # w_2 da^2 is last read as a factor of w_3 da^3, before even grows
         else:
-            even[alg.first(k) - alg.first(2):] += power
+            even[first[k] - first[2]:] += power
     out[1:] = cos0 * odd
     if even is not None:
-        out[alg.first(2):] += sin0 * even
+        out[first[2]:] += sin0 * even
     return out
 
 
