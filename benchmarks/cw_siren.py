@@ -151,8 +151,8 @@ def main(argv=None) -> int:
 
 
 def _cpu_seconds() -> float:
-    """CPU seconds of this process and of its finished worker processes (a level's pool ends
-    with the level): the measure that a loaded machine distorts least."""
+    """CPU seconds of this process and of its finished worker processes (the check's pool ends
+    with the check): the measure that a loaded machine distorts least."""
     t = os.times()
     return t.user + t.system + t.children_user + t.children_system
 

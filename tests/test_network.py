@@ -197,13 +197,14 @@ def test_pickled_arrays_are_refused(tmp_path):
         load_model(write_model(tmp_path, arrays))
 
 
-def test_network_models_pickle_and_run_on_worker_processes(tmp_path):
+def test_network_models_pickle_and_run_on_worker_processes(tmp_path, monkeypatch):
     """A network model is sent to workers whole (arrays, not the evaluation cache): the copy has
     the same law, and taylor ADS levels on 2 processes give the subdomains of 1 and their bounds
     to rounding (the batches differ in size, and BLAS may sum a batch's columns in another
-    order)."""
+    order). Levels of 2 and 4 boxes are shared by the workers here (``MIN_SHARE``: 1 box)."""
     import pickle
 
+    import reach.backends.taylor
     from reach.backends.taylor import BACKEND
     from reach.backends.taylor.keys import picklable
     from reach.spec.properties import bind, load_properties
@@ -228,6 +229,7 @@ def test_network_models_pickle_and_run_on_worker_processes(tmp_path):
         return [(tuple(r["low"]), tuple(r["high"])) for r in rows], np.array([r["bound"] for r in rows])
 
     boxes, bounds = essence(BACKEND.check(model, prop, options))
+    monkeypatch.setattr(reach.backends.taylor, "MIN_SHARE", 1)
     boxes_2, bounds_2 = essence(BACKEND.check(model, prop, {**options, "jobs": 2}))
     assert len(boxes) == 4 and boxes == boxes_2
     np.testing.assert_allclose(bounds_2, bounds, rtol=1e-10)      # a random network: bounds up to 1e9

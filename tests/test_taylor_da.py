@@ -85,6 +85,33 @@ def test_inverse_of_a_map_and_of_a_scalar_series():
     np.testing.assert_allclose(inverse.c, expected, atol=1e-10)
 
 
+def test_a_batch_of_maps_inverts_and_composes_as_each_map_alone():
+    """Components of shape (B,) hold B maps: each is inverted, and composed with its own
+    arguments, as it is on its own (event maps of an ADS level, :class:`.event.EventSolve`)."""
+    alg = algebra(4, 3)
+    rng = np.random.default_rng(3)
+    B = 5
+    F = []
+    for i in range(3):
+        c = 0.1 * rng.standard_normal((B, alg.size))
+        c[:, 1 + i] += 1.0                 # an invertible linear part
+        F.append(DA(alg, c))
+    identity = [DA.var(alg, 0), DA.var(alg, 1)]
+    G = invert(identity + [F[2]])
+    target = algebra(4, 2)
+    xi = [DA.var(target, j) for j in range(2)]
+    dt = G[2].compose(xi + [DA.const(target, -F[2].cons)])
+    states = DA(alg, np.stack([f.c for f in F])).compose(xi + [dt])
+    assert G[2].shape == (B,) and states.shape == (3, B)
+    for b in range(B):
+        G_b = invert(identity + [F[2][b]])
+        dt_b = G_b[2].compose(xi + [DA.const(target, -F[2][b].cons)])
+        np.testing.assert_allclose(G[2].c[b], G_b[2].c, rtol=1e-13, atol=1e-15)
+        np.testing.assert_allclose(dt.c[b], dt_b.c, rtol=1e-13, atol=1e-15)
+        alone = DA(alg, np.stack([f.c[b] for f in F])).compose(xi + [dt_b])
+        np.testing.assert_allclose(states.c[:, b], alone.c, rtol=1e-13, atol=1e-15)
+
+
 def test_integrate_and_derivative():
     alg = algebra(4, 2)
     x, y = DA.variables(alg, [0.0, 0.0], [1.0, 1.0])

@@ -50,6 +50,8 @@ class Algebra:
         self.exps = np.array(exps, dtype=int).reshape(-1, nvars)
         self.size = len(self.exps)
         self.degree = self.exps.sum(axis=1)
+        # first[k]: index of the first monomial of total degree k (monomials are graded; k <= order + 1)
+        self.first = [int(np.searchsorted(self.degree, k)) for k in range(order + 2)]
         self.index = {tuple(e): k for k, e in enumerate(self.exps)}
         pairs = [(i, j, self.index[tuple(self.exps[i] + self.exps[j])])
                  for i in range(self.size) for j in range(self.size)
@@ -59,6 +61,7 @@ class Algebra:
         self.left, self.right, self.target = P[:, 0], P[:, 1], P[:, 2]
         self._graded: dict = {}
         self._leading_totals: dict = {}
+        self._row_products: dict = {}
         # every monomial beta != 0 is parent[k] * xi_{step[k]} (for evaluation and composition)
         self.parent = np.zeros(self.size, dtype=int)
         self.step = np.zeros(self.size, dtype=int)
@@ -72,13 +75,13 @@ class Algebra:
         """``a b`` when ``a`` has no terms of degree below ``low_a`` and ``b`` none below ``low_b``
         (powers of a deviation): only the pairs that can be non-zero are formed."""
         left, right, total = self._pairs(low_a, low_b, False)
-        return total(np.take(a, left, axis=-1) * np.take(b, right, axis=-1))
+        return total(a.take(left, axis=-1) * b.take(right, axis=-1))
 
     def square_graded(self, a: np.ndarray, low: int) -> np.ndarray:
         """``a a`` when ``a`` has no terms of degree below ``low``: each pair ``{alpha, beta}`` is
         formed once and counted twice when ``alpha != beta``."""
         left, right, total = self._pairs(low, low, True)
-        return total(np.take(a, left, axis=-1) * np.take(a, right, axis=-1))
+        return total(a.take(left, axis=-1) * a.take(right, axis=-1))
 
     def multiply(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
         return self.multiply_graded(a, b, 0, 0)
@@ -89,8 +92,50 @@ class Algebra:
         the last axis for 1,024 series), and a square (``a is b``) forms each pair once."""
         square = a is b
         left, right, _ = self._pairs(low_a, low_b, square)
-        products = np.take(a, left, axis=0) * np.take(b, right, axis=0)
+        products = a.take(left, axis=0) * b.take(right, axis=0)
         return self._leading_totals[(low_a, low_b, square)](products)
+
+    def product_rows(self, a: np.ndarray, b: np.ndarray, low_a: int, low_b: int, scale: float) -> np.ndarray:
+        """``scale a b`` of coefficient-major series given by their rows from degree ``low_a``
+        (``a``) and ``low_b`` (``b``) on (the rows below are zero), as its rows from degree
+        ``low_a + low_b`` on; ``a is b`` is a square (each unordered pair formed once). The scale
+        is folded into the sum by target."""
+        key = (low_a, low_b, a is b, scale)
+        if key not in self._row_products:
+            self._row_products[key] = self._tabulate_rows(low_a, low_b, a is b, scale)
+        left, right, total = self._row_products[key]
+        return total(a.take(left, axis=0) * b.take(right, axis=0))
+
+    def _tabulate_rows(self, low_a: int, low_b: int, square: bool, scale: float):
+        """``(left, right, total)`` of :meth:`product_rows`: the pairs' rows in ``a`` and ``b``
+        and the weighted sum of their products ``(pairs, ...)`` into the target rows (a matrix
+        product in a small algebra, else a segmented sum, as :meth:`_pairs`)."""
+        keep = (self.degree[self.left] >= low_a) & (self.degree[self.right] >= low_b)
+        if square:
+            keep &= self.left <= self.right
+        left, right, target = self.left[keep], self.right[keep], self.target[keep]
+        weight = scale * (np.where(left < right, 2.0, 1.0) if square else np.ones(len(left)))
+        low = self.first[low_a + low_b]
+        rows = self.size - low
+        left, right, target = left - self.first[low_a], right - self.first[low_b], target - low
+        if self.size <= DENSE_SUM_SIZE:
+            S = np.zeros((rows, len(target)))
+            S[target, np.arange(len(target))] = weight
+
+            def total(products):
+                return (S @ products.reshape(len(target), -1)).reshape((rows,) + products.shape[1:])
+
+            return left, right, total
+        starts = np.flatnonzero(np.r_[True, target[1:] != target[:-1]]) if len(target) else target
+
+        def total(products):
+            out = np.zeros((rows,) + products.shape[1:])
+            if len(starts):
+                weighted = products * weight.reshape((-1,) + (1,) * (products.ndim - 1))
+                out[target[starts]] = np.add.reduceat(weighted, starts, axis=0)
+            return out
+
+        return left, right, total
 
     def _pairs(self, low_a: int, low_b: int, square: bool):
         """``(left, right, total)``: the monomial pairs of a graded product (unordered pairs of a
@@ -235,7 +280,13 @@ class DA:
     def weighted_sum(weights: np.ndarray, items: list) -> "DA":
         """``sum_k w_k a_k`` for scalar DAs and floats (one product on the stacked coefficients)."""
         alg = next(v.alg for v in items if isinstance(v, DA))
-        rows = np.stack(np.broadcast_arrays(*[v.c if isinstance(v, DA) else DA.const(alg, v).c for v in items]))
+        shape = np.broadcast_shapes(*[v.c.shape if isinstance(v, DA) else np.shape(v) + (alg.size,) for v in items])
+        rows = np.zeros((len(items),) + shape)
+        for row, v in zip(rows, items):
+            if isinstance(v, DA):
+                row[...] = v.c
+            else:
+                row[..., 0] = v
         return DA(alg, (weights @ rows.reshape(len(rows), -1)).reshape(rows.shape[1:]))
 
     def unstack(self) -> list["DA"]:
@@ -344,13 +395,15 @@ class DA:
         return np.tensordot(self.c, values, axes=([-1], [0]))
 
     def compose(self, args: list["DA"]) -> "DA":
-        """``self(args)``: substitute a DA (of any algebra) for each variable."""
+        """``self(args)``: substitute a DA (of any algebra) for each variable. Arguments of a batch
+        shape ``S`` are substituted into the batch of the same shape at the end of ``self``'s
+        (``self`` of shape ``(..., *S)``: each run's series into that run's)."""
         values = self.monomials(args)
         target = args[0].alg
         V = np.stack(np.broadcast_arrays(*[v.c for v in values]))     # (size, *args shape, target size)
         if V.ndim == 2:             # scalar arguments: one matrix product
             return DA(target, self.c @ V)
-        c = np.zeros(np.broadcast_shapes(self.shape + (1,) * (V.ndim - 2), V.shape[1:-1]) + (target.size,))
+        c = np.zeros(np.broadcast_shapes(self.c.shape[:-1] + (1,), V.shape[1:]))
         for k in range(len(V)):
             c += self.c[..., k, None] * V[k]
         return DA(target, c)
@@ -390,6 +443,41 @@ def series_leading(alg: Algebra, c: np.ndarray, coefficient) -> np.ndarray:
     return out
 
 
+def sine_leading(alg: Algebra, c: np.ndarray) -> np.ndarray:
+    """``sin(a)`` of coefficient-major ``c`` ``(size, ...)``. With ``a = a0 + da``,
+
+        sin(a) = sin(a0) C(da) + cos(a0) S(da),
+        C(da) = sum_{k even} w_k da^k,   S(da) = sum_{k odd} w_k da^k,   w_k = (-1)^floor(k/2) / k!,
+
+    so the powers of ``da`` are summed with scalar weights and the two arrays that depend on
+    ``a0`` scale only ``C - 1`` and ``S`` at the end (:func:`series_leading` scales every power by
+    an array ``f^(k)(a0)/k!``). The weighted powers ``w_k da^k = (w_k / w_(k-1)) (w_(k-1) da^(k-1)) da``
+    are graded products with the ratio folded into their sums, each held as its rows from degree
+    ``k`` on (:meth:`Algebra.product_rows`), so no operation touches rows that are zero."""
+    sin0, cos0 = np.sin(c[0]), np.cos(c[0])
+    out = np.empty_like(c)
+    out[0] = sin0
+    d = c[1:]                       # da, from degree 1
+    odd = d.copy()                  # S(da), from degree 1
+    even = None                     # C(da) - 1, from degree 2
+    power, weight = d, 1.0          # w_k da^k, from degree k
+    first = alg.first
+    for k in range(2, alg.order + 1):
+        w = (-1.0) ** (k // 2) / factorial(k)
+        power = alg.product_rows(power, d, k - 1, 1, w / weight)
+        weight = w
+        if k % 2:
+            odd[first[k] - 1:] += power
+        elif even is None:
+            even = power            # w_2 da^2 is last read as a factor of w_3 da^3, before even grows
+        else:
+            even[first[k] - first[2]:] += power
+    out[1:] = cos0 * odd
+    if even is not None:
+        out[first[2]:] += sin0 * even
+    return out
+
+
 class Layer:
     """A vector of DA numbers stored coefficient-major: ``c[k, i, ...]`` is monomial ``k`` of
     component ``i`` (further axes: a batch of runs). The hidden layers of a network
@@ -415,8 +503,7 @@ class Layer:
         return Layer(self.alg, c)
 
     def sin(self) -> "Layer":
-        derivatives = _sin_derivatives(self.c[0])
-        return Layer(self.alg, series_leading(self.alg, self.c, lambda a0, k: derivatives[k % 4] / factorial(k)))
+        return Layer(self.alg, sine_leading(self.alg, self.c))
 
     def unstack(self) -> list[DA]:
         """The scalar DAs (coefficients last again)."""
@@ -493,21 +580,22 @@ def invert(F: list[DA]) -> list[DA]:
     With ``F - F(0) = L + N`` (linear part ``L``, invertible, and nonlinear part ``N``) the
     inverse ``G`` solves ``G = L^-1 (Id - N o G)``; each pass fixes one more order, so ``n``
     passes give the order-``n`` inverse. The returned ``G`` takes ``F - F(0)`` to ``xi``.
+    Components of a batch shape hold a batch of maps, each inverted on its own.
     """
     alg = F[0].alg
     m = alg.nvars
-    C = np.stack([f.c for f in F], axis=0).copy()
-    C[:, 0] = 0.0
+    shape = np.broadcast_shapes(*[f.shape for f in F])        # a batch of maps: one inverse each
+    C = np.stack([np.broadcast_to(f.c, shape + (alg.size,)) for f in F], axis=0)   # (m, *shape, size)
+    C[..., 0] = 0.0
     lin = alg.degree == 1
-    L = C[:, lin]
-    Linv = np.linalg.inv(L)
+    Linv = np.linalg.inv(np.moveaxis(C[..., lin], 0, -2))     # (*shape, m, m)
     N = C.copy()
-    N[:, lin] = 0.0
+    N[..., lin] = 0.0
     nonlinear = DA(alg, N)
     identity = np.zeros((m, alg.size))
     identity[:, lin] = np.eye(m)
-    G = DA(alg, Linv @ identity)
+    G = DA(alg, np.moveaxis(Linv @ identity, -2, 0))
     for _ in range(alg.order):
         NG = nonlinear.compose([G[i] for i in range(m)])
-        G = DA(alg, Linv @ (identity - NG.c))
+        G = DA(alg, np.moveaxis(Linv @ (identity - np.moveaxis(NG.c, 0, -2)), -2, 0))
     return [G[i] for i in range(m)]

@@ -62,17 +62,51 @@ class Picard:
 
     def key(self):
         alg = self.x[0].alg
-        return ("picard", id(self.f), id(self.event), alg.order, alg.nvars, len(self.x), self.dt_var, self.order)
+        return (type(self).__name__, self.f, self.event, alg.order, alg.nvars, len(self.x), self.dt_var,
+                self.order)
 
     @staticmethod
-    def answer(requests: list["Picard"]) -> list[tuple]:
-        """``(x, E)`` of each request."""
+    def expand(requests: list["Picard"]) -> tuple[list[DA], DA]:
+        """The expansions ``x`` and events ``E`` of the requests, stacked (shape ``(B,)``)."""
         first = requests[0]
         alg = first.x[0].alg
         x_e = [DA(alg, np.stack([r.x[i].c for r in requests])) for i in range(len(first.x))]
         x = picard(first.f, x_e, first.dt_var, first.order)
-        E = first.event(x)
-        return [([DA(alg, xi.c[b]) for xi in x], DA(alg, E.c[b])) for b in range(len(requests))]
+        return x, first.event(x)
+
+    @staticmethod
+    def answer(requests: list["Picard"]) -> list[tuple]:
+        """``(x, E)`` of each request."""
+        x, E = Picard.expand(requests)
+        return [([xi[b] for xi in x], E[b]) for b in range(len(requests))]
+
+
+@dataclass
+class EventSolve(Picard):
+    """A request: the event map (eqs. 11-14) about the state ``x`` at the nominal event, in the
+    deviations ``xi`` and the time deviation ``xi_{dt_var}`` (the last variable). Answered as one
+    batch: the Picard expansions, the inversions of eq. (13) and the substitutions of eq. (14) of
+    all requests run on stacked DAs."""
+
+    @staticmethod
+    def answer(requests: list["EventSolve"]) -> list[tuple]:
+        """``(dt*(xi), x*(xi))`` of each request."""
+        x, E = Picard.expand(requests)
+        dt, state = solve_event(x, E)
+        return [(dt[b], [s[b] for s in state]) for b in range(len(requests))]
+
+
+def solve_event(x: list[DA], E: DA) -> tuple[DA, list[DA]]:
+    """``dt*(xi)`` and ``x*(xi) = x(xi, dt*(xi))`` (eqs. 13-14) from the expansions ``x`` and the
+    event ``E`` in the deviations ``xi`` and the time deviation (the last variable), for DAs of
+    any batch shape: ``(xi, dt) -> (xi, E - E(0))`` is inverted, ``E = 0`` enforced."""
+    alg = E.alg
+    m = alg.nvars - 1
+    G = invert([DA.var(alg, j) for j in range(m)] + [E])           # eq. (13), inverted
+    target = algebra(alg.order, m)
+    xi = [DA.var(target, j) for j in range(m)]
+    dt = G[m].compose(xi + [DA.const(target, -E.cons)])             # E = 0 enforced
+    return dt, stack(x).compose(xi + [dt]).unstack()                 # eq. (14)
 
 
 def refine_time(f, event, state_at, t_e: float, order: int, passes: int = 8):
@@ -126,13 +160,7 @@ def event_map_steps(f, event, x0: list[DA], nodes: np.ndarray, t_e: float, order
     alg = algebra(order, m + 1)
     x_e = yield Propagation(f, list(x0), step_sizes(nodes, t_e))
     x_e = [x.embed(alg) for x in x_e]
-    x, E = yield Picard(f, event, x_e, m, order)                   # eqs. (11), (12)
-    identity = [DA.var(alg, j) for j in range(m)]
-    G = invert(identity + [E])                                     # eq. (13), inverted
-    target = algebra(order, m)
-    xi = [DA.var(target, j) for j in range(m)]
-    dt = G[m].compose(xi + [DA.const(target, -E.cons)])            # E = 0 enforced
-    state = stack(x).compose(xi + [dt]).unstack()                   # eq. (14)
+    dt, state = yield EventSolve(f, event, x_e, m, order)          # eqs. (11)-(14)
     return EventMap(dt + t_e, state)
 
 

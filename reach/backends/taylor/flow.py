@@ -180,6 +180,15 @@ def rk8(f, x: list, h, steps: int) -> list:
             return np.stack(np.broadcast_arrays(*[np.asarray(v, dtype=float) for v in values]))
         return np.stack(np.broadcast_arrays(*[v.c if isinstance(v, DA) else DA.const(alg, v).c for v in values]))
 
+    def store(out, values):
+        """``out[j] = values[j]`` (a constant rate broadcast over the runs, or its DA)."""
+        for row, v in zip(out, values):
+            if isinstance(v, DA) or alg is None:
+                row[...] = v.c if isinstance(v, DA) else v
+            else:
+                row[...] = 0.0
+                row[..., 0] = v
+
     def unpack(X):
         return list(X) if alg is None else [DA(alg, row) for row in X]
 
@@ -188,7 +197,7 @@ def rk8(f, x: list, h, steps: int) -> list:
     for _ in range(steps):
         for i in range(len(B_DOP853)):
             Xi = X if i == 0 else X + h * _combine(A_DOP853[i, :i], K[:i])
-            K[i] = pack(f(unpack(Xi)))
+            store(K[i], f(unpack(Xi)))
         X = X + h * _combine(B_DOP853, K)
     return unpack(X)
 

@@ -1,15 +1,15 @@
-"""Many subdomains' expansions in lockstep: their nominal runs, DA propagations and Picard
-expansions batched.
+"""Many subdomains' expansions in lockstep: their nominal runs, DA propagations, Picard
+expansions and event maps batched.
 
 The candidate maps of a subdomain (:meth:`.problem.EventProblem.candidate_steps`) are written as a
 generator that yields a request each time it needs a run: a :class:`Propagation` (a mode's flow,
 a DA state, the RK8 step sizes: the state carried along its nominal run), a
-:class:`.nominal.NominalRun` (the nominal run itself) or a :class:`.event.Picard` (the expansion
-in time about an event and the event function on it: each pass of the time refinement and each
-event map), and receives the answer back. A request
-has a ``key`` (requests with the same key can be answered together), ``batch`` (the most answered
-at once, None for no limit), a ``length`` (the work it asks for: batches are formed of requests of
-similar lengths) and ``answer(requests) -> answers``. :func:`run_one` answers one
+:class:`.nominal.NominalRun` (the nominal run itself), a :class:`.event.Picard` (the expansion
+in time about an event and the event function on it: each pass of the time refinement) or a
+:class:`.event.EventSolve` (that expansion and the event map solved from it), and receives the
+answer back. A request has a ``key`` (requests with the same key can be answered together),
+``batch`` (the most answered at once, None for no limit), a ``length`` (the work it asks for:
+batches are formed of requests of similar lengths) and ``answer(requests) -> answers``. :func:`run_one` answers one
 generator's requests one at a time; :func:`run_batch` advances a whole ADS level's generators
 together, answering their pending requests group by group.
 
@@ -35,9 +35,12 @@ import numpy as np
 from reach.backends.taylor.da import DA
 from reach.backends.taylor.flow import rk8
 
-# runs stepped together: a sine layer (32 neurons, order 4 in 2 variables) costs 8.3 us per run in
-# a batch of 16, 7.7 us in a batch of 32 and 19 us in a batch of 64 (out of the caches)
-BATCH = 32
+# runs stepped together: a SIREN network (5 sine layers of 32 neurons, order 4 in 2 variables)
+# costs 22-26 us per run in batches of 16 to 96 once the allocator keeps freed blocks
+# (:func:`.units.keep_freed_memory`; 56 us per run at 96 without). Each batch also pays the
+# Python overhead of its sequence of array operations (about 0.7 CPU s for a CW SIREN
+# propagation), so a worker's share of an ADS level is best stepped in few batches
+BATCH = 96
 
 @dataclass
 class Propagation:

@@ -153,6 +153,11 @@ class EventProblem:
         for name in prop.modes:
             self.code(name)
 
+    def at_horizon(self, x):
+        """The event ``t = T`` on the global clock (one function for every subdomain, so that
+        their event maps are answered as one batch, :mod:`.lockstep`)."""
+        return x[self.clock] - self.model.horizon
+
     def code(self, name: str) -> ModeCode:
         if name not in self._codes:
             quantity = self.prop.quantity.get(name) if name in self.prop.modes else None
@@ -204,8 +209,7 @@ class EventProblem:
                     if hop == 0:
                         em = yield from fixed_time_map_steps(code.f, X, run.nodes, T)
                     else:
-                        c = self.clock
-                        em = yield from event_map_steps(code.f, lambda x: x[c] - T, X, run.nodes, T - t0, order)
+                        em = yield from event_map_steps(code.f, self.at_horizon, X, run.nodes, T - t0, order)
                     out[f"{mode}:horizon"] = code.q(em.state)
                 return out
             _, ex, face = leave

@@ -10,6 +10,9 @@ loaded machine made them tens of times slower.
 
 from __future__ import annotations
 
+import ctypes
+from functools import lru_cache
+
 from reach.backends.taylor.bound import truncate
 from reach.backends.taylor.keys import fingerprint
 from reach.backends.taylor.problem import EventProblem
@@ -35,9 +38,30 @@ def expand_box(model, prop, order: int, expand_order: int, tol: float, center, h
 
 def expand_boxes(model, prop, order: int, expand_order: int, tol: float, boxes: list) -> list:
     """:func:`expand_box` of each ``(center, half_width)`` in ``boxes``, expanded as one batch."""
+    keep_freed_memory()
     with single_threaded():
         batch = problem(model, prop).candidates_batch(boxes, expand_order, tol)
     return [(_truncated(maps, order, expand_order), maps) for maps in batch]
+
+
+@lru_cache(maxsize=None)
+def keep_freed_memory() -> None:
+    """Let this process's C allocator (glibc) keep freed blocks of up to 64 MiB for reuse.
+
+    By default glibc serves a block above its mmap threshold (128 KiB, raised to the size of a
+    freed block, up to 32 MiB) by a fresh ``mmap``, and gives the top of its heap back to the
+    system above the trim threshold (twice that), so the arrays of a batch's DA layers, a few
+    hundred KiB each and allocated thousands of times, can cost a page fault per 4 KiB touched.
+    A SIREN network on 96 runs (order 4 in 2 variables) took 5.4 ms per evaluation with the
+    defaults and 2.5 ms with these thresholds (0.7 ms on 32 runs either way), so batches of more
+    than about 64 runs pay only with them. Without glibc's ``mallopt``: no change."""
+    try:
+        mallopt = ctypes.CDLL("libc.so.6").mallopt
+    except (OSError, AttributeError):
+        return
+    m_trim_threshold, m_mmap_threshold = -1, -3            # mallopt parameters (malloc.h)
+    mallopt(m_mmap_threshold, 64 << 20)
+    mallopt(m_trim_threshold, 256 << 20)
 
 
 def _truncated(maps: dict, order: int, expand_order: int) -> dict:
