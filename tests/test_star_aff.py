@@ -68,7 +68,7 @@ def test_varying_input_is_proved_up_to_the_bang_bang_maximum(tmp_path, bound, sa
     (result,), *_ = check_spaceex(xml, cfg, "star", {"step": np.pi / 40})
     if safe:
         assert result.status is Status.SAFE, result.details.get("reason")
-        assert "|Phi^i B|" in result.details["semantics"]
+        assert "int_0^t |e^{A s} B| u_r ds" in result.details["semantics"]
     else:
         assert result.status is not Status.SAFE
 

@@ -59,13 +59,17 @@ def trace(alpha, path, nearest):
     Through an aggregate the point of the member nearest to the aggregate's point
     (``nearest(star, x)``, as :func:`nearest_point`) stands for it: exact when that point lies
     in a member, a candidate otherwise (the replay decides; the aggregate is refined if it
-    fails)."""
+    fails). Members are tried nearest box bound first; one whose box bound is no nearer than
+    the best point found cannot hold a nearer point and is skipped (no LP)."""
     entries = [(e, alpha) for e in path.entries]
     while path.origin is not None:
         agg = path.origin
         target = agg.star.point(alpha[:agg.star.nvars])
         best = None
-        for star, member_path in agg.members:
+        for gap, star, member_path in sorted(((_box_gap(star, target), star, member_path)
+                                             for star, member_path in agg.members), key=lambda m: m[0]):
+            if best is not None and gap >= best[0]:
+                break
             found = nearest(star, target)
             if found is not None and (best is None or found[0] < best[0]):
                 best = (found[0], found[1], member_path)
@@ -74,6 +78,13 @@ def trace(alpha, path, nearest):
         _, alpha, path = best
         entries = [(e, alpha) for e in path.entries] + entries
     return alpha, entries
+
+
+def _box_gap(star: Star, x) -> float:
+    """The max-norm distance from ``x`` to the box bound of ``star``: no point of ``star`` is
+    nearer."""
+    box = star.box_bound()
+    return float(np.max(np.maximum(np.maximum(box.low - x, x - box.high), 0.0), initial=0.0))
 
 
 #: pieces of the extremal input signal over ``[0, t]`` (:func:`extremal_signal`), at most
