@@ -78,10 +78,18 @@ class Star:
         return Star(c, M @ self.basis, self.predicate, self.box)
 
     def intersect_halfspaces(self, H, g) -> "Star":
-        """``S intersected with {x : H x <= g}``: rows ``H V a <= g - H c`` join the predicate."""
+        """``S intersected with {x : H x <= g}``: rows ``H V a <= g - H c`` join the predicate,
+        except those the coefficient box already implies (their largest value over the box is
+        within the bound): the set is the same, the LPs smaller."""
         H = np.atleast_2d(np.asarray(H, dtype=float))
         g = np.atleast_1d(np.asarray(g, dtype=float))
-        pred = self.predicate.intersect_halfspaces(H @ self.basis, g - H @ self.center)
+        rows, rhs = H @ self.basis, g - H @ self.center
+        low, high = self.box.low, self.box.high
+        if rows.shape[0] and np.all(np.isfinite(low)) and np.all(np.isfinite(high)):
+            largest = rows @ self.box.center + np.abs(rows) @ self.box.radius
+            needed = ~(largest <= rhs)
+            rows, rhs = rows[needed], rhs[needed]
+        pred = self.predicate.intersect_halfspaces(rows, rhs) if rows.shape[0] else self.predicate
         return Star(self.center, self.basis, pred, self.box)
 
     def intersect(self, polytope: HPolytope) -> "Star":
