@@ -25,7 +25,7 @@ from typing import Mapping
 import sympy
 
 from reach.errors import Where
-from reach.model.units import (DIMENSIONLESS, SI, UNITS, DimensionSystem, DisplayUnit, Form, UnitSystem,
+from reach.model.units import (DIMENSIONLESS, SI, UNITS, known_units, DimensionSystem, DisplayUnit, Form, UnitSystem,
                                bracket_display, model_display)
 
 MAX_LENGTH = 4000
@@ -268,7 +268,7 @@ class _Parser:
         """SI value and dimension of a bracketed unit expression."""
         if isinstance(node, ast.Name):
             if node.id not in UNITS:
-                self.fail(f"unknown unit '{node.id}'")
+                self.fail(f"unknown unit '{node.id}' (known: {known_units()})")
             si, dim = UNITS[node.id]
             return si, tuple(Fraction(d) for d in dim)
         if isinstance(node, ast.Constant) and type(node.value) is int and node.value == 1:

@@ -66,6 +66,11 @@ UNITS: dict[str, tuple[float, tuple[int, int, int]]] = {
 BASE_KINDS = {"length": 0, "time": 1, "mass": 2}
 
 
+def known_units() -> str:
+    """The unit names a model may use, for error messages (length, time and mass only)."""
+    return ", ".join(UNITS)
+
+
 def _power(name: str, exponent: Fraction) -> str:
     if exponent == 1:
         return name
@@ -110,7 +115,7 @@ SI = UnitSystem()
 def check_base(kind: str, name: str) -> str | None:
     """Why ``name`` cannot be the base unit for ``kind`` (or None if it can)."""
     if name not in UNITS:
-        return f"unknown unit '{name}'"
+        return f"unknown unit '{name}' (known: {known_units()})"
     dim = UNITS[name][1]
     expected = [0, 0, 0]
     expected[BASE_KINDS[kind]] = 1
