@@ -47,7 +47,7 @@ unit_names = st.sampled_from(sorted(UNITS))
 @st.composite
 def unit_expressions(draw):
     """A bracket unit such as ``kg*m/min**2`` and its exponent vector."""
-    text, dim = "", (0, 0, 0)
+    text, dim = "", (0, 0, 0, 0)
     for i in range(draw(st.integers(1, 3))):
         name = draw(unit_names)
         power = draw(st.integers(1, 2))
@@ -99,7 +99,7 @@ def test_a_sum_of_brackets_needs_one_dimension_and_converts_both(a, b):
 
 
 def test_plain_numbers_take_the_dimension_they_meet_and_functions_want_pure_numbers():
-    dims = _context({"x": (1, 0, 0)})
+    dims = _context({"x": (1, 0, 0, 0)})
     names = {"x": parse_expr("1", {}, W)}
     parse_comparison("3*x + 2 <= 5", names, W, MINUTES, dims)
     parse_comparison("x*tan(pi/6) <= 5[km]*cos(30[deg])", names, W, MINUTES, dims)
@@ -328,3 +328,17 @@ def test_inference_down_a_chain_of_derivatives(base, length):
 def test_a_complex_exponent_is_bad_input(text):
     with pytest.raises(InputError, match="is not a real number"):
         parse_expr(text, {"x": parse_expr("1", {}, W)}, W)
+
+
+def test_temperature_is_a_fourth_base_dimension():
+    """Kelvin converts by scale (1[mK] = 0.001 K), rates read K/min in a minute model, and a
+    temperature never meets a length."""
+    dims = _context({"T": (0, 0, 0, 1)})
+    names = {"T": parse_expr("1", {}, W)}
+    assert float(parse_expr("5[mK]", {}, W, MINUTES, dims)) == pytest.approx(0.005, rel=1e-15)
+    parse_comparison("T <= 300[K] + 5[mK]", names, W, MINUTES, dims)
+    with pytest.raises(InputError, match=r"compared with T \[K\]"):
+        parse_comparison("T <= 3[m]", names, W, MINUTES, dims)
+    assert MINUTES.name(dimension(temperature=1, time=-1)) == "K/min"
+    # 2 W for 60 s is 120 J = 120 kg m^2/s^2 = 120 * 3600 kg m^2/min^2
+    assert float(parse_expr("2[W]*60[s]", {}, W, MINUTES, dims)) == pytest.approx(120.0 * 3600.0, rel=1e-12)

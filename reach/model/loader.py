@@ -228,8 +228,9 @@ class _Builder:
         if not isinstance(value, dict):
             raise self.where("units").error("expected {length: m, time: s, mass: kg}")
         for key, unit in value.items():
-            if key not in ("length", "time", "mass"):
-                raise self.where("units", key).error(f"unknown base quantity '{key}' (length, time, mass)")
+            if key not in ("length", "time", "mass", "temperature"):
+                raise self.where("units", key).error(
+                    f"unknown base quantity '{key}' (length, time, mass, temperature)")
             why = check_base(key, unit) if isinstance(unit, str) else "expected a unit name"
             if why:
                 raise self.where("units", key).error(why)

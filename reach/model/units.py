@@ -4,7 +4,7 @@ Units. A model declares its base units (``units: {length: m, time: min, mass: kg
 default); a bracketed unit after a number converts it to those base units, so the ARCH
 thrust bound ``10[N]`` becomes 36000 kg m/min^2 in a minute-based model.
 
-Dimensions. A dimension is the exponent vector ``(length, time, mass)`` with rational
+Dimensions. A dimension is the exponent vector ``(length, time, mass, temperature)`` with rational
 entries (``sqrt(mu/r**3)`` has time exponent -1 from ``mu`` in m^3/s^2). Every state,
 input and constant has an unknown dimension ``d_v``; an expression's dimension is then an
 *affine form* ``sum_v c_v d_v + k`` (a product adds forms, a power ``e**p`` scales by ``p``,
@@ -32,42 +32,45 @@ import math
 from dataclasses import dataclass
 from fractions import Fraction
 
-Dimension = tuple[Fraction, Fraction, Fraction]
+Dimension = tuple[Fraction, Fraction, Fraction, Fraction]
 
 
-def dimension(length=0, time=0, mass=0) -> Dimension:
-    return (Fraction(length), Fraction(time), Fraction(mass))
+def dimension(length=0, time=0, mass=0, temperature=0) -> Dimension:
+    return (Fraction(length), Fraction(time), Fraction(mass), Fraction(temperature))
 
 
 DIMENSIONLESS = dimension()
 TIME = dimension(time=1)
 
-# unit -> (value in SI, dimension exponents (length, time, mass))
-UNITS: dict[str, tuple[float, tuple[int, int, int]]] = {
-    "m": (1.0, (1, 0, 0)),
-    "km": (1e3, (1, 0, 0)),
-    "cm": (1e-2, (1, 0, 0)),
-    "mm": (1e-3, (1, 0, 0)),
-    "um": (1e-6, (1, 0, 0)),
-    "s": (1.0, (0, 1, 0)),
-    "min": (60.0, (0, 1, 0)),
-    "h": (3600.0, (0, 1, 0)),
-    "day": (86400.0, (0, 1, 0)),
-    "kg": (1.0, (0, 0, 1)),
-    "g": (1e-3, (0, 0, 1)),
-    "N": (1.0, (1, -2, 1)),
-    "mN": (1e-3, (1, -2, 1)),
-    "uN": (1e-6, (1, -2, 1)),
-    "rad": (1.0, (0, 0, 0)),
-    "deg": (math.pi / 180.0, (0, 0, 0)),
-    "J": (1.0, (2, -2, 1)),
+# unit -> (value in SI, dimension exponents (length, time, mass, temperature))
+UNITS: dict[str, tuple[float, tuple[int, int, int, int]]] = {
+    "m": (1.0, (1, 0, 0, 0)),
+    "km": (1e3, (1, 0, 0, 0)),
+    "cm": (1e-2, (1, 0, 0, 0)),
+    "mm": (1e-3, (1, 0, 0, 0)),
+    "um": (1e-6, (1, 0, 0, 0)),
+    "s": (1.0, (0, 1, 0, 0)),
+    "min": (60.0, (0, 1, 0, 0)),
+    "h": (3600.0, (0, 1, 0, 0)),
+    "day": (86400.0, (0, 1, 0, 0)),
+    "kg": (1.0, (0, 0, 1, 0)),
+    "g": (1e-3, (0, 0, 1, 0)),
+    "N": (1.0, (1, -2, 1, 0)),
+    "mN": (1e-3, (1, -2, 1, 0)),
+    "uN": (1e-6, (1, -2, 1, 0)),
+    "rad": (1.0, (0, 0, 0, 0)),
+    "deg": (math.pi / 180.0, (0, 0, 0, 0)),
+    "J": (1.0, (2, -2, 1, 0)),
+    "W": (1.0, (2, -3, 1, 0)),
+    "K": (1.0, (0, 0, 0, 1)),
+    "mK": (1e-3, (0, 0, 0, 1)),
 }
 
-BASE_KINDS = {"length": 0, "time": 1, "mass": 2}
+BASE_KINDS = {"length": 0, "time": 1, "mass": 2, "temperature": 3}
 
 
 def known_units() -> str:
-    """The unit names a model may use, for error messages (length, time and mass only)."""
+    """The unit names a model may use, for error messages."""
     return ", ".join(UNITS)
 
 
@@ -85,11 +88,12 @@ class UnitSystem:
     length: str = "m"
     time: str = "s"
     mass: str = "kg"
+    temperature: str = "K"
 
     def factor(self, dim) -> float:
         """SI value of one model unit of the given dimension."""
         scale = 1.0
-        for base, exponent in zip((self.length, self.time, self.mass), dim):
+        for base, exponent in zip((self.length, self.time, self.mass, self.temperature), dim):
             scale *= UNITS[base][0] ** float(exponent)
         return scale
 
@@ -99,7 +103,7 @@ class UnitSystem:
 
     def name(self, dim: Dimension) -> str:
         """The model unit of ``dim`` written as a bracket unit: ``kg*m/min**2``, ``1/s``, ``1``."""
-        order = [(self.mass, dim[2]), (self.length, dim[0]), (self.time, dim[1])]
+        order = [(self.mass, dim[2]), (self.length, dim[0]), (self.temperature, dim[3]), (self.time, dim[1])]
         top = [_power(n, e) for n, e in order if e > 0]
         bottom = [_power(n, -e) for n, e in order if e < 0]
         numerator = "*".join(top) if top else "1"
@@ -117,7 +121,7 @@ def check_base(kind: str, name: str) -> str | None:
     if name not in UNITS:
         return f"unknown unit '{name}' (known: {known_units()})"
     dim = UNITS[name][1]
-    expected = [0, 0, 0]
+    expected = [0, 0, 0, 0]
     expected[BASE_KINDS[kind]] = 1
     if list(dim) != expected:
         return f"'{name}' is not a unit of {kind}"
@@ -164,7 +168,7 @@ ZERO = DIMENSIONLESS
 
 
 def _add(a: Dimension, b: Dimension, k: Fraction = Fraction(1)) -> Dimension:
-    return (a[0] + k * b[0], a[1] + k * b[1], a[2] + k * b[2])
+    return tuple(x + k * y for x, y in zip(a, b))
 
 
 class Form:

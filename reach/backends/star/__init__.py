@@ -93,7 +93,12 @@ input-free grid stars and applied exactly to the segments. The box is the exact 
 ``d(t)`` over all measurable signals, ``int_0^t |e^{A s} B| u_r ds`` per component, bounded
 from above on sub-cells by the chord of ``e^{A s} B`` plus a closure bound on its curvature
 (:class:`.flowpipe.AffineFlow`; sound between grid points, within ``O(delta^2)`` of exact).
-A polytopic initial set (``initial.polytope``) cuts the initial star. A witness is replayed
+The box grows with the time since its start, and the relaxed invariant cannot remove runs
+that left the mode long ago; so in a mode whose invariant reads a state an input moves, a
+chain is explored a few cells at a time, each block restarting ``d`` from the last block's end
+star (grid star plus box, cut by the exact invariant), which holds every run still in the
+mode (:meth:`_Explorer._rebase_cells`). The first half of a bisected cell takes the box at its
+own end, so the box shrinks with the cell near a start. A polytopic initial set (``initial.polytope``) cuts the initial star. A witness is replayed
 with the inputs held at its initial values and then with the extremal signal of the piece:
 for the piece row ``h x <= g`` the inputs move most, the LP point of the segment deepest
 along ``-h`` (the other rows kept, so an instant ``t == 20`` stays one) gives the initial

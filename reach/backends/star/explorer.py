@@ -213,11 +213,14 @@ class _Explorer:
         with the time since the chain's start, and the invariant can only cut the input-free
         runs, relaxed by ``|H| R_j`` (:meth:`_flow_chain`). In a mode whose invariant reads the
         states an input moves, the runs that left the invariant long ago then stay in the box.
-        Such a chain is explored ``rebase_cells`` cells at a time: the block's end star (its
-        grid star plus ``R``, cut by the exact invariant) is aggregated into its interval hull
-        (:meth:`_aggregate`), from which the next block starts with ``R = 0``. Every run in the
-        mode at the block end is in that star, so the hull holds them; a check that fails under
-        it refines it back into the exact end star."""
+        Such a chain is explored ``rebase_cells`` cells at a time (:meth:`_chain`): the next
+        block starts from the block's end star (its grid star plus ``R``, new coefficients, cut
+        by the exact invariant) with ``R = 0``. Every run still in the mode at the block end is
+        in that star, so the blocks cover what one chain would, and the invariant now cuts the
+        runs themselves. The star gains a coefficient per moved state and block. Where the
+        fixpoint check is on, a block end whose states lie in an earlier aggregate of the mode
+        ends the chain (its runs are time-shifted runs of that aggregate's). The successors of
+        all blocks are aggregated together, as one chain's are."""
         flow = self.flows[mode]
         if not self.opt.rebase_cells or not flow.inputs or flow.drift or self.opt.discrete_time:
             return None
