@@ -197,6 +197,8 @@ class _Explorer:
             self.stats.rebased += 1
             if self.covered is not None and self.covered.covers(mode, star, self._lp_count):
                 break
+            if 4 * star.nvars > self.opt.max_coefficients:     # the rest of the chain in one piece,
+                cells = None                                   # its segments still within the limit
         self._aggregate_pending(mode, pending)
 
     def _aggregate_pending(self, mode: str, pending: dict[int, list] | None):
@@ -220,7 +222,8 @@ class _Explorer:
         runs themselves. The star gains a coefficient per moved state and block. Where the
         fixpoint check is on, a block end whose states lie in an earlier aggregate of the mode
         ends the chain (its runs are time-shifted runs of that aggregate's). The successors of
-        all blocks are aggregated together, as one chain's are."""
+        all blocks are aggregated together, as one chain's are. Once the star holds a quarter of
+        ``max_coefficients``, the rest of the chain is explored in one piece."""
         flow = self.flows[mode]
         if not self.opt.rebase_cells or not flow.inputs or flow.drift or self.opt.discrete_time:
             return None
