@@ -25,8 +25,8 @@ from typing import Mapping
 import sympy
 
 from reach.errors import Where
-from reach.model.units import (DIMENSIONLESS, SI, UNITS, known_units, DimensionSystem, DisplayUnit, Form, UnitSystem,
-                               bracket_display, model_display)
+from reach.model.units import (DIMENSIONLESS, SI, UNITS, DimensionSystem, DisplayUnit, Form, UnitSystem,
+                               bracket_display, known_units, model_display)
 
 MAX_LENGTH = 4000
 MAX_DEPTH = 60

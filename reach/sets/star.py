@@ -83,13 +83,11 @@ class Star:
         within the bound): the set is the same, the LPs smaller."""
         H = np.atleast_2d(np.asarray(H, dtype=float))
         g = np.atleast_1d(np.asarray(g, dtype=float))
-        rows, rhs = H @ self.basis, g - H @ self.center
-        low, high = self.box.low, self.box.high
-        if rows.shape[0] and np.all(np.isfinite(low)) and np.all(np.isfinite(high)):
-            largest = rows @ self.box.center + np.abs(rows) @ self.box.radius
-            needed = ~(largest <= rhs)
-            rows, rhs = rows[needed], rhs[needed]
-        pred = self.predicate.intersect_halfspaces(rows, rhs) if rows.shape[0] else self.predicate
+        needed = ~(self.support_bounds(H) <= g)
+        if not np.any(needed):
+            return self
+        H, g = H[needed], g[needed]
+        pred = self.predicate.intersect_halfspaces(H @ self.basis, g - H @ self.center)
         return Star(self.center, self.basis, pred, self.box)
 
     def intersect(self, polytope: HPolytope) -> "Star":
