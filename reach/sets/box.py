@@ -12,6 +12,7 @@ radius ``|M| r``.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from itertools import product
 
 import numpy as np
@@ -19,6 +20,9 @@ import numpy as np
 
 @dataclass(frozen=True)
 class Box:
+    """``{x : low <= x <= high}``; its bounds are not changed in place (centre and radius are
+    computed once)."""
+
     low: np.ndarray
     high: np.ndarray
 
@@ -39,13 +43,18 @@ class Box:
     def dim(self) -> int:
         return self.low.size
 
-    @property
+    @cached_property
     def center(self) -> np.ndarray:
         return (self.low + self.high) / 2
 
-    @property
+    @cached_property
     def radius(self) -> np.ndarray:
         return (self.high - self.low) / 2
+
+    @cached_property
+    def bounded(self) -> bool:
+        """Whether every side is finite."""
+        return bool(np.all(np.isfinite(self.radius)))
 
     def is_empty(self) -> bool:
         return bool(np.any(self.low > self.high))

@@ -166,6 +166,8 @@ class Star:
         """Upper bounds of ``h_S(w)`` for each row ``w`` of ``directions`` (box only, no LP)."""
         W = np.atleast_2d(np.asarray(directions, dtype=float))
         G = W @ self.basis
+        if self.box.bounded:
+            return W @ self.center + G @ self.box.center + np.abs(G) @ self.box.radius
         finite = np.isfinite(self.box.radius)
         ac, ar = self.box.center[finite], self.box.radius[finite]
         value = W @ self.center + G[:, finite] @ ac + np.abs(G[:, finite]) @ ar

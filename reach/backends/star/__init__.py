@@ -55,6 +55,12 @@ import adds for several initial locations) the entry star is the whole of what t
 it is checked once and its jumps fire from it at once, one successor per transition instead of
 one per cell of a chain (:meth:`_Explorer._instant`).
 
+Switching groups. Modes a run may leave for one another at any instant (unguarded, reset-free
+may-transitions both ways, one invariant: communication lost and restored at arbitrary times)
+are explored as one differential inclusion per group, ``x' = A_m x + b_m + w`` with ``w`` the
+members' differences bounded over a box the block stays in (:mod:`.switching`), instead of a
+possible switch at every cell of every chain (option ``switching``).
+
 Jumps. ``max_jumps`` bounds the jumps along a path (none by default). When the model may
 have a zero-dwell cycle (:mod:`reach.model.lint`), a path may take at most ``STALL_JUMPS``
 jumps while its earliest clock advances by less than one time step; beyond, UNKNOWN (a
@@ -153,6 +159,7 @@ from reach.backends.star.flowpipe import AffineFlow, flowpipe
 from reach.backends.star.linearise import LinearisedModel, check_linearised
 from reach.backends.star.options import (CLOCKLESS_FIRST_STARS, DEPTH_LP_TOLERANCE, NAME, StarOptions,
                                          clockless_retry)
+from reach.backends.star.switching import SwitchingModel, check_switching
 from reach.backends.star.transitions import _LinearModel, _unsafe_pieces
 from reach.backends.star.witnesses import witness_details
 from reach.result import Result, Status
@@ -218,6 +225,9 @@ class StarBackend:
     def _check(self, model, prop, opt, start) -> Result:
         if not _LinearModel.of(model).linear:
             return check_linearised(model, prop, opt, lambda data, blocks: self._explore(
+                model, prop, opt, start, data, blocks))
+        if opt.switching and SwitchingModel.of(model).groups:
+            return check_switching(model, prop, opt, lambda data, blocks: self._explore(
                 model, prop, opt, start, data, blocks))
         return self._explore(model, prop, opt, start)
 

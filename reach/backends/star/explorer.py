@@ -15,6 +15,7 @@ from reach.backends.star.flowpipe import (_block_spreads, _chain_abs_bounds, _ch
                                           _plus_box, _segment, _tightened)
 from reach.backends.star.options import (ERROR_RATIO, MAX_CELLS, MAX_CHAIN_BYTES, NAME, PROGRESS_SECONDS,
                                          STALL_JUMPS, TIGHT_RATIO, StarOptions)
+from reach.backends.star.switching import group_pieces
 from reach.backends.star.transitions import (_LinearModel, _modes_leading_to, _Piece,
                                              _unsafe_pieces, kept_rows)
 from reach.backends.star.witnesses import _Witness, extremal_signal, nearest_point, signal_pieces, trace
@@ -116,6 +117,7 @@ class _Explorer:
         data = _LinearModel.of(model) if data is None else data
         self.data = data
         self.n, self.clock = data.n, data.clock
+        self.clock_row = np.eye(self.n)[self.clock]
         self.horizon = float(model.horizon)
         self.h = float(options.step) if options.step else self.horizon / 60.0
         if self.horizon / self.h > MAX_CELLS:
@@ -131,6 +133,7 @@ class _Explorer:
         self.pieces = {mode: [_Piece(data.widen(p.H, p.g)[0], p.g, p.strict, p.label) for p in pieces]
                        for mode, pieces in _unsafe_pieces(prop).items()} if data.added_clock \
             else _unsafe_pieces(prop)
+        self.pieces = group_pieces(self.pieces, getattr(data, "groups", ()))
         self.relevant = _modes_leading_to(model, set(self.pieces))
         self._guard_rows: dict[str, np.ndarray] = {}       # per mode, see _transient
         self.stats = _Stats()
@@ -157,20 +160,34 @@ class _Explorer:
 
     # ---- exploration
 
-    def _point(self, star: Star, guess, direction=None):
-        """Coefficients of a point of ``star`` without an LP if possible: ``guess``, or the
-        middle of the stretch of ``guess + s direction`` (``0 <= s <= 1``) inside the
-        predicate; else an LP's point. None if ``star`` is empty."""
+    def _earliest(self, star: Star) -> float:
+        """A lower bound of the clock over ``star`` (its coefficient box, no LP)."""
+        return -star.support_bounds(-self.clock_row)[0]
+
+    def _start(self, star: Star, guess, direction=None) -> tuple[Star | None, np.ndarray | None]:
+        """``(star, point)`` for a star about to be explored: ``star`` with its coefficient box
+        shrunk by bound propagation over all its predicate rows (:func:`.flowpipe._tightened`;
+        the same set, and cheaper support bounds for everything after), and the coefficients
+        of a point of it: ``guess``, or the middle of the stretch of ``guess + s direction``
+        (``0 <= s <= 1``) inside the predicate, without an LP if possible; else an LP's point.
+        ``(None, None)`` if ``star`` is empty: bound propagation proves most empty successors
+        so, without the LP."""
+        tight = _tightened(star, star.predicate.A.shape[0])
+        if tight is None:
+            return None, None
         if guess is not None:
             if direction is not None:
-                A, b = star.predicate.A, star.predicate.b
+                A, b = tight.predicate.A, tight.predicate.b
                 slope, room = A @ direction, b - A @ guess
-                lo = max([0.0] + [r / k for r, k in zip(room, slope) if k < 0])
-                hi = min([1.0] + [r / k for r, k in zip(room, slope) if k > 0])
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    ratio = room / slope
+                lo = max(0.0, np.max(ratio[slope < 0], initial=-np.inf))
+                hi = min(1.0, np.min(ratio[slope > 0], initial=np.inf))
                 guess = guess + (lo + hi) / 2 * direction if lo <= hi else guess
-            if star.box.contains(guess, 1e-12) and star.predicate.contains(guess):
-                return guess
-        return self._feasible(star)
+            if tight.box.contains(guess, 1e-12) and tight.predicate.contains(guess):
+                return tight, guess
+        point = self._feasible(tight)
+        return (tight, point) if point is not None else (None, None)
 
     def run(self):
         start = self.root.intersect_halfspaces(*self.invariants[self.root_mode])
@@ -235,7 +252,7 @@ class _Explorer:
                     block: int | None = None, collect: dict | None = None):
         """Explore ``star`` in ``mode`` up to the horizon: checks, jumps, refinement.
 
-        ``guess`` (and ``direction``): where a point of ``star`` may be (see :meth:`_point`).
+        ``guess`` (and ``direction``): where a point of ``star`` may be (see :meth:`_start`).
         The run of a known point proves the chain non-empty for as long as it stays inside
         the invariant, without LPs. ``block``: stop after this many cells and return
         ``(star, point)``, the star every run still in the mode is in at that time (the grid
@@ -245,8 +262,8 @@ class _Explorer:
         """
         if mode not in self.relevant:
             return
-        point = self._point(star, guess, direction)
-        if point is None:
+        star, point = self._start(star, guess, direction)
+        if star is None:
             return
         if path.jumps > self.max_jumps:
             raise _Stop(Status.UNKNOWN, f"more than {self.max_jumps} discrete jumps on a path "
@@ -254,7 +271,7 @@ class _Explorer:
         if path.stalled > self.stall_limit:
             raise _Stop(Status.UNKNOWN, f"{path.stalled} jumps within one time step "
                                         f"(possible zero-dwell cycle)")
-        t0 = -star.support_bounds(-np.eye(self.n)[self.clock])[0]
+        t0 = self._earliest(star)
         if t0 > self.horizon:                   # every run of the star is past the horizon
             return
         self.stats.chains += 1
@@ -367,7 +384,7 @@ class _Explorer:
         abort on its path) is, at or after the cutoff (nothing later needs a check)."""
         if not self.sweep:
             return False
-        since = path.abort if path.abort < np.inf else -start.support_bounds(-np.eye(self.n)[self.clock])[0]
+        since = path.abort if path.abort < np.inf else self._earliest(start)
         return since >= self.cutoff
 
     def _instant(self, mode: str, star: Star, path: _Path, point):
@@ -407,7 +424,7 @@ class _Explorer:
         from reach.result import SetPiece
 
         names = tuple(self.model.state) + (("time",) if self.data.added_clock else ())
-        clock = np.eye(self.n)[self.clock][None]
+        clock = self.clock_row[None]
         t0 = min(-float(s.support_bounds(-clock)[0]) for s in stars)
         t1 = max(float(s.support_bounds(clock)[0]) for s in stars)
         self.sets.append(SetPiece(mode, t0, t1, "star", names, tuple(stars),
@@ -547,8 +564,8 @@ class _Explorer:
             mid = start.affine_map(*self.flows[mode].step(half))
             Hi, gi = self.invariants[mode]       # relaxed by the input effect, as on the grid
             mid = mid.intersect_halfspaces(Hi, gi if first is None else gi + np.abs(Hi) @ first)
-            mid_point = self._point(mid, point)
-            if mid_point is not None:
+            mid, mid_point = self._start(mid, point)
+            if mid is not None:
                 self._cell(mode, mid, half, path, depth + 1, mid_point, pending, spread, since + half)
 
     def _half_spread(self, mode: str, spread, since: float, half: float):
@@ -592,7 +609,7 @@ class _Explorer:
         replayed when nothing can be refined or when it lies deeper in the piece than all
         refinable spread together.
         """
-        horizon_row = np.eye(self.n)[self.clock][None]
+        horizon_row = self.clock_row[None]
         blocks, open_ = path.blocks + (block,), path.open + (own_open,)
         for piece in self.pieces.get(mode, []):
             if not piece.H.shape[0]:
@@ -631,7 +648,7 @@ class _Explorer:
         the latest open jump on the path is blamed (the segment's own cell cannot help: the
         segment is non-empty however it is cut)."""
         self._lp_budget()
-        alpha = seg.intersect_halfspaces(np.eye(self.n)[self.clock][None],
+        alpha = seg.intersect_halfspaces(self.clock_row[None],
                                          np.array([self.horizon])).feasible_alpha()
         if alpha is None:
             return
@@ -665,7 +682,7 @@ class _Explorer:
             e = windows[-1]
             box = Box(seg.box.low[:e.row.size], seg.box.high[:e.row.size])
             return e.offset - box.support(-e.row)
-        return -seg.support_bounds(-np.eye(self.n)[self.clock])[0]
+        return self._earliest(seg)
 
     def _jump_from(self, mode: str, seg: Star, path: _Path, block: int, own_open: bool, point,
                    pending=None):
@@ -673,12 +690,12 @@ class _Explorer:
             if jump.target not in self.relevant:
                 continue
             if self.sweep and jump.window is not None and path.abort == np.inf and \
-                    -seg.support_bounds(-np.eye(self.n)[self.clock])[0] >= self.cutoff:
+                    self._earliest(seg) >= self.cutoff:
                 continue
             if jump.H.shape[0] and np.any(-seg.support_bounds(-jump.H) > jump.g):
                 continue
             # runs that switch after the horizon do not matter: the clock row cuts them
-            H = np.vstack([jump.H, np.eye(self.n)[self.clock]])
+            H = np.vstack([jump.H, self.clock_row])
             g = np.append(jump.g, self.horizon)
             entered = seg.intersect_halfspaces(H, g)
             if self.flows[mode].drift:
@@ -688,7 +705,7 @@ class _Explorer:
             clock = _Entry(jump.name, jump.window is not None,
                            float(entered.center[self.clock]), entered.basis[self.clock].copy(),
                            jump.window is None or jump.window[0] == self.clock)
-            earliest = -entered.support_bounds(-np.eye(self.n)[self.clock])[0]
+            earliest = self._earliest(entered)
             successor = entered.affine_map(jump.R, jump.r)
             successor = successor.intersect_halfspaces(*self.invariants[jump.target])
             if self.flows[mode].drift:
@@ -759,7 +776,7 @@ class _Explorer:
         signal is :func:`.witnesses.extremal_signal` of the witness mode's flow, which
         attains the input's exact support along ``c`` at ``t`` (exact for a path without
         jumps; a candidate otherwise). Only the replay decides."""
-        flow = self.flows[witness.mode]
+        flow = self.data.flows[witness.mode]     # the mode's own inputs (a block may add more)
         if not flow.inputs:
             return None
         reach = flow.deviation(self.h, max(1, int(np.ceil(self.horizon / self.h - 1e-9))))[-1]
@@ -768,7 +785,7 @@ class _Explorer:
             return None
         r = int(np.argmax(moved))
         others = np.delete(np.arange(len(piece.g)), r)
-        H = np.vstack([piece.H[others], np.eye(self.n)[self.clock]])
+        H = np.vstack([piece.H[others], self.clock_row])
         g = np.append(piece.g[others], self.horizon)
         self._lp_budget()
         res = seg.intersect_halfspaces(H, g).maximize(-piece.H[r])

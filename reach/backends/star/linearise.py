@@ -163,8 +163,11 @@ class Blocks:
     """The chains of the nonlinear modes, block by block (module doc), for one exploration;
     counts blocks and inflations and keeps the largest remainder and box per mode."""
 
-    def __init__(self, data: LinearisedModel, opt):
+    def __init__(self, data: LinearisedModel, opt, cells: int | None = None):
+        """``cells``: cells per block where the option ``linearise_cells`` is not set (None:
+        one block to the horizon)."""
         self.data, self.opt = data, opt
+        self.cells = cells if opt.linearise_cells is None else opt.linearise_cells
         self.curved = set(data.curved)
         self.blocks, self.inflations = 0, 0
         self.failure = ""
@@ -179,7 +182,7 @@ class Blocks:
             if t0 > explorer.horizon:
                 return
             count = max(1, int(np.ceil((explorer.horizon - t0) / explorer.h - 1e-9)))
-            block = count if self.opt.linearise_cells is None else min(count, self.opt.linearise_cells)
+            block = count if self.cells is None else min(count, self.cells)
             flow = self.block_flow(explorer, mode, star, block)
             while flow is None and block > 1:           # halve a block whose box does not close
                 block = (block + 1) // 2
@@ -253,7 +256,7 @@ def check_linearised(model, prop, opt, explore) -> Result:
 def _argument(blocks: Blocks) -> str:
     modes = "; ".join(f"{m}: |L| <= {v['remainder']:.3g} over the widest box {_text(Box(*v['box']))}"
                       for m, v in blocks.largest.items())
-    cells = "to the horizon" if blocks.opt.linearise_cells is None else f"of {blocks.opt.linearise_cells} cells"
+    cells = "to the horizon" if blocks.cells is None else f"of {blocks.cells} cells"
     return ("; nonlinear flows by conservative linearisation (Althoff, Stursberg & Buss 2008), "
             f"{blocks.blocks} blocks {cells}: per block f(x) = A x + b + L(x), A, b at the centre "
             "of a box X, the Lagrange remainder L enclosed over X by interval Hessians (mpmath iv, "

@@ -86,6 +86,9 @@ class StarOptions:
         move, the chain is explored this many cells at a time, each block starting from the
         interval hull of the last one's end, cut by the invariant, with the input effect
         restarted (:meth:`.explorer._Explorer._rebase_cells`); 0: one chain to the horizon.
+    switching: modes that may switch to one another at any instant (unguarded, reset-free
+        may-transitions both ways, one invariant) are explored as one differential inclusion
+        per group (:mod:`.switching`); false: mode by mode, every cell a possible switch.
     """
 
     step: float | None = None
@@ -107,6 +110,7 @@ class StarOptions:
     linearise_inflations: int = ranged(8, 1)
     linearise_margin: float = 0.1
     rebase_cells: int = ranged(2, 0)
+    switching: bool = True
 
     @classmethod
     def from_dict(cls, options: dict | None) -> "StarOptions":
