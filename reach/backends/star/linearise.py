@@ -111,25 +111,27 @@ class LinearisedModel(_LinearModel):
 
 
 
-def chain_hull(centers, bases, box, error, cells: int):
-    """``(low, high)``: a box holding the cover of the first ``cells`` cells of a chain, grid
-    stars ``j = 0..cells`` (centres, bases, one coefficient box) plus per-cell ``error`` (the
-    interpolation error and the input effect). A cell's segment lies in the box hull of its
-    two grid stars plus its error."""
-    eye = np.eye(centers.shape[1])
-    upper = _chain_bounds(centers[:cells + 1], bases[:cells + 1], box, eye)
-    lower = -_chain_bounds(centers[:cells + 1], bases[:cells + 1], box, -eye)
+def chain_hull(centers, bases, box, error, cells: int, M=None):
+    """``(low, high)``: bounds of ``M x`` (``M`` the identity if None: a box) over the cover of
+    the first ``cells`` cells of a chain, grid stars ``j = 0..cells`` (centres, bases, one
+    coefficient box) plus per-cell ``error`` (the interpolation error and the input effect).
+    A cell's segment lies in the hull of its two grid stars plus its error box."""
+    M = np.eye(centers.shape[1]) if M is None else M
+    upper = _chain_bounds(centers[:cells + 1], bases[:cells + 1], box, M)
+    lower = -_chain_bounds(centers[:cells + 1], bases[:cells + 1], box, -M)
     if not cells:
         return lower[0], upper[0]
-    upper = np.maximum(upper[:-1], upper[1:]) + error[:cells]
-    lower = np.minimum(lower[:-1], lower[1:]) - error[:cells]
+    spread = error[:cells] @ np.abs(M).T
+    upper = np.maximum(upper[:-1], upper[1:]) + spread
+    lower = np.minimum(lower[:-1], lower[1:]) - spread
     return lower.min(axis=0), upper.max(axis=0)
 
 
-def block_cover(flow: AffineFlow, star: Star, h: float, cells: int, Hi, gi):
-    """The hull of the cover of ``cells`` cells of length ``h`` from ``star`` under ``flow``, up
-    to the first grid star outside the invariant ``Hi x <= gi`` (relaxed by the input effect),
-    computed as the exploration's chain does (:meth:`_Explorer._flow_chain`)."""
+def block_cover(flow: AffineFlow, star: Star, h: float, cells: int, Hi, gi, M=None):
+    """The bounds of ``M x`` (default: the box) over the cover of ``cells`` cells of length ``h``
+    from ``star`` under ``flow``, up to the first grid star outside the invariant
+    ``Hi x <= gi`` (relaxed by the input effect), computed as the exploration's chain does
+    (:meth:`_Explorer._flow_chain`)."""
     Phis, psis = flow.powers(h, cells)
     dev = flow.deviation(h, cells)
     centers = star.center @ np.swapaxes(Phis, 1, 2) + psis
@@ -146,7 +148,7 @@ def block_cover(flow: AffineFlow, star: Star, h: float, cells: int, Hi, gi):
     error = h * h / 8 * samples @ F.T
     if dev is not None:
         error = error + dev[1:last + 1]
-    return chain_hull(centers, bases, star.box, error, last)
+    return chain_hull(centers, bases, star.box, error, last, M)
 
 
 def grown(hull, box: Box | None, margin: float) -> Box:
@@ -202,16 +204,16 @@ class Blocks:
         """The linearised flow of a block whose cover stays strictly inside its box; None (and
         the reason in ``failure``) if the box does not close."""
         Hi, gi = explorer.invariants[mode]
-        start = star.box_bound()
-        box = grown((start.low, start.high), None, self.opt.linearise_margin)
+        M = self._template(mode, explorer.n)
+        box = grown((-star.support_bounds(-M), star.support_bounds(M)), None, self.opt.linearise_margin)
         for k in range(self.opt.linearise_inflations):
             try:
                 flow, rem = self.data.flow_over(mode, box)
             except ValueError as failure:
                 raise _Stop(Status.UNKNOWN, str(failure))
-            low, high = block_cover(flow, star, explorer.h, cells, Hi, gi)
+            low, high = block_cover(flow, star, explorer.h, cells, Hi, gi, M)
             if np.all(low > box.low) and np.all(high < box.high):
-                self._record(mode, box, rem)
+                self._record(mode, Box(box.low[:explorer.n], box.high[:explorer.n]), rem)
                 return flow
             if k and not np.all(high - low <= BLOWUP * (box.high - box.low)):   # diverging (or NaN)
                 break
@@ -219,8 +221,16 @@ class Blocks:
             box = grown((low, high), box, self.opt.linearise_margin)
         self.failure = (f"mode '{mode}': the reachable set of a block of {cells} cell(s) did not stay "
                         f"inside its linearisation box after {self.opt.linearise_inflations} inflations "
-                        f"(last box {_text(box)})")
+                        f"(last box {_text(Box(box.low[:explorer.n], box.high[:explorer.n]))})")
         return None
+
+    def _template(self, mode: str, n: int):
+        """The rows ``M`` whose bounds make a block's region ``X = {x : low <= M x <= high}``:
+        the states (a box), then the extra directions the data asks for (``directions``: the
+        rows a switching input reads, so that its bound keeps the correlations of the states)."""
+        extra = getattr(self.data, "directions", None)
+        rows = None if extra is None else extra(mode)
+        return np.eye(n) if rows is None or not len(rows) else np.vstack([np.eye(n), rows])
 
     def _record(self, mode: str, box: Box, rem):
         self.blocks += 1

@@ -14,22 +14,27 @@ a run that stays in the group with switching signal ``sigma(t)`` solves
     x' = A_m x + b_m + B_m (u - u_c) + w(t),
     w = (A_sigma - A_m) x + (b_sigma - b_m) + (B_sigma - B_m)(u - u_c),
 
-and for ``x`` in a box ``X`` every such ``w`` lies in the box ``W(X)``: per component the least
-lower and the largest upper end over the members of ``D_i c + d_i +- (|D_i| r + |E_i| u_r)``
-(``D_i = A_i - A_m``, ``d_i = b_i - b_m``, ``E_i = B_i - B_m``, ``X`` with centre ``c`` and
-radius ``r``; exact for affine functions over a box), pushed out by a relative 1e-9 of the
-magnitudes involved against rounding. ``w`` is measurable (``sigma`` is piecewise constant and
+and for ``x`` in a region ``X`` every such ``w`` lies in the box ``W(X)``. ``X`` is a box (centre
+``c``, radius ``r``) cut by slabs ``l_k <= D_i[j] x <= u_k``, one per row ``j`` of each
+``D_i = A_i - A_m`` that is not zero (:meth:`SwitchingModel.directions`): the slabs keep the
+correlations between the states a row reads (on PLAA01 they halve the bound of ``w``). Per
+component ``j``, ``W`` runs from the least lower to the largest upper end over the members of
+``[D_i[j] x] + d_i[j] +- |E_i[j]| u_r`` (``d_i = b_i - b_m``, ``E_i = B_i - B_m``), where
+``[D_i[j] x]`` is the slab ``[l_k, u_k]`` intersected with the box's exact range
+``D_i[j] c +- |D_i[j]| r``; every end is pushed out by a relative 1e-9 of the magnitudes
+involved against rounding. ``w`` is measurable (``sigma`` is piecewise constant and
 ``x`` continuous), so it is a bounded time-varying input, and the exploration treats it as the
 remainder of a linearisation (:mod:`.linearise`): a chain in a group mode is explored block by
-block (:data:`SWITCHING_CELLS` cells each), each block with the affine flow ``A_m x + b_m`` and the input ``W(X)`` over a box ``X``
-its cover stays strictly inside (inflate and check). Every run that stays in the group is then
+block (:data:`SWITCHING_CELLS` cells each), each block with the affine flow ``A_m x + b_m`` and
+the input ``W(X)`` over a region ``X`` its cover stays strictly inside, box and slabs (inflate
+and check). Every run that stays in the group is then
 a run of that affine flow with a bounded input, block by block, whatever its switching.
 
 The exploration in turn (``_Explorer``, with ``data`` a :class:`SwitchingModel`): a group
 member's chain stands for the whole group. Its transitions within the group are not fired
 (their successors are runs of the same inclusion, already covered), it fires every member's
 transitions leaving the group (a run may leave from any member), and it is checked against the
-unsafe pieces of every member (``unsafe_pieces``). Any run of the automaton, up to the instant it
+unsafe pieces of every member (:func:`group_pieces`). Any run of the automaton, up to the instant it
 leaves the group, is a run of that chain, so a SAFE holds for the automaton. An UNSAFE needs a
 counterexample replayed on the automaton itself (the simulator chooses its own switching).
 """
@@ -48,10 +53,10 @@ from reach.sets import Box
 ROUNDING = 1e-9
 
 #: cells per block of a group's chain unless ``linearise_cells`` says otherwise: ``W(X)`` grows
-#: with the box a block sweeps, so short blocks keep the inclusion tight (on PLAA01-BND50 the
-#: bound on e2 over a block is -46.4 with 1 cell, -49.9 with 2, -53.3 with 3; a block to the
-#: horizon does not decide it)
-SWITCHING_CELLS = 1
+#: with the region a block sweeps, so short blocks keep the inclusion tight (on PLAA01-BND50 the
+#: lower bound of e2 over the widest block is -34.1 with 1 cell, -36.4 with 2, -38.5 with 3,
+#: -42.8 with 5; SAFE in 2.5, 1.1, 0.7, 0.3 s)
+SWITCHING_CELLS = 2
 
 
 def switching_groups(model) -> list[tuple[str, ...]]:
@@ -129,20 +134,35 @@ class SwitchingModel(_LinearModel):
         else:
             B, u_r = np.zeros((self.n, 0)), np.zeros(0)
         parts = [(f.A - A, f.b - b, (f.B if f.B is not None else np.zeros_like(B)) - B) for f in flows]
-        return A, b, B, u_r, parts
+        rows = np.vstack([np.zeros((0, self.n))] + [D[np.any(D != 0, axis=1)] for D, _, _ in parts])
+        return A, b, B, u_r, parts, rows
 
-    def flow_over(self, mode: str, box: Box):
+    def directions(self, mode: str) -> np.ndarray:
+        """The rows ``D_i[j]`` (every member ``i``, every row ``j`` that is not zero) whose
+        bounds, with the box, make a block's region ``X`` (:class:`.linearise.Blocks`)."""
+        return self._means[self.group_of[mode]][5]
+
+    def flow_over(self, mode: str, region: Box):
         """``(flow, w)``: the affine flow of the group of ``mode`` with its bounded inputs and
-        the switching input ``W(box)`` (module doc) as one more time-varying input."""
-        A, b, B, u_r, parts = self._means[self.group_of[mode]]
-        c, r = box.center, box.radius
-        low, high = np.full(self.n, np.inf), np.full(self.n, -np.inf)
+        the switching input ``W(X)`` (module doc) as one more time-varying input. ``region``:
+        the bounds of ``M x`` over ``X`` for ``M`` the identity stacked on :meth:`directions`
+        (the first ``n`` entries are the box of ``X``)."""
+        A, b, B, u_r, parts, rows = self._means[self.group_of[mode]]
+        n = self.n
+        c, r = region.center[:n], region.radius[:n]
+        slab_low, slab_high = region.low[n:], region.high[n:]
+        low, high = np.full(n, np.inf), np.full(n, -np.inf)
+        k = 0                                           # the first of member i's rows in ``rows``
         for D, d, E in parts:
-            mid = D @ c + d
-            spread = np.abs(D) @ r + np.abs(E) @ u_r
+            lo, hi = D @ c - np.abs(D) @ r, D @ c + np.abs(D) @ r    # D x over the box
+            used = np.flatnonzero(np.any(D != 0, axis=1))
+            lo[used] = np.maximum(lo[used], slab_low[k:k + used.size])   # ... and over the slabs
+            hi[used] = np.minimum(hi[used], slab_high[k:k + used.size])
+            k += used.size
+            spread = np.abs(E) @ u_r
             pad = ROUNDING * (np.abs(D) @ (np.abs(c) + r) + np.abs(d) + spread)
-            low = np.minimum(low, mid - spread - pad)
-            high = np.maximum(high, mid + spread + pad)
+            low = np.minimum(low, lo + d - spread - pad)
+            high = np.maximum(high, hi + d + spread + pad)
         if not (np.all(np.isfinite(low)) and np.all(np.isfinite(high))):
             raise ValueError(f"the switching input of mode '{mode}' is unbounded over the box")
         w = SwitchingInput(c, low, high)
