@@ -146,3 +146,55 @@ def test_platoon_with_arbitrary_communication_loss(cfg):
     prop = BoundSafety(docs.property_id, modes, pieces, model.symbols, cfg, "forbidden set")
     result = BACKEND.check(model, prop, {})
     assert result.status is Status.SAFE, result.details
+
+
+def test_a_reset_within_the_group_is_still_fired(tmp_path):
+    """Besides the free transitions, a ↦ b may also jump with x := 10 (once x >= 0.5): the
+    inclusion covers switching, not resets, so that jump must fire and b sees x = 10."""
+    model = """
+name: reset_in_group
+state: [x]
+modes:
+  a: {flow: {x: "1"}}
+  b: {flow: {x: "1"}}
+transitions:
+  - {from: a, to: b}
+  - {from: b, to: a}
+  - {from: a, to: b, guard: ["x >= 0.5"], reset: {x: "10"}}
+initial: {mode: a, box: {x: [0, 0]}}
+horizon: 2
+"""
+    assert _check(tmp_path, model, "[b]", "['x <= 5']").status is not Status.SAFE
+    loop = model.replace("{from: a, to: b, guard", "{from: a, to: a, guard")
+    assert _check(tmp_path, loop, "[a]", "['x <= 5']").status is not Status.SAFE
+
+
+def test_a_strict_and_a_closed_piece_are_both_kept():
+    """``x > 5`` in one member and ``x >= 5`` in the other have the same rows; a run touching
+    x = 5 in the second violates, so the merged pieces keep both."""
+    from reach.backends.star.switching import group_pieces
+    from reach.backends.star.transitions import _Piece
+
+    H, g = np.array([[-1.0]]), np.array([-5.0])
+    strict, closed = _Piece(H, g, True, "x > 5"), _Piece(H, g, False, "x >= 5")
+    merged = group_pieces({"a": [strict], "b": [closed]}, [("a", "b")])
+    assert {p.strict for p in merged["a"]} == {True, False} == {p.strict for p in merged["b"]}
+
+
+def test_a_point_start_grows_its_region(tmp_path):
+    """x' = t in a, -t in b, from x = t = 0 (a single point, t the model's clock): every run
+    has |x| <= t^2 / 2 = 2 by t = 2, and staying in a reaches it."""
+    model = """
+name: clock_pair
+state: [x, t]
+modes:
+  a: {flow: {x: "t", t: "1"}}
+  b: {flow: {x: "-t", t: "1"}}
+transitions:
+  - {from: a, to: b}
+  - {from: b, to: a}
+initial: {mode: b, box: {x: [0, 0], t: [0, 0]}}
+horizon: 2
+"""
+    assert _check(tmp_path, model, "[a, b]", "['x <= 2.1', 'x >= -2.1']").status is Status.SAFE
+    assert _check(tmp_path, model, "[a, b]", "['x <= 1.9']").status is not Status.SAFE

@@ -185,8 +185,11 @@ def _tightened(star: Star, rows: int, rounds: int = 3) -> Star | None:
 
     For a row ``sum_j A_ij a_j <= b_i`` with finite activity bounds, every ``a_k`` with
     ``A_ik > 0`` satisfies ``a_k <= (b_i - sum_{j != k} min(A_ij a_j)) / A_ik`` (and the mirror
-    bound when ``A_ik < 0``), minima over the current box. Each bound is relaxed by a relative
-    ``1e-9`` so rounding never cuts a point of the set. Cheap support bounds then see the
+    bound when ``A_ik < 0``), minima over the current box. Each bound is relaxed by ``1e-9``
+    times ``1 + |bound| + (|b_i| + sum_j |A_ij| max(|lo_j|, |hi_j|)) / |A_ik|``: relative to the
+    magnitudes of the row's terms, not only to the result, since a row whose terms cancel (a
+    thin invariant sliver far from the origin; ``b = g - H c`` is itself rounded) loses
+    digits in them. So rounding never cuts a point of the set. Cheap support bounds then see the
     guards and invariants that pin a coefficient (a dwell fixed by guard and invariant).
     Only the last ``rows`` rows (those just added by an intersection) are used: the box is
     already consistent with the older ones, and scanning them all again costs too much.
@@ -199,9 +202,10 @@ def _tightened(star: Star, rows: int, rounds: int = 3) -> Star | None:
     for _ in range(rounds):
         least = pos * lo + neg * hi                                   # min of A_ij a_j
         rest = b[:, None] - (least.sum(axis=1)[:, None] - least)      # room left for a_k
+        size = np.abs(b) + np.abs(A) @ np.maximum(np.abs(lo), np.abs(hi))    # the row's magnitudes
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             bound = rest / A
-            slack = 1e-9 * (1.0 + np.abs(bound))
+            slack = 1e-9 * (1.0 + np.abs(bound) + size[:, None] / np.abs(A))
             upper = np.where(A > 0, bound + slack, np.inf).min(axis=0)
             lower = np.where(A < 0, bound - slack, -np.inf).max(axis=0)
         new_lo, new_hi = np.maximum(lo, lower), np.minimum(hi, upper)

@@ -47,6 +47,10 @@ from reach.sets import Box, Star
 #: a grown box adds at least this much, relative to ``1 + |centre|`` (a flat hull still gets room)
 FLOOR = 1e-9
 
+#: a box side narrower than this, relative to ``1 + |centre|``, is still near the floor (a point
+#: start): its cover may outgrow it many times without the block diverging
+SETTLED = 1e-6
+
 #: a cover this many times wider than its box: the remainder drives the inflation apart, so the
 #: block is halved at once (its linearisation would only get worse, and costlier)
 BLOWUP = 10.0
@@ -215,7 +219,10 @@ class Blocks:
             if np.all(low > box.low) and np.all(high < box.high):
                 self._record(mode, Box(box.low[:explorer.n], box.high[:explorer.n]), rem)
                 return flow
-            if k and not np.all(high - low <= BLOWUP * (box.high - box.low)):   # diverging (or NaN)
+            width = box.high - box.low          # a side still near the floor (a point start) may grow
+            settled = width > SETTLED * (1 + np.abs(box.center))
+            if k and (not np.all(np.isfinite(high - low))
+                      or not np.all((high - low <= BLOWUP * width) | ~settled)):   # diverging
                 break
             self.inflations += 1
             box = grown((low, high), box, self.opt.linearise_margin)

@@ -32,9 +32,10 @@ a run of that affine flow with a bounded input, block by block, whatever its swi
 
 The exploration in turn (``_Explorer``, with ``data`` a :class:`SwitchingModel`): a group
 member's chain stands for the whole group. Its transitions within the group are not fired
-(their successors are runs of the same inclusion, already covered), it fires every member's
-transitions leaving the group (a run may leave from any member), and it is checked against the
-unsafe pieces of every member (:func:`group_pieces`). Any run of the automaton, up to the instant it
+when they change no state (their successors are runs of the same inclusion, already covered);
+it fires every member's transitions leaving the group and every transition within it that
+resets a state (a run may take them from any member), and it is checked against the unsafe
+pieces of every member (:func:`group_pieces`). Any run of the automaton, up to the instant it
 leaves the group, is a run of that chain, so a SAFE holds for the automaton. An UNSAFE needs a
 counterexample replayed on the automaton itself (the simulator chooses its own switching).
 """
@@ -60,10 +61,10 @@ SWITCHING_CELLS = 2
 
 
 def switching_groups(model) -> list[tuple[str, ...]]:
-    """The switching groups of ``model`` (module doc): the strongly connected sets, of at least
-    two modes, of the graph of its unguarded, reset-free, window-free may-transitions, kept when
-    every ordered pair of members is joined directly and the members' invariants, flows'
-    linearity and timelessness allow it."""
+    """The switching groups of ``model`` (module doc), disjoint: sets of at least two modes of
+    which every ordered pair is joined directly by an unguarded, reset-free, window-free
+    may-transition, kept when the members' invariants, flows' linearity and timelessness allow
+    it."""
     free: dict[str, set[str]] = {name: set() for name in model.modes}
     for tr in model.transitions:
         guard = model.guard_halfspaces(tr)
@@ -74,7 +75,7 @@ def switching_groups(model) -> list[tuple[str, ...]]:
     for name in model.modes:
         if name in seen:
             continue
-        members = [name] + sorted(m for m in free[name] if name in free[m])
+        members = [name] + sorted(m for m in free[name] if name in free[m] and m not in seen)
         members = [m for m in members if all(o == m or o in free[m] for o in members)]
         if len(members) < 2 or not _compatible(model, members):
             continue
@@ -104,8 +105,8 @@ class SwitchingInput:
 class SwitchingModel(_LinearModel):
     """The matrices of a linear hybrid automaton whose switching groups are explored as one
     inclusion each (module doc): ``curved`` holds every group member, :meth:`flow_over` gives
-    the group's affine flow and input box over a box of states, ``fired`` a member's transitions
-    leaving its group (those of every member), and ``flows`` of a member stays its own flow (a
+    the group's affine flow and input box over a region of states, ``fired`` a member's
+    transitions leaving its group or resetting a state (those of every member), and ``flows`` of a member stays its own flow (a
     placeholder that every block replaces; counterexample signals are built from it)."""
 
     def __init__(self, model):
@@ -115,8 +116,8 @@ class SwitchingModel(_LinearModel):
         self.curved = set(self.group_of)
         self._means = {group: self._mean(group) for group in self.groups}
         for group in self.groups:
-            leaving = [j for m in group for j in self.jumps[m] if j.target not in group]
-            kept = _unsubsumed(leaving, *self.invariants[group[0]])
+            fired = [j for m in group for j in self.jumps[m] if j.target not in group or _resets(j)]
+            kept = _unsubsumed(fired, *self.invariants[group[0]])
             for m in group:
                 self.fired[m] = kept
 
@@ -175,6 +176,11 @@ class SwitchingModel(_LinearModel):
         return AffineFlow(A, b + centre, columns, radius), w
 
 
+def _resets(jump) -> bool:
+    """Whether the jump changes a state (a reset other than the identity)."""
+    return not (np.array_equal(jump.R, np.eye(jump.R.shape[0])) and not np.any(jump.r))
+
+
 def group_pieces(pieces: dict, groups) -> dict:
     """The unsafe pieces per mode with every group member given those of all its group (a
     member's chain stands for runs in any member), duplicates dropped."""
@@ -183,7 +189,8 @@ def group_pieces(pieces: dict, groups) -> dict:
         union = []
         for m in group:
             for p in pieces.get(m, []):
-                if not any(np.array_equal(p.H, q.H) and np.array_equal(p.g, q.g) for q in union):
+                if not any(np.array_equal(p.H, q.H) and np.array_equal(p.g, q.g) and p.strict == q.strict
+                           for q in union):
                     union.append(p)
         if union:
             for m in group:
