@@ -178,8 +178,9 @@ def test_rigorous_thrust_bound_is_safe_and_contains_simulated_runs(srna):
 
 def test_events_after_the_urgent_switch_contain_sampled_runs(srna):
     """Line-of-sight margin in the rendezvous mode, 20 min past the switch: the estimated maps
-    (event past the guard crossing) and the rigorous sweep (entry box, then the rendezvous flow)
-    both contain the sampled minimum of 120 simulated runs; the rigorous one proves the margin."""
+    (event past the guard crossing) and the rigorous sweep (entry states, then the rendezvous flow)
+    both contain the sampled minimum of 120 simulated runs; the rigorous one proves the margin, its
+    lower end within 2 % of the sampled minimum."""
     model = dataclasses.replace(srna, horizon=130.0)
     prop = {p.id: bind(p, model) for p in load_properties("properties/rendezvous_events.yaml")}["los_upper_margin"]
     est = BACKEND.check(model, prop, {"max_splits": 0})
@@ -194,7 +195,7 @@ def test_events_after_the_urgent_switch_contain_sampled_runs(srna):
     for result in (est, rig):
         lo, hi = result.bound
         assert values.min() >= lo - 1e-9 and values.max() <= hi + monitor.slack
-    assert rig.bound[0] <= est.bound[0] and rig.bound[0] > 0
+    assert 0 < values.min() - rig.bound[0] <= 0.02 * values.min()
 
 
 def test_splitting_on_the_bound_decides_more_of_the_box(srna):
