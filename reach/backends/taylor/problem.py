@@ -36,7 +36,11 @@ from reach.model.constraints import affine_coefficients, lambdify_margins
 from reach.spec.properties import BoundEvent
 
 MAX_SWITCHES = 8
-KEEP_ENCLOSURES = 8
+# enclosures kept per process: the properties of one model check the same subdomains, and
+# refine's halves of two levels (root, 2 halves, 4 quarters: 14 stretches on SRNA01) must stay
+# cached from one property to the next (8 let each level evict the previous; a rendezvous
+# stretch of SRNA01 holds about 4 MB)
+KEEP_ENCLOSURES = 32
 _ENCLOSURES: OrderedDict = OrderedDict()
 
 
@@ -359,10 +363,12 @@ class EventProblem:
 
     def _crossing(self, code: ModeCode, ex: Exit, enc, k: int, end: float):
         """The entry states of ``ex`` as Taylor models (:func:`.verified.crossing`) over the window
-        from step ``k``'s start to ``end``, or None (a guard that is not a polytope, or the
-        argument does not apply)."""
+        from step ``k``'s start to ``end``, or None (a guard that is not a polytope, a window from
+        the stretch's start, where runs may already be inside the guard without crossing a face,
+        or the argument does not apply). Step ``k - 1`` cannot meet the guard, so every run is
+        outside it at the window's start."""
         faces = [affine_coefficients(c.g, self.model.symbols) for c in ex.transition.guard]
-        if any(face is None for face in faces):
+        if k == 0 or any(face is None for face in faces):
             return None
         step = enc.steps[k]
         x_start = [at_sigma(p, -1.0) for p in step.poly]
