@@ -221,11 +221,19 @@ class TaylorBackend:
                 row["bound"] = (lo, parent["bound"][1]) if sign > 0 else (parent["bound"][0], hi)
             return row
 
+        def progress(rows) -> tuple[float, float]:
+            """The bound's outer end (negated: larger is better) and the share of the box decided."""
+            share = sum(np.prod(r["high"] - r["low"]) for r in rows if decided(r))
+            return -max(outer(r) for r in rows), share / np.prod(problem.high[u] - problem.low[u])
+
         rows = evaluate(subdomains)
         # splitting on the bound: halve the subdomains whose bound is undecided or whose outer end
         # lies beyond the best inner end (the only ones that can hold the extremum, so the only
-        # ones whose halving can narrow the bound)
+        # ones whose halving can narrow the bound); stop when a level neither narrows the bound
+        # nor decides more of the box (on SRNA01 the width left after one level is error radius,
+        # which halving does not reduce: refine=2 gave the bounds of refine=1 at twice the time)
         for _ in range(opts.refine):
+            reached = progress(rows)
             floor = max(inner(r) for r in rows)
             open_rows = [r for r in rows if not decided(r) or outer(r) > floor]
             if not open_rows:
@@ -249,6 +257,8 @@ class TaylorBackend:
                     children.append(Subdomain(lo, hi, result, error, depth, error <= e_tol))
             kept = [r for r in rows if not any(r is parent for *_, parent in halves)]
             rows = kept + [capped(row, parent) for row, (*_, parent) in zip(evaluate(children), halves)]
+            if all(now <= before for now, before in zip(progress(rows), reached)):
+                break
         rows.sort(key=lambda r: tuple(r["low"]))
         volume = np.prod(problem.high[u] - problem.low[u])
         meets = violates = 0.0
