@@ -15,7 +15,8 @@ Frame. At a step node ``t_k`` the state of the run ``xi`` is known to satisfy
     x(t_k; xi) in { p_k(xi) + A_k r : r in [r_mid - r_rad, r_mid + r_rad] }          (F)
 
 with ``p_k`` a polynomial of order ``n`` in ``xi`` and ``A_k`` a ``q x q`` matrix acting on the error
-states (exact states: ``x_i = p_{k,i}``). Hence some ``eps(xi) in [-1, 1]^q`` gives
+states (exact states: ``x_i in p_{k,i} + [c_lo, c_hi]``, an interval that holds only their rounding
+allowances; it widens the start of the next Picard image). Hence some ``eps(xi) in [-1, 1]^q`` gives
 
     x(t_k; xi) = X0(xi, eps(xi)),   X0(xi, eps) = p_k(xi) + A_k (r_mid + r_rad * eps),
 
@@ -191,6 +192,10 @@ class LinearTM:
     def width(self) -> int:
         return self.g.shape[-1]
 
+    @property
+    def shape(self):
+        return self.v.shape
+
     def const_like(self, value) -> "LinearTM":
         value = np.asarray(value, dtype=float)
         alg = self.v.alg
@@ -331,20 +336,24 @@ def _unit(lo, hi):
     return -np.ones_like(lo), np.ones_like(hi)
 
 
-def picard_image(f, X0: list[DA], P: list[DA], lo: np.ndarray, hi: np.ndarray, h: float, symbolic: list[int]):
+def picard_image(f, X0: list[DA], P: list[DA], lo: np.ndarray, hi: np.ndarray, h: float, symbolic: list[int],
+                 carried=None):
     """The Picard image ``X0 + int f(P + [lo, hi])`` as Taylor models (one per state), and the
     enclosure ``[elo, ehi]`` of its difference from ``P`` over the whole step, with the rounding
     allowance: (V) holds for ``J = [lo, hi]`` iff ``lo <= elo`` and ``ehi <= hi``. The remainders
-    of the ``symbolic`` states enter the field as the symbols of :class:`LinearTM`."""
+    of the ``symbolic`` states enter the field as the symbols of :class:`LinearTM`; ``carried``
+    (``(lo, hi)``, per state) widens the start ``X0`` (the rounding carried by the exact states)."""
     F = [Fi.enclose() for Fi in f(LinearTM.seed(P, lo, hi, symbolic))]
-    image = [TM(x0) + integrate(Fi, h) for x0, Fi in zip(X0, F)]
+    clo, chi = (np.zeros(len(X0)), np.zeros(len(X0))) if carried is None else carried
+    image = [TM(x0, a, b) + integrate(Fi, h) for x0, a, b, Fi in zip(X0, clo, chi, F)]
     elo, ehi = _difference(image, P)
     size = np.array([_magnitude(x0) for x0 in X0]) + h * np.array([_magnitude(Fi) for Fi in F])
     return image, elo - ROUNDING * size, ehi + ROUNDING * size
 
 
 def validate(f, X0: list[DA], P: list[DA], lo, hi, h: float, symbolic: list[int]) -> bool:
-    """Whether ``J = [lo, hi]`` satisfies (V): the Picard operator maps ``P + J`` into itself."""
+    """Whether ``J = [lo, hi]`` satisfies (V): the Picard operator maps ``P + J`` into itself
+    (for a start ``X0`` without interval part)."""
     _, elo, ehi = picard_image(f, X0, P, np.asarray(lo, float), np.asarray(hi, float), h, symbolic)
     return bool(np.all(elo >= lo) and np.all(ehi <= hi))
 
@@ -432,14 +441,16 @@ class TMFlow:
 
     # ------------------------------------------------------------ frames
     def initial_frame(self):
-        """``(p, A, r_mid, r_rad)`` of the initial box: ``p_i = c_i + r_i xi_j``, no error."""
+        """``(p, A, r_mid, r_rad, carried)`` of the initial box: ``p_i = c_i + r_i xi_j``, no error.
+        ``carried`` (``(lo, hi)`` per state) is the interval the exact states carry (their
+        rounding allowances; zero for the error states, whose error is in ``r``)."""
         p = [DA.var(self.alg, self.uncertain.index(i), c, self.half_width[i]) if i in self.uncertain
              else DA.const(self.alg, c) for i, c in enumerate(self.center)]
-        return p, np.eye(self.q), np.zeros(self.q), np.zeros(self.q)
+        return p, np.eye(self.q), np.zeros(self.q), np.zeros(self.q), (np.zeros(self.n), np.zeros(self.n))
 
     def start_polynomials(self, frame) -> list[DA]:
         """``X0(xi, eps) = p(xi) + A (r_mid + r_rad eps)`` on the error states."""
-        p, A, rmid, rrad = frame
+        p, A, rmid, rrad, _ = frame
         X0 = [DA(self.alg, x.c.copy()) for x in p]
         shift = A @ rmid
         for row, i in enumerate(self.errors):
@@ -473,7 +484,10 @@ class TMFlow:
         if eta >= 0.5:
             raise ArithmeticError("the preconditioning frame is singular")
         rrad = rrad + (eta / (1.0 - eta) * np.abs(C).sum(axis=1).max() + ROUNDING) * e_size
-        return p, Q, rmid, rrad
+        clo, chi = np.zeros(self.n), np.zeros(self.n)
+        for i in set(range(self.n)) - set(rows):
+            clo[i], chi[i] = end[i].lo, end[i].hi
+        return p, Q, rmid, rrad, (clo, chi)
 
     # ------------------------------------------------------------ one step
     def picard_polynomial(self, X0: list[DA], h: float) -> list[DA]:
@@ -485,14 +499,15 @@ class TMFlow:
             P = [x + (g - at_sigma(g, -1.0)) * (0.5 * h) for x, g in zip(X0, G)]
         return P
 
-    def step(self, X0: list[DA], t0: float, h: float, guess=None) -> Segment | None:
-        """The validated step from ``X0`` at ``t0``, or None if no remainder satisfies (V). The
-        search for ``J`` starts from ``guess`` (an interval box), else from the image of ``J = 0``."""
+    def step(self, X0: list[DA], t0: float, h: float, guess=None, carried=None) -> Segment | None:
+        """The validated step from ``X0`` (widened by ``carried``) at ``t0``, or None if no remainder
+        satisfies (V). The search for ``J`` starts from ``guess`` (an interval box), else from the
+        image of ``J = 0``."""
         P = self.picard_polynomial(X0, h)
         lo, hi = (np.zeros(self.n), np.zeros(self.n)) if guess is None else guess
         for _ in range(INFLATIONS + 1):
             with np.errstate(over="ignore", invalid="ignore"):
-                image, elo, ehi = picard_image(self.f, X0, P, lo, hi, h, self.errors)
+                image, elo, ehi = picard_image(self.f, X0, P, lo, hi, h, self.errors, carried)
             if not (np.all(np.isfinite(elo)) and np.all(np.isfinite(ehi))):
                 return None
             if np.all(elo >= lo) and np.all(ehi <= hi):
@@ -533,7 +548,7 @@ class TMFlow:
             X0 = self.start_polynomials(frame)
             seg, rate, halvings = None, np.inf, 0
             while True:
-                trial = self.step(X0, t, h, guess)
+                trial = self.step(X0, t, h, guess, frame[4])
                 if trial is not None:
                     trial_rate = self._error_rate(trial)
                     if seg is not None and trial_rate > 0.75 * rate:
@@ -580,7 +595,7 @@ class TMFlow:
 
     def _frame_radius(self, frame) -> np.ndarray:
         """Bound of ``|A r|`` per state (the error carried by the frame)."""
-        _, A, rmid, rrad = frame
+        _, A, rmid, rrad, _ = frame
         out = np.zeros(self.n)
         out[self.errors] = np.abs(A @ rmid) + np.abs(A) @ rrad
         return out
