@@ -636,7 +636,8 @@ def prove_minimum_at_most(flow: TMFlow, q, threshold: float, horizon: float, h0:
     ``q`` is compiled for Taylor models (:func:`.flow.compile_expressions`, one output). After each
     validated step, the model ``q(E + J_end)`` at the step's end (in ``(xi, eps)``) is bounded on
     each pending sub-box of ``xi`` (the polynomial restricted to the sub-box, :func:`restrict`,
-    bounded over ``eps`` as well by eq. (27), plus its remainder): if its upper end is at most
+    bounded over ``eps`` as well by eq. (27), plus its remainder and a rounding allowance of
+    ``ROUNDING`` times the coefficients' size): if its upper end is at most
     ``threshold``, then for every run ``xi`` of the sub-box, ``q(x(t_{k+1}; xi)) <= threshold``
     (the run's ``eps(xi)`` is one value of ``eps``), and the sub-box is proved. A sub-box whose
     enclosure straddles the threshold is split into ``2^m`` halves (down to ``max_depth``
@@ -657,8 +658,10 @@ def prove_minimum_at_most(flow: TMFlow, q, threshold: float, horizon: float, h0:
             todo = list(pending)
             while todo:
                 center, radius, depth = todo.pop()
-                blo, bhi = polynomial_range(restrict(value.poly, center, radius, m))
-                if bhi + value.hi <= threshold:
+                part = restrict(value.poly, center, radius, m)
+                blo, bhi = polynomial_range(part)
+                allowance = ROUNDING * float(np.abs(part.c).sum())
+                if bhi + value.hi + allowance <= threshold:
                     proved.append((center, radius, t_end))
                 elif blo + value.lo <= threshold and depth < max_depth:
                     for corner in np.ndindex(*(2,) * m):
