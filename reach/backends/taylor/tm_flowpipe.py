@@ -402,8 +402,6 @@ class Flowpipe:
     segments: list = field(default_factory=list)
     status: str = "horizon"
     why: str = ""
-    m: int = 0
-    q: int = 0
     error_radius: list = field(default_factory=list)    # |A r| bound per state at each node
 
     @property
@@ -533,7 +531,7 @@ class TMFlow:
         ``eps`` adds error in proportion to the time, whatever the step) and becomes the
         threshold of the later steps (times 1.25)."""
         frame = self.initial_frame()
-        out = Flowpipe(m=self.m, q=self.q)
+        out = Flowpipe()
         t, h, k = 0.0, float(h0), 0
         n1 = self.order + 1
         threshold, guess = 1.0, None
