@@ -414,7 +414,8 @@ class TMFlow:
     :func:`.flow.compile_expressions`, evaluable on DAs and Taylor models) from the box
     ``center +- half_width`` (non-zero widths: the uncertain states).
 
-    ``exact``: states whose rate is a constant (clocks); they carry no error variable. ``tol``:
+    ``exact``: states whose rate is a constant (clocks); they carry no error variable, only an
+    interval (sound for any state, but wrapped: meant for the rounding of a clock). ``tol``:
     per-state tolerance of the error a step may add per unit time (step-size control only; every
     step is validated whatever its error)."""
 
@@ -477,8 +478,12 @@ class TMFlow:
             raise ArithmeticError("the preconditioning frame is singular")
         rrad = rrad + (eta / (1.0 - eta) * np.abs(C).sum(axis=1).max() + ROUNDING) * e_size
         clo, chi = np.zeros(self.n), np.zeros(self.n)
-        for i in set(range(self.n)) - set(rows):
-            clo[i], chi[i] = end[i].lo, end[i].hi
+        for i in set(range(self.n)) - set(rows):      # exact states: any eps terms join the interval
+            c = np.zeros(self.alg.size)
+            with_eps = np.r_[self.eps_linear, self.eps_rest]
+            c[with_eps] = end[i].poly.c[with_eps]
+            lo, hi = polynomial_range(DA(self.alg, c))
+            clo[i], chi[i] = lo + end[i].lo, hi + end[i].hi
         return p, Q, rmid, rrad, (clo, chi)
 
     # ------------------------------------------------------------ one step
