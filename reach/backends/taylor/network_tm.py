@@ -31,7 +31,7 @@ import numpy as np
 
 from reach.backends.taylor.da import DA, algebra
 from reach.backends.taylor.interval import PowerQuotients
-from reach.backends.taylor.tm import TM
+from reach.backends.taylor.tm import TM, scaled_sum
 
 
 def _trailing(t: TM) -> TM:
@@ -116,13 +116,7 @@ class TMJet(PowerQuotients):
     def log(self):
         return self._chain(self.v.log(), self.v ** -1.0)
 
-    @staticmethod
-    def weighted_sum(weights, items: list) -> "TMJet":
-        out = None
-        for w, item in zip(np.asarray(weights, dtype=float), items):
-            term = item * float(w)
-            out = term if out is None else out + term
-        return out
+    weighted_sum = staticmethod(scaled_sum)
 
     # ------------------------------------------------------------ vectors (network layers)
     @staticmethod

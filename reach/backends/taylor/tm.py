@@ -230,6 +230,17 @@ class TM:
         return f"TM({self.poly!r}, [{self.lo}, {self.hi}])"
 
 
+def scaled_sum(weights, items: list):
+    """``sum_k w_k a_k`` by the items' own ``*`` and ``+`` (types that carry derivatives or
+    remainder symbols besides a Taylor model: :class:`.network_tm.TMJet`,
+    :class:`.tm_flowpipe.LinearTM`)."""
+    out = None
+    for w, item in zip(np.asarray(weights, dtype=float), items):
+        term = item * float(w)
+        out = term if out is None else out + term
+    return out
+
+
 def _dropped_product_size(a: DA, b: DA) -> np.ndarray:
     """``sum_{p + q > n} S_p(a) S_q(b)``: a bound of the terms a truncated product drops."""
     n = a.alg.order

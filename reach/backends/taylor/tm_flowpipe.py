@@ -89,7 +89,7 @@ import scipy.linalg
 
 from reach.backends.taylor.bound import polynomial_range
 from reach.backends.taylor.da import DA, algebra, integer_power
-from reach.backends.taylor.tm import TM, _imul
+from reach.backends.taylor.tm import TM, _imul, scaled_sum
 from reach.backends.taylor.verified import at_sigma
 
 ROUNDING = 1e-12          # relative allowance for floating-point rounding
@@ -300,13 +300,7 @@ class LinearTM:
 
         return self._chain(self.v.log(), self.v ** -1.0, curvature)
 
-    @staticmethod
-    def weighted_sum(weights, items: list) -> "LinearTM":
-        out = None
-        for w, item in zip(np.asarray(weights, dtype=float), items):
-            term = item * float(w)
-            out = term if out is None else out + term
-        return out
+    weighted_sum = staticmethod(scaled_sum)
 
     # ------------------------------------------------------------ vectors (network layers)
     @staticmethod
