@@ -255,19 +255,25 @@ def _text(box: Box) -> str:
     return "[" + ", ".join(f"[{a:.6g}, {b:.6g}]" for a, b in zip(box.low, box.high)) + "]"
 
 
-def check_linearised(model, prop, opt, explore) -> Result:
-    """One exploration with the nonlinear modes linearised block by block. ``explore(data,
-    blocks)`` runs it and returns its Result; the linearisation's argument joins its semantics."""
-    data = LinearisedModel.of(model)
-    blocks = Blocks(data, opt)
-    result = explore(data, blocks)
-    result.details["linearisation"] = blocks.summary()
+def explore_in_blocks(blocks: Blocks, explore, key: str, details, argument, replayed: str) -> Result:
+    """One exploration whose curved modes go block by block: ``explore(data, blocks)`` runs it and
+    returns its Result, which gets ``details`` under ``key`` (computed by ``details(blocks)``
+    after the run), ``argument(blocks)`` joined to the semantics of a SAFE and ``replayed`` to
+    those of an UNSAFE."""
+    result = explore(blocks.data, blocks)
+    result.details[key] = details(blocks)
     if result.status is Status.SAFE:
-        result.details["semantics"] = result.details.get("semantics", "") + _argument(blocks)
+        result.details["semantics"] = result.details.get("semantics", "") + argument(blocks)
     elif result.status is Status.UNSAFE:
-        result.details["semantics"] = result.details.get("semantics", "") + (
-            "; the counterexample was replayed on the nonlinear flow (the simulator)")
+        result.details["semantics"] = result.details.get("semantics", "") + replayed
     return result
+
+
+def check_linearised(model, prop, opt, explore) -> Result:
+    """One exploration with the nonlinear modes linearised block by block (see
+    :func:`explore_in_blocks`); the linearisation's argument joins its semantics."""
+    return explore_in_blocks(Blocks(LinearisedModel.of(model), opt), explore, "linearisation", Blocks.summary,
+                             _argument, "; the counterexample was replayed on the nonlinear flow (the simulator)")
 
 
 def _argument(blocks: Blocks) -> str:

@@ -212,21 +212,17 @@ def argument(data: SwitchingModel) -> str:
 
 def check_switching(model, prop, opt, explore):
     """One exploration with every switching group explored as its inclusion, block by block
-    (:class:`.linearise.Blocks` over :class:`SwitchingModel`). ``explore(data, blocks)`` runs it
-    and returns its Result; the inclusion's argument joins its semantics."""
-    from reach.backends.star.linearise import Blocks
-    from reach.result import Status
+    (:func:`.linearise.explore_in_blocks` over :class:`SwitchingModel`); the inclusion's argument
+    joins its semantics."""
+    from reach.backends.star.linearise import Blocks, explore_in_blocks
 
     data = SwitchingModel.of(model)
-    blocks = Blocks(data, opt, SWITCHING_CELLS)
-    result = explore(data, blocks)
-    summary = blocks.summary()
-    result.details["switching"] = {"groups": [list(g) for g in data.groups], "blocks": summary["blocks"],
-                                   "inflations": summary["inflations"],
-                                   "largest_input": summary["largest_remainder"]}
-    if result.status is Status.SAFE:
-        result.details["semantics"] = result.details.get("semantics", "") + argument(data)
-    elif result.status is Status.UNSAFE:
-        result.details["semantics"] = result.details.get("semantics", "") + (
-            "; the counterexample was replayed on the automaton (the simulator's own switching)")
-    return result
+
+    def details(blocks):
+        summary = blocks.summary()
+        return {"groups": [list(g) for g in data.groups], "blocks": summary["blocks"],
+                "inflations": summary["inflations"], "largest_input": summary["largest_remainder"]}
+
+    return explore_in_blocks(Blocks(data, opt, SWITCHING_CELLS), explore, "switching", details,
+                             lambda _: argument(data),
+                             "; the counterexample was replayed on the automaton (the simulator's own switching)")
