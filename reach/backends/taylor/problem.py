@@ -31,12 +31,16 @@ from reach.backends.taylor.keys import fingerprint
 from reach.backends.taylor.lockstep import run_batch, run_one
 from reach.backends.taylor.nominal import NominalRun, nominal
 from reach.backends.taylor.tm import TM
-from reach.backends.taylor.verified import at_sigma, enclose_stretch
+from reach.backends.taylor.verified import at_sigma, crossing, enclose_stretch
 from reach.model.constraints import affine_coefficients, lambdify_margins
 from reach.spec.properties import BoundEvent
 
 MAX_SWITCHES = 8
-KEEP_ENCLOSURES = 8
+# enclosures kept per process: the properties of one model check the same subdomains, and
+# refine's halves of two levels (root, 2 halves, 4 quarters: 14 stretches on SRNA01) must stay
+# cached from one property to the next (8 let each level evict the previous; a rendezvous
+# stretch of SRNA01 holds about 4 MB)
+KEEP_ENCLOSURES = 32
 _ENCLOSURES: OrderedDict = OrderedDict()
 
 
@@ -228,10 +232,12 @@ class EventProblem:
         raise ValueError(f"more than {MAX_SWITCHES} mode switches")
 
     # ------------------------------------------------------------ rigorous (verified sweep)
-    def _enclosure(self, code: ModeCode, x0: list[DA], duration: float, rel_tol: float, tol: float):
-        """The verified enclosure of one mode's stretch, shared by the properties of a model (it
-        does not depend on the quantity): kept for the last few subdomains."""
-        key = fingerprint(self.model, code.name, [x.c for x in x0], duration, rel_tol, tol)
+    def _enclosure(self, code: ModeCode, x0: list[DA], error: np.ndarray, duration: float, rel_tol: float,
+                   tol: float):
+        """The verified enclosure of one mode's stretch from ``x0 + [-error, error]``, shared by the
+        properties of a model (it does not depend on the quantity): kept for the last few
+        subdomains."""
+        key = fingerprint(self.model, code.name, [x.c for x in x0], error, duration, rel_tol, tol)
         if key in _ENCLOSURES:
             _ENCLOSURES.move_to_end(key)
             return _ENCLOSURES[key][0]
@@ -240,7 +246,7 @@ class EventProblem:
         stop = lambda step: code.inside([TM(at_sigma(p, 1.0)) for p in step.poly], True) is not None
         # the sweep takes its first step from the nominal run and runs on (past the nominal
         # crossing) until every run is inside the guard, or to the horizon
-        enc = enclose_stretch(code.f, x0, np.r_[run.nodes[:2], duration], stop, rel_tol)
+        enc = enclose_stretch(code.f, x0, np.r_[run.nodes[:2], duration], stop, rel_tol, error)
         _ENCLOSURES[key] = (enc, self.model)      # the model stays alive with its entry
         while len(_ENCLOSURES) > KEEP_ENCLOSURES:
             _ENCLOSURES.popitem(last=False)
@@ -255,9 +261,10 @@ class EventProblem:
         horizon; runs that switched earlier are followed on with the mode's flow, which only
         enlarges the set. The upper end (for a maximum) is the largest Taylor-model bound of ``q``
         over those steps. For every exit whose guard some step may meet, the states entering
-        its target lie in the hull of those step boxes, clipped to the guard's single-variable
-        bounds and mapped by the reset; the target mode is swept from that box (up to the
-        horizon counted from its earliest entry), so a mode with several exits (a dock and an
+        its target lie in the Taylor models of :func:`.verified.crossing` (a polytope guard crossed
+        through one face), or else in the hull of those step boxes, clipped to the guard's
+        single-variable bounds; mapped by the reset, they start the target mode's sweep (up to the
+        horizon counted from their earliest entry), so a mode with several exits (a dock and an
         abort) branches. Exits from which no listed mode can be reached are not followed. The
         lower end is the best bound of ``q`` at the initial mode's step nodes that no run can
         have left the mode before, or on an entry box that every run passes through (a chain
@@ -269,13 +276,13 @@ class EventProblem:
         outer, inner, steps, error, stretches = -np.inf, -np.inf, 0, 0.0, 0
         kept = [] if keep_sets else None
         x0 = initial_state(algebra(order, m + 1), center, half_width, self.uncertain)
-        branches = [(self.model.initial.mode, x0, 0.0, 0, True)]
+        branches = [(self.model.initial.mode, x0, np.zeros(len(x0)), 0.0, 0, True)]
         while branches:
-            mode, x0, t_earliest, hop, sure = branches.pop()
+            mode, x0, x0_error, t_earliest, hop, sure = branches.pop()
             if hop > MAX_SWITCHES:
                 return _unbounded(f"more than {MAX_SWITCHES} mode switches")
             code = self.code(mode)
-            start = [TM(at_sigma(x, -1.0)) for x in x0]
+            start = [TM(at_sigma(x, -1.0), -e, e) for x, e in zip(x0, x0_error)]
             if T - t_earliest <= 1e-12 * max(1.0, T):       # entered at the horizon: one instant
                 if code.q is not None:
                     lo, hi = code.q(start).bound()
@@ -284,7 +291,7 @@ class EventProblem:
                         inner = max(inner, lo if sign > 0 else -hi)
                 continue
             try:
-                enc = self._enclosure(code, x0, T - t_earliest, rel_tol, tol)
+                enc = self._enclosure(code, x0, x0_error, T - t_earliest, rel_tol, tol)
             except ArithmeticError as err:
                 return _unbounded(str(err))
             if enc is None:
@@ -297,6 +304,7 @@ class EventProblem:
                 lo, hi = code.q(start).bound()
                 inner = max(inner, lo if sign > 0 else -hi)
             entry = {i: [] for i in range(len(code.exits))}
+            first = {}                  # the first step that may meet each exit's guard
             exit_taken = None
             for k in range(len(enc.steps)):
                 X = enc.tm(k)
@@ -314,6 +322,7 @@ class EventProblem:
                         certified = False
                         box = np.array([x.bound() for x in X]) if box is None else box
                         entry[i].append(box)
+                        first.setdefault(i, k)
                 exit_taken = code.inside(enc.tm_at_end(k), True)
                 if exit_taken is not None:
                     break
@@ -327,14 +336,23 @@ class EventProblem:
                     continue
                 if self.clock is None:
                     return _unbounded("events after a mode switch need a global clock state")
-                box = _entry_box(ex, entry[i], self.model)
-                if ex.reset is not None:
-                    out = ex.reset(Jet.seed(box[:, 0], box[:, 1]))
-                    box = np.array([[o.lo, o.hi] if isinstance(o, Jet) else [o, o] for o in out], dtype=float)
-                wide = [j for j in range(self.model.n) if box[j, 1] > box[j, 0]]
-                start_box = initial_state(algebra(order, len(wide) + 1), box.mean(axis=1),
-                                          0.5 * (box[:, 1] - box[:, 0]), wide)
-                branches.append((ex.transition.target, start_box, box[self.clock, 0], hop + 1,
+                states = self._crossing(code, ex, enc, first[i], end)
+                if states is None:
+                    box = _entry_box(ex, entry[i], self.model)
+                    if ex.reset is not None:
+                        out = ex.reset(Jet.seed(box[:, 0], box[:, 1]))
+                        box = np.array([[o.lo, o.hi] if isinstance(o, Jet) else [o, o] for o in out], dtype=float)
+                    wide = [j for j in range(self.model.n) if box[j, 1] > box[j, 0]]
+                    start_box = initial_state(algebra(order, len(wide) + 1), box.mean(axis=1),
+                                              0.5 * (box[:, 1] - box[:, 0]), wide)
+                    start_error = np.zeros(self.model.n)
+                else:
+                    if ex.reset is not None:
+                        states = ex.reset(states)
+                    start_box = [x.poly + 0.5 * (x.lo + x.hi) for x in states]
+                    start_error = np.array([0.5 * (x.hi - x.lo) for x in states])
+                    box = np.array([x.bound() for x in states])
+                branches.append((ex.transition.target, start_box, start_error, box[self.clock, 0], hop + 1,
                                  sure and len(possible) == 1 and ex is exit_taken))
         bound = (inner, outer) if sign > 0 else (-outer, -inner)
         out = {"bound": tuple(float(v) for v in bound), "steps": steps, "error": error,
@@ -342,6 +360,19 @@ class EventProblem:
         if kept is not None:
             out["sets"] = kept
         return out
+
+    def _crossing(self, code: ModeCode, ex: Exit, enc, k: int, end: float):
+        """The entry states of ``ex`` as Taylor models (:func:`.verified.crossing`) over the window
+        from step ``k``'s start to ``end``, or None (a guard that is not a polytope, a window from
+        the stretch's start, where runs may already be inside the guard without crossing a face,
+        or the argument does not apply). Step ``k - 1`` cannot meet the guard, so every run is
+        outside it at the window's start."""
+        faces = [affine_coefficients(c.g, self.model.symbols) for c in ex.transition.guard]
+        if k == 0 or any(face is None for face in faces):
+            return None
+        step = enc.steps[k]
+        x_start = [at_sigma(p, -1.0) for p in step.poly]
+        return crossing(code.f, x_start, enc.error_box[k], end - step.t0, faces)
 
     def _leads_to_property(self, mode: str) -> bool:
         """Whether a listed mode can be reached from ``mode`` through urgent switches."""
