@@ -22,6 +22,7 @@ from reach.backends.taylor.problem import EventProblem
 from reach.backends.taylor.interval import Jet
 from reach.backends.taylor.tm import TM
 from reach.backends.taylor.verified import _may_cross, at_sigma, enclose_stretch
+from reach.checking import check_model, resolve_backend
 from reach.model.loader import load_model
 from reach.result import Status
 from reach.spec.properties import bind, load_properties
@@ -317,3 +318,21 @@ def test_refining_on_the_bound_never_widens_it_and_holds_sampled_runs(srna):
     monitor, _, _ = sample_extrema(model, prop, x0, 0.01)
     assert outside_bounds(fine.details["subdomains"], x0, monitor.extrema(), [0, 1], prop.sense, monitor.slack) == 0
     assert monitor.extrema().min() >= fine.bound[0]
+
+
+@pytest.mark.timeout(180)
+def test_a_long_crossing_window_in_a_stiff_mode_falls_back_to_the_step_hull():
+    """SRA03's abort window (t >= tau, tau in [120, 145]) is 28 min long in the stiff rendezvous
+    mode: one polynomial step over it gives entry models with clock bounds of +-2e7 min, which
+    would start the passive mode's stretch with a horizon of 2e7 min. Such entry models are
+    replaced by the hull of the window's steps: the collision margin is bounded in seconds, its
+    lower end finite and below the closest sampled margin of Monte Carlo runs."""
+    model = load_model("models/SRA03.yaml")
+    prop = {p.id: p for p in load_properties("properties/rendezvous.yaml")}["collision"]
+    bound = bind(prop, model)
+    rig = check_model(resolve_backend("taylor"), model, [bound], {"remainder": "rigorous", "max_splits": 0})[0]
+    mc = check_model(resolve_backend("montecarlo"), model, [bound],
+                     {"samples": 200, "optimise": False, "search_rounds": 0})[0]
+    lo, _ = rig.details["margin_bound"]
+    assert rig.status is not Status.UNSAFE
+    assert -100.0 < lo <= mc.details["closest_depth"]

@@ -262,9 +262,11 @@ class EventProblem:
         enlarges the set. The upper end (for a maximum) is the largest Taylor-model bound of ``q``
         over those steps. For every exit whose guard some step may meet, the states entering
         its target lie in the Taylor models of :func:`.verified.crossing` (a polytope guard crossed
-        through one face), or else in the hull of those step boxes, clipped to the guard's
-        single-variable bounds; mapped by the reset, they start the target mode's sweep (up to the
-        horizon counted from their earliest entry), so a mode with several exits (a dock and an
+        through one face) and in the hull of those step boxes, clipped to the guard's
+        single-variable bounds; the models are taken unless they are wider than the hull
+        (:func:`_no_wider`). Mapped by the reset, they start the target mode's sweep (up to the
+        horizon counted from their earliest entry, which is no earlier than the stretch's earliest
+        start plus the first step that may meet the guard), so a mode with several exits (a dock and an
         abort) branches. Exits from which no listed mode can be reached are not followed. The
         lower end is the best bound of ``q`` at the initial mode's step nodes that no run can
         have left the mode before, or on an entry box that every run passes through (a chain
@@ -336,9 +338,10 @@ class EventProblem:
                     continue
                 if self.clock is None:
                     return _unbounded("events after a mode switch need a global clock state")
-                states = self._crossing(code, ex, enc, first[i], end)
+                hull = _entry_box(ex, entry[i], self.model)
+                states = _no_wider(self._crossing(code, ex, enc, first[i], end), hull)
                 if states is None:
-                    box = _entry_box(ex, entry[i], self.model)
+                    box = hull
                     if ex.reset is not None:
                         out = ex.reset(Jet.seed(box[:, 0], box[:, 1]))
                         box = np.array([[o.lo, o.hi] if isinstance(o, Jet) else [o, o] for o in out], dtype=float)
@@ -352,7 +355,9 @@ class EventProblem:
                     start_box = [x.poly + 0.5 * (x.lo + x.hi) for x in states]
                     start_error = np.array([0.5 * (x.hi - x.lo) for x in states])
                     box = np.array([x.bound() for x in states])
-                branches.append((ex.transition.target, start_box, start_error, box[self.clock, 0], hop + 1,
+                # no run enters before this stretch's earliest start plus the window's start
+                earliest = max(box[self.clock, 0], t_earliest + enc.steps[first[i]].t0)
+                branches.append((ex.transition.target, start_box, start_error, earliest, hop + 1,
                                  sure and len(possible) == 1 and ex is exit_taken))
         bound = (inner, outer) if sign > 0 else (-outer, -inner)
         out = {"bound": tuple(float(v) for v in bound), "steps": steps, "error": error,
@@ -401,6 +406,19 @@ def _step_box(mode: str, X, step, t_earliest: float, clock: int | None) -> tuple
 
 def _unbounded(why: str) -> dict:
     return {"bound": (-np.inf, np.inf), "steps": 0, "error": np.inf, "why": why}
+
+
+def _no_wider(states, hull: np.ndarray):
+    """The crossing's entry states, or None where their bounds are wider than the hull of the
+    window's step boxes in some component (both enclose every entry state, so either is sound;
+    a window that is long against a stiff mode's time scale makes one polynomial step over it,
+    and its entry models, useless: SRA03's abort window of 28 min in the rendezvous mode gave
+    clock bounds of +-2e7 min)."""
+    if states is None:
+        return None
+    box = np.array([x.bound() for x in states])
+    slack = 1e-9 * (1.0 + np.abs(hull).max(axis=1))
+    return states if np.all(box[:, 1] - box[:, 0] <= hull[:, 1] - hull[:, 0] + slack) else None
 
 
 def _entry_box(ex: Exit, boxes: list[np.ndarray], model) -> np.ndarray:
