@@ -69,6 +69,19 @@ def test_taylor_models_enclose_elementary_functions(cx, fraction, cy, sy, order)
         assert np.all(truth >= lo - 1e-12) and np.all(truth <= hi + 1e-12), name
 
 
+def test_a_blown_up_remainder_bounds_nothing_rather_than_nan():
+    """A remainder of ``[-inf, inf]`` through a network layer's ``W a + b`` (midpoint ``inf - inf``)
+    gives NaN inside the model; its bound is the whole line, never NaN (``max(-inf, nan)`` is
+    ``-inf`` in Python, which would drop the component from an extremum)."""
+    alg = algebra(2, 2)
+    a = TM.stack([TM(DA.var(alg, 0, 1.0, 0.1), -np.inf, np.inf), TM(DA.var(alg, 1, 2.0, 0.1))])
+    out = a.affine(np.array([[1.0, 0.5], [0.0, 1.0]]), np.array([0.0, 1.0]))
+    lo, hi = out.bound()
+    assert not np.isnan(lo).any() and not np.isnan(hi).any()
+    assert lo[0] == -np.inf and hi[0] == np.inf
+    assert max(-np.inf, float(hi[0])) == np.inf
+
+
 def test_network_layers_in_taylor_models_enclose_the_layer():
     """``sin(W a + b)`` on a vector of Taylor models (the SIREN layer of eq. 29)."""
     rng = np.random.default_rng(3)
