@@ -19,7 +19,9 @@ Bounds, by the ``remainder`` option:
   extremum than the continuations of the nominal ones and switch through the same guard face, and
   that the remainder estimate holds: the verdict is UNKNOWN with the bound.
 * ``rigorous``: a verified enclosure of every run on the subdomain (:mod:`.verified`: Taylor-model
-  defect bound, logarithmic-norm Gronwall estimate), swept step by step for the extremum
+  defect bound, logarithmic-norm Gronwall estimate; where that bound does not close, as on an
+  expanding flow, a Taylor-model flowpipe with QR-preconditioned symbolic remainders,
+  :mod:`.tm_flowpipe`), swept step by step for the extremum
   (:meth:`.problem.EventProblem.sweep`). It needs none of those assumptions, so a bound meeting
   the requirement on every subdomain is a proof: SAFE.
 
@@ -271,7 +273,7 @@ class TaylorBackend:
         verdict = "met" if meets >= 1 - 1e-12 else "violated" if violates >= 1 - 1e-12 else "undecided"
         details = {
             "remainder": {"estimated": "estimated", "next-order": "next-order (not rigorous)",
-                          "rigorous": "rigorous (verified enclosure)"}[opts.remainder],
+                          "rigorous": "rigorous (verified enclosure or flowpipe)"}[opts.remainder],
             "requirement": f"{prop.sense} {prop.op} {prop.value:g}: bound {verdict}",
             "sense": prop.sense, "op": prop.op, "value": prop.value,
             "share_meeting_requirement": meets, "share_violating_requirement": violates,
@@ -282,8 +284,9 @@ class TaylorBackend:
         if rigorous:
             details["argument"] = (
                 "on every subdomain the runs lie in a verified enclosure of the flow (Taylor-model "
-                "defect bound and a logarithmic-norm Gronwall estimate, reach.backends.taylor.verified) "
-                "and the extremum over the mode's stretch lies in the Taylor-model bound of the quantity "
+                "defect bound and a logarithmic-norm Gronwall estimate, reach.backends.taylor.verified; "
+                "or a Taylor-model flowpipe whose steps are validated by the Picard operator, "
+                "reach.backends.taylor.tm_flowpipe) and the extremum over the mode's stretch lies in the Taylor-model bound of the quantity "
                 "over all its steps, up to the step where every run is inside the urgent guard")
             details["assumptions"] = [
                 "floating-point rounding is covered only by a relative allowance of 1e-12 on the defect bound, "
@@ -293,6 +296,11 @@ class TaylorBackend:
             details["max_error_radius"] = max(r["verified"]["error"] for r in rows)
             status = Status.SAFE if verdict == "met" else Status.UNKNOWN
             coverage = meets
+            if verdict == "undecided":
+                whys = sorted({r["verified"]["why"] for r in rows if r["verified"].get("why")})
+                details["note"] = (f"the bound is open on {1 - meets - violates:.0%} of the box"
+                                   + (f" ({whys[0]})" if whys else "")
+                                   + f"; -o refine={opts.refine + 2} halves the subdomains that hold it open")
         else:
             details["assumptions"] = [
                 "the truncation remainder is " + ("extrapolated from the coefficient decay (eq. 28)"

@@ -31,6 +31,7 @@ from reach.backends.taylor.keys import fingerprint
 from reach.backends.taylor.lockstep import run_batch, run_one
 from reach.backends.taylor.nominal import NominalRun, nominal
 from reach.backends.taylor.tm import TM
+from reach.backends.taylor.tm_flowpipe import stretch_from_box
 from reach.backends.taylor.verified import at_sigma, crossing, enclose_stretch
 from reach.model.constraints import affine_coefficients, lambdify_margins
 from reach.spec.properties import BoundEvent
@@ -41,6 +42,9 @@ MAX_SWITCHES = 8
 # cached from one property to the next (8 let each level evict the previous; a rendezvous
 # stretch of SRNA01 holds about 4 MB)
 KEEP_ENCLOSURES = 32
+LOOSEST_STEP_TOL = 1e-3      # the step tolerance is loosened up to this when a stretch's time series does not converge
+FLOWPIPE_TOL = 1e-5          # flowpipe stretches: error added per unit time, relative to the state's size
+FLOWPIPE_SECONDS = 120.0     # flowpipe stretches: time budget of one stretch
 _ENCLOSURES: OrderedDict = OrderedDict()
 
 
@@ -240,17 +244,55 @@ class EventProblem:
         key = fingerprint(self.model, code.name, [x.c for x in x0], error, duration, rel_tol, tol)
         if key in _ENCLOSURES:
             _ENCLOSURES.move_to_end(key)
-            return _ENCLOSURES[key][0]
-        start = np.array([x.cons for x in x0])
-        run = nominal(code.f_numeric, start, duration, tol, stop=code.stop(start))
-        stop = lambda step: code.inside([TM(at_sigma(p, 1.0)) for p in step.poly], True) is not None
-        # the sweep takes its first step from the nominal run and runs on (past the nominal
-        # crossing) until every run is inside the guard, or to the horizon
-        enc = enclose_stretch(code.f, x0, np.r_[run.nodes[:2], duration], stop, rel_tol, error)
-        _ENCLOSURES[key] = (enc, self.model)      # the model stays alive with its entry
-        while len(_ENCLOSURES) > KEEP_ENCLOSURES:
-            _ENCLOSURES.popitem(last=False)
+        else:
+            start = np.array([x.cons for x in x0])
+            run = nominal(code.f_numeric, start, duration, tol, stop=code.stop(start))
+            stop = lambda step: code.inside([TM(at_sigma(p, 1.0)) for p in step.poly], True) is not None
+            # the sweep takes its first step from the nominal run and runs on (past the nominal
+            # crossing) until every run is inside the guard, or to the horizon
+            # a tolerance the time series cannot meet is loosened (a looser step defect widens the
+            # bound but keeps it sound) before the flowpipe is tried
+            enc, why = None, ""
+            for loosened in sorted({rel_tol, max(rel_tol, min(10 * rel_tol, LOOSEST_STEP_TOL)), max(rel_tol, LOOSEST_STEP_TOL)}):
+                try:
+                    enc = enclose_stretch(code.f, x0, np.r_[run.nodes[:2], duration], stop, loosened, error)
+                except ArithmeticError as err:
+                    why = str(err)
+                    continue
+                if enc is not None:
+                    break
+                why = "the logarithmic-norm error bound does not close"
+            if enc is None:
+                try:
+                    enc = self._flowpipe(code, x0, error, duration, float(run.nodes[1] - run.nodes[0]))
+                except ArithmeticError as err:    # kept too: the next property need not try again
+                    enc = ArithmeticError(f"mode '{code.name}': {why}; {err}")
+            _ENCLOSURES[key] = (enc, self.model)      # the model stays alive with its entry
+            while len(_ENCLOSURES) > KEEP_ENCLOSURES:
+                _ENCLOSURES.popitem(last=False)
+        enc = _ENCLOSURES[key][0]
+        if isinstance(enc, ArithmeticError):
+            raise enc
         return enc
+
+    def _flowpipe(self, code: ModeCode, x0: list[DA], error: np.ndarray, duration: float, h0: float):
+        """The stretch by a Taylor-model flowpipe (:mod:`.tm_flowpipe`: validated Picard steps,
+        QR-preconditioned symbolic remainders), where the logarithmic-norm bound of
+        :func:`.verified.enclose_stretch` does not close (an expanding flow such as Van der Pol's).
+        It starts from the interval hull of ``x0 + [-error, error]`` (the subdomain's box itself
+        for an initial box), carries states of constant rate (clocks) exactly, and sets its steps
+        for an error growth of ``FLOWPIPE_TOL`` times the state's size per unit time. Raises
+        ArithmeticError (the sweep's reason) when a step cannot be validated or the time budget
+        of ``FLOWPIPE_SECONDS`` is spent."""
+        box = np.array([TM(at_sigma(x, -1.0), -e, e).bound() for x, e in zip(x0, error)], dtype=float)
+        if not np.all(np.isfinite(box)):
+            raise ArithmeticError(f"no verified enclosure in mode '{code.name}' (unbounded start)")
+        flow = self.model.modes[code.name].flow
+        exact = [i for i, rate in enumerate(flow) if sympy.sympify(rate).is_number]
+        tol = FLOWPIPE_TOL * np.maximum(1.0, np.abs(box).max(axis=1))
+        inside = lambda end: code.inside(end, True) is not None
+        return stretch_from_box(code.f, box[:, 0], box[:, 1], x0[0].alg.order, exact, tol, duration,
+                                h0, inside, FLOWPIPE_SECONDS)
 
     def sweep(self, center: np.ndarray, half_width: np.ndarray, order: int, rel_tol: float,
               tol: float, keep_sets: bool = False) -> dict:
@@ -373,7 +415,7 @@ class EventProblem:
         or the argument does not apply). Step ``k - 1`` cannot meet the guard, so every run is
         outside it at the window's start."""
         faces = [affine_coefficients(c.g, self.model.symbols) for c in ex.transition.guard]
-        if k == 0 or any(face is None for face in faces):
+        if k == 0 or any(face is None for face in faces) or not getattr(enc, "crossing_models", True):
             return None
         step = enc.steps[k]
         x_start = [at_sigma(p, -1.0) for p in step.poly]
