@@ -32,6 +32,7 @@ import logging
 import math
 import os
 import sys
+import warnings
 from pathlib import Path
 
 import yaml
@@ -433,6 +434,10 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     """Run one command; every failure becomes one line on stderr and an exit code of the contract."""
     args = build_parser().parse_args(argv)
+    if not os.environ.get("REACH_DEBUG"):
+        # floating-point overflow in an enclosure that blows up is an answer (an unbounded
+        # interval, UNKNOWN), not a message for the user
+        warnings.filterwarnings("ignore", category=RuntimeWarning)
     try:
         return args.func(args)
     except InputError as exc:

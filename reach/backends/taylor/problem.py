@@ -31,12 +31,20 @@ from reach.backends.taylor.keys import fingerprint
 from reach.backends.taylor.lockstep import run_batch, run_one
 from reach.backends.taylor.nominal import NominalRun, nominal
 from reach.backends.taylor.tm import TM
-from reach.backends.taylor.verified import at_sigma, enclose_stretch
+from reach.backends.taylor.tm_flowpipe import stretch_from_box
+from reach.backends.taylor.verified import at_sigma, crossing, enclose_stretch
 from reach.model.constraints import affine_coefficients, lambdify_margins
 from reach.spec.properties import BoundEvent
 
 MAX_SWITCHES = 8
-KEEP_ENCLOSURES = 8
+# enclosures kept per process: the properties of one model check the same subdomains, and
+# refine's halves of two levels (root, 2 halves, 4 quarters: 14 stretches on SRNA01) must stay
+# cached from one property to the next (8 let each level evict the previous; a rendezvous
+# stretch of SRNA01 holds about 4 MB)
+KEEP_ENCLOSURES = 32
+LOOSEST_STEP_TOL = 1e-3      # the step tolerance is loosened up to this when a stretch's time series does not converge
+FLOWPIPE_TOL = 1e-5          # flowpipe stretches: error added per unit time, relative to the state's size
+FLOWPIPE_SECONDS = 120.0     # flowpipe stretches: time budget of one stretch
 _ENCLOSURES: OrderedDict = OrderedDict()
 
 
@@ -228,23 +236,63 @@ class EventProblem:
         raise ValueError(f"more than {MAX_SWITCHES} mode switches")
 
     # ------------------------------------------------------------ rigorous (verified sweep)
-    def _enclosure(self, code: ModeCode, x0: list[DA], duration: float, rel_tol: float, tol: float):
-        """The verified enclosure of one mode's stretch, shared by the properties of a model (it
-        does not depend on the quantity): kept for the last few subdomains."""
-        key = fingerprint(self.model, code.name, [x.c for x in x0], duration, rel_tol, tol)
+    def _enclosure(self, code: ModeCode, x0: list[DA], error: np.ndarray, duration: float, rel_tol: float,
+                   tol: float):
+        """The verified enclosure of one mode's stretch from ``x0 + [-error, error]``, shared by the
+        properties of a model (it does not depend on the quantity): kept for the last few
+        subdomains."""
+        key = fingerprint(self.model, code.name, [x.c for x in x0], error, duration, rel_tol, tol)
         if key in _ENCLOSURES:
             _ENCLOSURES.move_to_end(key)
-            return _ENCLOSURES[key][0]
-        start = np.array([x.cons for x in x0])
-        run = nominal(code.f_numeric, start, duration, tol, stop=code.stop(start))
-        stop = lambda step: code.inside([TM(at_sigma(p, 1.0)) for p in step.poly], True) is not None
-        # the sweep takes its first step from the nominal run and runs on (past the nominal
-        # crossing) until every run is inside the guard, or to the horizon
-        enc = enclose_stretch(code.f, x0, np.r_[run.nodes[:2], duration], stop, rel_tol)
-        _ENCLOSURES[key] = (enc, self.model)      # the model stays alive with its entry
-        while len(_ENCLOSURES) > KEEP_ENCLOSURES:
-            _ENCLOSURES.popitem(last=False)
+        else:
+            start = np.array([x.cons for x in x0])
+            run = nominal(code.f_numeric, start, duration, tol, stop=code.stop(start))
+            stop = lambda step: code.inside([TM(at_sigma(p, 1.0)) for p in step.poly], True) is not None
+            # the sweep takes its first step from the nominal run and runs on (past the nominal
+            # crossing) until every run is inside the guard, or to the horizon
+            # a tolerance the time series cannot meet is loosened (a looser step defect widens the
+            # bound but keeps it sound) before the flowpipe is tried
+            enc, why = None, ""
+            for loosened in sorted({rel_tol, max(rel_tol, min(10 * rel_tol, LOOSEST_STEP_TOL)), max(rel_tol, LOOSEST_STEP_TOL)}):
+                try:
+                    enc = enclose_stretch(code.f, x0, np.r_[run.nodes[:2], duration], stop, loosened, error)
+                except ArithmeticError as err:
+                    why = str(err)
+                    continue
+                if enc is not None:
+                    break
+                why = "the logarithmic-norm error bound does not close"
+            if enc is None:
+                try:
+                    enc = self._flowpipe(code, x0, error, duration, float(run.nodes[1] - run.nodes[0]))
+                except ArithmeticError as err:    # kept too: the next property need not try again
+                    enc = ArithmeticError(f"mode '{code.name}': {why}; {err}")
+            _ENCLOSURES[key] = (enc, self.model)      # the model stays alive with its entry
+            while len(_ENCLOSURES) > KEEP_ENCLOSURES:
+                _ENCLOSURES.popitem(last=False)
+        enc = _ENCLOSURES[key][0]
+        if isinstance(enc, ArithmeticError):
+            raise enc
         return enc
+
+    def _flowpipe(self, code: ModeCode, x0: list[DA], error: np.ndarray, duration: float, h0: float):
+        """The stretch by a Taylor-model flowpipe (:mod:`.tm_flowpipe`: validated Picard steps,
+        QR-preconditioned symbolic remainders), where the logarithmic-norm bound of
+        :func:`.verified.enclose_stretch` does not close (an expanding flow such as Van der Pol's).
+        It starts from the interval hull of ``x0 + [-error, error]`` (the subdomain's box itself
+        for an initial box), carries states of constant rate (clocks) exactly, and sets its steps
+        for an error growth of ``FLOWPIPE_TOL`` times the state's size per unit time. Raises
+        ArithmeticError (the sweep's reason) when a step cannot be validated or the time budget
+        of ``FLOWPIPE_SECONDS`` is spent."""
+        box = np.array([TM(at_sigma(x, -1.0), -e, e).bound() for x, e in zip(x0, error)], dtype=float)
+        if not np.all(np.isfinite(box)):
+            raise ArithmeticError(f"no verified enclosure in mode '{code.name}' (unbounded start)")
+        flow = self.model.modes[code.name].flow
+        exact = [i for i, rate in enumerate(flow) if sympy.sympify(rate).is_number]
+        tol = FLOWPIPE_TOL * np.maximum(1.0, np.abs(box).max(axis=1))
+        inside = lambda end: code.inside(end, True) is not None
+        return stretch_from_box(code.f, box[:, 0], box[:, 1], x0[0].alg.order, exact, tol, duration,
+                                h0, inside, FLOWPIPE_SECONDS)
 
     def sweep(self, center: np.ndarray, half_width: np.ndarray, order: int, rel_tol: float,
               tol: float, keep_sets: bool = False) -> dict:
@@ -255,9 +303,12 @@ class EventProblem:
         horizon; runs that switched earlier are followed on with the mode's flow, which only
         enlarges the set. The upper end (for a maximum) is the largest Taylor-model bound of ``q``
         over those steps. For every exit whose guard some step may meet, the states entering
-        its target lie in the hull of those step boxes, clipped to the guard's single-variable
-        bounds and mapped by the reset; the target mode is swept from that box (up to the
-        horizon counted from its earliest entry), so a mode with several exits (a dock and an
+        its target lie in the Taylor models of :func:`.verified.crossing` (a polytope guard crossed
+        through one face) and in the hull of those step boxes, clipped to the guard's
+        single-variable bounds; the models are taken unless they are wider than the hull
+        (:func:`_no_wider`). Mapped by the reset, they start the target mode's sweep (up to the
+        horizon counted from their earliest entry, which is no earlier than the stretch's earliest
+        start plus the first step that may meet the guard), so a mode with several exits (a dock and an
         abort) branches. Exits from which no listed mode can be reached are not followed. The
         lower end is the best bound of ``q`` at the initial mode's step nodes that no run can
         have left the mode before, or on an entry box that every run passes through (a chain
@@ -269,13 +320,13 @@ class EventProblem:
         outer, inner, steps, error, stretches = -np.inf, -np.inf, 0, 0.0, 0
         kept = [] if keep_sets else None
         x0 = initial_state(algebra(order, m + 1), center, half_width, self.uncertain)
-        branches = [(self.model.initial.mode, x0, 0.0, 0, True)]
+        branches = [(self.model.initial.mode, x0, np.zeros(len(x0)), 0.0, 0, True)]
         while branches:
-            mode, x0, t_earliest, hop, sure = branches.pop()
+            mode, x0, x0_error, t_earliest, hop, sure = branches.pop()
             if hop > MAX_SWITCHES:
                 return _unbounded(f"more than {MAX_SWITCHES} mode switches")
             code = self.code(mode)
-            start = [TM(at_sigma(x, -1.0)) for x in x0]
+            start = [TM(at_sigma(x, -1.0), -e, e) for x, e in zip(x0, x0_error)]
             if T - t_earliest <= 1e-12 * max(1.0, T):       # entered at the horizon: one instant
                 if code.q is not None:
                     lo, hi = code.q(start).bound()
@@ -284,7 +335,7 @@ class EventProblem:
                         inner = max(inner, lo if sign > 0 else -hi)
                 continue
             try:
-                enc = self._enclosure(code, x0, T - t_earliest, rel_tol, tol)
+                enc = self._enclosure(code, x0, x0_error, T - t_earliest, rel_tol, tol)
             except ArithmeticError as err:
                 return _unbounded(str(err))
             if enc is None:
@@ -297,6 +348,7 @@ class EventProblem:
                 lo, hi = code.q(start).bound()
                 inner = max(inner, lo if sign > 0 else -hi)
             entry = {i: [] for i in range(len(code.exits))}
+            first = {}                  # the first step that may meet each exit's guard
             exit_taken = None
             for k in range(len(enc.steps)):
                 X = enc.tm(k)
@@ -314,6 +366,7 @@ class EventProblem:
                         certified = False
                         box = np.array([x.bound() for x in X]) if box is None else box
                         entry[i].append(box)
+                        first.setdefault(i, k)
                 exit_taken = code.inside(enc.tm_at_end(k), True)
                 if exit_taken is not None:
                     break
@@ -327,14 +380,26 @@ class EventProblem:
                     continue
                 if self.clock is None:
                     return _unbounded("events after a mode switch need a global clock state")
-                box = _entry_box(ex, entry[i], self.model)
-                if ex.reset is not None:
-                    out = ex.reset(Jet.seed(box[:, 0], box[:, 1]))
-                    box = np.array([[o.lo, o.hi] if isinstance(o, Jet) else [o, o] for o in out], dtype=float)
-                wide = [j for j in range(self.model.n) if box[j, 1] > box[j, 0]]
-                start_box = initial_state(algebra(order, len(wide) + 1), box.mean(axis=1),
-                                          0.5 * (box[:, 1] - box[:, 0]), wide)
-                branches.append((ex.transition.target, start_box, box[self.clock, 0], hop + 1,
+                hull = _entry_box(ex, entry[i], self.model)
+                states = _no_wider(self._crossing(code, ex, enc, first[i], end), hull)
+                if states is None:
+                    box = hull
+                    if ex.reset is not None:
+                        out = ex.reset(Jet.seed(box[:, 0], box[:, 1]))
+                        box = np.array([[o.lo, o.hi] if isinstance(o, Jet) else [o, o] for o in out], dtype=float)
+                    wide = [j for j in range(self.model.n) if box[j, 1] > box[j, 0]]
+                    start_box = initial_state(algebra(order, len(wide) + 1), box.mean(axis=1),
+                                              0.5 * (box[:, 1] - box[:, 0]), wide)
+                    start_error = np.zeros(self.model.n)
+                else:
+                    if ex.reset is not None:
+                        states = ex.reset(states)
+                    start_box = [x.poly + 0.5 * (x.lo + x.hi) for x in states]
+                    start_error = np.array([0.5 * (x.hi - x.lo) for x in states])
+                    box = np.array([x.bound() for x in states])
+                # no run enters before this stretch's earliest start plus the window's start
+                earliest = max(box[self.clock, 0], t_earliest + enc.steps[first[i]].t0)
+                branches.append((ex.transition.target, start_box, start_error, earliest, hop + 1,
                                  sure and len(possible) == 1 and ex is exit_taken))
         bound = (inner, outer) if sign > 0 else (-outer, -inner)
         out = {"bound": tuple(float(v) for v in bound), "steps": steps, "error": error,
@@ -342,6 +407,19 @@ class EventProblem:
         if kept is not None:
             out["sets"] = kept
         return out
+
+    def _crossing(self, code: ModeCode, ex: Exit, enc, k: int, end: float):
+        """The entry states of ``ex`` as Taylor models (:func:`.verified.crossing`) over the window
+        from step ``k``'s start to ``end``, or None (a guard that is not a polytope, a window from
+        the stretch's start, where runs may already be inside the guard without crossing a face,
+        or the argument does not apply). Step ``k - 1`` cannot meet the guard, so every run is
+        outside it at the window's start."""
+        faces = [affine_coefficients(c.g, self.model.symbols) for c in ex.transition.guard]
+        if k == 0 or any(face is None for face in faces) or not getattr(enc, "crossing_models", True):
+            return None
+        step = enc.steps[k]
+        x_start = [at_sigma(p, -1.0) for p in step.poly]
+        return crossing(code.f, x_start, enc.error_box[k], end - step.t0, faces)
 
     def _leads_to_property(self, mode: str) -> bool:
         """Whether a listed mode can be reached from ``mode`` through urgent switches."""
@@ -370,6 +448,19 @@ def _step_box(mode: str, X, step, t_earliest: float, clock: int | None) -> tuple
 
 def _unbounded(why: str) -> dict:
     return {"bound": (-np.inf, np.inf), "steps": 0, "error": np.inf, "why": why}
+
+
+def _no_wider(states, hull: np.ndarray):
+    """The crossing's entry states, or None where their bounds are wider than the hull of the
+    window's step boxes in some component (both enclose every entry state, so either is sound;
+    a window that is long against a stiff mode's time scale makes one polynomial step over it,
+    and its entry models, useless: SRA03's abort window of 28 min in the rendezvous mode gave
+    clock bounds of +-2e7 min)."""
+    if states is None:
+        return None
+    box = np.array([x.bound() for x in states])
+    slack = 1e-9 * (1.0 + np.abs(hull).max(axis=1))
+    return states if np.all(box[:, 1] - box[:, 0] <= hull[:, 1] - hull[:, 0] + slack) else None
 
 
 def _entry_box(ex: Exit, boxes: list[np.ndarray], model) -> np.ndarray:

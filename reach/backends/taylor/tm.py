@@ -89,9 +89,16 @@ class TM:
         return self.poly.cons
 
     def bound(self) -> tuple[np.ndarray, np.ndarray]:
-        """An interval that contains the modelled function's values on the whole box."""
+        """An interval that contains the modelled function's values on the whole box. A NaN
+        (``inf - inf`` in a remainder or a coefficient: an enclosure that has blown up) bounds
+        nothing, so that component's interval is the whole line; left as NaN, comparisons such as
+        ``max(bound, nan)`` would silently drop it."""
         plo, phi = polynomial_range(self.poly)
-        return plo + self.lo, phi + self.hi
+        lo, hi = plo + self.lo, phi + self.hi
+        lost = np.isnan(lo) | np.isnan(hi)
+        if np.any(lost):
+            lo, hi = np.where(lost, -np.inf, lo), np.where(lost, np.inf, hi)
+        return lo, hi
 
     def widen(self, lo, hi) -> "TM":
         return TM(self.poly, self.lo + lo, self.hi + hi)

@@ -683,3 +683,52 @@ def prove_minimum_at_most(flow: TMFlow, q, threshold: float, horizon: float, h0:
     else:
         status, why = "horizon", f"some runs not shown to reach q <= {threshold:g} by t = {pipe.t_end:.6g}"
     return MinimumProof(proved, pending, fraction, pipe, seconds, status, why)
+
+
+# ------------------------------------------------------------------ as a rigorous sweep's stretch
+class FlowpipeStretch:
+    """A flowpipe read as :class:`.verified.Enclosure` is by the rigorous sweep
+    (:meth:`.problem.EventProblem.sweep`): ``steps[k]`` (``t0``, ``h``), the Taylor models of the
+    state on step ``k`` and at its end, and ``error_box`` (per step, the remainder's size ``|J|``).
+    Its models have the variables ``eps`` between ``xi`` and ``sigma`` (still the last variable, so
+    :func:`.verified.at_sigma` and every bound over all variables stay valid); the crossing models
+    of :func:`.verified.crossing` are not built from it (``crossing_models``: the sweep uses the
+    hull of the steps that meet a guard)."""
+
+    crossing_models = False
+
+    def __init__(self, pipe: Flowpipe):
+        self.steps = pipe.segments
+        self.error_box = np.array([np.maximum(np.abs(s.lo), np.abs(s.hi)) for s in pipe.segments])
+
+    def tm(self, k: int) -> list[TM]:
+        return self.steps[k].tm()
+
+    def tm_at_end(self, k: int) -> list[TM]:
+        return self.steps[k].end
+
+
+def stretch_from_box(f, low, high, order: int, exact, tol, duration: float, h0: float, inside,
+                     budget: float) -> FlowpipeStretch:
+    """The flowpipe of a mode's stretch from the box ``[low, high]`` for ``duration`` (or until
+    ``inside(end models)`` says every run is inside an urgent guard), as a :class:`FlowpipeStretch`.
+    Raises ArithmeticError with the reason when a step cannot be validated or ``budget`` seconds
+    pass first."""
+    low, high = np.asarray(low, dtype=float), np.asarray(high, dtype=float)
+    flow = TMFlow(f, 0.5 * (low + high), 0.5 * (high - low), order, exact, tol)
+    started, spent = time.perf_counter(), []
+
+    def stop(seg: Segment) -> bool:
+        if inside(seg.end):
+            return True
+        if time.perf_counter() - started > budget:
+            spent.append(seg.t0 + seg.h)
+            return True
+        return False
+
+    pipe = flow.run(duration, h0, stop)
+    if pipe.status == "failed":
+        raise ArithmeticError(f"Taylor-model flowpipe: {pipe.why}")
+    if spent:
+        raise ArithmeticError(f"Taylor-model flowpipe: time budget of {budget:g} s spent at t = {spent[0]:.6g}")
+    return FlowpipeStretch(pipe)

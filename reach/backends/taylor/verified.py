@@ -24,29 +24,44 @@ over by ``||T_new T_old^-1||_2``. Several shifts are tried and the one with the 
 kept (any choice of metrics gives a valid bound). Following the flow pays on long arcs whose
 Jacobian turns (SRNA01 line-of-sight margin: rigorous lower end 0.360 with the start metric, 0.377).
 
+A stretch may start from a Taylor model ``x0 + [-b, b]`` (the states entering a mode): the
+error then starts at the radius ``sqrt(b' |S| b)`` instead of 0. Those entry states come from
+:func:`crossing`: the window in which runs may cross the guard is taken as one step, the entry
+instant solved for as a polynomial in the deviations (eqs. 13-14) with a proved residual, and the
+state there kept as a polynomial in the deviations and one slack variable. On SRNA01 the interval
+hull of the window's step boxes, which this replaces, made the entry into the rendezvous mode
+wider than the runs by a time-decorrelated box (Fx max 3.069 N against 2.658 N sampled, all of it
+present on the entry box before the rendezvous flow: its error radius there is 1e-6 m).
+
 Limit: ``mu`` needs the Jacobian's range over the states of a whole step. For a deep network
 controller, interval (and Taylor-model remainder) enclosures of that range wrap at every layer; on
 the CW SIREN transfer (five sine layers, omega = 30) the interval gradient of the network over a 1 mm
 box is already 5 times wider than the gradient, so no enclosure closes there.
 
-Soundness rests on: the Taylor-model enclosures, the interval Jacobian, Gronwall's lemma. Not
-covered by directed rounding: floating-point rounding of coefficients, for which a relative
-allowance ``ROUNDING`` of the enclosed magnitudes is added.
+Soundness rests on: the Taylor-model enclosures, the interval Jacobian, Gronwall's lemma, and for
+entry states the mean value theorem and a linear program that rules out guard faces (solved with a
+margin far above the solver's tolerance). Not covered by directed rounding: floating-point
+rounding of coefficients, for which a relative allowance ``ROUNDING`` of the enclosed magnitudes
+is added.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import lru_cache
 
 import numpy as np
 import scipy.linalg
+import scipy.optimize
 
+from reach.backends.taylor.bound import polynomial_range
 from reach.backends.taylor.da import DA, algebra
+from reach.backends.taylor.event import solve_event
 from reach.backends.taylor.interval import Jet
-from reach.backends.taylor.tm import TM
+from reach.backends.taylor.tm import TM, _imul
 
 ROUNDING = 1e-12              # relative allowance for floating-point rounding
+MIN_STEP = 1e-8               # shortest step of a stretch, relative to its duration
 SHIFTS = (1e-3, 1e-2, 1e-1, 1.0)   # Lyapunov shifts alpha, relative to the spectral radius
 
 
@@ -134,13 +149,20 @@ def polynomial_steps(f, x0: list[DA], nodes: np.ndarray, stop=None, rel_tol: flo
     strongly nonlinear flow such as a network). When halving the step no longer halves the
     defect, that floor is accepted (the defect bound is sound whatever its size; it enters the
     error radius of phase 2) and later steps are held to twice the floor. ``stop(step)`` may end
-    the sweep after a step."""
+    the sweep after a step. A step shorter than ``MIN_STEP`` of the stretch (before its last
+    step) ends the sweep with ArithmeticError: the step size collapses geometrically when the
+    defect does not shrink with the step in a way the floor test misses (Van der Pol's
+    flow from a wide box: 15,000 steps down to 1e-320 before, 1.4 s to give up now)."""
     X, steps = list(x0), []
     n = x0[0].alg.order
     t, end = float(nodes[0]), float(nodes[-1])
     h = float(nodes[1] - nodes[0]) if len(nodes) > 1 else end - t
     floor = 0.0                                  # the defect ratio that steps cannot go below
+    shortest = MIN_STEP * (end - t)
     while t < end * (1 - 1e-15) - 1e-300:
+        if h < shortest < end - t:
+            raise ArithmeticError(f"the step size collapsed to {h:.3g} at t = {t:g} (the defect does not "
+                                  "shrink with the step)")
         h = min(h, end - t)
         threshold, previous = max(1.0, 2.0 * floor), None
         for _ in range(max_halvings + 1):
@@ -205,68 +227,204 @@ def _log_norm(T: np.ndarray, Tinv: np.ndarray, Jc: np.ndarray, Jr: np.ndarray) -
     return float(np.linalg.eigvalsh(0.5 * (M + M.T))[-1]) + float(np.linalg.norm(np.abs(T) @ Jr @ np.abs(Tinv), 2))
 
 
-def error_radii(f, steps: list[Step], shift: float):
-    """Phase 2: the proved error radii at the step nodes and the error box of each step, or None
-    if the a priori radius cannot be closed on some step.
+@dataclass
+class _Track:
+    """The error bound of :func:`error_radii` under one Lyapunov shift: the current metric
+    ``(S, T, T^-1, w)``, the radii at the nodes and the error box of each step."""
+
+    shift: float
+    metric: tuple | None = None
+    radii: list = field(default_factory=lambda: [0.0])
+    boxes: list = field(default_factory=list)
+
+
+def error_radii(f, steps: list[Step], initial_error: np.ndarray | None = None):
+    """Phase 2: the proved error radii at the step nodes and the error box of each step, under
+    the metric shift (of :data:`SHIFTS`) with the smallest final error box; None if the a priori
+    radius cannot be closed on some step for any shift.
+
+    ``initial_error`` bounds ``|e_i|`` at the first node (zero when the polynomial start is
+    exact); in the first metric it is the radius ``sqrt(b' |S| b)``, ``b`` the bounds, since
+    ``e' S e <= sum_ij |S_ij| |e_i| |e_j|``.
 
     The metric follows the flow: before each step, the Lyapunov metric of the step's own
     Jacobian (shift ``shift``) replaces the current one when that lowers the growth over the
     step. Changing the metric at a node is sound: ``|e|_new = |T_new T_old^-1 T_old e| <=
-    ||T_new T_old^-1||_2 |e|_old``. Returns ``(radii, boxes)``: ``radii[k]`` is the radius at
-    ``t_k`` in step ``k``'s metric (``radii[-1]`` at the end, in the last one), ``boxes[k]``
-    bounds ``|e_i|`` on step ``k``."""
-    current, r, boxes = None, [0.0], []
+    ||T_new T_old^-1||_2 |e|_old``. The shifts run in lockstep and share the interval Jacobians:
+    on each step one on the step's range and one on that range widened by the largest ``w rho``
+    of the shifts still to close (a box holding every shift's ``Z`` is a valid ``Z`` for each;
+    this halves the sweep's Jacobian evaluations, which were half of its time on SRNA01).
+    Returns ``(radii, boxes)``: ``radii[k]`` is the radius at ``t_k`` in step ``k``'s metric
+    (``radii[-1]`` at the end, in the last one), ``boxes[k]`` bounds ``|e_i|`` on step ``k``."""
+    tracks = [_Track(shift) for shift in SHIFTS]
     for step in steps:
         Jc0, Jr0 = jacobian_box(f, step.low, step.high)
         if not (np.all(np.isfinite(Jc0)) and np.all(np.isfinite(Jr0))):
             return None
-        S_new = lyapunov_metric(Jc0, shift)
-        rk = r[-1]
-        if S_new is not None:
-            T_new, Tinv_new, w_new = _metric_factors(S_new)
-            if current is None:
-                current = (S_new, T_new, Tinv_new, w_new)
-            else:
-                _, T, Tinv, _ = current
-                factor = float(np.linalg.norm(T_new @ Tinv, 2))
-                if np.log(max(factor, 1e-300)) + _log_norm(T_new, Tinv_new, Jc0, Jr0) * step.h < \
-                        _log_norm(T, Tinv, Jc0, Jr0) * step.h:
-                    current, rk = (S_new, T_new, Tinv_new, w_new), rk * factor
-        if current is None:
-            return None
-        S, T, Tinv, w = current
-        D = float(np.sqrt(step.defect @ np.abs(S) @ step.defect))
-        rho = 2.0 * (rk + D * step.h) + 1e-300
+        pending = []                 # [track, radius at t_k, defect bound, a priori radius]
+        for track in tracks:
+            S_new = lyapunov_metric(Jc0, track.shift)
+            rk = track.radii[-1]
+            if S_new is not None:
+                T_new, Tinv_new, w_new = _metric_factors(S_new)
+                if track.metric is None:
+                    track.metric = (S_new, T_new, Tinv_new, w_new)
+                else:
+                    _, T, Tinv, _ = track.metric
+                    factor = float(np.linalg.norm(T_new @ Tinv, 2))
+                    if np.log(max(factor, 1e-300)) + _log_norm(T_new, Tinv_new, Jc0, Jr0) * step.h < \
+                            _log_norm(T, Tinv, Jc0, Jr0) * step.h:
+                        track.metric, rk = (S_new, T_new, Tinv_new, w_new), rk * factor
+            if track.metric is None:
+                continue
+            S = track.metric[0]
+            if len(track.radii) == 1 and initial_error is not None:
+                track.radii[0] = rk = float(np.sqrt(initial_error @ np.abs(S) @ initial_error))
+            D = float(np.sqrt(step.defect @ np.abs(S) @ step.defect))
+            pending.append([track, rk, D, 2.0 * (rk + D * step.h) + 1e-300])
+        closed = []
         for _ in range(40):
-            Jc, Jr = jacobian_box(f, step.low - w * rho, step.high + w * rho)
-            if not (np.all(np.isfinite(Jc)) and np.all(np.isfinite(Jr))):
-                return None
-            mu = _log_norm(T, Tinv, Jc, Jr)
-            if mu * step.h > 700:
-                return None
-            growth = np.exp(mu * step.h)
-            phi = step.h if abs(mu * step.h) < 1e-12 else (growth - 1.0) / mu
-            r_next = rk * growth + D * phi
-            if max(rk, r_next) < rho:
+            if not pending:
                 break
-            rho = 2.0 * max(rk, r_next)
-        else:
+            widen = np.max([track.metric[3] * rho for track, _, _, rho in pending], axis=0)
+            Jc, Jr = jacobian_box(f, step.low - widen, step.high + widen)
+            if not (np.all(np.isfinite(Jc)) and np.all(np.isfinite(Jr))):
+                break
+            open_ = []
+            for item in pending:
+                track, rk, D, rho = item
+                _, T, Tinv, w = track.metric
+                mu = _log_norm(T, Tinv, Jc, Jr)
+                if mu * step.h > 700:
+                    continue
+                growth = np.exp(mu * step.h)
+                phi = step.h if abs(mu * step.h) < 1e-12 else (growth - 1.0) / mu
+                r_next = rk * growth + D * phi
+                if max(rk, r_next) < rho:
+                    track.boxes.append(w * max(rk, r_next))
+                    track.radii.append(r_next)
+                    closed.append(track)
+                else:
+                    item[3] = 2.0 * max(rk, r_next)
+                    open_.append(item)
+            pending = open_
+        tracks = closed
+        if not tracks:
             return None
-        boxes.append(w * max(rk, r_next))
-        r.append(r_next)
-    return np.array(r), boxes
+    best = min(tracks, key=lambda track: np.max(track.boxes[-1]))
+    return np.array(best.radii), best.boxes
 
 
-def enclose_stretch(f, x0: list[DA], nodes: np.ndarray, stop=None, rel_tol: float = 1e-6) -> Enclosure | None:
-    """The verified enclosure of the flow from the polynomial initial set ``x0`` (no remainder);
-    of the metric shifts tried, the one with the smallest final error box is kept."""
+def enclose_stretch(f, x0: list[DA], nodes: np.ndarray, stop=None, rel_tol: float = 1e-6,
+                    initial_error: np.ndarray | None = None) -> Enclosure | None:
+    """The verified enclosure of the flow from the initial set ``x0 + [-b, b]`` (``b`` the
+    ``initial_error``, zero by default); of the metric shifts tried, the one with the smallest
+    final error box is kept."""
     steps = polynomial_steps(f, x0, nodes, stop, rel_tol)
-    best = None
-    for shift in SHIFTS:
-        out = error_radii(f, steps, shift)
-        if out is not None and (best is None or np.max(out[1][-1]) < np.max(best[1][-1])):
-            best = out
-    if best is None:
+    out = error_radii(f, steps, initial_error)
+    if out is None:
         return None
-    radii, boxes = best
+    radii, boxes = out
     return Enclosure(steps, radii, np.array(boxes))
+
+
+def compose(p: DA, args: list[TM]) -> TM:
+    """``p(args)`` as a Taylor model: every monomial is the Taylor-model product of its parent
+    monomial and one argument (each product encloses the terms its truncation drops), and the
+    monomials are summed with ``p``'s coefficients."""
+    alg = p.alg
+    values = [args[0].const_like(1.0)]
+    for k in range(1, alg.size):
+        values.append(values[alg.parent[k]] * args[alg.step[k]])
+    return TM.weighted_sum(p.c, values)
+
+
+def crossing(f, x_start: list[DA], start_error: np.ndarray, h: float, faces) -> list[TM] | None:
+    """Taylor models of the states in which runs first enter a guard ``{a_j . x + b_j <= 0}``
+    (``faces``: the ``(a_j, b_j)``), for runs that enter it in the window ``[t_s, t_s + h]``;
+    None when the argument below does not apply.
+
+    ``x_start`` is the polynomial state at ``t_s`` in the deviations ``xi`` (and an unused step
+    time), ``start_error`` bounds ``|e_i|`` there. The caller guarantees the window: every run is
+    outside the guard at ``t_s`` (no earlier step can meet it) and every run has left the mode by
+    ``t_s + h`` (each is inside some urgent guard there); a run that enters the guard does so in
+    the window. The window is one step: ``P(xi, sigma)`` with
+    error box ``E`` (:func:`polynomial_step`, :func:`error_radii`), so the true state is
+    ``x = P + e``, ``|e_i| <= E_i``. A run enters the guard at the first instant all faces are
+    ``<= 0``, on a face ``j`` with ``g_j = 0``. A face can be that face only if ``{g_j = 0, g_k <= 0
+    for all k}`` meets the interval hull of the window's states (a linear program, solved with a
+    margin); if only one face can, it is the one crossed; with ``G = a_j . P + b_j`` (a polynomial)
+    the entry instant ``s`` satisfies ``|G(xi, s)| <= eps = |a_j| . E`` and, if ``dG/dsigma`` keeps
+    its sign on the window (range ``[c_lo, c_hi]`` not containing 0), it is unique.
+
+    The root ``s*(xi)`` of ``G`` is expanded as a polynomial by inverting ``(xi, sigma) -> (xi, G)``
+    (eqs. 13-14, :func:`.event.solve_event`). Its residual ``rho(xi) = G(xi, s*(xi))`` is enclosed
+    by Taylor-model composition, and by the mean value theorem (``s*`` and ``s`` both in
+    ``[-1, 1]``, which is checked for ``s*``) the entry instant is ``s = s*(xi) + d``,
+    ``d in ([-eps, eps] - rho) / [c_lo, c_hi]``. With ``d`` written ``d_mid + d_rad v`` for one more
+    variable ``v in [-1, 1]``, the entry state ``P(xi, s*(xi) + d_mid + d_rad v) + [-E, E]`` is a
+    Taylor model in ``(xi, v)`` (and the next stretch's step time, unused): unlike the interval
+    hull of the window's states, it keeps the state components tied to one another and to the
+    entry instant. Its order-``n`` terms are bounded (eq. 27) into the remainder: the next
+    stretch's Picard steps cannot integrate the rates of order-``n`` terms of the start within the
+    order-``n`` algebra, so they would leave a defect that no step size removes (about
+    ``|Df| |order-n part|``, 1.5e-4 m/min^2 on SRNA01's entry into rendezvous, which stalled the
+    step control). A relative ``ROUNDING`` allowance is added to ``eps`` and to the result."""
+    alg = x_start[0].alg
+    m = alg.nvars - 1
+    step = polynomial_step(f, x_start, 0.0, h)
+    out = error_radii(f, [step], start_error)
+    if out is None:
+        return None
+    error = out[1][0]
+    hull = np.array([TM(p, -e, e).bound() for p, e in zip(step.poly, error)])
+    open_faces = [j for j in range(len(faces)) if _may_cross(faces, j, hull)]
+    if len(open_faces) != 1:
+        return None
+    a, b = (np.asarray(v, dtype=float) for v in faces[open_faces[0]])
+    G = DA.weighted_sum(a, step.poly) + float(b)
+    c_lo, c_hi = polynomial_range(G.derivative(m))
+    if not (np.isfinite(c_lo) and np.isfinite(c_hi)) or c_lo <= 0 <= c_hi:
+        return None
+    s_star, _ = solve_event(step.poly, G)
+    s_lo, s_hi = polynomial_range(s_star)
+    if not (-1 <= s_lo and s_hi <= 1):                 # NaN fails too
+        return None
+    target = algebra(alg.order, m + 2)
+    xi = [TM(DA.var(target, j)) for j in range(m)]
+    s_star = s_star.embed(target)
+    rho_lo, rho_hi = compose(G, xi + [TM(s_star)]).bound()
+    if not (np.isfinite(rho_lo) and np.isfinite(rho_hi)):
+        return None
+    eps = float(np.abs(a) @ error) * (1 + ROUNDING) + ROUNDING * max(abs(rho_lo), abs(rho_hi))
+    d_lo, d_hi = _imul(-eps - rho_hi, eps - rho_lo, 1.0 / c_hi, 1.0 / c_lo)
+    s = TM(s_star + DA.var(target, m, 0.5 * (d_lo + d_hi), 0.5 * (d_hi - d_lo)))
+    top = target.degree == alg.order
+    entry = []
+    for p, e in zip(step.poly, error):
+        x = compose(p, xi + [s])
+        lo, hi = x.bound()
+        slack = e + ROUNDING * max(abs(lo), abs(hi))
+        c = x.poly.c.copy()
+        c[~top] = 0.0
+        top_lo, top_hi = polynomial_range(DA(target, c))
+        c = x.poly.c.copy()
+        c[top] = 0.0
+        entry.append(TM(DA(target, c), x.lo + top_lo - slack, x.hi + top_hi + slack))
+    return entry
+
+
+def _may_cross(faces, j: int, hull: np.ndarray) -> bool:
+    """Whether ``{a_j . x + b_j = 0, a_k . x + b_k <= 0 for all k}`` meets the box ``hull`` (rows
+    ``[lo, hi]``): the linear program is solved with every constraint relaxed by a margin of
+    ``1e-7`` of its scale (at least HiGHS's feasibility tolerance, 1e-7); an error within the
+    tolerance, or any status but "infeasible", answers "may cross", so "empty" is a safe answer."""
+    A = np.array([a for a, _ in faces], dtype=float)
+    b = np.array([b for _, b in faces], dtype=float)
+    scale = 1.0 + np.abs(b) + np.abs(A) @ np.max(np.abs(hull), axis=1)
+    margin = 1e-7 * scale
+    rows = np.vstack([A, -A[j:j + 1]])
+    limits = np.r_[margin - b, margin[j] + b[j]]
+    box = [(lo - 1e-7 * (1 + abs(lo)), hi + 1e-7 * (1 + abs(hi))) for lo, hi in hull]
+    out = scipy.optimize.linprog(np.zeros(len(hull)), A_ub=rows, b_ub=limits, bounds=box, method="highs")
+    return out.status != 2
