@@ -282,3 +282,80 @@ def plot_subdomain_map(subdomains, variables: list[str], prop: dict, out: Path, 
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out, dpi=110)
     plt.close(fig)
+
+
+def plot_proved_map(subdomains, colours, proved_boxes, attempts, out: Path, title: str = "",
+                    zooms=(), unit: str = "m") -> None:
+    """Fig. 4 with proved colours: the subdomains' outlines, each filled by what is proved of it
+    (reach/bench/proved_map.py: proved safe, proved unsafe, undecided), the proved-safe boxes as
+    filled patches (ringed, since a box of a few m^2 vanishes at the map's scale), and the boxes
+    whose proof was attempted and not finished outlined in blue (solid: a subdomain, dashed: another
+    box) with the flight time the flowpipe reached (on the main panel only where it fits).
+
+    ``subdomains``: ``(low, high)`` pairs; ``colours``: one colour name per subdomain;
+    ``proved_boxes``: ``(low, high)`` pairs; ``attempts``: ``{"low", "high", "label", "dashed"}`` per
+    attempted box left undecided; ``zooms``: ``(low, high)`` windows drawn again in side panels."""
+    plt = _pyplot()
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    from reach.bench.proved_map import PROVED_SAFE, PROVED_UNSAFE, UNDECIDED
+
+    fill = {PROVED_SAFE: "tab:green", PROVED_UNSAFE: "tab:red", UNDECIDED: "0.92"}
+    panels = len(zooms)
+    fig = plt.figure(figsize=(6.5 + (3.5 if panels else 0), 9.5))
+    grid = fig.add_gridspec(max(panels, 1), 2 if panels else 1, width_ratios=[1.6, 1] if panels else [1])
+    main = fig.add_subplot(grid[:, 0])
+    axes = [main] + [fig.add_subplot(grid[k, 1]) for k in range(panels)]
+    windows = [None] + list(zooms)
+    map_width = max(h[0] for _, h in subdomains) - min(lo[0] for lo, _ in subdomains)
+    for ax, window in zip(axes, windows):
+        for (low, high), name in zip(subdomains, colours):
+            ax.add_patch(plt.Rectangle(low, high[0] - low[0], high[1] - low[1], facecolor=fill[name],
+                                       edgecolor="0.35", lw=0.4))
+        for low, high in proved_boxes:
+            ax.add_patch(plt.Rectangle(low, high[0] - low[0], high[1] - low[1], facecolor=fill[PROVED_SAFE],
+                                       edgecolor="darkgreen", lw=0.8))
+        width = map_width if window is None else window[1][0] - window[0][0]
+        for a in attempts:
+            (x0, y0), (x1, y1) = a["low"], a["high"]
+            ax.add_patch(plt.Rectangle((x0, y0), x1 - x0, y1 - y0, fill=False, edgecolor="tab:blue",
+                                       lw=1.2 if a["dashed"] else 1.6, ls="--" if a["dashed"] else "-"))
+            # subdomains: in the upper half, clear of the rings, upright in tall ones; other boxes:
+            # to the right of the box
+            if a["dashed"]:
+                x, y, place = x1, 0.5 * (y0 + y1), {"ha": "left", "va": "center"}
+            else:
+                x, y = 0.5 * (x0 + x1), y1 - 0.25 * (y1 - y0)
+                place = {"ha": "center", "va": "center", "rotation": 90 if y1 - y0 > 2 * (x1 - x0) else 0}
+            shown = window is None or (window[0][0] <= x <= window[1][0] and window[0][1] <= y <= window[1][1])
+            if shown and x1 - x0 >= 0.04 * width:
+                ax.text(x, y, a["label"], fontsize=6, color="tab:blue", **place)
+        ax.set_aspect("equal")
+    if proved_boxes:
+        centres = np.array([0.5 * (np.asarray(lo) + np.asarray(hi)) for lo, hi in proved_boxes])
+        main.scatter(centres[:, 0], centres[:, 1], s=90, facecolors="none", edgecolors="darkgreen", lw=1.4)
+    main.autoscale_view()
+    main.set_xlabel(f"x [{unit}]")
+    main.set_ylabel(f"y [{unit}]")
+    fig.suptitle(title, fontsize=9)
+    count = {name: colours.count(name) for name in fill}
+    main.legend(handles=[
+        Patch(facecolor=fill[PROVED_SAFE], edgecolor="0.35", label=f"proved safe ({count[PROVED_SAFE]} subdomains)"),
+        Patch(facecolor=fill[PROVED_UNSAFE], edgecolor="0.35",
+              label=f"proved unsafe ({count[PROVED_UNSAFE]} subdomains)"),
+        Patch(facecolor=fill[UNDECIDED], edgecolor="0.35", label=f"undecided ({count[UNDECIDED]} subdomains)"),
+        Line2D([], [], marker="o", ls="", markerfacecolor=fill[PROVED_SAFE], markeredgecolor="darkgreen",
+               ms=9, label=f"proved-safe box ({len(proved_boxes)}; ringed)"),
+        Patch(fill=False, edgecolor="tab:blue", lw=1.6, label="subdomain attempted, not proved (flight time reached)"),
+        Patch(fill=False, edgecolor="tab:blue", lw=1.2, ls="--", label="other box attempted, not proved"),
+    ], loc="upper center", bbox_to_anchor=(0.5, -0.07), ncol=2, fontsize=7)
+    for ax, (low, high) in zip(axes[1:], zooms):
+        ax.set_xlim(low[0], high[0])
+        ax.set_ylim(low[1], high[1])
+        ax.set_title(f"zoom: x {low[0]:g}..{high[0]:g}, y {low[1]:g}..{high[1]:g} {unit}", fontsize=8)
+        ax.tick_params(labelsize=7)
+    fig.tight_layout()
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
