@@ -283,6 +283,12 @@ def replay(model: HybridAutomaton, prop: BoundSafety, initial_state, switch_time
     :func:`reach.backends.event_sampling.replay_event`)."""
     if isinstance(prop, BoundEvent):
         return replay_event(model, prop, initial_state, dt)
+    with single_threaded():
+        return _replay_safety(model, prop, initial_state, switch_time, dt, input_signal)
+
+
+def _replay_safety(model: HybridAutomaton, prop: BoundSafety, initial_state, switch_time: float | None,
+                   dt: float | None, input_signal: dict | None) -> Replay:
     sim = Simulator(model, dt)
     sim.tables = dict.fromkeys(model.modes)     # the general per-segment path, not the block path
     x0 = np.asarray(initial_state, dtype=float).reshape(1, -1)
