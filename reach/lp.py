@@ -31,7 +31,9 @@ OPTIMAL, INFEASIBLE, UNBOUNDED = "optimal", "infeasible", "unbounded"
 
 
 class LPError(RuntimeError):
-    """The solver stopped without a verdict (iteration limit, numerical difficulties)."""
+    """No verdict: the solver stopped without one (iteration limit, numerical difficulties), or
+    the LP cannot be posed faithfully (a NaN or non-finite coefficient, which HiGHS would drop
+    or reject, changing the polyhedron)."""
 
 
 @dataclass
@@ -84,20 +86,30 @@ def _model(n: int, bounds, A_ub=None, b_ub=None, A_eq=None, b_eq=None, options=N
 
     infinity = highspy.kHighsInf
     lo, hi = _bounds(bounds, n)
+    if np.isnan(lo).any() or np.isnan(hi).any():
+        raise LPError("a variable bound is NaN")
     solver = highspy._Highs()
     solver.setOptionValue("output_flag", False)
     for key, value in (options or {}).items():
         solver.setOptionValue(key, value)
-    solver.addVars(n, np.where(np.isfinite(lo), lo, -infinity), np.where(np.isfinite(hi), hi, infinity))
+    # HiGHS rejects a row with a non-finite or huge coefficient and drops a NaN one from a kept
+    # row; either would change the polyhedron silently, so both are errors here (UNKNOWN above)
+    error = highspy.HighsStatus.kError
+    if solver.addVars(n, np.where(np.isfinite(lo), lo, -infinity), np.where(np.isfinite(hi), hi, infinity)) == error:
+        raise LPError("the LP's variable bounds were rejected")
     for A, low, high in ((A_ub, None, b_ub), (A_eq, b_eq, b_eq)):
         if A is None or np.size(A) == 0:
             continue
         A = np.asarray(A, dtype=float).reshape(-1, n)
         high = np.asarray(high, dtype=float).reshape(-1)
         low = np.full(A.shape[0], -infinity) if low is None else np.asarray(low, dtype=float).reshape(-1)
+        if not np.isfinite(A).all() or np.isnan(high).any() or np.isnan(low).any():
+            raise LPError("an LP row has a non-finite coefficient or a NaN bound")
         nz = A != 0
         starts = np.concatenate([[0], np.cumsum(nz.sum(axis=1))[:-1]]).astype(np.int32)
-        solver.addRows(A.shape[0], low, high, int(nz.sum()), starts, np.nonzero(nz)[1].astype(np.int32), A[nz])
+        if solver.addRows(A.shape[0], low, high, int(nz.sum()), starts, np.nonzero(nz)[1].astype(np.int32),
+                          A[nz]) == error:
+            raise LPError("the LP's rows were rejected (a coefficient too large for the solver)")
     return solver
 
 
@@ -116,6 +128,8 @@ def minimize(c, A_ub=None, b_ub=None, *, A_eq=None, b_eq=None, bounds=None,
         return LPResult(OPTIMAL, 0.0, np.zeros(0)) if ok else LPResult(INFEASIBLE)
     options = {} if tolerance is None else {"primal_feasibility_tolerance": tolerance,
                                             "dual_feasibility_tolerance": tolerance}
+    if not np.isfinite(c).all():
+        raise LPError("the LP's objective is not finite")
     solver = _model(n, bounds, A_ub, b_ub, A_eq, b_eq, options)
     solver.changeColsCost(n, np.arange(n, dtype=np.int32), c)
     status = highspy.HighsModelStatus
@@ -176,6 +190,8 @@ def maximize_many(C, A_ub, b_ub, bounds) -> np.ndarray:
 
     C = np.atleast_2d(np.asarray(C, dtype=float))
     n = C.shape[1]
+    if not np.isfinite(C).all():
+        raise LPError("the LP's objective is not finite")
     solver = _model(n, bounds, A_ub, b_ub, options={"presolve": "off"})
     solver.changeObjectiveSense(highspy.ObjSense.kMaximize)
     index = np.arange(n, dtype=np.int32)

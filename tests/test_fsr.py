@@ -465,3 +465,15 @@ def test_verdict_reads_the_interval_against_the_threshold(low, high, at_least, s
     from reach.backends.fsr import _verdict
     from reach.sets.gaussian import Probability
     assert _verdict(Probability(0.5 * (low + high), low, high), at_least) == (status, verdict)
+
+
+def test_overflowing_moments_are_undecided_never_safe():
+    """A spiral (x' = x - y, y' = x + y) over 800 s: the mean overflows to inf and then to
+    inf - inf = NaN at kick 71. NaN rows once read as satisfied constraints (probability 1, SAFE,
+    while Monte Carlo gives P <= 0.02); both properties must be UNKNOWN with the whole [0, 1]."""
+    model = load_model("tests/data/fsr_spiral.yaml")
+    for prop in load_properties("tests/data/fsr_spiral_props.yaml"):
+        result = BACKEND.check(model, bind(prop, model), {})
+        assert result.status is Status.UNKNOWN
+        assert result.probability == (0.0, 1.0)
+        assert "overflows" in result.details["reason"]

@@ -99,3 +99,11 @@ def test_gaussian_set_operations():
     assert np.allclose(np.cov(X.T), g.cov, atol=0.03)
     p = g.probability([[1.0, 1.0]], [6.0])          # P(x + y <= 6) for x + y ~ N(3, 4)
     assert p.low <= ndtr(1.5) <= p.high
+
+
+def test_a_non_finite_law_bounds_no_probability():
+    """A NaN mean or variance must not make rows look fixed and satisfied (which gave 1)."""
+    for mean, cov in (([np.nan, 0.0], np.eye(2)), ([0.0, 0.0], np.diag([np.nan, 1.0])),
+                      ([np.inf, -np.inf], np.eye(2))):
+        p = box_probability(mean, cov, [-1.0, -1.0], [1.0, 1.0])
+        assert (p.low, p.high) == (0.0, 1.0)

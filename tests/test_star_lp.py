@@ -5,6 +5,7 @@ the same verdict (optimal, infeasible, unbounded), the same optimum, and a feasi
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.optimize import linprog
@@ -73,3 +74,18 @@ def test_bounds_as_pairs_and_none():
     assert res.optimal and res.value == 4.0
     assert lp.maximize([1.0], bounds=None).unbounded
     assert lp.feasible_point([[1.0], [-1.0]], [1.0, -2.0]) is None
+
+
+def test_an_lp_with_non_finite_data_is_an_error_not_a_changed_polyhedron():
+    """HiGHS drops a NaN coefficient from a kept row (x0 + nan x1 <= 0 became x0 <= 0: max 0
+    where nothing bounds x0 below 1) and rejects huge ones (the row vanishes): both raise."""
+    from reach import lp
+
+    box = (np.array([-1.0, -1.0]), np.array([1.0, 1.0]))
+    for A, b in (([[1.0, np.nan]], [0.0]), ([[1.0, np.inf]], [0.0]), ([[1.0, 1e16]], [0.0]),
+                 ([[1.0, 0.0]], [np.nan])):
+        with pytest.raises(lp.LPError):
+            lp.maximize(np.array([1.0, 0.0]), A, b, bounds=box)
+    with pytest.raises(lp.LPError):
+        lp.maximize_many(np.array([[np.nan, 1.0]]), np.array([[1.0, 1.0]]), np.array([1.0]), box)
+    assert lp.maximize(np.array([1.0, 0.0]), [[1.0, 1.0]], [0.0], bounds=box).value == pytest.approx(1.0)

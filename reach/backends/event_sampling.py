@@ -77,15 +77,16 @@ class EventMonitor:
                 self.mode[rr] = m_index
 
     def extrema(self) -> np.ndarray:
-        """Sampled extremum of ``q`` per run (``nan`` for runs that never visited a listed mode)."""
+        """Sampled extremum of ``q`` per run (``nan`` for runs that never visited a listed mode;
+        an infinite value, where ``q`` overflowed, is kept: it is past any finite requirement)."""
         out = self.sign * self.best
-        return np.where(np.isfinite(out), out, np.nan)
+        return np.where(self.best == -np.inf, np.nan, out)
 
 
 def violates(prop: BoundEvent, value) -> np.ndarray:
     value = np.asarray(value, dtype=float)
     bad = value > prop.value if prop.op == "<=" else value < prop.value
-    return bad & np.isfinite(value)
+    return bad & ~np.isnan(value)
 
 
 def within_bound(values, lo: float, hi: float, sense: str, slack: float) -> np.ndarray:

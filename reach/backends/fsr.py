@@ -121,7 +121,15 @@ class GaussianProblem:
         return cls(system, x0, np.zeros((model.n, model.n)), dist.mean, dist.cov)
 
     def moments(self):
-        return self.system.moments(self.x0, self.P0, self.w_mean, self.w_cov)
+        """Means and covariances at the kicks and at ``at``; ArithmeticError when they overflow
+        (a non-finite mean or covariance bounds no probability, and NaN rows would read as
+        satisfied constraints)."""
+        means, covs = self.system.moments(self.x0, self.P0, self.w_mean, self.w_cov)
+        finite = np.isfinite(means).all(axis=-1) & np.isfinite(covs).all(axis=(-2, -1))
+        if not finite.all():
+            k = int(np.argmin(finite))
+            raise ArithmeticError(f"the state's mean or covariance overflows at kick {k} of {len(finite) - 1}")
+        return means, covs
 
 
 def reach(problem: GaussianProblem, H, g, abs_error: float = 1e-3, seed: int = 0,
@@ -388,6 +396,12 @@ class FsrBackend:
         problem = GaussianProblem.from_model(model, prop.at)
         details = {"kicks": problem.system.steps, "step": model.disturbance.step,
                    "semantics": "kicks at k*step < at, states observed before the kick"}
+        try:
+            problem.moments()
+        except ArithmeticError as exc:
+            details["reason"] = f"{exc}: no probability is bounded"
+            return Result(NAME, model.name, prop.id, Status.UNKNOWN, time.perf_counter() - start,
+                          probability=(0.0, 1.0), details=details)
         if isinstance(prop, BoundReach):
             if opts.method == "fourier" or not point:
                 initial = (fsr_fourier.point_law(problem.x0) if point

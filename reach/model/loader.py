@@ -663,13 +663,15 @@ def _bounding_box(P: LinearSet, state: list[str], where: Where):
     b_eq = P.f if P.E.shape[0] else None
     A_ub = P.A if P.A.shape[0] else None
     b_ub = P.b if P.A.shape[0] else None
-    if lp.feasible_point(A_ub, b_ub, A_eq=A_eq, b_eq=b_eq, n=n) is None:
-        raise where.error("the initial set is empty")
+    try:
+        if lp.feasible_point(A_ub, b_ub, A_eq=A_eq, b_eq=b_eq, n=n) is None:
+            raise where.error("the initial set is empty")
+        bounds = [(lp.maximize(e, A_ub, b_ub, A_eq=A_eq, b_eq=b_eq), lp.minimize(e, A_ub, b_ub, A_eq=A_eq, b_eq=b_eq))
+                  for e in np.eye(n)]
+    except lp.LPError as exc:
+        raise where.error(f"the initial set's constraints cannot be solved ({exc})") from None
     low, high = np.zeros(n), np.zeros(n)
-    for i in range(n):
-        e = np.eye(n)[i]
-        hi = lp.maximize(e, A_ub, b_ub, A_eq=A_eq, b_eq=b_eq)
-        lo = lp.minimize(e, A_ub, b_ub, A_eq=A_eq, b_eq=b_eq)
+    for i, (hi, lo) in enumerate(bounds):
         if not (hi.optimal and lo.optimal):
             raise where.error(f"the initial set is unbounded in '{state[i]}'")
         low[i], high[i] = lo.value, hi.value

@@ -161,6 +161,8 @@ def box_probability(mean, cov, lower, upper, *, abs_error: float = 1e-4,
     """
     mean = np.atleast_1d(np.asarray(mean, dtype=float))
     cov = np.atleast_2d(np.asarray(cov, dtype=float))
+    if not (np.all(np.isfinite(mean)) and np.all(np.isfinite(cov))):
+        return Probability(np.nan, 0.0, 1.0)       # an overflowed law bounds nothing
     lower = np.atleast_1d(np.asarray(lower, dtype=float)) - mean
     upper = np.atleast_1d(np.asarray(upper, dtype=float)) - mean
     if np.any(lower > upper):

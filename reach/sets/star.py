@@ -215,6 +215,8 @@ def chord_hull(start: Star, end_center, end_basis, error=None) -> Star:
     c1 = np.asarray(end_center, dtype=float)
     V1 = np.asarray(end_basis, dtype=float)
     r = np.zeros(start.dim) if error is None else np.asarray(error, dtype=float)
+    if not np.all(np.isfinite(r)):        # NaN would read as "no error" below
+        raise lp.LPError("a non-finite error radius (the flow overflows)")
     err = np.flatnonzero(r > 0)
     k = err.size
 

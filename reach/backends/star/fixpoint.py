@@ -107,6 +107,8 @@ class Covered:
         settled by the boxes costs one LP over ``hull`` (reported to ``count_lps``)."""
         box = hull.box_bound()
         low, high, start = box.low, box.high, float(box.low[self.clock])
+        if np.isnan(low).any() or np.isnan(high).any():     # NaN fails every test below: not covered
+            return False
         states = np.arange(low.size) != self.clock
         for entry in self.entries:
             if entry.mode != mode or entry.start > start:

@@ -206,8 +206,8 @@ def _tightened(star: Star, rows: int, rounds: int = 3) -> Star | None:
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             bound = rest / A
             slack = 1e-9 * (1.0 + np.abs(bound) + size[:, None] / np.abs(A))
-            upper = np.where(A > 0, bound + slack, np.inf).min(axis=0)
-            lower = np.where(A < 0, bound - slack, -np.inf).max(axis=0)
+            upper = np.where((A > 0) & ~np.isnan(bound), bound + slack, np.inf).min(axis=0)
+            lower = np.where((A < 0) & ~np.isnan(bound), bound - slack, -np.inf).max(axis=0)
         new_lo, new_hi = np.maximum(lo, lower), np.minimum(hi, upper)
         if np.any(new_lo > new_hi):
             return None
@@ -221,6 +221,8 @@ def _plus_box(star: Star, radius) -> Star:
     """``star + [-radius, radius]`` (Minkowski sum): one new coefficient in ``[-1, 1]`` per
     positive component of ``radius``."""
     radius = np.asarray(radius, dtype=float)
+    if not np.all(np.isfinite(radius)):   # NaN would read as "no error" below
+        raise lp.LPError("a non-finite error radius (the flow overflows)")
     free = np.flatnonzero(radius > 0)
     if not free.size:
         return star

@@ -162,9 +162,14 @@ def linear_rows(texts_eq: list[tuple[str, str]], names: dict[str, sympy.Symbol],
 
 
 def feasible(rows, n) -> bool:
+    """Whether the rows have a common point; when the LP cannot say (LPError), True: keeping a
+    location or transition that is in fact empty only costs time."""
     A, b, E, f = rows
-    point = lp.feasible_point(A if len(b) else None, b if len(b) else None,
-                              A_eq=E if len(f) else None, b_eq=f if len(f) else None, n=n)
+    try:
+        point = lp.feasible_point(A if len(b) else None, b if len(b) else None,
+                                  A_eq=E if len(f) else None, b_eq=f if len(f) else None, n=n)
+    except lp.LPError:
+        return True
     return point is not None
 
 
