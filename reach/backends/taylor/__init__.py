@@ -48,6 +48,7 @@ from reach.backends.taylor.bound import contenders, enclose, estimated_remainder
 from reach.backends.taylor.da import DA, algebra, stack
 from reach.backends.taylor.flow import Unsmooth
 from reach.backends.taylor.keys import picklable
+from reach.backends.taylor.nominal import NominalFailure
 from reach.backends.taylor import units
 from reach.backends.taylor.problem import EventProblem, global_clock
 from reach.backends.taylor.units import expand_boxes, sweep_box
@@ -121,8 +122,13 @@ class TaylorBackend:
             return check_safety(self, model, prop, options)
         opts = Options.from_dict(options)
         model, _ = with_switch_time(model)
-        with _unit_runner(opts, picklable(model, prop)) as run_units:
-            return self._check_event(model, prop, opts, run_units)
+        try:
+            with _unit_runner(opts, picklable(model, prop)) as run_units:
+                return self._check_event(model, prop, opts, run_units)
+        except NominalFailure as err:
+            return Result(self.name, model.name, prop.id, Status.UNKNOWN, bound=(-np.inf, np.inf),
+                          details={"reason": f"{err}: nothing was bounded", "remainder": opts.remainder,
+                                   "subdomain_count": 0, "share_meeting_requirement": 0.0})
 
     def _check_event(self, model, prop, opts: Options, run_units) -> Result:
         """:meth:`check` of an event property, its work units run by ``run_units(fn, arg_list)``

@@ -160,6 +160,10 @@ def _rows(f_numeric):
     return lambda X: np.stack(f_numeric(list(X.T)), axis=1)
 
 
+class NominalFailure(ArithmeticError):
+    """The adaptive integration cannot go on (its step is below the spacing of the numbers)."""
+
+
 class _Run:
     """One run's record: accepted times ``t``, the current state ``y`` and (dense) the interpolant
     data of each step; ``stopped`` when it ended at the ``stop`` crossing."""
@@ -187,7 +191,8 @@ def dop853(fun, t0: np.ndarray, y0: np.ndarray, t_end: np.ndarray, rtol: float, 
         ti, yi, ha = t[idx], y[idx], h_abs[idx]
         min_step = 10 * np.abs(np.nextafter(ti, np.inf) - ti)
         if np.any(retry[idx] & (ha < min_step)):
-            raise RuntimeError("nominal run failed: required step size is less than spacing between numbers")
+            raise NominalFailure("the nominal run failed: the step size it needs is below the spacing of "
+                                 "the numbers (a stiff or overflowing flow)")
         ha = np.where(~retry[idx] & (ha < min_step), min_step, ha)
         t_new = np.minimum(ti + ha, t_end[idx])
         h = t_new - ti
@@ -202,6 +207,9 @@ def dop853(fun, t0: np.ndarray, y0: np.ndarray, t_end: np.ndarray, rtol: float, 
         e3 = _norm(_combine(Ki[:, :STAGES + 1], E3) / scale) ** 2
         with np.errstate(divide="ignore", invalid="ignore"):
             err = np.where((e5 == 0) & (e3 == 0), 0.0, h * e5 / np.sqrt((e5 + 0.01 * e3) * n))
+        # an overflowing state (inf, then NaN) is a rejected step: the step shrinks until it is
+        # below the spacing of the numbers and the run fails, instead of NaN steps forever
+        err = np.where(np.isfinite(err) & np.isfinite(y_new).all(axis=1), err, np.inf)
         factor = SAFETY * _power(err, EXPONENT)
         grow = np.where(err == 0, MAX_FACTOR, np.minimum(MAX_FACTOR, factor))
         shrink = np.maximum(MIN_FACTOR, factor)

@@ -168,7 +168,7 @@ def _witness(model, prop: BoundSafety, result):
 
     rows = [r for r in result.details.get("subdomains", []) if np.isfinite(r["bound"][1])]
     rows.sort(key=lambda r: r["bound"][1])
-    names = result.details["variables"]
+    names = result.details.get("variables", [])
     for row in rows[:WITNESSES]:
         if row["bound"][0] > 0:
             break
