@@ -27,6 +27,7 @@ their output folder (:func:`reach.paths.safe_name`).
 from __future__ import annotations
 
 import argparse
+import errno
 import json
 import logging
 import math
@@ -431,6 +432,10 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: an OSError with one of these numbers is a path the user gave that cannot be used: bad input
+BAD_PATH_ERRORS = {errno.ENAMETOOLONG, errno.ENOENT, errno.ENOTDIR, errno.EISDIR, errno.EACCES, errno.ELOOP}
+
+
 def main(argv=None) -> int:
     """Run one command; every failure becomes one line on stderr and an exit code of the contract."""
     args = build_parser().parse_args(argv)
@@ -453,9 +458,18 @@ def main(argv=None) -> int:
     except RecursionError:
         print("reach: input nested too deeply (nothing was decided)", file=sys.stderr)
         return 2
+    except (OverflowError, FloatingPointError) as exc:
+        print(printable(f"reach: floating-point overflow ({exc}): a horizon or magnitude too large for "
+                        "double precision (nothing was decided)"), file=sys.stderr)
+        return 3
     except Exception as exc:  # a defect in reach, not in the input: one line, and undecided
         if os.environ.get("REACH_DEBUG"):
             raise
+        if isinstance(exc, OSError) and exc.errno in BAD_PATH_ERRORS:     # a path given that cannot be used
+            name = str(exc.filename)
+            print(printable(f"reach: {name[:80]}{'...' if len(name) > 80 else ''}: {exc.strerror}"),
+                  file=sys.stderr)
+            return 2
         print(printable(f"reach: internal error: {exc.__class__.__name__}: {exc} "
                         "(nothing was decided; please report it with the input)"), file=sys.stderr)
         return 3

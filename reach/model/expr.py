@@ -325,9 +325,23 @@ def parse_quantity(text, names: Mapping[str, sympy.Expr], where: Where, units: U
     if dims is not None:
         dims.brackets = []
     try:
-        return _Parser(names, where, units, dims, _source(text)).expr(tree)
+        value, form = _Parser(names, where, units, dims, _source(text)).expr(tree)
     except (RecursionError, OverflowError, MemoryError, ZeroDivisionError):
         raise where.error(f"expression '{text}' is too large to evaluate") from None
+    _check_numbers(value, text, where)
+    return value, form
+
+
+def _check_numbers(value: sympy.Expr, text, where: Where) -> None:
+    """Every number folded into ``value`` fits a float: ``1e308*1e308`` folds to 1e616, which
+    the back-ends would evaluate as inf (and inf - inf as NaN)."""
+    for number in value.atoms(sympy.Number):
+        try:
+            finite = math.isfinite(float(number))
+        except (TypeError, ValueError, OverflowError):
+            finite = False
+        if not finite:
+            raise where.error(f"expression '{text}' holds a number out of the floating-point range")
 
 
 def parse_expr(text, names: Mapping[str, sympy.Expr], where: Where, units: UnitSystem = SI,
@@ -355,6 +369,8 @@ def parse_comparison(text, names: Mapping[str, sympy.Expr], where: Where,
         if type(op) not in _COMPARE:
             raise where.error(f"only <=, <, >=, > are allowed in '{text}'")
         (lhs, lf), (rhs, rf) = operands[i], operands[i + 1]
+        _check_numbers(lhs, text, where)
+        _check_numbers(rhs, text, where)
         form = parser.meet(nodes[i], lf, nodes[i + 1], rf, "compared with")
         dimension, unit = dims.display(form, dims.brackets) if dims is not None else (None, None)
         result.append(Comparison(lhs, _COMPARE[type(op)], rhs, dimension, unit))

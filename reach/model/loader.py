@@ -83,8 +83,12 @@ def read_with_templates(path: Path, depth: int = 0, chain=()) -> Doc:
     where = doc.where("extends")
     if not isinstance(parent, str):
         raise where.error("expected a file name")
-    parent_path = (path.parent / parent).resolve()
-    if not parent_path.exists():
+    try:
+        parent_path = (path.parent / parent).resolve()
+        found = parent_path.exists()
+    except (OSError, ValueError) as exc:      # a name too long for the file system, a NUL byte
+        raise where.error(f"not a usable file name '{printable(parent[:80])}' ({exc.__class__.__name__})") from None
+    if not found:
         raise where.error(f"no such file '{printable(parent)}'")
     if not parent_path.is_file():
         raise where.error(f"'{printable(parent)}' is not a regular file (a template must be a plain YAML file)")

@@ -75,7 +75,11 @@ class Siren:
         def fail(message):
             return where.error(f"{label}: {message}")
 
-        if not path.is_file():
+        try:
+            found = path.is_file()
+        except (OSError, ValueError):          # a name too long for the file system
+            found = False
+        if not found:
             raise fail("network weights file not found")
         try:
             with np.load(path, allow_pickle=False) as data:

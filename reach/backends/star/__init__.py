@@ -264,6 +264,9 @@ class StarBackend:
         except lp.LPError as failure:
             status = Status.UNKNOWN
             details["reason"] = f"LP solver failure, nothing concluded: {failure}"
+        except ArithmeticError as failure:         # overflow, or a cell far too long for the flow
+            status = Status.UNKNOWN
+            details["reason"] = f"nothing concluded: {failure}"
         except RecursionError:
             status = Status.UNKNOWN
             details["reason"] = (f"a path of more than {explorer.stats.jumps} jumps is too deep to "
@@ -276,11 +279,19 @@ class StarBackend:
                       counterexample=counterexample, details=details, sets=explorer.sets)
 
 
+def _substeps(flow, h: float) -> str:
+    """Sub-samples per cell of the curvature bound, as the soundness text states them."""
+    try:
+        return str(flow.curvature(h)[3] + 1)
+    except ArithmeticError:
+        return "none (the cell is too long for the flow)"
+
+
 def _run_details(explorer: _Explorer) -> dict:
     s, opt = explorer.stats, explorer.opt
-    substeps = {m: f.curvature(explorer.h)[3] for m, f in explorer.flows.items()}
+    substeps = {m: _substeps(f, explorer.h) for m, f in explorer.flows.items()}
     soundness = _DISCRETE if opt.discrete_time else _SOUNDNESS.format(
-        q=", ".join(f"{m}: {q + 1}" for m, q in substeps.items()), lp_tol=DEPTH_LP_TOLERANCE,
+        q=", ".join(f"{m}: {q}" for m, q in substeps.items()), lp_tol=DEPTH_LP_TOLERANCE,
         rel=opt.touch_tolerance, tol=s.tolerance)
     if explorer.data.varying:
         soundness += ("; time-varying inputs " + ", ".join(u.name for u in explorer.data.varying)

@@ -12,6 +12,8 @@ from reach.backends.star.options import DEPTH_LP_TOLERANCE, HIGHS_DEFAULT_TOLERA
 from reach.sets import Box, Star, chord_hull
 from reach.sets.hpolytope import HPolytope
 
+MAX_SUBSAMPLES = 4096        # sub-samples of one cell for its curvature bound (the suite needs at most 56)
+
 
 #: sub-cells of the input bound per sub-sample of :meth:`AffineFlow.curvature` (accuracy)
 INPUT_SUBSTEPS = 4
@@ -122,7 +124,11 @@ class AffineFlow:
         sub-steps with spectral radius of ``delta^2/8 |A^2|`` at most 1/4.
         """
         if h not in self._curvature:
-            q = 1 if self.rho == 0 else max(1, int(np.ceil(h / np.sqrt(2.0 / self.rho))))
+            ratio = 0.0 if self.rho == 0 else h / np.sqrt(2.0 / self.rho)
+            if not ratio <= MAX_SUBSAMPLES:
+                raise ArithmeticError(f"a cell of length {h:.3g} is {ratio:.3g} times the flow's time scale "
+                                      f"(at most {MAX_SUBSAMPLES} sub-samples): set a shorter step")
+            q = max(1, int(np.ceil(ratio)))
             delta = h / q
             Phi, psi = self.step(delta)
             D, d = [], []
