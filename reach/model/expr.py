@@ -364,13 +364,13 @@ def parse_comparison(text, names: Mapping[str, sympy.Expr], where: Where,
         operands = [parser.expr(node) for node in nodes]
     except (RecursionError, OverflowError, MemoryError, ZeroDivisionError):
         raise where.error(f"expression '{text}' is too large to evaluate") from None
+    for value, _ in operands:
+        _check_numbers(value, text, where)
     result = []
     for i, op in enumerate(tree.ops):
         if type(op) not in _COMPARE:
             raise where.error(f"only <=, <, >=, > are allowed in '{text}'")
         (lhs, lf), (rhs, rf) = operands[i], operands[i + 1]
-        _check_numbers(lhs, text, where)
-        _check_numbers(rhs, text, where)
         form = parser.meet(nodes[i], lf, nodes[i + 1], rf, "compared with")
         dimension, unit = dims.display(form, dims.brackets) if dims is not None else (None, None)
         result.append(Comparison(lhs, _COMPARE[type(op)], rhs, dimension, unit))

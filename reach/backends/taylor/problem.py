@@ -253,7 +253,7 @@ class EventProblem:
             # a tolerance the time series cannot meet is loosened (a looser step defect widens the
             # bound but keeps it sound) before the flowpipe is tried
             enc, why = None, ""
-            for loosened in sorted({rel_tol, max(rel_tol, min(10 * rel_tol, LOOSEST_STEP_TOL)), max(rel_tol, LOOSEST_STEP_TOL)}):
+            for loosened in _loosened(rel_tol):
                 try:
                     enc = enclose_stretch(code.f, x0, np.r_[run.nodes[:2], duration], stop, loosened, error)
                 except ArithmeticError as err:
@@ -338,8 +338,6 @@ class EventProblem:
                 enc = self._enclosure(code, x0, x0_error, T - t_earliest, rel_tol, tol)
             except ArithmeticError as err:
                 return _unbounded(str(err))
-            if enc is None:
-                return _unbounded(f"no verified enclosure in mode '{mode}'")
             stretches += 1
             steps, error = steps + len(enc.steps), max(error, float(np.max(enc.error_box)))
             # the start counts for the inner end only if no run can switch at t = 0
@@ -415,7 +413,7 @@ class EventProblem:
         or the argument does not apply). Step ``k - 1`` cannot meet the guard, so every run is
         outside it at the window's start."""
         faces = [affine_coefficients(c.g, self.model.symbols) for c in ex.transition.guard]
-        if k == 0 or any(face is None for face in faces) or not getattr(enc, "crossing_models", True):
+        if k == 0 or any(face is None for face in faces) or not enc.crossing_models:
             return None
         step = enc.steps[k]
         x_start = [at_sigma(p, -1.0) for p in step.poly]
@@ -444,6 +442,12 @@ def _step_box(mode: str, X, step, t_earliest: float, clock: int | None) -> tuple
     else:
         t0, t1 = t_earliest + step.t0, t_earliest + step.t0 + step.h
     return mode, float(t0), float(t1), box[:, 0], box[:, 1]
+
+
+def _loosened(rel_tol: float) -> list[float]:
+    """The step tolerances to try, tightest first: ``rel_tol``, then ten times it and
+    ``LOOSEST_STEP_TOL`` where they are looser (never a tighter one than asked for)."""
+    return sorted({rel_tol, *(t for t in (min(10 * rel_tol, LOOSEST_STEP_TOL), LOOSEST_STEP_TOL) if t > rel_tol)})
 
 
 def _unbounded(why: str) -> dict:

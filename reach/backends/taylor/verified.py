@@ -103,6 +103,7 @@ class Enclosure:
     steps: list[Step]
     radius: np.ndarray                 # len(steps) + 1
     error_box: np.ndarray              # (len(steps), n): |e_i| bound on each step
+    crossing_models = True             # :func:`crossing` may start from its steps (a class constant)
 
     def tm(self, k: int) -> list[TM]:
         """Taylor models of the true state on step ``k`` (polynomial + error box)."""
