@@ -338,7 +338,8 @@ def hylaa_verdict(result: dict) -> str:
     return "SAFE"
 
 
-#: imported SpaceEx instances under models/spaceex/: (model, cfg, Hylaa time step); the cfgs give
+#: imported SpaceEx instances under models/spaceex/: (model, cfg, Hylaa time step[, star options
+#: as in suite.yaml]); the cfgs give
 #: no usable sampling time, so the steps are those of Hylaa's ARCH-COMP AFF runs where there is
 #: one (0.01 s for Building; 5e-4 s in Hylaa's examples/drivetrain, the ARCH-COMP 2018 drivetrain
 #: encoding; 0.1 min in its examples/rendezvous), 1/500 of the horizon for Gearbox, 0.01 s for
@@ -355,6 +356,10 @@ AFF = {
                       "Powertrain/drivetrain_2theta_30percent-forbidden.cfg", 5e-4),
     "PLAD01-BND42": ("Platoon/PLAD01-BND.xml", "Platoon/PLAD01-BND42-forbidden.cfg", 0.01),
     "PLAD01-BND30": ("Platoon/PLAD01-BND.xml", "Platoon/PLAD01-BND30-forbidden.cfg", 0.01),
+    "PLAD01-BND42-h20": ("Platoon/PLAD01-BND.xml", "Platoon/PLAD01-BND42-h20-forbidden.cfg", 0.01,
+                         {"input_cells": 1}),
+    "PLAD01-BND30-h20": ("Platoon/PLAD01-BND.xml", "Platoon/PLAD01-BND30-h20-forbidden.cfg", 0.01,
+                         {"input_cells": 1}),
     "PLAA01-BND50": ("Platoon/PLAA01-BND.xml", "Platoon/PLAA01-BND50-forbidden.cfg", 0.01),
     "PLAN01-UNB50": ("Platoon/PLAN01-UNB.xml", "Platoon/PLAN01-UNB50-forbidden.cfg", 0.01),
     "SRA01-SR0-LOS": ("Rendezvous_ARCH18/SRA01-SR0_.xml", "Rendezvous_ARCH18/SRA01-SR0_-LOS.cfg", 0.1),
@@ -376,7 +381,7 @@ def load_aff(name: str):
     from reach.spec import bind
     from reach.spec.properties import BoundSafety
 
-    xml, cfg, _ = AFF[name]
+    xml, cfg, *rest = AFF[name]
     xml, cfg = ROOT / "models/spaceex" / xml, ROOT / "models/spaceex" / cfg
     model, props, docs = load_spaceex(xml, cfg)
     bound = [bind(p, model) for p in props]
@@ -384,7 +389,7 @@ def load_aff(name: str):
     pieces = {m: [piece for b in bound for piece in b.pieces.get(m, [])] for m in modes}
     from reach.backends.star.options import cfg_hints
     return (model, BoundSafety(docs.property_id, modes, pieces, model.symbols, str(cfg), f"forbidden set of {cfg}"),
-            cfg_hints(docs.model.get("notes", {}), model.horizon, {}))
+            cfg_hints(docs.model.get("notes", {}), model.horizon, dict(rest[1]) if len(rest) > 1 else {}))
 
 
 def compare_aff(name: str, args) -> str:

@@ -29,6 +29,9 @@ import numpy as np
 
 OPTIMAL, INFEASIBLE, UNBOUNDED = "optimal", "infeasible", "unbounded"
 
+#: rows whose largest coefficient is below this are scaled up before HiGHS sees them
+SMALL_ROW = 1e-6
+
 
 class LPError(RuntimeError):
     """No verdict: the solver stopped without one (iteration limit, numerical difficulties), or
@@ -105,6 +108,20 @@ def _model(n: int, bounds, A_ub=None, b_ub=None, A_eq=None, b_eq=None, options=N
         low = np.full(A.shape[0], -infinity) if low is None else np.asarray(low, dtype=float).reshape(-1)
         if not np.isfinite(A).all() or np.isnan(high).any() or np.isnan(low).any():
             raise LPError("an LP row has a non-finite coefficient or a NaN bound")
+        # HiGHS drops coefficients below 1e-9 (small_matrix_value): a row made only of such
+        # (a clock pinned to within 1e-9 s, a tiny input column) would read 0 <= b and could
+        # make a non-empty set infeasible. Such rows are scaled to a largest coefficient of 1
+        # (the same half-space), unless that would push a bound past 1e15 (then the row's
+        # bound dwarfs its coefficients and it is passed as it is)
+        scale = np.abs(A).max(axis=1)
+        tiny = (scale > 0) & (scale < SMALL_ROW)
+        if np.any(tiny):
+            factor = np.where(tiny, 1.0 / np.where(tiny, scale, 1.0), 1.0)
+            with np.errstate(over="ignore", invalid="ignore"):
+                size = np.maximum(np.abs(np.where(np.isfinite(low), low, 0.0)),
+                                  np.abs(np.where(np.isfinite(high), high, 0.0))) * factor
+            factor = np.where(size <= 1e15, factor, 1.0)
+            A, low, high = A * factor[:, None], low * factor, high * factor
         nz = A != 0
         starts = np.concatenate([[0], np.cumsum(nz.sum(axis=1))[:-1]]).astype(np.int32)
         if solver.addRows(A.shape[0], low, high, int(nz.sum()), starts, np.nonzero(nz)[1].astype(np.int32),

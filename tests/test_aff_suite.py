@@ -32,6 +32,8 @@ SOURCES = {
     "bball-speed": ("BouncingBall/bball.xml", "BouncingBall/bball-speed.cfg"),
     "PLAD01-BND42": ("Platoon/PLAD01-BND.xml", "Platoon/PLAD01-BND42-forbidden.cfg"),
     "PLAD01-BND30": ("Platoon/PLAD01-BND.xml", "Platoon/PLAD01-BND30-forbidden.cfg"),
+    "PLAD01-BND42-h20": ("Platoon/PLAD01-BND.xml", "Platoon/PLAD01-BND42-h20-forbidden.cfg"),
+    "PLAD01-BND30-h20": ("Platoon/PLAD01-BND.xml", "Platoon/PLAD01-BND30-h20-forbidden.cfg"),
     "PLAN01-UNB50": ("Platoon/PLAN01-UNB.xml", "Platoon/PLAN01-UNB50-forbidden.cfg"),
     "SRA01-SR0-LOS": ("Rendezvous_ARCH18/SRA01-SR0_.xml", "Rendezvous_ARCH18/SRA01-SR0_-LOS.cfg"),
     "SRA01-SR0-collision": ("Rendezvous_ARCH18/SRA01-SR0_.xml", "Rendezvous_ARCH18/SRA01-SR0_-collision.cfg"),
@@ -45,6 +47,7 @@ SOURCES = {
 }
 #: the imported file's name where it is not the instance's
 FILE = {"PLAD01-BND42": "PLAD01-BND42-forbidden", "PLAD01-BND30": "PLAD01-BND30-forbidden",
+        "PLAD01-BND42-h20": "PLAD01-BND42-h20-forbidden", "PLAD01-BND30-h20": "PLAD01-BND30-h20-forbidden",
         "PLAN01-UNB50": "PLAN01-UNB50-forbidden",
         "SRA01-SR0-LOS": "SRA01-SR0_-LOS", "SRA01-SR0-collision": "SRA01-SR0_-collision",
         "SRNA01-SR0-LOS": "SRNA01-SR0_-LOS", "DTN-2theta-30": "drivetrain_2theta_30percent-forbidden"}
@@ -253,6 +256,20 @@ def test_plad01_least_spacing_over_the_published_horizon_clears_30():
     least = _platoon_least_spacing(model, model.horizon)
     assert -19.0 < least[0] < -18.9 and least[1] > -6.1 and least[2] > -2.4
     assert all(STAR.check(model, prop, {}).status.value == "SAFE" for prop in props)
+
+
+def test_plad01_over_the_reports_horizon_clears_30_and_star_proves_it_with_input_generators():
+    """Over the reports' horizon 20 the least spacing is about -26.8 (e1 near t = 14; e2 -24.1):
+    PLAD01-BND30 is safe. star proves it once the lead acceleration's effect crosses the
+    switches as generators (``input_cells = 1``) and the time-triggered switches are taken at
+    their instant; with the effect as one box per chain the corners it carries through the
+    switch at t = 5 reach past -30 (UNKNOWN, never a wrong answer)."""
+    model, props = _imported("PLAD01-BND30-h20")
+    assert model.horizon == 20.0
+    least = _platoon_least_spacing(model, model.horizon)
+    assert -27.0 < least[0] < -26.5 and -24.5 < least[1] < -23.5 and least[2] > -30
+    assert all(STAR.check(model, prop, {"input_cells": 1}).status.value == "SAFE" for prop in props)
+    assert STAR.check(model, props[1], {}).status.value == "UNKNOWN"
 
 
 def test_filtered_oscillator_x_flows_towards_plus_minus_0p7():

@@ -89,3 +89,17 @@ def test_an_lp_with_non_finite_data_is_an_error_not_a_changed_polyhedron():
     with pytest.raises(lp.LPError):
         lp.maximize_many(np.array([[np.nan, 1.0]]), np.array([[1.0, 1.0]]), np.array([1.0]), box)
     assert lp.maximize(np.array([1.0, 0.0]), [[1.0, 1.0]], [0.0], bounds=box).value == pytest.approx(1.0)
+
+
+@settings(max_examples=40, deadline=None)
+@given(scale=st.floats(1e-14, 1e-7), offset=st.floats(0.1, 0.9))
+def test_a_row_of_tiny_coefficients_keeps_its_half_space(scale, offset):
+    """``scale (x0 + x1) <= -offset scale`` is ``x0 + x1 <= -offset``: HiGHS drops coefficients
+    below 1e-9, which would read the row as ``0 <= -offset scale`` (infeasible); the row is
+    scaled up first, so the polyhedron is non-empty and its support is the true one."""
+    A = scale * np.array([[1.0, 1.0]])
+    b = np.array([-offset * scale])
+    res = lp.maximize([1.0, 1.0], A, b, bounds=[(-1, 1), (-1, 1)], tolerance=1e-10)
+    assert res.optimal and res.value == pytest.approx(-offset, abs=1e-9)
+    assert lp.maximize_many(np.array([[1.0, 0.0]]), A, b, (np.array([-1.0, -1.0]), np.array([1.0, 1.0])))[0] \
+        == pytest.approx(1.0 - offset, abs=1e-9)

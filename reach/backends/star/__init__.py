@@ -27,6 +27,11 @@ Transitions -- urgent ones (the octagon entry) and may-transitions over a clock 
 invariant: that set contains the state at every switching instant inside the cell, so the
 continuum of switching times is covered without aggregation; each such set starts a
 successor star that carries the global clock, so no alignment of time grids is assumed.
+Where the guard leaves a single instant (a switch at ``t == 5``, and a start star whose
+clock is one value up to rounding), the successor is instead the image of the cell's start
+star at that instant, bloated by the instant's width times a bound on ``|x'|``
+(:meth:`_Explorer._at_instant`): no chord, no interpolation error and no second copy of the
+coefficients, so a schedule of switches keeps its stars small.
 Invariants are intersected exactly (predicate rows). Every unsafe convex piece of the
 property is checked per segment: cheap support bounds first (vectorised over the chain),
 an LP on the segment only where they do not exclude the piece.
@@ -104,7 +109,13 @@ that left the mode long ago; so in a mode whose invariant reads a state an input
 chain is explored a few cells at a time, each block restarting ``d`` from the last block's end
 star (grid star plus box, cut by the exact invariant), which holds every run still in the
 mode (:meth:`_Explorer._rebase_cells`). The first half of a bisected cell takes the box at its
-own end, so the box shrinks with the cell near a start. A polytopic initial set (``initial.polytope``) cuts the initial star. A witness is replayed
+own end, so the box shrinks with the cell near a start. The box is exact per component but
+not jointly: a successor that carries it through a jump starts from its corners, which no
+signal reaches together. With ``input_cells = L > 0`` a chain is cut into blocks of ``L``
+cells and each completed block's effect enters the grid stars as generators, two per input
+(the block's mean input and its first Legendre moment, coupled by ``|x| + |y| <= 1``), plus a
+residual box of order ``T^3`` (:class:`.flowpipe.ChainInputs`); only the block in progress
+is a box. A polytopic initial set (``initial.polytope``) cuts the initial star. A witness is replayed
 with the inputs held at its initial values and then with the extremal signal of the piece:
 for the piece row ``h x <= g`` the inputs move most, the LP point of the segment deepest
 along ``-h`` (the other rows kept, so an instant ``t == 20`` stays one) gives the initial
@@ -297,7 +308,14 @@ def _run_details(explorer: _Explorer) -> dict:
         soundness += ("; time-varying inputs " + ", ".join(u.name for u in explorer.data.varying)
                       + ": their effect up to the end of a cell bounded by the box R(t) = int_0^t "
                         "|e^{A s} B| u_r ds (t since the chain or block started; chords of e^{A s} B plus "
-                        "a curvature bound), for any measurable signal in the input box")
+                        "a curvature bound), for any measurable signal in the input box"
+                      + ("" if not opt.input_cells else
+                         f"; completed blocks of {opt.input_cells} cells carried as "
+                         "generators (mean and first moment of the input, |x| + |y| <= 1) plus "
+                         "their residual box, moved with the flow"))
+    if s.instants:
+        soundness += (f"; {s.instants} jumps at a single instant taken from the image of their cell's start "
+                      f"star at that instant, bloated by the instant's width times a bound on |x'|")
     if s.rebased:
         soundness += (f"; {s.rebased} chain blocks restarted the input effect from the previous block's "
                       f"end star (grid star plus R, cut by the invariant), which holds every run still "
@@ -322,7 +340,7 @@ def _run_details(explorer: _Explorer) -> dict:
             "jumps": s.jumps, "latest_chain_start": s.reached, "aggregates": s.aggregated,
             "aggregated_stars": s.members, "refined_aggregates": s.deaggregated,
             "covered_aggregates": 0 if explorer.covered is None else explorer.covered.pruned,
-            "rebased_blocks": s.rebased}
+            "rebased_blocks": s.rebased, "instant_jumps": s.instants}
 
 
 BACKEND = StarBackend()

@@ -11,14 +11,15 @@ import numpy as np
 
 from reach.backends.star.aggregation import _Aggregate, interval_hull
 from reach.backends.star.fixpoint import Covered, enlarged, time_invariant
-from reach.backends.star.flowpipe import (_block_spreads, _chain_abs_bounds, _chain_bounds, _depth,
+from reach.backends.star.flowpipe import (ChainInputs, _block_spreads, _chain_abs_bounds, _chain_bounds, _depth,
                                           _plus_box, _segment, _tightened)
-from reach.backends.star.options import (ERROR_RATIO, MAX_CELLS, MAX_CHAIN_BYTES, NAME, PROGRESS_SECONDS,
-                                         STALL_JUMPS, TIGHT_RATIO, StarOptions)
+from reach.backends.star.options import (ERROR_RATIO, INSTANT_WIDTH, MAX_CELLS, MAX_CHAIN_BYTES, MEMORY_FRACTION, NAME,
+                                         PROGRESS_SECONDS, STALL_JUMPS, TIGHT_RATIO, StarOptions)
 from reach.backends.star.switching import group_pieces
 from reach.backends.star.transitions import (_LinearModel, _modes_leading_to, _Piece,
                                              _unsafe_pieces, kept_rows)
 from reach.backends.star.witnesses import _Witness, extremal_signal, nearest_point, signal_pieces, trace
+from reach.memory import physical_bytes, resident_bytes
 from reach.result import Status
 from reach.sets import Box, Star
 
@@ -98,6 +99,7 @@ class _Stats:
     members: int = 0                # successor stars they stand for
     deaggregated: int = 0           # aggregates refined back into their members
     rebased: int = 0                # block ends of chains with inputs (see _rebase_cells)
+    instants: int = 0               # jumps taken at one instant (see _at_instant)
 
 
 class _Explorer:
@@ -262,6 +264,7 @@ class _Explorer:
         """
         if mode not in self.relevant:
             return
+        self._memory_guard()
         star, point = self._start(star, guess, direction)
         if star is None:
             return
@@ -285,9 +288,10 @@ class _Explorer:
         count = max(1, int(np.ceil((self.horizon - t0) / h - 1e-9)))
         handoff = block is not None and block < count
         count = block if handoff else count
-        segment_vars = star.nvars if flow.drift else 2 * star.nvars + 1 + self.n
+        nvars = star.nvars + (ChainInputs.generators(flow, count, self.opt.input_cells) if flow.inputs else 0)
+        segment_vars = nvars if flow.drift else 2 * nvars + 1 + self.n
         if segment_vars > self.opt.max_coefficients or \
-                8 * 3 * (count + 1) * self.n * (star.nvars + 1) > MAX_CHAIN_BYTES:
+                8 * 3 * (count + 1) * self.n * (nvars + 1) > MAX_CHAIN_BYTES:
             raise _Stop(Status.UNKNOWN, f"a segment in mode '{mode}' needs {segment_vars} coefficients "
                                         f"over {count} steps (limits: option max_coefficients = "
                                         f"{self.opt.max_coefficients}, {MAX_CHAIN_BYTES >> 20} MiB per "
@@ -296,16 +300,22 @@ class _Explorer:
         self.stats.reached = max(self.stats.reached, t0)
         self._progress()
         Phis, psis = flow.powers(h, count)
-        dev = flow.deviation(h, count)          # input effect bound per grid point, or None
+        inputs = ChainInputs(flow, h, count, self.opt.input_cells) if flow.inputs else None
+        if inputs is not None and inputs.count:                  # the blocks' generators
+            star = inputs.extend(star)
+            point = np.concatenate([point, np.zeros(inputs.count)])   # input at its centre
+        dev = None if inputs is None else inputs.grid             # the box left per grid point
         centers = star.center @ np.swapaxes(Phis, 1, 2) + psis
         bases = np.einsum("jab,bm->jam", Phis, star.basis)
+        if inputs is not None and inputs.count:
+            bases[:, :, -inputs.count:] += inputs.columns
         box = star.box
         Hi, gi = self.invariants[mode]
 
         # invariant: the first grid star entirely outside ends the chain; rows that are not
         # implied by the coefficient box join the predicate exactly, step by step. With
-        # inputs the grid stars are input-free runs x_free, |x - x_free| <= R_j: the rows are
-        # relaxed to H x_free <= g + |H| R_j (every run inside the invariant satisfies them)
+        # inputs the grid stars hold the runs up to the box ``dev_j`` (:class:`ChainInputs`):
+        # the rows are relaxed by |H| dev_j (every run inside the invariant satisfies them)
         last = count
         extra = {}
         if Hi.shape[0]:
@@ -356,8 +366,8 @@ class _Explorer:
             D, d, F, _ = flow.curvature(h)
             samples = _chain_abs_bounds(centers[:last], bases[:last], box, D, d).max(axis=1)
             error = h * h / 8 * samples @ F.T
-            if dev is not None:
-                error = error + dev[1:last + 1]          # the whole cell, R non-decreasing
+            if inputs is not None:
+                error = error + inputs.cell[:last]       # the whole cell
         for piece in self.pieces.get(mode, []):
             candidates |= self._screen(centers, bases, box, error, piece.H, piece.g, cells)
         for jump in self.jumps[mode]:
@@ -370,8 +380,13 @@ class _Explorer:
                      and path.jumps >= self.aggregate_after)
         pending: dict[int, list] | None = None if not aggregate else {} if collect is None else collect
         for j in sorted(candidates):
-            spread = None if dev is None else dev[j] if self.opt.discrete_time else dev[j + 1]
-            self._cell(mode, grid_star(j), h, path, 0, point, pending, spread, j * h)
+            if inputs is None:
+                self._cell(mode, grid_star(j), h, path, 0, point, pending)
+            elif self.opt.discrete_time:
+                self._cell(mode, grid_star(j), h, path, 0, point, pending, dev[j])
+            else:
+                self._cell(mode, grid_star(j), h, path, 0, point, pending, inputs.cell[j],
+                           inputs.since[j], inputs.carried[j])
         if collect is None:
             self._aggregate_pending(mode, pending)
         if handoff and ended_inside:
@@ -429,6 +444,15 @@ class _Explorer:
         t1 = max(float(s.support_bounds(clock)[0]) for s in stars)
         self.sets.append(SetPiece(mode, t0, t1, "star", names, tuple(stars),
                                   None if bloat is None else np.asarray(bloat, float)))
+
+    def _memory_guard(self):
+        """UNKNOWN once the process holds more than ``MEMORY_FRACTION`` of the machine's memory
+        (the stars' predicates grow with jumps and refinement; no out-of-memory kill)."""
+        held, limit = resident_bytes(), MEMORY_FRACTION * physical_bytes()
+        if held > limit:
+            raise _Stop(Status.UNKNOWN, f"memory: the exploration holds {held / 2**30:.1f} GiB, more than "
+                                        f"{MEMORY_FRACTION:.0%} of this machine's {physical_bytes() / 2**30:.0f} GiB "
+                                        f"(coarser step, fewer coefficients or sooner aggregation)")
 
     def _progress(self):
         now = time.perf_counter()
@@ -527,7 +551,7 @@ class _Explorer:
         return (_tightened(seg, len(gi)) or seg) if self.flows[mode].drift else seg, error
 
     def _cell(self, mode: str, start: Star, h: float, path: _Path, depth: int, point, pending=None,
-              spread=None, since: float = 0.0):
+              spread=None, since: float = 0.0, carried=0.0):
         """Check one cell and launch its successors; bisect when a failure is blamed on it.
 
         The segment's own coefficients are the block starting at ``start.nvars``; a failure
@@ -535,12 +559,14 @@ class _Explorer:
         the cell owning that block is bisected. ``point``: coefficients of a point of
         ``start`` (passed on as a guess to successors). ``pending``: where successors to be
         aggregated are collected (per outgoing jump), None to explore them at once.
-        ``spread``: bound of the input effect on the cell (None without inputs), ``since``: the
-        time from the start of the input effect to the cell's start; the second half keeps
-        ``spread``, the first takes the bound at its own end (:meth:`_half_spread`).
+        ``spread``: bound of the input effect on the cell (None without inputs): ``carried``
+        (the remainders of completed input blocks, :class:`.flowpipe.ChainInputs`) plus the
+        effect of the block in progress, which started ``since`` before the cell; the second
+        half keeps ``spread``, the first takes the bound at its own end (:meth:`_half_spread`).
         """
         if self._past_cutoff(start, path):
             return
+        self._memory_guard()
         seg, error = self._segment(mode, start, h, spread)
         final = depth >= self.opt.max_refinements or self.opt.discrete_time or self.flows[mode].drift
         block = start.nvars
@@ -551,7 +577,7 @@ class _Explorer:
             if self.opt.keep_sets:
                 self._keep(mode, (seg,))
             self._check_segment(mode, seg, path, block, not final)
-            self._jump_from(mode, seg, path, block, not final, point, pending)
+            self._jump_from(mode, seg, path, block, not final, point, pending, (start, spread))
         except _Refine as failure:
             if final or failure.blame != block:
                 raise
@@ -559,17 +585,18 @@ class _Explorer:
             self.stats.refined += 1
             self.stats.deepest = max(self.stats.deepest, depth + 1)
             half = h / 2
-            first = self._half_spread(mode, spread, since, half)
-            self._cell(mode, start, half, path, depth + 1, point, pending, first, since)
+            first = self._half_spread(mode, spread, since, half, carried)
+            self._cell(mode, start, half, path, depth + 1, point, pending, first, since, carried)
             mid = start.affine_map(*self.flows[mode].step(half))
             Hi, gi = self.invariants[mode]       # relaxed by the input effect, as on the grid
             mid = mid.intersect_halfspaces(Hi, gi if first is None else gi + np.abs(Hi) @ first)
             mid, mid_point = self._start(mid, point)
             if mid is not None:
-                self._cell(mode, mid, half, path, depth + 1, mid_point, pending, spread, since + half)
+                self._cell(mode, mid, half, path, depth + 1, mid_point, pending, spread, since + half,
+                           carried)
 
-    def _half_spread(self, mode: str, spread, since: float, half: float):
-        """The input-effect bound ``R(since + half)`` of the first half of a bisected cell
+    def _half_spread(self, mode: str, spread, since: float, half: float, carried=0.0):
+        """The input-effect bound ``carried + R(since + half)`` of the first half of a bisected cell
         (:meth:`.flowpipe.AffineFlow.deviation` on the grid of step ``half``), or ``spread``, the
         bound of the whole cell (``R`` is non-decreasing), when that grid would exceed
         :data:`HALF_SPREAD_CELLS` cells. Near the start of the input effect (a jump, or a block
@@ -580,7 +607,7 @@ class _Explorer:
         if k > HALF_SPREAD_CELLS:
             return spread
         count = 1 << (k - 1).bit_length()          # tables of 2^i cells: each built once
-        return np.minimum(spread, self.flows[mode].deviation(half, count)[k])
+        return np.minimum(spread, carried + self.flows[mode].deviation(half, count)[k])
 
     def _transient(self, mode: str, seg: Star, error) -> bool:
         """Whether the interpolation error of a segment, along a guard row of the mode's
@@ -685,7 +712,7 @@ class _Explorer:
         return self._earliest(seg)
 
     def _jump_from(self, mode: str, seg: Star, path: _Path, block: int, own_open: bool, point,
-                   pending=None):
+                   pending=None, cell=None):
         for index, jump in enumerate(self.jumps[mode]):
             if jump.target not in self.relevant:
                 continue
@@ -702,6 +729,11 @@ class _Explorer:
                 entered = _tightened(entered, len(g))
                 if entered is None or np.any(-entered.support_bounds(-jump.H) > jump.g):
                     continue
+            instant = None if cell is None or self.flows[mode].drift else \
+                self._at_instant(mode, entered, seg, H, g, *cell)
+            if instant is not None:
+                entered = instant
+                self.stats.instants += 1
             clock = _Entry(jump.name, jump.window is not None,
                            float(entered.center[self.clock]), entered.basis[self.clock].copy(),
                            jump.window is None or jump.window[0] == self.clock)
@@ -722,12 +754,54 @@ class _Explorer:
             # (a, s) from s = 0 to 1 in a constant-flow mode
             m, pad = point.size, successor.nvars - point.size
             guess = np.concatenate([point, np.zeros(pad)])
-            if self.flows[mode].drift and not self.opt.discrete_time:
+            if instant is not None:              # the start's point, moved with the flow
+                direction = None
+            elif self.flows[mode].drift and not self.opt.discrete_time:
                 direction = np.concatenate([np.zeros(m), [1.0]]) if pad == 1 else None
             else:
                 direction = np.concatenate([np.zeros(m), point, [1.0], np.zeros(pad - m - 1)]) \
                     if pad > m else None
             self._chain(jump.target, successor, descended, guess, direction)
+
+    def _at_instant(self, mode: str, entered: Star, seg: Star, H, g, start: Star, spread) -> Star | None:
+        """The runs that take a time-triggered jump out of a cell, as an image of the cell's start
+        star, or None where that does not apply.
+
+        It applies when the runs of ``start`` have their clocks in ``[first, last]`` and the
+        guard leaves the clock of ``entered`` (the segment cut by the guard, bound-propagated)
+        in ``[lo, hi]``, with ``hi - first`` at rounding level past ``lo - last`` (a switch at
+        ``t == 5`` by guard and invariant). A run from clock ``s`` that jumps at ``t*`` has
+        flowed ``d = t* - s`` in ``[tau, tau + w]``, ``tau = max(0, lo - last)``,
+        ``w = hi - first - tau``. At ``s + tau`` its
+        state is ``x_free + dev``: the input-free run ``Phi(tau) x0 + psi(tau)`` from its point
+        ``x0`` of ``start`` plus the input's effect, within ``spread`` as on the segment. From
+        ``s + tau`` to ``t*`` it stays in the mode and the cell, so in the segment, where
+        ``|x'| <= v = |A| |x| + |b| + |B| u_r``: it moves at most ``w v``. So the image
+        ``Phi(tau) start`` plus the box ``spread + w v`` holds ``x(t*)`` (the clock's own ``v``
+        is 1: the box spans ``[lo, hi]`` in the clock), cut by the invariant and the guard,
+        which ``x(t*)`` satisfies. Unlike the segment it carries no second copy of the
+        coefficients and no interpolation error, so a schedule of switches keeps stars small
+        and tight."""
+        if self.opt.discrete_time:
+            return None
+        clock = self.clock_row[None]
+        first, last = -float(start.support_bounds(-clock)[0]), float(start.support_bounds(clock)[0])
+        tightened = _tightened(entered, len(g))
+        if tightened is None:
+            return None
+        lo, hi = -float(tightened.support_bounds(-clock)[0]), float(tightened.support_bounds(clock)[0])
+        tau = max(0.0, lo - last)            # a run jumps no earlier than its cell start
+        w = max(0.0, (hi - first) - tau)
+        if not (w <= INSTANT_WIDTH * max(1.0, abs(hi))):
+            return None
+        flow = self.flows[mode]
+        size = np.abs(seg.support_bounds(np.vstack([np.eye(self.n), -np.eye(self.n)]))).reshape(2, -1).max(axis=0)
+        speed = np.abs(flow.A) @ size + np.abs(flow.b)
+        if flow.inputs:
+            speed = speed + np.abs(flow.B) @ flow.u_radius
+        bloat = w * speed + (0.0 if spread is None else spread)
+        image = _plus_box(start.affine_map(*flow.step(tau)), bloat)
+        return image.intersect_halfspaces(*self.invariants[mode]).intersect_halfspaces(H, g)
 
     # ---- witnesses
 

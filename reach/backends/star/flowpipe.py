@@ -60,6 +60,8 @@ class AffineFlow:
         self._powers: dict[float, tuple[np.ndarray, np.ndarray]] = {}
         self._curvature: dict[float, tuple] = {}
         self._deviation: dict[float, np.ndarray] = {}
+        self._blocks: dict[tuple[float, int], tuple[np.ndarray, np.ndarray]] = {}
+        self._growth: dict[float, np.ndarray] = {}
 
     def deviation(self, h: float, count: int) -> np.ndarray | None:
         """``R_j >= sup_{t <= j h} |d(t)|`` for ``j = 0..count`` (``(count + 1, n)``), or None
@@ -92,6 +94,67 @@ class AffineFlow:
             R = np.vstack([np.zeros(self.n), np.cumsum(steps, axis=0)])
             self._deviation[h] = R
         return R[:count + 1]
+
+    def input_block(self, h: float, cells: int):
+        """``(S, eps)`` for a block of ``cells`` cells of length ``h``: the block's input effect
+        ``v = int_0^T G(r) (u(T - r) - u_c) dr`` (``G(r) = e^{A r} B``, ``T = cells h``, any
+        measurable signal in the input box) lies in ``{S w} + [-eps, eps]``, ``w = (x, y)``
+        per input with ``|x| + |y| <= 1``, ``|y| <= 1/2`` (``S``: ``(n, 2 p)``, the ``x``
+        columns first).
+
+        ``G`` is split as its Legendre fit ``c0 + c1 phi(r)`` (``phi = (2 r - T) / T``,
+        ``c0`` its mean, ``c1 = (3/T) int G phi``) plus a residual:
+        ``v = c0 int ũ + c1 int phi ũ + int (G - c0 - c1 phi) ũ`` with ``ũ = u(T - .) - u_c``.
+        Per input, ``x = int ũ / (T u_r)`` and ``y = int phi ũ / (T u_r)`` satisfy
+        ``s1 x + s2 y = int (s1 + s2 phi) ũ / (T u_r) <= int (1 + s1 s2 phi) / T = 1`` for all
+        signs (``|phi| <= 1``, ``int phi = 0``) and ``|y| <= int |phi| / T = 1/2``; the columns
+        are ``T u_r c0`` and ``T u_r c1``. The residual is at most ``eps = int |G - c0 - c1 phi|
+        dr u_r`` per component, bounded as :meth:`deviation` bounds ``int |G|``: chords on
+        sub-cells plus the closure bound on the residual's curvature ``A^2 G`` (``phi`` is
+        linear). The fit is exact to first order, so ``eps = O(T^3 |A^2 B| u_r)``, and the
+        coupling row keeps the support exact where ``G``'s component keeps its sign."""
+        key = (h, cells)
+        if key not in self._blocks:
+            q = self.curvature(h)[3] * INPUT_SUBSTEPS
+            delta, total = h / q, cells * h
+            n, p = self.B.shape
+            aug = np.zeros((n + 2 * p, n + 2 * p))      # int_0^T G and int_0^T r G by expm
+            aug[:n, :n], aug[:n, n:n + p], aug[n:n + p, n + p:] = self.A, self.B, np.eye(p)
+            E = expm(aug * total)
+            integral, moment = E[:n, n:n + p], E[:n, n + p:]           # int G, int (T - r) G
+            c0 = integral / total
+            c1 = 3 / total * (2 * (total * integral - moment) / total - integral)  # (3/T) int G phi
+            F = np.linalg.inv(np.eye(n) - delta ** 2 / 8 * np.abs(self.A2))
+            Phi_delta = self.step(delta)[0]
+            chord, curv, G = 0.0, 0.0, self.B[None]
+            for cell in range(cells):                # one cell's sub-samples at a time (memory)
+                for _ in range(q):
+                    G = np.concatenate([G, (Phi_delta @ G[-1])[None]])
+                phi = (2 * delta * np.arange(cell * q, (cell + 1) * q + 1) - total) / total
+                residual = G - c0 - phi[:, None, None] * c1
+                absY = np.abs(np.einsum("ab,lbp->lap", self.A2, G))
+                chord = chord + _abs_chord_integral(residual[:-1], residual[1:], delta).sum(axis=0)
+                curv = curv + delta ** 3 / 12 * F @ np.maximum(absY[:-1], absY[1:]).sum(axis=0)
+                G = G[-1:]
+            S = np.hstack([total * c0 * self.u_radius, total * c1 * self.u_radius])
+            self._blocks[key] = (S, (chord + curv) @ self.u_radius)
+        return self._blocks[key]
+
+    def cell_growth(self, h: float) -> np.ndarray:
+        """``K >= 0`` with ``sup_{0 <= tau <= h} |e^{A tau} e| <= K |e|`` componentwise for
+        every ``e``: on each sub-cell of :meth:`curvature`, ``|y| <= max(|y_l|, |y_{l+1}|) +
+        delta^2/8 sup |y''|`` for ``y = e^{A tau} e`` (chord plus interpolation error) and
+        ``sup |y''| <= F max(|A^2 y_l|, |A^2 y_{l+1}|)`` (closure), with ``y_l = P_l e``."""
+        if h not in self._growth:
+            D, _, F, q = self.curvature(h)
+            delta = h / q
+            Phi_delta = self.step(delta)[0]
+            P, powers = np.eye(self.n), []
+            for _ in range(q + 1):
+                powers.append(np.abs(P))
+                P = Phi_delta @ P
+            self._growth[h] = np.max(powers, axis=0) + delta ** 2 / 8 * F @ np.max(np.abs(D), axis=0)
+        return self._growth[h]
 
     def step(self, h: float):
         """``(Phi, psi)`` with ``x(t + h) = Phi x(t) + psi``."""
@@ -140,6 +203,80 @@ class AffineFlow:
             F = np.linalg.inv(np.eye(self.n) - delta ** 2 / 8 * np.abs(self.A2))
             self._curvature[h] = (np.array(D), np.array(d), F, q)
         return self._curvature[h]
+
+
+class ChainInputs:
+    """The effect of time-varying inputs along a chain of ``count`` cells of length ``h`` from
+    its start (:meth:`.explorer._Explorer._flow_chain`), split into generators and boxes.
+
+    The chain is cut into ``nb = floor(count / L)`` blocks of ``L`` cells (``L = 0``: one box
+    from the chain's start, no generators). A completed block's effect is
+    ``S w_b + e_b`` (:meth:`AffineFlow.input_block`, ``|w_b| <= 1``, ``|e_b| <= eps``), carried
+    to grid point ``j`` by ``Phi_{j - (b+1) L}``: the generators enter the grid stars as new
+    coefficients (``columns``, ``(count + 1, n, nb p)``, zero before the block ends), so a
+    successor keeps the input's directions instead of a box around them. What is left is a box:
+
+    * ``grid[j] = R(j - s_j) + E_j`` at grid point ``j``, with ``s_j`` the start of the block
+      in progress, ``R`` the exact-support bound of :meth:`AffineFlow.deviation` (the block in
+      progress) and ``E_j = sum_b |Phi_{j - (b+1) L}| eps`` (the completed blocks' remainders);
+    * ``cell[j] = R(j + 1 - s_j) + K E_j`` over cell ``j`` (``K``: :meth:`AffineFlow.cell_growth`,
+      the remainders moving with the flow inside the cell; ``R`` non-decreasing);
+    * ``since[j] = (j - s_j) h`` and ``carried[j] = K E_j``: for bisected cells, whose first
+      half takes ``carried + R(since + h/2)`` (:meth:`.explorer._Explorer._half_spread`).
+
+    Every run is ``x_free + sum_b Phi S w_b + rest`` with ``x_free`` the run at the input's
+    centre from the same state and ``|rest|`` within the box, so grid stars plus ``grid`` and
+    segments (hulls of grid stars, which hold the generators) plus ``cell`` cover it."""
+
+    def __init__(self, flow: AffineFlow, h: float, count: int, cells: int):
+        n = flow.n
+        L = self._cells(count, cells)
+        nb, p = count // L, flow.B.shape[1]
+        self.count = 2 * nb * p                  # (x, y) per block and input, x columns first
+        k = nb * p                               # |x| + |y| <= 1 for each pair
+        signs = np.array([[1, 1], [1, -1], [-1, 1], [-1, -1]], dtype=float)
+        self.rows = np.zeros((4 * k, self.count))
+        for i in range(k):
+            self.rows[4 * i:4 * i + 4, [i, k + i]] = signs
+        self.high = np.concatenate([np.ones(k), np.full(k, 0.5)])
+        starts = L * np.minimum(np.arange(count + 1) // L, nb)   # block in progress at grid j
+        R = flow.deviation(h, min(L, count))
+        self.columns = np.zeros((count + 1, n, self.count))
+        E = np.zeros((count + 1, n))
+        if nb:
+            S, eps = flow.input_block(h, L)
+            Phis, _ = flow.powers(h, count)
+            for b in range(nb):
+                end = (b + 1) * L
+                moved = Phis[:count + 1 - end]
+                self.columns[end:, :, b * p:(b + 1) * p] = moved @ S[:, :p]
+                self.columns[end:, :, k + b * p:k + (b + 1) * p] = moved @ S[:, p:]
+                E[end:] += np.abs(Phis[:count + 1 - end]) @ eps
+        j = np.arange(count + 1)
+        self.grid = R[j - starts] + E
+        carried = E[:-1] @ flow.cell_growth(h).T
+        self.cell = R[j[:-1] + 1 - starts[:-1]] + carried
+        self.carried, self.since = carried, (j[:-1] - starts[:-1]) * h
+
+    @staticmethod
+    def _cells(count: int, cells: int) -> int:
+        """Cells per block (``count + 1``, no completed block, when ``cells`` is 0)."""
+        return cells if cells else count + 1
+
+    @staticmethod
+    def generators(flow: AffineFlow, count: int, cells: int) -> int:
+        """How many coefficients the generators add to a chain of ``count`` cells."""
+        return 2 * (count // ChainInputs._cells(count, cells)) * flow.B.shape[1]
+
+    def extend(self, star: Star) -> Star:
+        """``star`` with the generators' coefficients (zero columns: the same set; the chain
+        adds the columns to its images), their box and coupling rows."""
+        A, m = star.predicate.A, star.nvars
+        rows = np.vstack([np.hstack([A, np.zeros((A.shape[0], self.count))]),
+                          np.hstack([np.zeros((self.rows.shape[0], m)), self.rows])])
+        predicate = HPolytope(rows, np.concatenate([star.predicate.b, np.ones(self.rows.shape[0])]))
+        box = Box(np.append(star.box.low, -self.high), np.append(star.box.high, self.high))
+        return Star(star.center, np.hstack([star.basis, np.zeros((star.dim, self.count))]), predicate, box)
 
 
 def _abs_chord_integral(a, b, delta):

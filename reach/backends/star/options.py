@@ -30,8 +30,16 @@ STALL_JUMPS = 10
 MAX_CELLS = 1_000_000             # grid cells over the horizon (horizon / step) a check may start with
 
 
+#: a jump whose guard leaves its clock within this relative width is taken at one instant
+#: (:meth:`.explorer._Explorer._at_instant`)
+INSTANT_WIDTH = 1e-9
+
 #: the grid stacks of one chain may take at most this many bytes (memory guard)
 MAX_CHAIN_BYTES = 1 << 30
+
+#: the whole check may hold at most this fraction of the machine's memory (resident set, read
+#: at every chain and cell; beyond it the answer is UNKNOWN, never an out-of-memory kill)
+MEMORY_FRACTION = 0.4
 
 
 #: seconds between two progress lines (logger ``reach.star``, shown under ``-v``)
@@ -89,6 +97,10 @@ class StarOptions:
     switching: modes that may switch to one another at any instant (unguarded, reset-free
         may-transitions both ways, one invariant) are explored as one differential inclusion
         per group (:mod:`.switching`); false: mode by mode, every cell a possible switch.
+    input_cells: a chain with time-varying inputs is cut into blocks of this many cells, each
+        completed block's effect carried by generators (two coefficients per input) plus a
+        small box (:class:`.flowpipe.ChainInputs`); 0: the effect since the chain's start as
+        one box (exact per state, not jointly).
     """
 
     step: float | None = None
@@ -111,6 +123,7 @@ class StarOptions:
     linearise_margin: float = 0.1
     rebase_cells: int = ranged(2, 0)
     switching: bool = True
+    input_cells: int = ranged(0, 0)
 
     @classmethod
     def from_dict(cls, options: dict | None) -> "StarOptions":
