@@ -132,6 +132,7 @@ class _Explorer:
         self.aggregate_after = None if self.sweep else options.aggregate_after
         self.covered = Covered(self.clock) if time_invariant(model) and not options.keep_sets else None
         self.last_progress = time.perf_counter()
+        self.memory_limit = MEMORY_FRACTION * physical_bytes()
         self.pieces = {mode: [_Piece(data.widen(p.H, p.g)[0], p.g, p.strict, p.label) for p in pieces]
                        for mode, pieces in _unsafe_pieces(prop).items()} if data.added_clock \
             else _unsafe_pieces(prop)
@@ -448,10 +449,11 @@ class _Explorer:
     def _memory_guard(self):
         """UNKNOWN once the process holds more than ``MEMORY_FRACTION`` of the machine's memory
         (the stars' predicates grow with jumps and refinement; no out-of-memory kill)."""
-        held, limit = resident_bytes(), MEMORY_FRACTION * physical_bytes()
-        if held > limit:
+        held = resident_bytes()
+        if held > self.memory_limit:
             raise _Stop(Status.UNKNOWN, f"memory: the exploration holds {held / 2**30:.1f} GiB, more than "
-                                        f"{MEMORY_FRACTION:.0%} of this machine's {physical_bytes() / 2**30:.0f} GiB "
+                                        f"{MEMORY_FRACTION:.0%} of this machine's "
+                                        f"{self.memory_limit / MEMORY_FRACTION / 2**30:.0f} GiB "
                                         f"(coarser step, fewer coefficients or sooner aggregation)")
 
     def _progress(self):

@@ -126,13 +126,14 @@ class AffineFlow:
             c1 = 3 / total * (2 * (total * integral - moment) / total - integral)  # (3/T) int G phi
             F = np.linalg.inv(np.eye(n) - delta ** 2 / 8 * np.abs(self.A2))
             Phi_delta = self.step(delta)[0]
-            chord, curv, G = 0.0, 0.0, self.B[None]
+            chord, curv, G = 0.0, 0.0, [self.B]
             for cell in range(cells):                # one cell's sub-samples at a time (memory)
                 for _ in range(q):
-                    G = np.concatenate([G, (Phi_delta @ G[-1])[None]])
+                    G.append(Phi_delta @ G[-1])
+                samples = np.array(G)
                 phi = (2 * delta * np.arange(cell * q, (cell + 1) * q + 1) - total) / total
-                residual = G - c0 - phi[:, None, None] * c1
-                absY = np.abs(np.einsum("ab,lbp->lap", self.A2, G))
+                residual = samples - c0 - phi[:, None, None] * c1
+                absY = np.abs(np.einsum("ab,lbp->lap", self.A2, samples))
                 chord = chord + _abs_chord_integral(residual[:-1], residual[1:], delta).sum(axis=0)
                 curv = curv + delta ** 3 / 12 * F @ np.maximum(absY[:-1], absY[1:]).sum(axis=0)
                 G = G[-1:]
@@ -147,13 +148,8 @@ class AffineFlow:
         ``sup |y''| <= F max(|A^2 y_l|, |A^2 y_{l+1}|)`` (closure), with ``y_l = P_l e``."""
         if h not in self._growth:
             D, _, F, q = self.curvature(h)
-            delta = h / q
-            Phi_delta = self.step(delta)[0]
-            P, powers = np.eye(self.n), []
-            for _ in range(q + 1):
-                powers.append(np.abs(P))
-                P = Phi_delta @ P
-            self._growth[h] = np.max(powers, axis=0) + delta ** 2 / 8 * F @ np.max(np.abs(D), axis=0)
+            P = self.powers(h / q, q)[0]                         # P_l = e^{A l delta}
+            self._growth[h] = np.abs(P).max(axis=0) + (h / q) ** 2 / 8 * F @ np.abs(D).max(axis=0)
         return self._growth[h]
 
     def step(self, h: float):
@@ -251,10 +247,10 @@ class ChainInputs:
                 moved = Phis[:count + 1 - end]
                 self.columns[end:, :, b * p:(b + 1) * p] = moved @ S[:, :p]
                 self.columns[end:, :, k + b * p:k + (b + 1) * p] = moved @ S[:, p:]
-                E[end:] += np.abs(Phis[:count + 1 - end]) @ eps
+                E[end:] += np.abs(moved) @ eps
         j = np.arange(count + 1)
         self.grid = R[j - starts] + E
-        carried = E[:-1] @ flow.cell_growth(h).T
+        carried = E[:-1] @ flow.cell_growth(h).T if nb else E[:-1]
         self.cell = R[j[:-1] + 1 - starts[:-1]] + carried
         self.carried, self.since = carried, (j[:-1] - starts[:-1]) * h
 
