@@ -47,6 +47,7 @@ class LPResult:
     status: str
     value: float | None = None
     x: np.ndarray | None = None
+    duals: np.ndarray | None = None     # the solver's duals of the A_ub rows (its signs)
 
     @property
     def optimal(self) -> bool:
@@ -113,15 +114,7 @@ def _model(n: int, bounds, A_ub=None, b_ub=None, A_eq=None, b_eq=None, options=N
         # make a non-empty set infeasible. Such rows are scaled to a largest coefficient of 1
         # (the same half-space), unless that would push a bound past 1e15 (then the row's
         # bound dwarfs its coefficients and it is passed as it is)
-        scale = np.abs(A).max(axis=1)
-        tiny = (scale > 0) & (scale < SMALL_ROW)
-        if np.any(tiny):
-            factor = np.where(tiny, 1.0 / np.where(tiny, scale, 1.0), 1.0)
-            with np.errstate(over="ignore", invalid="ignore"):
-                size = np.maximum(np.abs(np.where(np.isfinite(low), low, 0.0)),
-                                  np.abs(np.where(np.isfinite(high), high, 0.0))) * factor
-            factor = np.where(size <= 1e15, factor, 1.0)
-            A, low, high = A * factor[:, None], low * factor, high * factor
+        A, low, high = _scaled_rows(A, low, high)
         nz = A != 0
         starts = np.concatenate([[0], np.cumsum(nz.sum(axis=1))[:-1]]).astype(np.int32)
         if solver.addRows(A.shape[0], low, high, int(nz.sum()), starts, np.nonzero(nz)[1].astype(np.int32),
@@ -156,13 +149,32 @@ def minimize(c, A_ub=None, b_ub=None, *, A_eq=None, b_eq=None, bounds=None,
         solver.clearSolver()
         s = _run(solver)
     if s == status.kOptimal:
+        solution = solver.getSolution()
+        rows = 0 if A_ub is None else np.size(A_ub) // n
         return LPResult(OPTIMAL, float(solver.getInfo().objective_function_value),
-                        np.asarray(solver.getSolution().col_value, dtype=float))
+                        np.asarray(solution.col_value, dtype=float),
+                        np.asarray(solution.row_dual, dtype=float)[:rows])
     if s == status.kInfeasible:
         return LPResult(INFEASIBLE)
     if s == status.kUnbounded:
         return LPResult(UNBOUNDED)
     raise LPError(f"LP solver stopped without a verdict: {solver.modelStatusToString(s)}")
+
+
+def _scaled_rows(A, low, high):
+    """``low <= A x <= high`` with every row whose coefficients are all below
+    :data:`SMALL_ROW` scaled to a largest coefficient of 1, unless that would push a bound
+    past 1e15 (the same half-spaces; see :func:`_model`)."""
+    scale = np.abs(A).max(axis=1) if A.size else np.zeros(A.shape[0])
+    tiny = (scale > 0) & (scale < SMALL_ROW)
+    if not np.any(tiny):
+        return A, low, high
+    factor = np.where(tiny, 1.0 / np.where(tiny, scale, 1.0), 1.0)
+    with np.errstate(over="ignore", invalid="ignore"):
+        size = np.maximum(np.abs(np.where(np.isfinite(low), low, 0.0)),
+                          np.abs(np.where(np.isfinite(high), high, 0.0))) * factor
+    factor = np.where(size <= 1e15, factor, 1.0)
+    return A * factor[:, None], low * factor, high * factor
 
 
 def _run(solver):
@@ -202,24 +214,36 @@ def maximize_many(C, A_ub, b_ub, bounds) -> np.ndarray:
     ``-inf`` for all rows if the polyhedron is empty, ``+inf`` where unbounded. A row the
     warm start does not decide as optimal or unbounded is solved again from scratch (an
     infeasible verdict is trusted only then); ``nan`` where that decides nothing either (the
-    caller falls back to a bound it can argue without the LP)."""
+    caller falls back to a bound it can argue without the LP).
+
+    Where every variable is bounded (a star's coefficient box), an optimal value is returned
+    as the weak-duality bound of the solver's row duals (:class:`DualBound`), which holds
+    whatever the solver's tolerances; otherwise as the solver's own value."""
     from highspy import _core as highspy
 
     C = np.atleast_2d(np.asarray(C, dtype=float))
     n = C.shape[1]
     if not np.isfinite(C).all():
         raise LPError("the LP's objective is not finite")
+    b_ub = np.asarray(b_ub, dtype=float).reshape(-1)
+    A_ub, _, b_ub = _scaled_rows(np.asarray(A_ub, dtype=float).reshape(-1, n), np.full(b_ub.shape, -np.inf), b_ub)
     solver = _model(n, bounds, A_ub, b_ub, options={"presolve": "off"})
     solver.changeObjectiveSense(highspy.ObjSense.kMaximize)
     index = np.arange(n, dtype=np.int32)
     values = np.empty(C.shape[0])
     status = highspy.HighsModelStatus
+    lo, hi = _bounds(bounds, n)
+    certificate = DualBound(A_ub, b_ub, lo, hi) if np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) else None
     k, fresh = 0, True                  # the first run starts from scratch
     while k < C.shape[0]:
-        solver.changeColsCost(n, index, C[k])
+        size = np.abs(C[k]).max() if n else 0.0
+        size = size if size > 0 else 1.0
+        solver.changeColsCost(n, index, C[k] / size)       # the solver's dual tolerance is absolute
         s = _run(solver)
         if s == status.kOptimal:
-            values[k] = solver.getInfo().objective_function_value
+            value = size * solver.getInfo().objective_function_value
+            values[k] = certificate(C[k], size * np.asarray(solver.getSolution().row_dual, dtype=float)) \
+                if certificate is not None else value
         elif s == status.kUnbounded:
             values[k] = np.inf
         elif not fresh:                 # anything else (infeasible too) once more, from scratch
@@ -232,3 +256,75 @@ def maximize_many(C, A_ub, b_ub, bounds) -> np.ndarray:
             values[k] = np.nan
         k, fresh = k + 1, False
     return values
+
+
+class DualBound:
+    """Upper bounds of ``max c . x`` over ``{A x <= b, lo <= x <= hi}`` (``lo``, ``hi`` finite)
+    that do not rest on the solver having converged: for every ``y >= 0`` and every such
+    ``x``,
+
+        c . x = y . A x + (c - A^T y) . x <= y . b + sum_j max(r_j lo_j, r_j hi_j),
+        r = c - A^T y                                           (weak duality).
+
+    Called with an objective and the solver's row duals, it takes ``y`` the part of the duals
+    of their dominant sign (the solver's sign convention does not matter: either part is
+    valid). Near the optimum the bound is the solver's value to
+    within its tolerances (about 1e-7), but it is an upper bound even where that value falls
+    short of the maximum (poor duals only make it looser). Pushed out by ``4 (m + n)`` units
+    of rounding of the magnitudes summed; ``inf`` for duals that are not finite. The
+    polyhedron's parts are prepared once for the many objectives of :func:`maximize_many`."""
+
+    def __init__(self, A, b, lo, hi):
+        self.A, self.abs_A = A, np.abs(A)
+        self.open = ~np.isfinite(b)                     # a row with no upper bound takes no weight
+        self.any_open = bool(self.open.any())
+        self.b = np.where(self.open, 0.0, b)
+        self.lo, self.hi = lo, hi
+        self.magnitude = np.maximum(np.abs(lo), np.abs(hi))
+        self.units = 4 * (A.shape[0] + A.shape[1]) * np.finfo(float).eps
+
+    def __call__(self, c, duals) -> float:
+        if duals.shape != self.b.shape or not np.isfinite(duals).all():
+            return np.inf
+        y = np.maximum(duals if duals.sum() >= 0 else -duals, 0.0)    # the duals' dominant sign
+        if self.any_open:
+            y[self.open] = 0.0
+        r = c - y @ self.A
+        re = r * np.where(r > 0, self.hi, self.lo)
+        yb = y * self.b
+        size = np.abs(yb).sum() + np.abs(re).sum() + (y @ self.abs_A + np.abs(c)) @ self.magnitude
+        return float(yb.sum() + re.sum() + self.units * size)
+
+def variable_bound(j: int, A, b, lo, hi, duals) -> float:
+    """An upper bound of ``x_j`` over ``{A x <= b, lo <= x <= hi}`` that does not rest on the
+    solver having converged, where ``x_j`` may be unbounded but every other variable is
+    bounded (a star's coefficients and a depth): for every ``y >= 0`` with
+    ``sigma = (A^T y)_j > 0`` and every such ``x``,
+
+        sigma x_j <= y . b - sum_{i != j} (A^T y)_i x_i
+                  <= y . b + sum_{i != j} max(-(A^T y)_i lo_i, -(A^T y)_i hi_i),
+
+    tried with ``y`` the positive and the negative part of the solver's row ``duals``; the
+    least of these and ``hi_j``, pushed out by ``4 (m + n)`` units of rounding of the
+    magnitudes summed. ``inf`` where neither gives a bound."""
+    best = float(hi[j])
+    if duals is None or duals.shape != (A.shape[0],) or not np.all(np.isfinite(duals)):
+        return best
+    others = np.arange(A.shape[1]) != j
+    for y in (np.maximum(duals, 0.0), np.maximum(-duals, 0.0)):
+        y[~np.isfinite(b)] = 0.0
+        weights = A.T @ y
+        sigma = weights[j]
+        if not sigma > 0:
+            continue
+        r = -weights[others]
+        ends = np.where(r > 0, hi[others], np.where(r < 0, lo[others], 0.0))
+        with np.errstate(invalid="ignore"):
+            terms = np.concatenate([y * np.where(y > 0, b, 0.0), r * ends])
+        if not np.all(np.isfinite(terms)):
+            continue
+        size = np.abs(terms).sum() + (np.abs(A.T) @ y)[others] @ np.maximum(np.abs(lo[others]), np.abs(hi[others]))
+        top = terms.sum() + 4 * (A.shape[0] + A.shape[1]) * np.finfo(float).eps * size
+        # the division by sigma rounds too: one more unit of the quotient's size
+        best = min(best, float(top / sigma + 2 * np.finfo(float).eps * abs(top / sigma)))
+    return best

@@ -124,7 +124,7 @@ def test_block_decomposition_holds_a_random_signal(cells, h, seed):
 
 
 def test_a_check_past_its_memory_share_is_unknown_naming_memory(tmp_path, monkeypatch):
-    """The resident set is read at every chain and cell: beyond the share the answer is
+    """The resident set is read at chains and cells: beyond the share the answer is
     UNKNOWN with the reason, never an out-of-memory kill (here a share no process fits in)."""
     from reach.backends.star import explorer
 

@@ -103,3 +103,65 @@ def test_a_row_of_tiny_coefficients_keeps_its_half_space(scale, offset):
     assert res.optimal and res.value == pytest.approx(-offset, abs=1e-9)
     assert lp.maximize_many(np.array([[1.0, 0.0]]), A, b, (np.array([-1.0, -1.0]), np.array([1.0, 1.0])))[0] \
         == pytest.approx(1.0 - offset, abs=1e-9)
+
+
+@st.composite
+def boxed_problems(draw):
+    """``(c, A, b, lo, hi)``: 1-6 bounded variables and 0-8 random rows, feasible (the rows
+    hold at a random point of the box)."""
+    rng = np.random.default_rng(draw(st.integers(0, 2 ** 31 - 1)))
+    n, rows = draw(st.integers(1, 6)), draw(st.integers(0, 8))
+    lo, hi = -rng.uniform(0, 2, n), rng.uniform(0, 2, n)
+    A = rng.normal(size=(rows, n))
+    point = rng.uniform(lo, hi)
+    b = A @ point + rng.uniform(0, 1, rows)
+    return rng.normal(size=n), A, b, lo, hi
+
+
+@settings(max_examples=100, deadline=None)
+@given(boxed_problems(), st.integers(0, 2 ** 31 - 1))
+def test_the_dual_bound_holds_for_any_multipliers_and_is_tight_at_the_solvers(problem, seed):
+    """Weak duality: for any multipliers (random here, of either sign) the bound is at least
+    the maximum (scipy's linprog); with the solver's own duals it is the maximum, which
+    ``maximize_many`` returns (a box makes every star support one of these)."""
+    c, A, b, lo, hi = problem
+    status, value = reference(-c, A, b, np.zeros((0, c.size)), np.zeros(0), lo, hi)
+    assert status == lp.OPTIMAL
+    top = -value
+    y = np.random.default_rng(seed).normal(size=A.shape[0]) * 3
+    assert lp.DualBound(A, b, lo, hi)(c, y) >= top - 1e-9 * (1 + abs(top))
+    assert lp.maximize_many(c[None], A, b, (lo, hi))[0] == pytest.approx(top, rel=1e-6, abs=1e-6)
+    assert lp.maximize_many(c[None], A, b, (lo, hi))[0] >= top - 1e-12 * (1 + abs(top))
+
+
+def test_the_dual_bound_covers_a_solver_value_short_of_the_maximum():
+    """A solver may stop within its tolerances below the maximum; the bound does not rest
+    on it: multipliers off by 1e-4 still give an upper bound (looser, not lower)."""
+    A, b = np.array([[1.0, 1.0], [1.0, -1.0]]), np.array([1.0, 0.0])
+    lo, hi = np.array([-1.0, -1.0]), np.array([1.0, 1.0])
+    c = np.array([1.0, 0.0])                            # max x0 = 1/2 at (1/2, 1/2)
+    exact = np.array([0.5, 0.5])                        # the optimal multipliers
+    assert lp.DualBound(A, b, lo, hi)(c, exact) == pytest.approx(0.5, abs=1e-12)
+    for shift in ([1e-4, 0.0], [0.0, -1e-4], [-1e-4, 1e-4]):
+        assert lp.DualBound(A, b, lo, hi)(c, exact + np.array(shift)) >= 0.5
+
+
+@settings(max_examples=100, deadline=None)
+@given(boxed_problems(), st.integers(0, 2 ** 31 - 1), st.booleans())
+def test_the_variable_bound_holds_for_any_multipliers_and_is_tight_at_the_solvers(problem, seed, capped):
+    """``x_j`` unbounded below (and above unless ``capped``), the others boxed: the bound
+    from any multipliers is at least the maximum of ``x_j`` (scipy's linprog), and the
+    solver's own duals give the maximum."""
+    _, A, b, lo, hi = problem
+    j = 0
+    lo, hi = lo.copy(), hi.copy()
+    lo[j], hi[j] = -np.inf, (hi[j] if capped else np.inf)
+    c = np.eye(lo.size)[j]
+    status, value = reference(-c, A, b, np.zeros((0, c.size)), np.zeros(0), lo, hi)
+    if status != lp.OPTIMAL:
+        return
+    top = -value
+    y = np.random.default_rng(seed).normal(size=A.shape[0]) * 3
+    assert lp.variable_bound(j, A, b, lo, hi, y) >= top - 1e-9 * (1 + abs(top))
+    res = lp.maximize(c, A, b, bounds=(lo, hi))
+    assert lp.variable_bound(j, A, b, lo, hi, res.duals) == pytest.approx(top, rel=1e-6, abs=1e-6)

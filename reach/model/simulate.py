@@ -36,6 +36,7 @@ run's mode, in time order per run; properties are monitored this way without sto
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -62,8 +63,15 @@ RUN_BYTES_PER_VALUE = 8 * 24      # per run and state value: the arrays a batch 
 def single_threaded():
     """A context with one BLAS thread: the simulator's products are many and small, and
     threads fighting over a loaded machine's cores make them several times slower."""
-    from threadpoolctl import threadpool_limits
-    return threadpool_limits(1, user_api="blas")
+    return _blas_controller().limit(limits=1, user_api="blas")
+
+
+@functools.cache
+def _blas_controller():
+    """The thread pools of the loaded libraries, found once: the search reads every loaded
+    shared object (about 2 ms), and numpy's and scipy's BLAS are loaded with this module."""
+    from threadpoolctl import ThreadpoolController
+    return ThreadpoolController()
 
 
 def check_size(model: HybridAutomaton, dt: float, runs: int = 0) -> None:

@@ -141,6 +141,10 @@ class Star:
         ``(inf, None)`` if the depth is unbounded (an unbounded ``S`` and no cap), otherwise
         the optimal value and the coefficients ``a`` of the deepest point. ``tolerance``: the
         LP's primal feasibility tolerance (None: the solver's default).
+
+        Where the coefficient box is bounded, the value returned is the weak-duality bound
+        of the LP's duals (:func:`reach.lp.variable_bound`): at least the true depth
+        whatever the solver's tolerances, and equal to its optimum up to them.
         """
         H = np.atleast_2d(np.asarray(H, dtype=float))
         g = np.atleast_1d(np.asarray(g, dtype=float))
@@ -158,7 +162,8 @@ class Star:
             return -np.inf, None
         if res.unbounded:
             return np.inf, None
-        return res.value, res.x[:m]
+        bound = lp.variable_bound(m, A, b, *bounds, res.duals)
+        return (bound if np.isfinite(bound) else res.value), res.x[:m]
 
     # ------------------------------------------------------------------ cheap bounds
 

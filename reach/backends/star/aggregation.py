@@ -29,7 +29,7 @@ class _Aggregate:
 
 def interval_hull(members, invariant, count_lps):
     """``(hull, kept)``: the interval hull of the member stars (LPs reported to
-    ``count_lps``; every bound pushed out by a relative 1e-9 against rounding) intersected
+    ``count_lps``; every bound pushed out by a relative 1e-9 against rounding, :func:`_outward`) intersected
     with ``invariant = (H, g)``, a box star with fresh coefficients, and the non-empty
     members. ``hull`` is None when a member is unbounded. The hull contains every member:
     everything reachable from them is reachable from it, and its LPs stay small however many
@@ -52,9 +52,19 @@ def interval_hull(members, invariant, count_lps):
     kept = [members[k] for k in sorted(nonempty)]
     if not kept or not np.all(np.isfinite(best)):
         return None, kept
-    low, high = -best[n:], best[:n]
-    pad = 1e-9 * (1.0 + np.maximum(np.abs(low), np.abs(high)))
-    return Star.from_box(Box(low - pad, high + pad)).intersect_halfspaces(*invariant), kept
+    low, high = _outward(-best[n:], best[:n])
+    return Star.from_box(Box(low, high)).intersect_halfspaces(*invariant), kept
+
+
+def _outward(low, high):
+    """``[low, high]`` pushed out by a relative 1e-9 against rounding, then onto a grid of
+    steps ``2^(e - 30)`` (``2^e <= 1 + |x| < 2^(e+1)``; about 1e-9 relative, every operation
+    exact): hulls of the same states whose LP bounds differ in the last digits (another
+    basis, another order of sums) come out equal, so that the fixpoint check
+    (:mod:`.fixpoint`) can find one inside the other."""
+    size = 1.0 + np.maximum(np.abs(low), np.abs(high))
+    step = np.exp2(np.floor(np.log2(size)) - 30)
+    return np.floor((low - 1e-9 * size) / step) * step, np.ceil((high + 1e-9 * size) / step) * step
 
 
 def _supports(star: Star, W, bound, need, count_lps):

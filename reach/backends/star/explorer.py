@@ -13,8 +13,9 @@ from reach.backends.star.aggregation import _Aggregate, interval_hull
 from reach.backends.star.fixpoint import Covered, enlarged, time_invariant
 from reach.backends.star.flowpipe import (ChainInputs, _block_spreads, _chain_abs_bounds, _chain_bounds, _depth,
                                           _plus_box, _segment, _tightened)
-from reach.backends.star.options import (ERROR_RATIO, INSTANT_WIDTH, MAX_CELLS, MAX_CHAIN_BYTES, MEMORY_FRACTION, NAME,
-                                         PROGRESS_SECONDS, STALL_JUMPS, TIGHT_RATIO, StarOptions)
+from reach.backends.star.options import (ERROR_RATIO, INSTANT_WIDTH, MAX_CELLS, MAX_CHAIN_BYTES, MEMORY_FRACTION,
+                                         MEMORY_PERIOD, NAME, PROGRESS_SECONDS, STALL_JUMPS, TIGHT_RATIO,
+                                         StarOptions)
 from reach.backends.star.switching import group_pieces
 from reach.backends.star.transitions import (_LinearModel, _modes_leading_to, _Piece,
                                              _unsafe_pieces, kept_rows)
@@ -132,7 +133,7 @@ class _Explorer:
         self.aggregate_after = None if self.sweep else options.aggregate_after
         self.covered = Covered(self.clock) if time_invariant(model) and not options.keep_sets else None
         self.last_progress = time.perf_counter()
-        self.memory_limit = MEMORY_FRACTION * physical_bytes()
+        self.memory_limit, self.memory_read = MEMORY_FRACTION * physical_bytes(), -np.inf
         self.pieces = {mode: [_Piece(data.widen(p.H, p.g)[0], p.g, p.strict, p.label) for p in pieces]
                        for mode, pieces in _unsafe_pieces(prop).items()} if data.added_clock \
             else _unsafe_pieces(prop)
@@ -449,7 +450,10 @@ class _Explorer:
     def _memory_guard(self):
         """UNKNOWN once the process holds more than ``MEMORY_FRACTION`` of the machine's memory
         (the stars' predicates grow with jumps and refinement; no out-of-memory kill)."""
-        held = resident_bytes()
+        now = time.perf_counter()
+        if now - self.memory_read < MEMORY_PERIOD:
+            return
+        self.memory_read, held = now, resident_bytes()
         if held > self.memory_limit:
             raise _Stop(Status.UNKNOWN, f"memory: the exploration holds {held / 2**30:.1f} GiB, more than "
                                         f"{MEMORY_FRACTION:.0%} of this machine's "

@@ -38,8 +38,10 @@ INSTANT_WIDTH = 1e-9
 MAX_CHAIN_BYTES = 1 << 30
 
 #: the whole check may hold at most this fraction of the machine's memory (resident set, read
-#: at every chain and cell; beyond it the answer is UNKNOWN, never an out-of-memory kill)
+#: at chains and cells at most every MEMORY_PERIOD seconds; beyond it the answer is UNKNOWN,
+#: never an out-of-memory kill)
 MEMORY_FRACTION = 0.4
+MEMORY_PERIOD = 0.05
 
 
 #: seconds between two progress lines (logger ``reach.star``, shown under ``-v``)
