@@ -79,13 +79,13 @@ def _avoid_text(pieces_by_mode) -> str:
     modes: dict[str, list[str]] = {}
     for mode, pieces in pieces_by_mode.items():
         for piece in pieces:
-            text = " and ".join(con.text for con in piece)
-            modes.setdefault(f"({text})" if len(piece) > 1 else text, []).append(mode)
+            modes.setdefault(" and ".join(con.text for con in piece), []).append(mode)
     every = len(pieces_by_mode)
-    if len(modes) == 1 and next(iter(modes)).startswith("("):
-        modes = {next(iter(modes))[1:-1]: next(iter(modes.values()))}
-    return "avoid " + " or ".join(text if len(where) == every else f"{text} (in {', '.join(where)})"
-                                  for text, where in modes.items())
+    alone = len(modes) == 1
+    return "avoid " + " or ".join(
+        (text if alone or " and " not in text else f"({text})")
+        + ("" if len(where) == every else f" (in {', '.join(where)})")
+        for text, where in modes.items())
 
 
 def _bound_value(prop) -> str:

@@ -12,6 +12,7 @@ Status semantics (strict):
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import asdict, dataclass, field
 from enum import Enum
 from pathlib import Path
@@ -81,6 +82,9 @@ class Counterexample:
                 raise InputError("not a counterexample file: expected a file name", file, key)
             if Path(value).suffix.lower() not in kinds:
                 raise InputError(f"expected a {' or '.join(kinds)} file", file, key)
+            beside = Path(path).parent / value
+            if not Path(value).is_absolute() and beside.exists():
+                data[key] = str(beside)     # relative to the counterexample (else, older files: the working folder)
         if not isinstance(data.get("property"), str):
             raise InputError("not a counterexample file: expected a property id", file, "property")
         state = data.get("initial_state")
@@ -100,7 +104,16 @@ class Counterexample:
             raise InputError(f"not a counterexample file ({exc})", file) from None
 
     def save(self, path) -> None:
-        Path(path).write_text(json.dumps(self.to_dict(), indent=1))
+        """Write the file; ``model_file`` and ``property_file`` are stored relative to its folder
+        (as written, if on another drive), so a replay finds them from any working folder."""
+        data = self.to_dict()
+        folder = Path(path).resolve().parent
+        for key in ("model_file", "property_file"):
+            try:
+                data[key] = os.path.relpath(Path(data[key]).resolve(), folder)
+            except ValueError:
+                pass
+        Path(path).write_text(json.dumps(data, indent=1))
 
 
 @dataclass

@@ -184,3 +184,39 @@ def test_an_avoided_union_reads_as_a_union(tmp_path):
         "properties:\n  - {id: band, kind: safety, modes: [heating], avoid: ['T >= 30', 'T <= 31']}\n")
     prop = bind(load_properties(tmp_path / "p.yaml")[0], model)
     assert requirement(prop) == "avoid T >= 30 and T <= 31"
+
+
+@pytest.mark.parametrize("written", ["(2*T) >= 70.0", "(T - 1) >= 30 and T <= 31", "T >= (30)"])
+def test_an_avoided_set_reads_as_written(tmp_path, written):
+    """A constraint that opens or closes with a parenthesis is shown whole: the text of one piece is
+    never trimmed, only pieces joined by ``or`` are parenthesised."""
+    from reach.report import requirement
+    model = load_model("models/thermostat.yaml")
+    constraints = written.split(" and ")
+    (tmp_path / "p.yaml").write_text(
+        "properties:\n  - {id: p, kind: safety, modes: [heating], avoid: [%s]}\n"
+        % ", ".join(f"'{c}'" for c in constraints))
+    prop = bind(load_properties(tmp_path / "p.yaml")[0], model)
+    assert requirement(prop) == "avoid " + written
+
+
+def test_a_counterexample_replays_from_any_working_folder(tmp_path, monkeypatch, capsys):
+    """The saved counterexample names its model and property files relative to itself, so the
+    replay finds them from another folder (and after the folder is moved with its files)."""
+    import shutil
+    work = tmp_path / "project"
+    (work / "models").mkdir(parents=True)
+    (work / "properties").mkdir()
+    shutil.copy("models/thermostat.yaml", work / "models")
+    shutil.copy("properties/thermostat.yaml", work / "properties")
+    monkeypatch.chdir(work)
+    assert main(["check", "models/thermostat.yaml", "properties/thermostat.yaml", "-b", "star",
+                 "--counterexamples", "out"]) == 1
+    saved = json.loads((work / "out" / "thermostat_below_20p5_star.json").read_text())
+    assert saved["model_file"] == str(Path("..") / "models" / "thermostat.yaml")
+    moved = tmp_path / "moved"
+    shutil.move(str(work), str(moved))
+    monkeypatch.chdir(tmp_path)
+    capsys.readouterr()
+    assert main(["replay", str(moved / "out" / "thermostat_below_20p5_star.json")]) == 1
+    assert "replayed: thermostat violates 'below_20p5'" in capsys.readouterr().out

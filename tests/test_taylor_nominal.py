@@ -55,15 +55,20 @@ def test_batched_runs_are_the_single_runs_and_follow_solve_ivp(siren):
 
 
 def test_steps_are_scipys(siren):
-    """Over the first hour (no stop), the accepted steps of each batched run are solve_ivp's."""
+    """Over the first hour (no stop), the accepted steps of each batched run are solve_ivp's.
+
+    The batch evaluates the field row-wise (vectorised numpy and BLAS kernels) where solve_ivp
+    calls it per state, so the two differ in the last bits of each evaluation; the step control
+    carries that over some hundred steps, hence steps to 1e-9 and the end state to 1e-6 relative
+    (a different method or error norm would differ in the first digits)."""
     model, code = siren
     X = _starts(model, 4, 2)
     runs = dop853(_rows(code.f_numeric), np.zeros(4), X, np.full(4, 3600.0), 1e-9, 1e-9 * np.maximum(1.0, np.abs(X)))
     for x, run in zip(X, runs):
         ref = _scipy(code, x, 3600.0, 1e-9)
         assert len(run.t) == len(ref.t)
-        np.testing.assert_allclose(run.t, ref.t, rtol=1e-12)
-        np.testing.assert_allclose(run.y, ref.y[:, -1], rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(run.t, ref.t, rtol=1e-9)
+        np.testing.assert_allclose(run.y, ref.y[:, -1], rtol=1e-6, atol=1e-9)
 
 
 def _pendulum(values):

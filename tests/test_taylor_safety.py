@@ -155,3 +155,35 @@ def test_kept_sets_of_a_safety_check_hold_the_closed_form_runs(tmp_path):
             x, v = x0 * np.cos(t), -x0 * np.sin(t)
             assert xs.min() - 1e-9 <= x <= xs.max() + 1e-9 and vs.min() - 1e-9 <= v <= vs.max() + 1e-9
     assert not BACKEND.check(model, props["low"], RIGOROUS).sets
+
+
+# a clockless two-mode automaton: x' = 1 from x0 in [0, 0.5] until the urgent switch at x = 2
+# (t = 2 - x0), then x' = -1: x(t) = 4 - x0 - t in ``down``, least at the horizon 3, 1 - x0 >= 0.5
+CLOCKLESS = """
+name: updown
+state: [x]
+modes:
+  up: {flow: {x: 1}, invariant: ["x <= 2"]}
+  down: {flow: {x: -1}}
+transitions:
+  - {from: up, to: down, guard: ["x >= 2"], urgent: true}
+initial: {mode: up, box: {x: [0, 0.5]}}
+horizon: 3
+"""
+
+
+@pytest.mark.parametrize("floor, expected", [(0.3, Status.SAFE), (0.8, Status.UNSAFE)])
+def test_a_model_without_a_clock_gets_one_for_events_past_a_switch(tmp_path, floor, expected):
+    """``x >= floor`` in ``down`` holds for floor < 0.5 (closed form above) and fails above it;
+    taylor reads the horizon on a clock of its own, the model having none."""
+    (tmp_path / "m.yaml").write_text(CLOCKLESS)
+    (tmp_path / "p.yaml").write_text(
+        f"properties:\n  - {{id: low, kind: safety, modes: [down], require: ['x >= {floor}']}}\n")
+    model = load_model(tmp_path / "m.yaml")
+    prop = bind(load_properties(tmp_path / "p.yaml")[0], model)
+    assert BACKEND.supports(model, prop) is None
+    result = BACKEND.check(model, prop, RIGOROUS if expected == Status.SAFE else None)
+    assert result.status == expected
+    if expected == Status.UNSAFE:
+        cex = result.counterexample
+        assert replay(model, prop, cex.initial_state, cex.switch_time, cex.dt or None).violated

@@ -74,7 +74,7 @@ from reach.model.constraints import halfspaces
 from reach.result import Result, Status
 from reach.sets.gaussian import (ZERO_VARIANCE, Probability, box_probability, interval_form,
                                  mass_and_draw, normal_mass, polytope_probability, randomized_qmc)
-from reach.spec.properties import BoundReach, BoundReachAvoid
+from reach.spec.properties import BoundReach, BoundReachAvoid, article
 
 NAME = "fsr"
 METHODS = ("auto", "genz", "markov", "fourier")   # auto: genz, or fourier for a box initial state
@@ -363,7 +363,7 @@ class FsrBackend:
 
     def supports(self, model, prop) -> str | None:
         if not isinstance(prop, (BoundReach, BoundReachAvoid)):
-            return (f"fsr computes reach and reach-avoid probabilities; a {prop.kind} property is "
+            return (f"fsr computes reach and reach-avoid probabilities; {article(prop.kind)} property is "
                     "for the star, taylor or montecarlo back-ends")
         if model.disturbance is None:
             return ("deterministic model (no disturbance): there is no distribution to integrate; "

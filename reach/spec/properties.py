@@ -218,16 +218,21 @@ def properties_from_doc(doc: Doc) -> list[Property]:
         extra = set(item) - _FIELDS[kind]
         if extra:
             key = sorted(extra)[0]
-            raise doc.where("properties", i, key).error(f"unknown field '{key}' for a {kind} property")
+            raise doc.where("properties", i, key).error(f"unknown field '{key}' for {article(kind)} property")
         prop = Property(pid, kind, item, doc, ("properties", i), doc.file)
         _check_structure(prop)
         out.append(prop)
     return out
 
 
+def article(kind: str) -> str:
+    """``a safety``, ``an event``: the kind with its indefinite article."""
+    return ("an " if kind[:1] in "aeiou" and kind else "a ") + kind
+
+
 def _need(prop: Property, key: str):
     if key not in prop.raw:
-        raise prop.where().error(f"a {prop.kind} property needs '{key}'")
+        raise prop.where().error(f"{article(prop.kind)} property needs '{key}'")
     return prop.raw[key]
 
 

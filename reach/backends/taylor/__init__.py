@@ -38,7 +38,7 @@ import logging
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -90,6 +90,16 @@ class Options:
         return out
 
 
+def _clocked(model, prop: BoundEvent):
+    """``model`` and ``prop`` with a global clock when an event past the initial mode needs one
+    (the horizon is the event ``t = T`` on it): the model's own, else a state ``_time`` added
+    (rate 1 everywhere, 0 initially, never reset; :meth:`HybridAutomaton.with_global_clock`)."""
+    if prop.modes == [model.initial.mode] or global_clock(model) is not None:
+        return model, prop
+    clocked, _ = model.with_global_clock()
+    return clocked, replace(prop, symbols=clocked.symbols)
+
+
 class TaylorBackend:
     name = "taylor"
 
@@ -109,8 +119,7 @@ class TaylorBackend:
         if reason is not None:
             return reason
         model, _ = with_switch_time(model)
-        if prop.modes != [model.initial.mode] and global_clock(model) is None:
-            return "events after a mode switch need a global clock state (rate 1, starting at 0)"
+        model, prop = _clocked(model, prop)
         try:
             EventProblem(model, prop)
         except Unsmooth as err:
@@ -122,6 +131,7 @@ class TaylorBackend:
             return check_safety(self, model, prop, options)
         opts = Options.from_dict(options)
         model, _ = with_switch_time(model)
+        model, prop = _clocked(model, prop)
         try:
             with _unit_runner(opts, picklable(model, prop)) as run_units:
                 return self._check_event(model, prop, opts, run_units)
