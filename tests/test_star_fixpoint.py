@@ -109,3 +109,39 @@ def test_a_deadband_loop_closes_by_the_fixpoint_and_stays_sound(deadband, tmp_pa
     assert above.details["latest_chain_start"] < 200
     below = BACKEND.check(model, _angle_bound(model, tmp_path, 0.0095))
     assert below.status is not Status.SAFE
+
+
+# a thermostat with constant rates (exact segments): x' = +-1000 between 19 and 21, switching
+# every 2 ms, 500 switches over the horizon; closed form: x stays in [19, 21], reaching both
+FAST = """
+name: fast
+state: [x]
+modes:
+  heat: {flow: {x: "1000"}, invariant: ["x <= 21"]}
+  cool: {flow: {x: "-1000"}, invariant: ["x >= 19"]}
+transitions:
+  - {from: heat, to: cool, guard: ["x >= 21"], urgent: true}
+  - {from: cool, to: heat, guard: ["x <= 19"], urgent: true}
+initial: {mode: heat, box: {x: [19.5, 20]}}
+horizon: 1
+"""
+
+
+@pytest.mark.parametrize("require, expected", [
+    (["x >= 18.99999", "x <= 21.00001"], Status.SAFE),
+    (["x <= 20.99"], Status.UNSAFE),
+    (["x >= 19.01"], Status.UNSAFE),
+])
+def test_a_cycle_of_constant_rate_modes_closes(tmp_path, require, expected):
+    """Constant-rate modes aggregate too on a clockless model, so the 500-switch cycle closes
+    by the fixpoint check: the band (closed form [19, 21]) is proved with a margin of 1e-5, and
+    bounds inside it fail with a replayed counterexample."""
+    (tmp_path / "m.yaml").write_text(FAST)
+    (tmp_path / "p.yaml").write_text(f"properties:\n  - {{id: b, kind: safety, require: {require}}}\n")
+    model = load_model(tmp_path / "m.yaml")
+    result = BACKEND.check(model, bind(load_properties(tmp_path / "p.yaml")[0], model))
+    assert result.status == expected
+    if expected == Status.SAFE:
+        assert result.details["covered_aggregates"] >= 1
+    else:
+        assert result.counterexample is not None

@@ -88,7 +88,9 @@ fresh coefficients intersected with the target invariant; it contains every memb
 proof under it covers them. When a check under an aggregate fails, its witness is traced
 back through the nearest point of a member (one LP per member, per aggregate level) to an
 initial state and replayed; if that run does not violate, the aggregate is refined into
-its members, explored with their exact histories. Star, coefficient and memory budgets end
+its members, explored with their exact histories. A constant flow's segments are exact and
+add one coefficient, so its successors are aggregated only on a model without a clock, where
+the hulls let the fixpoint check close the cycle. Star, coefficient and memory budgets end
 a check in UNKNOWN with the reason, and progress goes to the ``reach.star`` logger.
 
 Strict and non-strict bounds. With piece rows of unit norm, the depth LP (HiGHS, primal

@@ -378,7 +378,7 @@ class _Explorer:
         if self.opt.keep_sets:
             self._keep_chain(mode, grid_star, centers, bases, error, [j for j in cells if j not in candidates])
 
-        aggregate = (self.aggregate_after is not None and not flow.drift
+        aggregate = (self.aggregate_after is not None and (not flow.drift or self.covered is not None)
                      and path.jumps >= self.aggregate_after)
         pending: dict[int, list] | None = None if not aggregate else {} if collect is None else collect
         for j in sorted(candidates):
