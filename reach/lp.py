@@ -169,8 +169,8 @@ def _scaled_rows(A, low, high):
     tiny = (scale > 0) & (scale < SMALL_ROW)
     if not np.any(tiny):
         return A, low, high
-    factor = np.where(tiny, 1.0 / np.where(tiny, scale, 1.0), 1.0)
     with np.errstate(over="ignore", invalid="ignore"):
+        factor = np.where(tiny, 1.0 / np.where(tiny, scale, 1.0), 1.0)
         size = np.maximum(np.abs(np.where(np.isfinite(low), low, 0.0)),
                           np.abs(np.where(np.isfinite(high), high, 0.0))) * factor
     factor = np.where(size <= 1e15, factor, 1.0)
@@ -226,7 +226,10 @@ def maximize_many(C, A_ub, b_ub, bounds) -> np.ndarray:
     if not np.isfinite(C).all():
         raise LPError("the LP's objective is not finite")
     b_ub = np.asarray(b_ub, dtype=float).reshape(-1)
-    A_ub, _, b_ub = _scaled_rows(np.asarray(A_ub, dtype=float).reshape(-1, n), np.full(b_ub.shape, -np.inf), b_ub)
+    if n == 0:                          # no variables: the polyhedron is R^0 or empty
+        return np.full(C.shape[0], 0.0 if np.all(b_ub >= 0) else -np.inf)
+    A_ub, _, b_ub = _scaled_rows(np.asarray(A_ub, dtype=float).reshape(b_ub.size, n),
+                                 np.full(b_ub.shape, -np.inf), b_ub)
     solver = _model(n, bounds, A_ub, b_ub, options={"presolve": "off"})
     solver.changeObjectiveSense(highspy.ObjSense.kMaximize)
     index = np.arange(n, dtype=np.int32)

@@ -165,3 +165,11 @@ def test_the_variable_bound_holds_for_any_multipliers_and_is_tight_at_the_solver
     assert lp.variable_bound(j, A, b, lo, hi, y) >= top - 1e-9 * (1 + abs(top))
     res = lp.maximize(c, A, b, bounds=(lo, hi))
     assert lp.variable_bound(j, A, b, lo, hi, res.duals) == pytest.approx(top, rel=1e-6, abs=1e-6)
+
+
+def test_maximize_many_over_no_variables_is_the_point_or_empty():
+    """A star with no coefficients (a single point) asks for supports over R^0: 0 when every
+    row holds at the origin, -inf (empty) otherwise."""
+    C = np.zeros((2, 0))
+    assert list(lp.maximize_many(C, np.zeros((1, 0)), [0.5], (np.zeros(0), np.zeros(0)))) == [0.0, 0.0]
+    assert list(lp.maximize_many(C, np.zeros((1, 0)), [-0.5], (np.zeros(0), np.zeros(0)))) == [-np.inf] * 2
