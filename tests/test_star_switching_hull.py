@@ -166,7 +166,7 @@ def _plaa01():
 
 def test_plaa01_over_the_reports_horizon_is_safe():
     """PLAA01-BND50 over 20 s: the inclusion alone is undecided, the hull proves e1, e2, e3 >= -50
-    (the bounds of the module doc's run: e1 >= -37.8, e2 >= -43.6, e3 >= -30.3 on 500 steps)."""
+    (on 500 steps: e1 >= -37.8, e2 >= -43.6, e3 >= -30.3)."""
     model, props = _plaa01()
     for prop in props:
         result = BACKEND.check(model, prop)
