@@ -71,8 +71,9 @@ def _extremes(folder: Path, model, states, steps: int, horizon: float | None = N
 
 def test_closed_groups_only(tmp_path):
     """The bound applies when no transition leaves the initial mode's group and none resets."""
-    way_out = SCALAR.replace("  - {from: b, to: a}\n", "  - {from: b, to: a}\n  - {from: b, to: c, guard: ['x >= 0.5']}\n") \
-        .replace('  b: {flow: {x: "-2*x + 0.5"}}\n', '  b: {flow: {x: "-2*x + 0.5"}}\n  c: {flow: {x: "0"}}\n')
+    way_out = (SCALAR.replace("  - {from: b, to: a}\n",
+                              "  - {from: b, to: a}\n  - {from: b, to: c, guard: ['x >= 0.5']}\n")
+               .replace('  b: {flow: {x: "-2*x + 0.5"}}\n', '  b: {flow: {x: "-2*x + 0.5"}}\n  c: {flow: {x: "0"}}\n'))
     reset = SCALAR.replace("{from: b, to: a}", "{from: b, to: a, reset: {x: 'x / 2'}}")
     for text, group in ((SCALAR, ("a", "b")), (way_out, None), (reset, None)):
         model = _model(tmp_path, text)
@@ -141,7 +142,8 @@ def test_random_switched_systems_stay_inside_the_bound(tmp_path_factory, seed, n
             + ("bounded_inputs: {u: {range: [-1, 1], varying: true}}\n" if with_input else "")
             + f"modes:\n  a: {{flow: {_text(names, A[0], b[0], B)}}}\n  b: {{flow: {_text(names, A[1], b[1], B)}}}\n"
             + "transitions:\n  - {from: a, to: b}\n  - {from: b, to: a}\n"
-            + "initial: {mode: a, box: {" + ", ".join(f"{s}: [{float(lo)!r}, {float(hi)!r}]" for s, lo, hi in zip(names, low0, high0))
+            + "initial: {mode: a, box: {"
+            + ", ".join(f"{s}: [{float(lo)!r}, {float(hi)!r}]" for s, lo, hi in zip(names, low0, high0))
             + "}}\n" + f"horizon: {horizon!r}\n")
     folder = tmp_path_factory.mktemp("random")
     model = _model(folder, text)

@@ -379,5 +379,6 @@ def check_hull(model, prop, opt) -> dict | None:
 
 
 def _input_radius(data: SwitchingModel, group) -> np.ndarray:
+    """The radii of the time-varying inputs the group's members read (none: empty)."""
     flows = [data.flows[m] for m in group if data.flows[m].B is not None]
     return flows[0].u_radius if flows else np.zeros(0)
