@@ -169,6 +169,7 @@ import numpy as np
 from reach import lp
 from reach.backends.star.explorer import LOG, _Explorer, _Stop
 from reach.backends.star.flowpipe import AffineFlow, flowpipe
+from reach.backends.star.hull import check_hull
 from reach.backends.star.linearise import LinearisedModel, check_linearised
 from reach.backends.star.options import (CLOCKLESS_FIRST_STARS, DEPTH_LP_TOLERANCE, NAME, StarOptions,
                                          clockless_retry)
@@ -247,8 +248,11 @@ class StarBackend:
             return check_linearised(model, prop, opt, lambda data, blocks: self._explore(
                 model, prop, opt, start, data, blocks))
         if opt.switching and SwitchingModel.of(model).groups:
-            return check_switching(model, prop, opt, lambda data, blocks: self._explore(
+            result = check_switching(model, prop, opt, lambda data, blocks: self._explore(
                 model, prop, opt, start, data, blocks))
+            if result.status is Status.UNKNOWN and opt.switching_hull and not opt.discrete_time:
+                return _with_hull(model, prop, opt, result, start)
+            return result
         return self._explore(model, prop, opt, start)
 
     def _explore(self, model, prop, opt, start, data=None, linearise=None) -> Result:
@@ -290,6 +294,31 @@ class StarBackend:
                  explorer.stats.cells, explorer.stats.lps, explorer.stats.aggregated)
         return Result(NAME, model.name, prop.id, status, time.perf_counter() - start,
                       counterexample=counterexample, details=details, sets=explorer.sets)
+
+
+def _with_hull(model, prop, opt, result: Result, start: float) -> Result:
+    """``result`` (UNKNOWN from the switching inclusion) decided by the closed group's hull
+    (:mod:`.hull`) where it proves every piece excluded: SAFE, its argument as the semantics
+    and its report under ``details.hull``; otherwise ``result`` with that report added."""
+    try:
+        report = check_hull(model, prop, opt)
+    except (ArithmeticError, lp.LPError) as failure:
+        report = {"proved": False, "reason": f"nothing concluded: {failure}"}
+    if report is None:
+        return result
+    result.seconds = time.perf_counter() - start
+    if not report["proved"]:
+        result.details["hull"] = report
+        return result
+    details = {k: v for k, v in result.details.items() if k not in ("reason", "witness")}
+    details["inclusion"] = result.details.get("reason", "")
+    details["hull"] = report
+    details["semantics"] = (f"continuous time, closed switching group {{{', '.join(report['group'])}}} "
+                            f"bounded around its mean flow on {report['steps']} steps of "
+                            f"{report['step']:.6g} (the inclusion explored first was undecided): "
+                            f"{report['argument']}; matrix exponentials in floating point (rounding "
+                            f"not enclosed)")
+    return Result(NAME, model.name, prop.id, Status.SAFE, result.seconds, details=details)
 
 
 def _substeps(flow, h: float) -> str:

@@ -100,6 +100,12 @@ class StarOptions:
     switching: modes that may switch to one another at any instant (unguarded, reset-free
         may-transitions both ways, one invariant) are explored as one differential inclusion
         per group (:mod:`.switching`); false: mode by mode, every cell a possible switch.
+    switching_hull: when that inclusion leaves a check UNKNOWN and the initial mode's group is
+        closed (no transition leaves it or resets a state), bound the group around its mean
+        flow with the members' difference as a fed-back input (:mod:`.hull`); it answers SAFE
+        or leaves the UNKNOWN.
+    hull_steps: the most grid steps over the horizon that bound takes: it starts at an eighth
+        of this and doubles while a piece is not excluded (cost quadratic in the steps).
     input_cells: a chain with time-varying inputs is cut into blocks of this many cells, each
         completed block's effect carried by generators (two coefficients per input) plus a
         small box (:class:`.flowpipe.ChainInputs`); 0: the effect since the chain's start as
@@ -126,6 +132,8 @@ class StarOptions:
     linearise_margin: float = 0.1
     rebase_cells: int = ranged(2, 0)
     switching: bool = True
+    switching_hull: bool = True
+    hull_steps: int = ranged(2000, 1, 20_000)
     input_cells: int = ranged(0, 0)
 
     @classmethod
