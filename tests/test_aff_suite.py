@@ -35,6 +35,8 @@ SOURCES = {
     "PLAD01-BND42-h20": ("Platoon/PLAD01-BND.xml", "Platoon/PLAD01-BND42-h20-forbidden.cfg"),
     "PLAD01-BND30-h20": ("Platoon/PLAD01-BND.xml", "Platoon/PLAD01-BND30-h20-forbidden.cfg"),
     "PLAN01-UNB50": ("Platoon/PLAN01-UNB.xml", "Platoon/PLAN01-UNB50-forbidden.cfg"),
+    "PLAA01-BND50": ("Platoon/PLAA01-BND.xml", "Platoon/PLAA01-BND50-forbidden.cfg"),
+    "PLAA01-BND50-h20": ("Platoon/PLAA01-BND.xml", "Platoon/PLAA01-BND50-h20-forbidden.cfg"),
     "SRA01-SR0-LOS": ("Rendezvous_ARCH18/SRA01-SR0_.xml", "Rendezvous_ARCH18/SRA01-SR0_-LOS.cfg"),
     "SRA01-SR0-collision": ("Rendezvous_ARCH18/SRA01-SR0_.xml", "Rendezvous_ARCH18/SRA01-SR0_-collision.cfg"),
     "SRNA01-SR0-LOS": ("Rendezvous_ARCH18/SRNA01-SR0_.xml", "Rendezvous_ARCH18/SRNA01-SR0_-LOS.cfg"),
@@ -48,7 +50,8 @@ SOURCES = {
 #: the imported file's name where it is not the instance's
 FILE = {"PLAD01-BND42": "PLAD01-BND42-forbidden", "PLAD01-BND30": "PLAD01-BND30-forbidden",
         "PLAD01-BND42-h20": "PLAD01-BND42-h20-forbidden", "PLAD01-BND30-h20": "PLAD01-BND30-h20-forbidden",
-        "PLAN01-UNB50": "PLAN01-UNB50-forbidden",
+        "PLAN01-UNB50": "PLAN01-UNB50-forbidden", "PLAA01-BND50": "PLAA01-BND50-forbidden",
+        "PLAA01-BND50-h20": "PLAA01-BND50-h20-forbidden",
         "SRA01-SR0-LOS": "SRA01-SR0_-LOS", "SRA01-SR0-collision": "SRA01-SR0_-collision",
         "SRNA01-SR0-LOS": "SRNA01-SR0_-LOS", "DTN-2theta-30": "drivetrain_2theta_30percent-forbidden"}
 THRESHOLD = -0.00078                     # BDU02: forbidden x25 < -7.8e-4 at t = 20
