@@ -47,3 +47,12 @@ class Where:
 
     def __repr__(self) -> str:
         return f"Where({self.file!r}, {self.field!r}, {self.line!r})"
+
+
+def not_a_mode(value, where: Where) -> InputError:
+    """The error for ``value`` where the name of one of a model's modes is expected. YAML 1.1
+    reads unquoted ``on``/``off`` (and ``yes``/``no``, ``true``/``false``) as booleans, so a mode
+    named ``on`` arrives as ``True``: say so rather than name a mode 'True'."""
+    if isinstance(value, bool):
+        return where.error(f"mode name read as a boolean by YAML; quote it: '{'on' if value else 'off'}'")
+    return where.error(f"unknown mode '{value}'")

@@ -235,11 +235,17 @@ def test_a_label_no_transition_of_a_declaring_component_takes_blocks_and_is_repo
     assert capsys.readouterr().err == ""
 
 
-def test_unknown_names_in_initially_are_dropped_when_satisfiable(tmp_path):
+@pytest.mark.parametrize("extra,message", [
+    ("t == 0", "unknown name 't' (the system's variables: x, y)"),
+    ("loc(C) == c", "loc(C): no component instance 'C' (the system's: A, B)"),
+])
+def test_names_the_system_lacks_in_initially_are_bad_input(tmp_path, extra, message):
+    """Not dropped: the initial set would silently differ from the one written."""
     xml, cfg = write(tmp_path, NETWORK, 'system = sys\ninitially = "loc(A)==off & loc(B)==idle & '
-                     'x == 0 & y == 0 & t == 0 & loc(C) == c"\ntime-horizon = 1\n')
-    _, _, docs = load_spaceex(xml, cfg)
-    assert len(docs.model["notes"]["dropped"]) == 2
+                     f'x == 0 & y == 0 & {extra}"\ntime-horizon = 1\n')
+    with pytest.raises(InputError) as info:
+        load_spaceex(xml, cfg)
+    assert str(info.value) == f"{cfg}:2: initially: {message}"
 
 
 @pytest.mark.parametrize("body,cfg,needle", [

@@ -53,7 +53,7 @@ import numpy as np
 import sympy
 
 from reach import lp
-from reach.errors import InputError, Where
+from reach.errors import InputError, Where, not_a_mode
 from reach.paths import printable
 from reach.model.automaton import (BoundedInput, Controller, Disturbance, HybridAutomaton, InitialSet,
                                    LinearSet, Mode, Transition)
@@ -389,10 +389,10 @@ class _Builder:
                 if k not in spec:
                     raise w.error(f"missing '{k}'")
             sources = spec["from"] if isinstance(spec["from"], list) else [spec["from"]]
-            for s in sources + [spec["to"]]:
-                if not isinstance(s, str) or s not in modes:
-                    field = "from" if s in sources else "to"
-                    raise self.where(*path, field).error(f"unknown mode '{s}'")
+            for field, names in (("from", sources), ("to", [spec["to"]])):
+                for s in names:
+                    if not isinstance(s, str) or s not in modes:
+                        raise not_a_mode(s, self.where(*path, field))
             urgent = spec.get("urgent", False)
             if not isinstance(urgent, bool):
                 raise self.where(*path, "urgent").error("expected true or false")
@@ -452,7 +452,7 @@ class _Builder:
         if extra:
             raise self.where("initial", sorted(extra)[0]).error(f"unknown field '{sorted(extra)[0]}'")
         if not isinstance(raw["mode"], str) or raw["mode"] not in modes:
-            raise self.where("initial", "mode").error(f"unknown mode '{raw['mode']}'")
+            raise not_a_mode(raw["mode"], self.where("initial", "mode"))
         box = raw["box"]
         if not isinstance(box, dict):
             raise self.where("initial", "box").error("expected {var: [low, high] or value}")
@@ -585,8 +585,8 @@ class _Builder:
         extra = set(raw) - {"mode", "box", "constraints"}
         if extra:
             raise self.where("initial", sorted(extra)[0]).error(f"unknown field '{sorted(extra)[0]}'")
-        if raw.get("mode") not in modes:
-            raise self.where("initial", "mode").error(f"unknown mode '{raw.get('mode')}'")
+        if not isinstance(raw.get("mode"), str) or raw["mode"] not in modes:
+            raise not_a_mode(raw.get("mode"), self.where("initial", "mode"))
         n = len(self.state)
         rows, rhs, eq_rows, eq_rhs = [], [], [], []
         box = raw.get("box", {})

@@ -46,7 +46,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import sympy
 
-from reach.errors import InputError, Where
+from reach.errors import InputError, Where, not_a_mode
 from reach.model.constraints import Constraint, from_comparisons, halfspaces, violation_test
 from reach.model.expr import DimensionContext, parse_comparison, parse_quantity, side_text
 from reach.model.units import TIME, DisplayUnit, Form
@@ -248,6 +248,9 @@ def _check_structure(prop: Property) -> None:
     raw = prop.raw
     if "modes" in raw and (not isinstance(raw["modes"], list) or not raw["modes"]
                            or not all(isinstance(m, str) for m in raw["modes"])):
+        for i, mode in enumerate(raw["modes"] if isinstance(raw["modes"], list) else []):
+            if isinstance(mode, bool):
+                raise not_a_mode(mode, prop.where("modes", i))
         raise prop.where("modes").error("expected a non-empty list of mode names")
     if prop.kind == "safety":
         if ("require" in raw) == ("avoid" in raw):

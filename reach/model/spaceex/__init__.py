@@ -39,8 +39,8 @@ def documents(xml_path, cfg_path=None, name: str | None = None) -> Documents:
     if not system:
         raise InputError("no 'system'", str(cfg_path), line=1)
     flat = instantiate(doc, system, cfg.line("system"), cfg.file)
-    builder = DocumentBuilder(flat, str(xml_path), cfg, name or _name(cfg_path))
-    compose(flat, _initial_locations(builder, cfg), cfg.file)
+    builder = DocumentBuilder(flat, str(xml_path), cfg, name or cfg_path.stem)
+    compose(flat, _initial_locations(builder, cfg))
     return builder.build()
 
 
@@ -50,14 +50,9 @@ def _initial_locations(builder: DocumentBuilder, cfg: Config):
     for term in builder.cfg_formula("initially", required=True)[:1]:
         for atom in term:
             if isinstance(atom, Loc):
-                i = builder.instance_of(atom.component, "initially")
-                if i is not None:
-                    allowed[i] = (allowed[i] or {atom.location}) & {atom.location}
+                i = builder.location_of(atom, "initially")
+                allowed[i] = (allowed[i] or {atom.location}) & {atom.location}
     return allowed
-
-
-def _name(cfg_path: Path) -> str:
-    return cfg_path.stem
 
 
 def load_spaceex(xml_path, cfg_path=None):

@@ -12,11 +12,18 @@ instance is taken together with one transition of the same label in every other 
 alphabet has that label (synchronisation on shared labels); unlabelled or local labels move one
 instance alone. A product location's invariant and flow are the conjunctions of its parts; a
 product transition's guard and assignment are the conjunctions of its parts, asap if any is.
+
+Sizes. A product grows exponentially with the instances, so it is counted while it is built,
+never materialised first: at most ``MAX_LOCATIONS`` location combinations (initial ones by
+their count, before any is made), at most ``MAX_SIZE`` locations, transitions and relations in
+their texts together (what the conversion and the loader then parse, one by one), and a
+synchronised label's combinations counted before they are made.
 """
 
 from __future__ import annotations
 
 import itertools
+import math
 import re
 from dataclasses import dataclass, field
 
@@ -26,8 +33,9 @@ from reach.model.spaceex.components import Base, Document, Location, Text, Trans
 MAX_DEPTH = 16
 MAX_INSTANCES = 256
 MAX_LOCATIONS = 20_000
-MAX_TRANSITIONS = 200_000
+MAX_SIZE = 100_000
 _NUMBER = re.compile(r"^[-+]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?$")
+_AND = re.compile(r"&&?")
 
 
 @dataclass
@@ -58,10 +66,20 @@ class Instance:
 
 @dataclass
 class Part:
-    """One instance's contribution to a product location or transition."""
+    """One instance's contribution to a product location or transition: a text and the
+    location or transition of the instance's component where it is written."""
 
     instance: Instance
-    text: Text | None
+    text: Text
+    source: Location | Transition
+
+    @property
+    def context(self) -> str:
+        """Where the text is written, as messages show it: ``location 'on'``, ``transition on -> off``."""
+        if isinstance(self.source, Location):
+            return f"location '{self.source.name}'"
+        locations = self.instance.component.locations
+        return f"transition {locations[self.source.source].name} -> {locations[self.source.target].name}"
 
 
 @dataclass
@@ -88,8 +106,22 @@ class ProductTransition:
 class Flat:
     instances: list[Instance]
     globals: dict[str, str]             # global real name -> "any" | "const"
+    file: str                           # the XML file
+    system: str                         # the analysed component's id
+    line: int                           # and its line
     locations: dict[tuple, ProductLocation] = field(default_factory=dict)
     transitions: list[ProductTransition] = field(default_factory=list)
+
+    def label(self, key: tuple) -> str:
+        """A product location as messages show it: ``on``, or ``A.off, B.idle`` in a network."""
+        names = self.locations[key].names
+        if len(self.instances) == 1:
+            return names[0]
+        return ", ".join(f"{i.path or i.component.id}.{name}" for i, name in zip(self.instances, names))
+
+    def error(self, message: str) -> InputError:
+        """Bad input about the system as a whole, at its component's line."""
+        return InputError(message, self.file, f"component '{self.system}'", self.line)
 
 
 def instantiate(doc: Document, system: str, line: int | None, cfg_file: str | None) -> Flat:
@@ -101,7 +133,7 @@ def instantiate(doc: Document, system: str, line: int | None, cfg_file: str | No
     for p in top.params.values():
         if p.type == "real":
             globals_[p.name] = p.dynamics
-    flat = Flat([], globals_)
+    flat = Flat([], globals_, doc.file, system, top.line)
     top_binding = {p.name: Binding(name=p.name) for p in top.params.values()}
     _walk(doc, top, "", top_binding, flat, 0)
     return flat
@@ -156,40 +188,88 @@ def _resolve_map(m, binding, path, ptype, file) -> Binding:
                      file, line=m.line)
 
 
-def compose(flat: Flat, initial_locations: list[set[str] | None], file: str) -> None:
-    """Fill ``flat.locations``/``transitions``: the product reachable from the initial locations.
+def compose(flat: Flat, initial_locations: list[set[str] | None]) -> None:
+    """Fill ``flat.locations``/``transitions``: the product reachable from the initial locations,
+    counted as it is built (see the module docstring).
 
     ``initial_locations[i]`` is the set of allowed location names of instance ``i`` (None: all).
     """
     inst = flat.instances
-    for i, allowed in enumerate(initial_locations):
-        if allowed is not None:
-            names = {loc.name for loc in inst[i].component.locations.values()}
-            unknown = allowed - names
-            if unknown:
-                raise InputError(f"initially: instance '{inst[i].path or inst[i].component.id}' has no "
-                                 f"location '{sorted(unknown)[0]}'", file)
-    choices = []
-    for i, allowed in enumerate(initial_locations):
-        locs = inst[i].component.locations.values()
-        choices.append([loc.id for loc in locs if allowed is None or loc.name in allowed])
+    choices = [[loc.id for loc in i.component.locations.values() if allowed is None or loc.name in allowed]
+               for i, allowed in zip(inst, initial_locations)]
+    combinations = math.prod(len(c) for c in choices)
+    if combinations > MAX_LOCATIONS:
+        raise flat.error(f"more than {MAX_LOCATIONS} initial location combinations ({combinations}: the product "
+                         f"of the {len(inst)} instances' locations): fix each instance's initial location in "
+                         "the cfg's initially with loc(INSTANCE) == LOCATION, or analyse a smaller network")
+    size = _Size(flat)
+    outgoing = {id(i.component): _outgoing(i.component) for i in inst}
     alphabets = [i.alphabet for i in inst]
     todo = list(itertools.product(*choices))
-    if len(todo) > MAX_LOCATIONS:
-        raise InputError(f"more than {MAX_LOCATIONS} initial location combinations", file)
     seen = set(todo)
     while todo:
         key = todo.pop()
-        flat.locations[key] = _product_location(inst, key)
-        for tr in _successors(inst, alphabets, key):
+        location = _product_location(inst, key)
+        size.add_location(location)
+        flat.locations[key] = location
+        for tr in _successors(inst, alphabets, outgoing, key, size):
             flat.transitions.append(tr)
-            if len(flat.transitions) > MAX_TRANSITIONS:
-                raise InputError(f"the composition has more than {MAX_TRANSITIONS} transitions", file)
             if tr.target not in seen:
+                if len(seen) >= MAX_LOCATIONS:
+                    raise flat.error(f"the composition of its {len(inst)} instances reaches more than "
+                                     f"{MAX_LOCATIONS} location combinations: analyse a smaller network "
+                                     "(fewer instances, or fewer locations in them)")
                 seen.add(tr.target)
                 todo.append(tr.target)
-                if len(seen) > MAX_LOCATIONS:
-                    raise InputError(f"the composition has more than {MAX_LOCATIONS} locations", file)
+
+
+class _Size:
+    """The running size of a product: its locations and transitions and the relations in their
+    texts (a text's relations counted by its ``&``, each text once)."""
+
+    def __init__(self, flat: Flat):
+        self.flat = flat
+        self.total = 0
+        self.relations: dict[int, int] = {}
+
+    def weight(self, parts: list[Part]) -> int:
+        total = 0
+        for part in parts:
+            key = id(part.text)
+            if key not in self.relations:
+                self.relations[key] = len(_AND.findall(part.text.text)) + 1
+            total += self.relations[key]
+        return total
+
+    def add_location(self, location: ProductLocation) -> None:
+        self.add(1 + self.weight(location.invariants) + self.weight(location.flows))
+
+    def add_transition(self, transition: ProductTransition) -> None:
+        self.add(1 + self.weight(transition.guards) + self.weight(transition.assignments))
+
+    def add(self, amount: int) -> None:
+        self.total += amount
+        if self.total > MAX_SIZE:
+            instances = len(self.flat.instances)
+            raise self.flat.error(
+                f"too large to import: more than {MAX_SIZE} locations, transitions and relations in their "
+                f"texts" + (f" after composing its {instances} instances" if instances > 1 else "")
+                + f" (at {len(self.flat.locations)} location combinations): analyse a smaller network")
+
+    def room(self, count: int, label: str) -> None:
+        """Refuse before making ``count`` synchronised transitions of ``label`` that cannot fit."""
+        if self.total + count > MAX_SIZE:
+            raise self.flat.error(f"too large to import: label '{label}' synchronises transitions into {count} "
+                                  f"combinations in one location combination, more than the {MAX_SIZE} "
+                                  "locations, transitions and relations the import handles")
+
+
+def _outgoing(component: Base) -> dict[str, list[Transition]]:
+    """The component's transitions by source location id."""
+    out: dict[str, list[Transition]] = {}
+    for tr in component.transitions:
+        out.setdefault(tr.source, []).append(tr)
+    return out
 
 
 def blocked_labels(flat: Flat) -> list[str]:
@@ -215,32 +295,29 @@ def blocked_labels(flat: Flat) -> list[str]:
 def _product_location(inst: list[Instance], key) -> ProductLocation:
     locs: list[Location] = [i.component.locations[k] for i, k in zip(inst, key)]
     return ProductLocation(key, tuple(loc.name for loc in locs),
-                           [Part(i, loc.invariant) for i, loc in zip(inst, locs) if loc.invariant],
-                           [Part(i, loc.flow) for i, loc in zip(inst, locs) if loc.flow],
+                           [Part(i, loc.invariant, loc) for i, loc in zip(inst, locs) if loc.invariant],
+                           [Part(i, loc.flow, loc) for i, loc in zip(inst, locs) if loc.flow],
                            locs[0].line)
 
 
-def _successors(inst: list[Instance], alphabets, key) -> list[ProductTransition]:
+def _successors(inst: list[Instance], alphabets, outgoing, key, size: _Size) -> list[ProductTransition]:
     out = []
-    by_label: dict[str, list[list[tuple[int, Transition]]]] = {}
+    labels: dict[str, None] = {}                 # in the order met
     for i, instance in enumerate(inst):
-        for tr in instance.component.transitions:
-            if tr.source != key[i]:
-                continue
+        for tr in outgoing[id(instance.component)].get(key[i], []):
             if tr.label is None:
                 out.append(_combine(inst, key, [(i, tr)], None))
+                size.add_transition(out[-1])
             else:
-                by_label.setdefault(instance.label(tr.label), [])
-    for label in by_label:
-        participants = [i for i, a in enumerate(alphabets) if label in a]
-        options = []
-        for i in participants:
-            mine = [(i, tr) for tr in inst[i].component.transitions
-                    if tr.source == key[i] and tr.label is not None and inst[i].label(tr.label) == label]
-            options.append(mine)
-        if all(options):
-            for combo in itertools.product(*options):
-                out.append(_combine(inst, key, list(combo), label))
+                labels[instance.label(tr.label)] = None
+    for label in labels:
+        options = [[(i, tr) for tr in outgoing[id(inst[i].component)].get(key[i], [])
+                    if tr.label is not None and inst[i].label(tr.label) == label]
+                   for i, alphabet in enumerate(alphabets) if label in alphabet]
+        size.room(math.prod(len(o) for o in options), label)
+        for combo in itertools.product(*options):
+            out.append(_combine(inst, key, list(combo), label))
+            size.add_transition(out[-1])
     return out
 
 
@@ -249,6 +326,6 @@ def _combine(inst, key, moves: list[tuple[int, Transition]], label) -> ProductTr
     for i, tr in moves:
         target[i] = tr.target
     return ProductTransition(tuple(key), tuple(target), label,
-                             [Part(inst[i], tr.guard) for i, tr in moves if tr.guard],
-                             [Part(inst[i], tr.assignment) for i, tr in moves if tr.assignment],
+                             [Part(inst[i], tr.guard, tr) for i, tr in moves if tr.guard],
+                             [Part(inst[i], tr.assignment, tr) for i, tr in moves if tr.assignment],
                              any(tr.asap for _, tr in moves), moves[0][1].line)

@@ -12,10 +12,19 @@ mention, and the invariants only bound by the same interval everywhere, is a con
 input (Building BLDC01's ``u1' == 0``). Constants bound to numbers are substituted.
 
 Initial set (SpaceEx semantics): the cfg's ``initially`` intersected with the invariant of the
-initial location; without ``loc()`` the initial location is the one location combination
-whose invariant meets the set (an LP), and several such is bad input. Terms of ``initially``
-or ``forbidden`` over names the system lacks only are dropped if satisfiable (the constraint
-``t == 0`` on a variable that does not exist is existentially true), with a note.
+initial location; without ``loc()`` the initial locations are the location combinations whose
+invariant meets the set (an LP), entered from a timeless start mode when there are several.
+
+Sizes. The composition bounds the texts to read (:mod:`.compose`); once the variables are
+known, at most ``MAX_VARIABLES`` states and inputs and ``MAX_MATRIX_ENTRIES`` entries of the
+flow matrices (one square of the variables per location) are accepted, before the loader
+builds any matrix.
+
+Names in the cfg. Every name in ``initially`` and ``forbidden`` must be a variable of the
+model (a state, an input, or an alias in the locations concerned), written in full or by a
+unique dotted suffix, and every ``loc()`` term an instance and one of its locations. Anything
+else is bad input at the cfg's line: SpaceEx would read an unknown name as one more free
+variable, so a typo would silently change the initial set or forbid every state.
 """
 
 from __future__ import annotations
@@ -35,6 +44,8 @@ from reach.model.spaceex.formula import (Const, FormulaError, Loc, Relation, Tok
                                          is_primed_name, names_in, parse_formula, to_python)
 
 RESERVED = set(FUNCTIONS) | set(CONSTANTS) | {"true", "false", "loc"}
+MAX_VARIABLES = 1_000
+MAX_MATRIX_ENTRIES = 25_000_000
 
 
 @dataclass
@@ -45,43 +56,63 @@ class Atoms:
     false: bool = False
 
 
+def few(names, limit: int = 10) -> str:
+    """``a, b, c`` (the first ``limit`` names, then how many in all)."""
+    names = list(names)
+    shown = ", ".join(names[:limit])
+    return shown if len(names) <= limit else f"{shown}, ... ({len(names)} in all)"
+
+
 class Converter:
     def __init__(self, flat: Flat, xml_file: str):
         self.flat = flat
         self.file = xml_file
         self.lines: dict[tuple, tuple[str, int]] = {}
-        self.notes: list[str] = []
+        self.parsed: dict[tuple[int, int], Atoms] = {}
 
     # ------------------------------------------------------------------ names
-    def global_of(self, instance: Instance, local: str, line: int) -> str:
+    def global_of(self, instance: Instance, local: str, field: str, line: int) -> str:
         """The global name behind ``local`` in ``instance`` (numbers come back as ``#value``)."""
         b = instance.binding.get(local)
         if b is None:
             # a name the component does not declare: SpaceEx treats it as a param of the
             # component; here that is a typo more often than not
-            raise InputError(f"component '{instance.component.id}': unknown name '{local}' "
-                             "(not a param of the component)", self.file, line=line)
+            raise InputError(f"unknown name '{local}' (the component's params: {few(instance.component.params)})",
+                             self.file, field, line)
         if b.number is not None:
             return "#" + b.number
         return b.name
 
+    @staticmethod
+    def field_of(part: Part, what: str) -> str:
+        """Where a text is written: ``component 'heater': location 'on': flow``."""
+        return f"component '{part.instance.component.id}': {part.context}: {what}"
+
     def parse(self, part: Part, what: str) -> Atoms:
+        """The atoms of an instance's text, names made global; each (instance, text) is read
+        once, however many product locations or transitions it is part of."""
+        key = (id(part.instance), id(part.text))
+        if key not in self.parsed:
+            self.parsed[key] = self._parse(part, self.field_of(part, what))
+        return self.parsed[key]
+
+    def _parse(self, part: Part, field: str) -> Atoms:
         text = part.text
         try:
             atoms = conjunction(text.text)
         except FormulaError as exc:
-            raise formula_error(exc, what, text.text, self.file, text.line) from None
+            raise formula_error(exc, field, text.text, self.file, text.line) from None
         out = Atoms()
         for atom in atoms:
             if isinstance(atom, Const):
                 out.false |= not atom.value
             elif isinstance(atom, Loc):
-                raise InputError(f"{what}: construct loc() is only allowed in the cfg", self.file, line=text.line)
+                raise InputError("construct loc() is only allowed in the cfg", self.file, field, text.line)
             else:
-                out.relations.append((self._globalise(atom, part.instance, text.line), part.instance))
+                out.relations.append((self._globalise(atom, part.instance, field, text.line), part.instance))
         return out
 
-    def _globalise(self, rel: Relation, instance: Instance, line: int) -> Relation:
+    def _globalise(self, rel: Relation, instance: Instance, field: str, line: int) -> Relation:
         parts = []
         for tokens in rel.parts:
             new = []
@@ -89,9 +120,10 @@ class Converter:
                 called = i + 1 < len(tokens) and tokens[i + 1].text == "("
                 if t.kind == "name" and not called:
                     if t.text in RESERVED and t.text not in instance.binding:
-                        new.append(t)
+                        # a constant (pi) is a number to the rest of the import
+                        new.append(Token("num", t.text) if t.text in CONSTANTS else t)
                         continue
-                    g = self.global_of(instance, t.text, line)
+                    g = self.global_of(instance, t.text, field, line)
                     new.append(Token("num", f"({g[1:]})") if g.startswith("#") else Token("name", g))
                 else:
                     new.append(t)
@@ -118,16 +150,33 @@ def yaml_names(used: list[str]) -> dict[str, str]:
     return out
 
 
-def identifier(text: str, taken: set[str]) -> str:
-    name = re.sub(r"\W", "_", text) or "m"
-    if not name.isidentifier():
-        name = "m_" + name
-    base, k = name, 2
-    while name in taken:
-        name = f"{base}_{k}"
-        k += 1
-    taken.add(name)
-    return name
+class Identifiers:
+    """Unique identifiers made from texts: ``a``, then ``a_2``, ``a_3``, ... Each base keeps
+    its next number, so n equal texts cost n steps, not n squared."""
+
+    def __init__(self, taken=()):
+        self.taken = set(taken)
+        self.next: dict[str, int] = {}
+
+    def __call__(self, text: str) -> str:
+        name = re.sub(r"\W", "_", text) or "m"
+        if not name.isidentifier():
+            name = "m_" + name
+        base, k = name, self.next.get(name, 2)
+        while name in self.taken:
+            name = f"{base}_{k}"
+            k += 1
+        self.next[base] = k
+        self.taken.add(name)
+        return name
+
+
+def property_id(cfg_file: str) -> str:
+    """The id of the cfg's forbidden set: the cfg's file name without ``.cfg`` in letters, digits,
+    ``_`` and ``-`` (``my model (v2).cfg`` -> ``my_model_v2``), ``forbidden`` if nothing is left."""
+    name = cfg_file.replace("\\", "/").rsplit("/", 1)[-1]
+    stem = name[:-4] if name.endswith(".cfg") else name
+    return re.sub(r"[^A-Za-z0-9_-]+", "_", stem).strip("_-") or "forbidden"
 
 
 def number_of(text: str) -> float | None:
@@ -252,24 +301,25 @@ class DocumentBuilder(Converter):
         for key, loc in self.flat.locations.items():
             flows = {}
             for part in loc.flows:
-                atoms = self.parse(part, f"location '{loc.names}' flow")
+                atoms = self.parse(part, "flow")
                 if atoms.false:
                     self.timeless.add(key)
                 for rel, _ in atoms.relations:
                     var = is_primed_name(rel.parts[0]) if rel.ops in (["=="], ["="]) else None
                     if var is None:
-                        raise InputError(f"flow: construct '{self._show(rel)}' is not supported "
-                                         "(expected x' == expression)", self.file, line=part.text.line)
+                        raise InputError(f"construct '{self._show(rel)}' is not supported (expected x' == "
+                                         "expression)", self.file, self.field_of(part, "flow"), part.text.line)
                     if var in flows:
-                        raise InputError(f"flow: two derivatives given for '{var}'", self.file, line=part.text.line)
+                        raise InputError(f"two derivatives given for '{var}' in location '{self.flat.label(key)}'",
+                                         self.file, self.field_of(part, "flow"), part.text.line)
                     flows[var] = (rel.parts[1], part.text.line)
             self.flows[key] = flows
             invariant = []
             for part in loc.invariants:
                 atoms = self.parse(part, "invariant")
                 if atoms.false:
-                    raise InputError("invariant: construct 'false' (an empty location) is not supported",
-                                     self.file, line=part.text.line)
+                    raise InputError("construct 'false' (an empty location) is not supported", self.file,
+                                     self.field_of(part, "invariant"), part.text.line)
                 invariant += [(rel, part.text.line) for rel, _ in atoms.relations]
             self.invariants[key] = invariant
         self.guards, self.assignments = [], []
@@ -287,13 +337,20 @@ class DocumentBuilder(Converter):
                     lhs = rel.parts[0]
                     var = _only_name(lhs) or is_primed_name(lhs)
                     if len(rel.ops) != 1 or rel.ops[0] not in (":=", "==", "=") or var is None:
-                        raise InputError(f"assignment: construct '{self._show(rel)}' is not supported "
-                                         "(expected x := expression)", self.file, line=part.text.line)
+                        raise InputError(f"construct '{self._show(rel)}' is not supported (expected x := "
+                                         "expression)", self.file, self.field_of(part, "assignment"), part.text.line)
                     if var in assign:
-                        raise InputError(f"assignment: '{var}' assigned twice", self.file, line=part.text.line)
+                        raise InputError(f"'{var}' assigned twice", self.file, self.field_of(part, "assignment"),
+                                         part.text.line)
                     assign[var] = (rel.parts[1], part.text.line)
             self.guards.append(guard)
             self.assignments.append(assign)
+        # every global name under itself and each of its dotted suffixes (p.first.z: first.z, z)
+        self.suffixes: dict[str, list[str]] = {}
+        for g in self._order():
+            parts = g.split(".")
+            for k in range(len(parts)):
+                self.suffixes.setdefault(".".join(parts[k:]), []).append(g)
 
     def _show(self, rel: Relation) -> str:
         text = " ".join(" ".join(t.text for t in p) + (f" {rel.ops[i]}" if i < len(rel.ops) else "")
@@ -335,6 +392,18 @@ class DocumentBuilder(Converter):
             self._maybe_constant_input(var, cfg_names)
         self.states = [g for g in self._order() if g in states and g not in self.inputs]
 
+    def check_size(self) -> None:
+        """Refuse more variables, or flow matrices, than the import handles (the module docstring)."""
+        n = len(self.states) + len(self.inputs)
+        if n > MAX_VARIABLES:
+            raise self.flat.error(f"{n} variables (states and inputs), more than the {MAX_VARIABLES} the import "
+                                  "handles (flow matrices grow with their square)")
+        entries = len(self.flat.locations) * (n + 1) ** 2
+        if entries > MAX_MATRIX_ENTRIES:
+            raise self.flat.error(f"too large to import: {len(self.flat.locations)} location combinations of {n} "
+                                  f"variables need {entries} flow matrix entries, more than {MAX_MATRIX_ENTRIES}: "
+                                  "analyse a smaller network")
+
     def _order(self) -> list[str]:
         """Variables in declaration order (the system's params first, then instance locals)."""
         return list(self.flat.globals) + sorted(set(v for f in self.flows.values() for v in f)
@@ -369,7 +438,7 @@ class DocumentBuilder(Converter):
             for key in where:
                 if key not in bounds:
                     raise InputError(f"'{var}' has no flow and is unbounded in location "
-                                     f"'{'__'.join(self.flat.locations[key].names)}' (an unbounded input is "
+                                     f"'{self.flat.label(key)}' (an unbounded input is "
                                      "not supported)", self.file, line=self.flat.locations[key].line)
                 lo, hi = -np.inf, np.inf
                 for j, (a, b) in bounds[key]:
@@ -471,12 +540,13 @@ class DocumentBuilder(Converter):
                              cfg.file, line=cfg.line("initially"))
         init_atoms = init_terms[0]
         cfg_rel = [a for a in init_atoms if isinstance(a, Relation)]
-        cfg_names = {self.resolve(n) for r in cfg_rel for p in r.parts for n in names_in(p)} - {None}
         self.read_locations()
+        cfg_names = {g for r in cfg_rel for p in r.parts for n in names_in(p) for g in self.lookup(n)}
         self.classify(cfg_names)
+        self.check_size()
         self.yaml = yaml_names(self.states + list(self.inputs))
-        taken: set[str] = set()
-        self.mode_of = {key: identifier("__".join(loc.names), taken) for key, loc in self.flat.locations.items()}
+        modes = Identifiers()
+        self.mode_of = {key: modes("__".join(loc.names)) for key, loc in self.flat.locations.items()}
         data: dict = {"name": self.name}
         lines = self.lines
         lines[()] = (self.file, 1)
@@ -499,7 +569,7 @@ class DocumentBuilder(Converter):
                 flow = {}
                 for s in self.states:
                     if s not in self.flows[key]:
-                        raise InputError(f"location '{'__'.join(loc.names)}': no flow for '{s}' (SpaceEx "
+                        raise InputError(f"location '{self.flat.label(key)}': no flow for '{s}' (SpaceEx "
                                          "leaves it free there; not supported)", self.file, line=loc.line)
                     tokens, line = self.flows[key][s]
                     flow[self.yaml[s]] = self.render(tokens, key, line)
@@ -529,8 +599,6 @@ class DocumentBuilder(Converter):
         for key in ("sampling-time", "iter-max"):
             if cfg.text(key) is not None:
                 notes[key] = cfg.number(key)
-        if self.notes:
-            notes["dropped"] = list(self.notes)
         blocked = blocked_labels(self.flat)
         if blocked:
             notes["blocked"] = blocked
@@ -539,13 +607,13 @@ class DocumentBuilder(Converter):
         return Documents(data, lines, props, plines, pid)
 
     def transitions_doc(self) -> dict:
-        out, taken = {}, set()
+        out, names = {}, Identifiers()
         for tr, guard, assign in zip(self.flat.transitions, self.guards, self.assignments):
             if guard is None:
                 continue                      # a guard 'false' never fires
             src, dst = self.mode_of[tr.source], self.mode_of[tr.target]
             base = tr.label.split(".")[-1] if tr.label else f"{src}_to_{dst}"
-            name = identifier(base, taken)
+            name = names(base)
             path = ("transitions", name)
             self.lines[path] = (self.file, tr.line)
             spec: dict = {"from": src, "to": dst}
@@ -582,76 +650,72 @@ class DocumentBuilder(Converter):
         except FormulaError as exc:
             raise formula_error(exc, key, text, self.cfg.file, self.cfg.line(key)) from None
 
-    def resolve(self, name: str) -> str | None:
-        """A cfg name as a global name: exact, else the unique global with that dotted suffix."""
-        known = set(self.flat.globals) | {v for f in getattr(self, "flows", {}).values() for v in f}
-        if name in known:
-            return name
-        matches = [g for g in known if g.endswith("." + name)]
-        return matches[0] if len(matches) == 1 else None
+    def lookup(self, name: str) -> list[str]:
+        """The global names a cfg name may mean: itself, else those with that dotted suffix."""
+        matches = self.suffixes.get(name, [])
+        return [name] if name in matches else matches
 
-    def instance_of(self, comp: str | None, where_key: str) -> int | None:
+    def resolve(self, name: str, key, where_key: str) -> str:
+        """A cfg name as the global name of a variable of the model in location ``key``; a name
+        the system lacks, or that means nothing there, is bad input."""
+        matches = self.lookup(name)
+        if len(matches) > 1:
+            raise self.cfg_error(where_key, f"'{name}' is ambiguous ({few(matches)}): write the instance's name")
+        if not matches:
+            variables = self.states + list(self.inputs) + sorted({a for d in self.aliases.values() for a in d})
+            raise self.cfg_error(where_key, f"unknown name '{name}' (the system's variables: {few(variables)})")
+        g = matches[0]
+        if g in self.yaml or g in self.aliases[key]:
+            return g
+        if any(g in d for d in self.aliases.values()):
+            raise self.cfg_error(where_key, f"'{name}' has no value in location '{self.flat.label(key)}' "
+                                            "(an equality defines it in other locations only)")
+        raise self.cfg_error(where_key, f"'{name}' takes no part in the system (no flow, bound or definition), "
+                                        "so a constraint on it says nothing about the runs")
+
+    def cfg_error(self, where_key: str, message: str) -> InputError:
+        return InputError(message, self.cfg.file, where_key, self.cfg.line(where_key))
+
+    def instance_of(self, comp: str | None, where_key: str) -> int:
         inst = self.flat.instances
         if comp is None:
             if len(inst) != 1:
-                raise InputError(f"{where_key}: loc() without a component in a network of {len(inst)} "
-                                 "components", self.cfg.file, line=self.cfg.line(where_key))
+                raise self.cfg_error(where_key, f"loc() without a component in a network of {len(inst)} components")
             return 0
         matches = [i for i, x in enumerate(inst) if x.path == comp or x.path.endswith("." + comp)
                    or (x.path == "" and x.component.id == comp)]
         if len(matches) > 1:
-            raise InputError(f"{where_key}: loc({comp}) is ambiguous", self.cfg.file, line=self.cfg.line(where_key))
-        return matches[0] if matches else None
+            raise self.cfg_error(where_key, f"loc({comp}) is ambiguous")
+        if not matches:
+            raise self.cfg_error(where_key, f"loc({comp}): no component instance '{comp}' "
+                                            f"(the system's: {few(x.path or x.component.id for x in inst)})")
+        return matches[0]
 
-    def cfg_relation(self, rel: Relation, key, where_key: str):
-        """The texts of a cfg relation, or None if it only names variables the system lacks
-        (then it must be satisfiable on its own, and is dropped with a note)."""
-        line = self.cfg.line(where_key)
-        names = [n for p in rel.parts for n in names_in(p)]
-        resolved = {n: self.resolve(n) for n in names}
-        missing = [n for n, g in resolved.items() if g is None or (g not in self.yaml and g not in
-                                                                   self.aliases.get(key, {}))]
-        if missing:
-            if len(missing) < len(set(names)):
-                raise InputError(f"{where_key}: unknown name '{missing[0]}'", self.cfg.file, line=line)
-            return None
+    def location_of(self, atom: Loc, where_key: str) -> int:
+        """The instance a ``loc(component) == location`` term names, its location checked."""
+        i = self.instance_of(atom.component, where_key)
+        instance = self.flat.instances[i]
+        names = [loc.name for loc in instance.component.locations.values()]
+        if atom.location not in names:
+            who = f"instance '{instance.path}'" if instance.path else f"component '{instance.component.id}'"
+            raise self.cfg_error(where_key, f"{who} has no location '{atom.location}' (its locations: {few(names)})")
+        return i
+
+    def cfg_relation(self, rel: Relation, key, where_key: str) -> list[tuple[str, str]]:
+        """The texts of a cfg relation in location ``key``, its names made global (a constant
+        such as ``pi`` stays a number unless the system has a variable of that name)."""
+        parts = [[Token("num", t.text) if t.kind == "name" and t.text in CONSTANTS and not self.lookup(t.text)
+                  else t for t in p] for p in rel.parts]
+        resolved = {n: self.resolve(n, key, where_key) for p in parts for n in names_in(p)}
         parts = [[Token("name", resolved[t.text]) if t.kind == "name" and t.text in resolved else t for t in p]
-                 for p in rel.parts]
-        return self.relation_texts(Relation(parts, rel.ops), key, line)
-
-    def _dropped_satisfiable(self, rels: list[Relation], where_key: str) -> bool:
-        """Are relations over names the system lacks satisfiable together (linear ones by LP)?"""
-        names = sorted({n for r in rels for p in r.parts for n in names_in(p)})
-        symbols = [sympy.Symbol(f"v{i}", real=True) for i in range(len(names))]
-        table = dict(zip([n.replace(".", "_") for n in names], symbols))
-        pairs = []
-        for r in rels:
-            for lhs, op, rhs in _pairs(r):
-                try:
-                    a = to_python(lhs, lambda n: n.replace(".", "_"))
-                    b = to_python(rhs, lambda n: n.replace(".", "_"))
-                except FormulaError as exc:
-                    raise InputError(f"{where_key}: construct not supported: {exc}", self.cfg.file,
-                                     line=self.cfg.line(where_key)) from None
-                kind = "==" if op in ("==", "=") else "<="
-                if op in (">=", ">"):
-                    a, b = b, a
-                pairs.append((kind, f"({a}) - ({b})"))
-        rows = linear_rows(pairs, table, symbols)
-        if rows is None:
-            raise InputError(f"{where_key}: a nonlinear constraint on names the system lacks",
-                             self.cfg.file, line=self.cfg.line(where_key))
-        return feasible(rows, len(symbols))
+                 for p in parts]
+        return self.relation_texts(Relation(parts, rel.ops), key, self.cfg.line(where_key))
 
     def initial_doc(self, atoms) -> dict:
         allowed: dict[int, set] = {}
-        unknown: list[Relation] = []
         for a in atoms:
             if isinstance(a, Loc):
-                i = self.instance_of(a.component, "initially")
-                if i is None:
-                    self.notes.append(f"initially: loc({a.component}) == {a.location} (no such component)")
-                    continue
+                i = self.location_of(a, "initially")
                 allowed[i] = allowed.get(i, {a.location}) & {a.location}
             elif isinstance(a, Const) and not a.value:
                 raise InputError("initially: the initial set is 'false' (empty)", self.cfg.file,
@@ -665,14 +729,7 @@ class DocumentBuilder(Converter):
         table = {s.name: s for s in symbols}
         choice = []
         for key in candidates:
-            texts, unknown = [], []
-            for a in atoms:
-                if isinstance(a, Relation):
-                    t = self.cfg_relation(a, key, "initially")
-                    if t is None:
-                        unknown.append(a)
-                    else:
-                        texts += t
+            texts = [t for a in atoms if isinstance(a, Relation) for t in self.cfg_relation(a, key, "initially")]
             for j, (rel, line) in enumerate(self.invariants[key]):
                 if j not in self.dropped[key]:
                     inv = self.relation_texts(rel, key, line)
@@ -684,10 +741,6 @@ class DocumentBuilder(Converter):
             if rows is None or feasible(linear_rows([(k, _difference(t, k)) for k, t in texts] + bounds,
                                                     table, symbols), len(symbols)):
                 choice.append((key, texts))
-        if unknown:
-            if not self._dropped_satisfiable(unknown, "initially"):
-                raise InputError("initially: the initial set is empty", self.cfg.file, line=self.cfg.line("initially"))
-            self.notes += [f"initially: {self._show(r)} (names the system lacks)" for r in unknown]
         if not choice:
             raise InputError("initially: the initial set meets no location's invariant", self.cfg.file,
                              line=self.cfg.line("initially"))
@@ -701,21 +754,21 @@ class DocumentBuilder(Converter):
         """Several initial locations: a timeless mode ``start`` holding the cfg's set, with an
         urgent jump into each location whose (linear) invariant it meets. Properties do not
         look at ``start``: its states are checked where they land."""
-        start = identifier("start", set(self.mode_of.values()) | set(self.extra_modes))
+        start = Identifiers(set(self.mode_of.values()) | set(self.extra_modes))("start")
         self.extra_modes[start] = {"flow": False}
         self.lines[("modes", start)] = (self.cfg.file, self.cfg.line("initially"))
         texts = []
         for a in atoms:
             if isinstance(a, Relation):
-                texts += self.cfg_relation(a, choice[0][0], "initially") or []
-        taken = set(self.transitions_out)
+                texts += self.cfg_relation(a, choice[0][0], "initially")
+        names = Identifiers(self.transitions_out)
         # a simulator takes the first enabled urgent jump: locations where time passes first
         for key, _ in sorted(choice, key=lambda c: c[0] in self.timeless):
             guard = []
             for j, (rel, line) in enumerate(self.invariants[key]):
                 if j not in self.dropped[key]:
                     guard += self.as_constraints(self.relation_texts(rel, key, line))
-            name = identifier(f"{start}_to_{self.mode_of[key]}", taken)
+            name = names(f"{start}_to_{self.mode_of[key]}")
             self.transitions_out[name] = {"from": start, "to": self.mode_of[key], "urgent": True,
                                           **({"guard": guard} if guard else {})}
             self.lines[("transitions", name)] = (self.cfg.file, self.cfg.line("initially"))
@@ -723,9 +776,7 @@ class DocumentBuilder(Converter):
 
     def forbidden_doc(self):
         terms = self.cfg_formula("forbidden")
-        stem = self.cfg.file.replace("\\", "/").rsplit("/", 1)[-1]
-        stem = stem[:-4] if stem.endswith(".cfg") else stem
-        pid = re.sub(r"[^A-Za-z0-9_-]", "_", stem) or "forbidden"     # a property id is a name
+        pid = property_id(self.cfg.file)
         line = self.cfg.line("forbidden")
         props, plines = [], {}
         for term in terms:
@@ -734,29 +785,22 @@ class DocumentBuilder(Converter):
             modes = set(self.mode_of.values())
             for a in term:
                 if isinstance(a, Loc):
-                    i = self.instance_of(a.component, "forbidden")
-                    if i is None:
-                        raise InputError(f"forbidden: loc({a.component}): no such component", self.cfg.file, line=line)
+                    i = self.location_of(a, "forbidden")
                     modes &= {self.mode_of[k] for k, loc in self.flat.locations.items() if loc.names[i] == a.location}
             if not modes:
                 continue
-            avoid, unknown = [], []
+            avoid = []
             for a in term:
                 if isinstance(a, Relation):
                     texts = None
-                    for key in self.flat.locations:          # aliases: the same text in every location
+                    for key, mode in self.mode_of.items():     # aliases: the same text in every mode
+                        if mode not in modes:
+                            continue
                         t = self.cfg_relation(a, key, "forbidden")
                         if texts is not None and t != texts:
-                            raise InputError("forbidden: a name defined differently in different locations",
-                                             self.cfg.file, line=line)
+                            raise self.cfg_error("forbidden", "a name defined differently in different locations")
                         texts = t
-                    if texts is None:
-                        unknown.append(a)
-                    else:
-                        avoid += self.as_constraints(texts)
-            if unknown and not self._dropped_satisfiable(unknown, "forbidden"):
-                continue
-            self.notes += [f"forbidden: {self._show(r)} (names the system lacks)" for r in unknown]
+                    avoid += self.as_constraints(texts)
             k = len(props)
             order = [m for m in self.mode_of.values() if m in modes]
             prop = {"id": pid, "kind": "safety", "modes": order}

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
+from typing import NamedTuple
 
 from reach.errors import InputError
 from reach.model.expr import FUNCTIONS
@@ -32,8 +33,7 @@ _TOKEN = re.compile(r"""
 COMPARISONS = ("<=", ">=", "==", ":=", "=", "<", ">")
 
 
-@dataclass(frozen=True)
-class Token:
+class Token(NamedTuple):
     kind: str          # "num" | "name" | "op"
     text: str
 
@@ -105,7 +105,10 @@ class _Parser:
         while self.peek() is not None and self.peek().text in ("&", "&&"):
             self.take()
             right = self.unit()
-            terms = [a + b for a in terms for b in right]
+            if len(terms) == len(right) == 1:
+                terms[0].extend(right[0])        # a plain conjunction: linear in its length
+            else:
+                terms = [a + b for a in terms for b in right]
             if len(terms) > MAX_TERMS:
                 raise FormulaError(f"more than {MAX_TERMS} disjuncts")
         return terms

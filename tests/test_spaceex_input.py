@@ -1,0 +1,372 @@
+"""SpaceEx import: names the model lacks, networks too large to compose, the wording of its
+errors, and locations where no time passes.
+
+Every bad input ends in exit code 2 with one line ``file:line: field: message``; a network
+whose product of locations is too large is refused while the product is built, not after.
+"""
+
+from __future__ import annotations
+
+import keyword
+from pathlib import Path
+
+import numpy as np
+import pytest
+import sympy
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from reach.cli import main
+from reach.errors import InputError
+from reach.model import load_model
+from reach.model.expr import CONSTANTS, FUNCTIONS
+from reach.model.spaceex import load_spaceex, write_yaml
+from reach.model.spaceex.compose import MAX_LOCATIONS
+
+HEADER = '<?xml version="1.0"?>\n<sspaceex xmlns="http://www-verimag.imag.fr/xml-namespaces/sspaceex" version="0.2">\n'
+
+THERMOSTAT = '''<component id="heater">
+ <param name="T" type="real" local="false" dynamics="any"/>
+ <param name="c" type="real" local="false" dynamics="any"/>
+ <location id="1" name="on"><invariant>T &lt;= 22</invariant><flow>T' == -0.1*(T - 10) + 3 &amp; c' == 1</flow></location>
+ <location id="2" name="off"><invariant>T &gt;= 18</invariant><flow>T' == -0.1*(T - 10) &amp; c' == 1</flow></location>
+ <transition source="1" target="2"><guard>T &gt;= 21</guard><assignment>c := 0</assignment></transition>
+ <transition source="2" target="1"><guard>T &lt;= 19</guard></transition>
+</component>
+'''
+CFG = 'system = heater\ninitially = "loc(heater) == on & T == 20 & c == 0"\nforbidden = "T >= 22.01"\ntime-horizon = 30\n'
+
+
+def write(folder: Path, body: str, cfg: str, name: str = "m") -> tuple[Path, Path]:
+    (folder / f"{name}.xml").write_text(HEADER + body + "</sspaceex>\n")
+    (folder / f"{name}.cfg").write_text(cfg)
+    return folder / f"{name}.xml", folder / f"{name}.cfg"
+
+
+def bad_input(argv: list[str], capsys) -> str:
+    """Run ``reach ARGV``: it must exit 2 with one line on stderr, which is returned."""
+    code = main(argv)
+    err = capsys.readouterr().err
+    assert code == 2, err
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    return err.strip()
+
+
+def check(xml, cfg) -> list[str]:
+    return ["check", str(xml), str(cfg), "-b", "montecarlo", "-o", "samples=20", "-o", "search_rounds=0"]
+
+
+# ------------------------------------------------------------------ names the model lacks
+@pytest.mark.parametrize("key,line,formula", [
+    ("forbidden", 3, "xx >= 22.01"),
+    ("forbidden", 3, "T >= 22 & xx <= 1"),
+    ("forbidden", 3, "T >= 23 | xx >= 22.01"),
+    ("initially", 2, "loc(heater) == on & T == 20 & c == 0 & xx == 3"),
+    ("initially", 2, "loc(heater) == on & T == 20 & xx == 3 & c == 0"),
+])
+def test_an_unknown_name_in_the_cfg_is_bad_input_naming_it_and_the_known_ones(tmp_path, capsys, key, line,
+                                                                               formula):
+    cfg = CFG.replace('"loc(heater) == on & T == 20 & c == 0"' if key == "initially" else '"T >= 22.01"',
+                      f'"{formula}"')
+    xml, cfg_path = write(tmp_path, THERMOSTAT, cfg)
+    err = bad_input(check(xml, cfg_path), capsys)
+    assert err == (f"reach: {cfg_path}:{line}: {key}: unknown name 'xx' (the system's variables: T, c)")
+    err = bad_input(["import", str(xml), str(cfg_path), "--out", str(tmp_path / "out")], capsys)
+    assert "unknown name 'xx'" in err and not (tmp_path / "out").exists()
+
+
+def test_a_forbidden_set_over_an_unknown_name_is_not_an_unsafe_verdict(tmp_path, capsys):
+    """``xx >= 22.01`` with no ``xx`` once became 'everything forbidden' and UNSAFE at t = 0."""
+    xml, cfg = write(tmp_path, THERMOSTAT, CFG.replace("T >= 22.01", "xx >= 22.01"))
+    with pytest.raises(InputError, match="unknown name 'xx'"):
+        load_spaceex(xml, cfg)
+    bad_input(check(xml, cfg), capsys)
+
+
+def test_an_unknown_component_in_initially_is_bad_input(tmp_path, capsys):
+    xml, cfg = write(tmp_path, THERMOSTAT, CFG.replace("c == 0", "c == 0 & loc(cooler) == on"))
+    err = bad_input(check(xml, cfg), capsys)
+    assert err == f"reach: {cfg}:2: initially: loc(cooler): no component instance 'cooler' (the system's: heater)"
+
+
+def test_a_variable_declared_but_used_nowhere_is_named_as_such(tmp_path, capsys):
+    body = THERMOSTAT.replace('<param name="c"', '<param name="idle" type="real" local="false" dynamics="any"/>\n'
+                              ' <param name="c"')
+    xml, cfg = write(tmp_path, body, CFG.replace("T >= 22.01", "idle >= 1"))
+    err = bad_input(check(xml, cfg), capsys)
+    assert err == (f"reach: {cfg}:3: forbidden: 'idle' takes no part in the system (no flow, bound or "
+                   "definition), so a constraint on it says nothing about the runs")
+
+
+def test_a_dotted_suffix_naming_two_variables_is_ambiguous(tmp_path, capsys):
+    body = THERMOSTAT + '''<component id="sys">
+ <bind component="heater" as="a"/>
+ <bind component="heater" as="b"/>
+</component>
+'''
+    cfg = ('system = sys\ninitially = "loc(a) == on & loc(b) == on & a.T == 20 & b.T == 20 & a.c == 0 & '
+           'b.c == 0"\nforbidden = "T >= 22.01"\ntime-horizon = 30\n')
+    xml, cfg_path = write(tmp_path, body, cfg)
+    err = bad_input(check(xml, cfg_path), capsys)
+    assert err == f"reach: {cfg_path}:3: forbidden: 'T' is ambiguous (a.T, b.T): write the instance's name"
+
+
+RESERVED = set(FUNCTIONS) | set(CONSTANTS) | {"true", "false", "loc"}
+IDENTIFIERS = st.from_regex(r"[A-Za-z_][A-Za-z0-9_]{0,7}(\.[A-Za-z_][A-Za-z0-9_]{0,5})?", fullmatch=True).filter(
+    lambda s: s not in RESERVED and s.split(".")[-1] not in ("T", "c") and not keyword.iskeyword(s))
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(name=IDENTIFIERS, key=st.sampled_from(["initially", "forbidden"]),
+       shape=st.sampled_from(["{} >= 1", "T + 2*{} <= 3", "-1 <= {} <= 1", "{} == 0", "{}^2 >= T"]),
+       where=st.integers(0, 2))
+def test_any_name_the_system_lacks_is_bad_input_naming_it(tmp_path_factory, capsys, name, key, shape, where):
+    """An identifier the model does not declare, anywhere in ``initially`` or ``forbidden``,
+    is bad input naming the cfg's line, the field and the identifier."""
+    tmp = tmp_path_factory.mktemp("names")
+    atom = shape.format(name)
+    base = ["loc(heater) == on", "T == 20", "c == 0"] if key == "initially" else ["T >= 22.01"]
+    base.insert(min(where, len(base)), atom)
+    text = " & ".join(base)
+    cfg = CFG.replace('"loc(heater) == on & T == 20 & c == 0"' if key == "initially" else '"T >= 22.01"',
+                      f'"{text}"')
+    xml, cfg_path = write(tmp, THERMOSTAT, cfg)
+    line = 2 if key == "initially" else 3
+    err = bad_input(check(xml, cfg_path), capsys)
+    assert err.startswith(f"reach: {cfg_path}:{line}: {key}: unknown name '{name}'"), err
+
+
+@pytest.mark.parametrize("old,new,line,field", [
+    ("T' == -0.1*(T - 10) + 3", "T' == -0.1*(T - 10) + 3 + q", 6, "location 'on': flow"),
+    ("T &lt;= 22", "q &lt;= 22", 6, "location 'on': invariant"),
+    ("T &gt;= 21", "q &gt;= 21", 8, "transition on -> off: guard"),
+    ("c := 0", "q := 0", 8, "transition on -> off: assignment"),
+    ("c := 0", "c := q", 8, "transition on -> off: assignment"),
+    ("&amp; c' == 1</flow></location>\n <location id=\"2\"", "&amp; q' == 1</flow></location>\n <location id=\"2\"",
+     6, "location 'on': flow"),
+])
+def test_an_unknown_name_in_the_xml_names_file_line_and_field(tmp_path, capsys, old, new, line, field):
+    assert old in THERMOSTAT
+    xml, cfg = write(tmp_path, THERMOSTAT.replace(old, new, 1), CFG)
+    err = bad_input(check(xml, cfg), capsys)
+    assert err == (f"reach: {xml}:{line}: component 'heater': {field}: unknown name 'q' "
+                   "(the component's params: T, c)")
+
+
+# ------------------------------------------------------------------ networks too large
+SWITCH = '''<component id="sw">
+ <param name="x" type="real" local="false" dynamics="any"/>
+ <location id="1" name="on"><flow>x' == 1</flow></location>
+ <location id="2" name="off"><flow>x' == -1</flow></location>
+ <transition source="1" target="2"><guard>x &gt;= 1</guard></transition>
+ <transition source="2" target="1"><guard>x &lt;= 0</guard></transition>
+</component>
+'''
+
+
+def network(n: int, fixed: bool) -> tuple[str, str]:
+    """``n`` bound copies of a two-location switch, and a cfg that fixes each copy's initial
+    location (``fixed``) or leaves the product of all of them."""
+    params = "".join(f' <param name="x{i}" type="real" local="false" dynamics="any"/>\n' for i in range(n))
+    binds = "".join(f' <bind component="sw" as="s{i}"><map key="x">x{i}</map></bind>\n' for i in range(n))
+    body = SWITCH + '<component id="sys">\n' + params + binds + "</component>\n"
+    init = " & ".join(f"x{i} == 0" + (f" & loc(s{i}) == on" if fixed else "") for i in range(n))
+    return body, f'system = sys\ninitially = "{init}"\nforbidden = "x0 >= 2"\ntime-horizon = 1\n'
+
+
+NETWORK_LINE = SWITCH.count("\n") + 3          # the line of <component id="sys">
+
+
+@pytest.mark.parametrize("fixed", [False, True])
+def test_forty_bound_components_are_refused_while_the_product_is_built(tmp_path, capsys, fixed):
+    """2^40 location combinations: refused at the limit (no memory blow-up), naming the
+    network component's line and what to do."""
+    xml, cfg = write(tmp_path, *network(40, fixed))
+    for argv in (check(xml, cfg), ["import", str(xml), str(cfg), "--out", str(tmp_path / "out")]):
+        err = bad_input(argv, capsys)
+        assert err.startswith(f"reach: {xml}:{NETWORK_LINE}: component 'sys': ")
+        if fixed:
+            assert "reaches more than" in err and "smaller network" in err
+        else:
+            assert f"more than {MAX_LOCATIONS} initial location combinations" in err
+            assert "loc(INSTANCE) == LOCATION" in err
+
+
+def test_a_synchronised_label_shared_by_many_components_is_refused_before_its_product(tmp_path, capsys):
+    """Forty components that each take label 'go' in two ways: one product step would have
+    2^40 transitions."""
+    comp = '''<component id="sw">
+ <param name="x" type="real" local="false" dynamics="any"/>
+ <param name="go" type="label" local="false"/>
+ <location id="1" name="on"><flow>x' == 1</flow></location>
+ <transition source="1" target="1"><label>go</label><assignment>x := 0</assignment></transition>
+ <transition source="1" target="1"><label>go</label><assignment>x := 1</assignment></transition>
+</component>
+'''
+    params = "".join(f' <param name="x{i}" type="real" local="false" dynamics="any"/>\n' for i in range(40))
+    binds = "".join(f' <bind component="sw" as="s{i}"><map key="x">x{i}</map><map key="go">go</map></bind>\n'
+                    for i in range(40))
+    body = comp + '<component id="sys">\n <param name="go" type="label" local="false"/>\n' + params + binds + \
+        "</component>\n"
+    init = " & ".join(f"x{i} == 0" for i in range(40))
+    xml, cfg = write(tmp_path, body, f'system = sys\ninitially = "{init}"\ntime-horizon = 1\n')
+    err = bad_input(check(xml, cfg), capsys)
+    assert err.startswith(f"reach: {xml}:{comp.count(chr(10)) + 3}: component 'sys': ") and "label 'go'" in err
+
+
+def test_many_variables_are_refused_before_the_matrices_are_built(tmp_path, capsys):
+    n = 3000
+    params = "".join(f' <param name="x{i}" type="real" local="false" dynamics="any"/>\n' for i in range(n))
+    flow = " &amp; ".join(f"x{i}' == -x{i}" for i in range(n))
+    body = f'<component id="sys">\n{params} <location id="1" name="run"><flow>{flow}</flow></location>\n</component>\n'
+    init = " & ".join(f"x{i} == 0" for i in range(n))
+    xml, cfg = write(tmp_path, body, f'system = sys\ninitially = "{init}"\ntime-horizon = 1\n')
+    err = bad_input(check(xml, cfg), capsys)
+    assert err.startswith(f"reach: {xml}:3: component 'sys': ") and "3000 variables" in err
+
+
+def test_many_transitions_are_refused_before_they_are_converted(tmp_path, capsys):
+    loops = "".join(f' <transition source="1" target="1"><guard>x &gt;= {i}</guard></transition>\n'
+                    for i in range(60_000))
+    body = ('<component id="sys">\n <param name="x" type="real" local="false" dynamics="any"/>\n'
+            f' <location id="1" name="run"><flow>x\' == 1</flow></location>\n{loops}</component>\n')
+    xml, cfg = write(tmp_path, body, 'system = sys\ninitially = "x == 0"\ntime-horizon = 1\n')
+    err = bad_input(check(xml, cfg), capsys)
+    assert err.startswith(f"reach: {xml}:3: component 'sys': ") and "too large" in err
+
+
+def test_many_locations_of_many_variables_are_refused_before_the_flow_matrices(tmp_path, capsys):
+    """26 locations of 1000 states: 26 flow matrices of 1001^2 entries. With one state that
+    flows, the same locations and declarations import."""
+    n, m = 1000, 26
+    params = "".join(f' <param name="x{i}" type="real" local="false" dynamics="any"/>\n' for i in range(n))
+    flow = " &amp; ".join(f"x{i}' == {{k}}" for i in range(n))
+    locations = "".join(f' <location id="{k}" name="l{k}"><flow>{flow.format(k=k)}</flow></location>\n'
+                        for k in range(m))
+    chain = "".join(f' <transition source="{k}" target="{k + 1}"/>\n' for k in range(m - 1))
+    body = f'<component id="sys">\n{params}{locations}{chain}</component>\n'
+    init = " & ".join(f"x{i} == 0" for i in range(n))
+    xml, cfg = write(tmp_path, body, f'system = sys\ninitially = "loc(sys) == l0 & {init}"\ntime-horizon = 1\n')
+    err = bad_input(check(xml, cfg), capsys)
+    assert err.startswith(f"reach: {xml}:3: component 'sys': too large to import: 26 location combinations "
+                          "of 1000 variables")
+    one = f'<component id="sys">\n{params}' + "".join(
+        f' <location id="{k}" name="l{k}"><flow>x0\' == {k}</flow></location>\n' for k in range(m)) + chain + \
+        "</component>\n"
+    xml, cfg = write(tmp_path, one, 'system = sys\ninitially = "loc(sys) == l0 & x0 == 0"\ntime-horizon = 1\n')
+    model, _, _ = load_spaceex(xml, cfg)
+    assert model.state == ["x0"] and len(model.modes) == m
+
+
+@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(n=st.integers(1, 60), fixed=st.booleans())
+def test_networks_of_any_size_import_or_are_refused(tmp_path_factory, capsys, n, fixed):
+    tmp = tmp_path_factory.mktemp("network")
+    xml, cfg = write(tmp, *network(n, fixed))
+    code = main(["import", str(xml), str(cfg), "--out", str(tmp / "out")])
+    err = capsys.readouterr().err
+    assert code in (0, 2) and "Traceback" not in err
+    if code == 2:
+        assert err.count("\n") == 1 and err.startswith(f"reach: {xml}:{NETWORK_LINE}: component 'sys': ")
+    if n <= 6:
+        assert code == 0
+
+
+# ------------------------------------------------------------------ the wording of errors
+def test_an_initial_location_that_does_not_exist_names_the_cfg_line(tmp_path, capsys):
+    xml, cfg = write(tmp_path, THERMOSTAT, "# heater\n" + CFG.replace("== on", "== nowhere"))
+    err = bad_input(check(xml, cfg), capsys)
+    assert err == f"reach: {cfg}:3: initially: component 'heater' has no location 'nowhere' (its locations: on, off)"
+
+
+PAIR = '<component id="sys">\n <bind component="heater" as="h"/>\n <bind component="heater" as="g"/>\n</component>\n'
+PAIR_CFG = ('system = sys\ninitially = "loc(h) == on & loc(g) == off & h.T == 20 & g.T == 20 & h.c == 0 & '
+            'g.c == 0"\ntime-horizon = 1\n')
+
+
+@pytest.mark.parametrize("network_of_two", [False, True])
+def test_locations_are_named_as_written_not_as_python_tuples(tmp_path, capsys, network_of_two):
+    body = THERMOSTAT.replace("T' == -0.1*(T - 10) + 3", "T' == 1 | T' == 2")
+    cfg = CFG
+    if network_of_two:
+        body += PAIR
+        cfg = PAIR_CFG
+    xml, cfg_path = write(tmp_path, body, cfg)
+    err = bad_input(check(xml, cfg_path), capsys)
+    assert "('" not in err and "location 'on': flow" in err
+
+
+def test_product_locations_are_shown_with_their_instances(tmp_path, capsys):
+    """A message about a product location names each instance's location (``h.on, g.off``)."""
+    body = THERMOSTAT.replace("<flow>T' == -0.1*(T - 10) &amp; c' == 1</flow>", "<flow>c' == 1</flow>")
+    xml, cfg_path = write(tmp_path, body + PAIR, PAIR_CFG)
+    err = bad_input(check(xml, cfg_path), capsys)
+    assert "location 'h.on, g.off': no flow for 'g.T'" in err and "('" not in err
+
+
+@pytest.mark.parametrize("stem,pid", [("..", "forbidden"), ("ü", "forbidden"), ("my model (v2)", "my_model_v2"),
+                                      ("-x", "x"), ("a.4th_order", "a_4th_order")])
+def test_a_cfg_file_name_that_is_no_identifier_gives_a_valid_property_id(tmp_path, capsys, stem, pid):
+    xml, _ = write(tmp_path, THERMOSTAT, CFG)
+    cfg = tmp_path / f"{stem}.cfg"
+    cfg.write_text(CFG)
+    _, props, _ = load_spaceex(xml, cfg)
+    assert [p.id for p in props] == [pid]
+    assert main(check(xml, cfg)) == 3
+    assert main(["import", str(xml), str(cfg), "--out", str(tmp_path / "out")]) == 0
+    capsys.readouterr()
+
+
+# ------------------------------------------------------------------ locations where no time passes
+TIMELESS = '''<component id="tank">
+ <param name="h" type="real" local="false" dynamics="any"/>
+ <param name="n" type="real" local="false" dynamics="any"/>
+ <location id="1" name="fill"><invariant>h &lt;= 10</invariant><flow>h' == 2 &amp; n' == 0</flow></location>
+ <location id="2" name="count"><flow>false</flow></location>
+ <location id="3" name="drain"><invariant>h &gt;= 1</invariant><flow>h' == -1 &amp; n' == 0</flow></location>
+ <transition source="1" target="2" asap="true"><guard>h &gt;= 10</guard><assignment>n := n + 1</assignment></transition>
+ <transition source="2" target="3" asap="true"></transition>
+ <transition source="3" target="1"><guard>h &lt;= 1</guard></transition>
+</component>
+'''
+
+
+@pytest.mark.parametrize("forbidden,verdicts", [("h >= 10.5", {"star": 0, "montecarlo": 3}),
+                                               ("n >= 1.5", {"star": None, "montecarlo": 1})])
+def test_a_timeless_location_is_marked_and_round_trips_with_the_same_verdicts(tmp_path, capsys, forbidden,
+                                                                             verdicts):
+    """``flow false``: no time passes in 'count'; the imported YAML is the same automaton and
+    gives the same verdicts as the XML (the tank fills to 10 by t = 5, counts, drains to 1 by
+    t = 14 and fills again: the second count is at t = 18.5, the level never passes 10). Star
+    leaves the second count undecided (None: the same verdict from both files is all that is
+    asserted)."""
+    cfg = (f'system = tank\ninitially = "loc(tank) == fill & h == 0 & n == 0"\nforbidden = "{forbidden}"\n'
+           'time-horizon = 30\n')
+    xml, cfg_path = write(tmp_path, TIMELESS, cfg)
+    direct, _, docs = load_spaceex(xml, cfg_path)
+    assert [name for name, mode in direct.modes.items() if mode.timeless] == ["count"]
+    assert docs.model["modes"]["count"]["flow"] is False
+    model_file, prop_file = write_yaml(docs, tmp_path / "out")
+    again = load_model(model_file)
+    assert [(name, m.timeless) for name, m in again.modes.items()] == \
+        [(name, m.timeless) for name, m in direct.modes.items()]
+    assert [(t.source, t.target, t.urgent, {k: sympy.srepr(v) for k, v in t.reset.items()})
+            for t in again.transitions] == \
+        [(t.source, t.target, t.urgent, {k: sympy.srepr(v) for k, v in t.reset.items()}) for t in direct.transitions]
+    assert np.array_equal(again.initial.low, direct.initial.low)
+    for backend, expected in verdicts.items():
+        options = ["-o", "samples=50"] if backend == "montecarlo" else []
+        from_xml = main(["check", str(xml), str(cfg_path), "-b", backend, *options])
+        from_yaml = main(["check", str(model_file), str(prop_file), "-b", backend, *options])
+        out = capsys.readouterr().out
+        assert from_xml == from_yaml, out
+        assert expected is None or from_xml == expected, out
+
+
+def test_the_constant_pi_is_a_number_in_the_xml_and_the_cfg(tmp_path):
+    """``pi`` is no variable to declare: in a flow, and in the cfg's sets."""
+    body = THERMOSTAT.replace("T' == -0.1*(T - 10) + 3", "T' == -0.1*(T - 10) + pi")
+    xml, cfg = write(tmp_path, body, CFG.replace("T >= 22.01", "T >= 7*pi"))
+    model, props, docs = load_spaceex(xml, cfg)
+    assert docs.model["modes"]["on"]["flow"]["T"] == "-0.1*(T - 10) + pi"
+    assert props[0].raw["avoid"] == ["T >= 7*pi"]
