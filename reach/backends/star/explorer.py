@@ -31,6 +31,10 @@ LOG = logging.getLogger("reach.star")
 #: most this many cells (:meth:`_Explorer._half_spread`)
 HALF_SPREAD_CELLS = 512
 
+#: relative size of a grid star's possible rounding (terms that cancel) beyond which a chain ends
+#: UNKNOWN (:meth:`_Explorer._cancellation_guard`): a thousand times the default touch tolerance
+PRECISION_LOST = 1e-6
+
 
 @dataclass
 class _Entry:
@@ -309,6 +313,7 @@ class _Explorer:
         dev = None if inputs is None else inputs.grid             # the box left per grid point
         centers = star.center @ np.swapaxes(Phis, 1, 2) + psis
         bases = np.einsum("jab,bm->jam", Phis, star.basis)
+        self._cancellation_guard(mode, star, Phis, psis, centers, bases)
         if inputs is not None and inputs.count:
             bases[:, :, -inputs.count:] += inputs.columns
         box = star.box
@@ -395,6 +400,31 @@ class _Explorer:
             end = grid_star(count) if dev is None else _plus_box(grid_star(count), dev[count])
             return end.intersect_halfspaces(Hi, gi), np.concatenate([point, np.zeros(end.nvars - point.size)])
         return None
+
+    def _cancellation_guard(self, mode: str, star: Star, Phis, psis, centers, bases):
+        """UNKNOWN where rounding may move the grid stars by more than the touch tolerance.
+
+        A grid star is ``Phi_j c + psi_j + Phi_j V a``, each product rounded to about
+        ``(n + 2) eps`` of the magnitudes it sums, and ``Phi_j`` from ``j`` products (its
+        exponential taken as computed). Where those magnitudes,
+        ``|Phi_j| (|c| + |V| |a|) + |psi_j|``, times ``8 (n + 2)(j + 1) eps`` exceed
+        :data:`PRECISION_LOST` of the star's own size, terms cancel that rounding cannot be
+        trusted with (an unstable mode run from its equilibrium: ``e^{A t} c`` and ``psi`` of
+        1e15 summing to 1), and no verdict rests on such stars. Below it, rounding is within a
+        thousand touch tolerances, as the semantics state (exponentials not enclosed)."""
+        a = np.maximum(np.abs(star.box.low), np.abs(star.box.high))
+        a = np.where(np.isfinite(a), a, 0.0)
+        summed = np.abs(Phis) @ (np.abs(star.center) + np.abs(star.basis) @ a) + np.abs(psis)
+        size = np.abs(centers) + np.abs(bases) @ a
+        steps = np.arange(1, len(Phis) + 1)[:, None]
+        rounding = 8 * (self.n + 2) * steps * np.finfo(float).eps * summed
+        lost = np.any(rounding > PRECISION_LOST * np.maximum(1.0, size), axis=1)
+        if np.any(lost):
+            j = int(np.argmax(lost))
+            raise _Stop(Status.UNKNOWN, f"precision lost in mode '{mode}': at step {j} the flow's terms "
+                                        f"(size {summed[j].max():.3g}) cancel to {size[j].max():.3g}, "
+                                        f"beyond what rounding can be trusted with (an unstable mode "
+                                        f"near its equilibrium; a shorter horizon helps)")
 
     def _past_cutoff(self, start: Star, path: _Path) -> bool:
         """In the safe-abort sweep: whether every run from ``start`` aborted, or (without an

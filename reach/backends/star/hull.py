@@ -78,10 +78,13 @@ may be in any member), up to the first grid point at or beyond the horizon (meas
 initial clock's lower end, or 0). SAFE only if every piece is excluded on every step.
 
 Rounding. Matrix exponentials ``P(t_j)`` and the centre run come from ``scipy.linalg.expm``,
-each on its own (no error accumulates along the grid; not enclosed, as elsewhere in star).
-The Neumann inverses are bounded with their tails; sums of non-negative terms are within a
-relative ``1e-12`` of exact, and every bound the check uses is pushed out by a relative
-:data:`ROUNDING` of the magnitudes it sums. The steps start at ``hull_steps / 8`` over the
+each on its own, so no error accumulates along the grid; the exponentials themselves are taken
+as computed (not enclosed, as elsewhere in star). The Neumann inverses are bounded with their
+tails; sums of non-negative terms are within a relative ``1e-12`` of exact. Every bound is
+pushed out by a relative :data:`ROUNDING` of the magnitudes summed into it, the centre's
+counted as ``|P(t_k)| |c_0| + |psi(t_k)|`` (not ``|c_k|``: at an unstable equilibrium the two
+terms cancel, and the computed centre is off by ~1e-15 of their size, far more than 1e-9 of
+``|c_k|``), and the members' difference at the centre alike. The steps start at ``hull_steps / 8`` over the
 horizon and double while a piece is not excluded, up to ``hull_steps``; the cost is quadratic
 in the steps (the convolutions above).
 """
@@ -111,7 +114,8 @@ ARGUMENT = ("every run stays in a closed switching group, so it is the mean flow
             "support) plus delta = int e^{A_m (t-s)} w(s) ds, w = (A_i - A_m) x + ... the members' "
             "difference, bounded per step by one generator per member and a box that a Volterra "
             "inequality (non-negative kernel, induction over the steps) bounds through delta itself; "
-            "between grid points by the chord plus (h/2)|y'| spread, rounding pushed out by 1e-9")
+            "between grid points by the chord plus (h/2)|y'| spread; rounding pushed out by 1e-9 of the "
+            "magnitudes summed (matrix exponentials taken as computed)")
 
 
 def closed_group(model, data: SwitchingModel) -> tuple[str, ...] | None:
@@ -153,6 +157,9 @@ class _Flowpipe:
         E_t = expm(aug * (h * np.arange(steps + 1))[:, None, None])
         self.P = E_t[:, :n, :n]                              # e^{A_m t_j}, j = 0..steps
         self.c = self.P @ self.c0 + E_t[:, :n, n]            # the centre run at the grid points
+        # the magnitudes summed into each centre: its rounding scales with them, not with |c|
+        # (an unstable equilibrium cancels terms of e^{A t} c0 and the input part to ~1e15)
+        self.c_size = np.abs(self.P) @ np.abs(self.c0) + np.abs(E_t[:, :n, n])
         self.K = AffineFlow(self.A, self.b).cell_growth(h)   # |e^{A_m s} e| <= K |e|, s <= h
         self.A2 = self.A @ self.A
 
@@ -292,6 +299,7 @@ def bound(data: SwitchingModel, group, box, pieces: list[_Piece], duration: floa
     if fp.u_r.size:
         sigma = sigma + (np.abs(fp.E) @ fp.u_r)[None]
     sigma = sigma.max(axis=1) + np.abs(p_mean)                    # (steps, r)
+    sigma += ROUNDING * (np.abs(fp.D) @ fp.c_size[:-1].T).max(axis=0).T + ROUNDING * np.abs(fp.d).max(axis=0)
     zeta = np.zeros((steps, r))
     if r:
         uD, slackD = fp.kernel(Drows)                              # (steps + 1, members r, r)
@@ -308,7 +316,8 @@ def bound(data: SwitchingModel, group, box, pieces: list[_Piece], duration: floa
         lc = fp.c @ rows.T                                         # (steps + 1, q)
         rho = fp.spread(rows)
         lower = np.minimum(lc[:-1] - rho[:-1], lc[1:] - rho[1:]) - h / 2 * (np.abs(rows) @ drift).T
-        size = np.abs(lc[:-1]) + np.abs(lc[1:]) + rho[:-1] + rho[1:]
+        c_size = fp.c_size @ np.abs(rows).T
+        size = c_size[:-1] + c_size[1:] + rho[:-1] + rho[1:]
         if r:
             u, slack = fp.kernel(rows)
             U = _lagged_max(np.abs(u)) + slack                     # (steps + 1, q, r)

@@ -1,0 +1,41 @@
+"""Rounding where a flow's terms cancel: an unstable mode run from its equilibrium. ``x' = x - 1``
+from ``x = 1`` stays at 1 (closed form), while ``e^{t} x0`` and the affine part reach 1e15 by
+t = 35 and cancel; star's grid stars and the switching hull's centre lose the digits that
+decide. Neither may then say SAFE of a set every run is in."""
+
+from __future__ import annotations
+
+import pytest
+
+from reach.backends.star import BACKEND
+from reach.model import load_model
+from reach.result import Status
+from reach.spec import bind, load_properties
+
+MODEL = """
+name: equilibrium
+state: [x, z, t]
+modes:
+  a: {{flow: {{x: "x - 1", z: "-z", t: "1"}}}}
+{second}
+transitions: {transitions}
+initial: {{mode: a, box: {{x: [1, 1], z: [0, 0], t: [0, 0]}}}}
+horizon: {horizon}
+"""
+SWITCHING = ('  b: {flow: {x: "x - 1", z: "-2*z", t: "1"}}',
+             "\n  - {from: a, to: b}\n  - {from: b, to: a}")
+
+
+@pytest.mark.parametrize("switching", [False, True])
+@pytest.mark.parametrize("horizon", [34, 35, 40])
+def test_an_unstable_equilibrium_is_never_proved_to_leave_a_set_it_stays_in(tmp_path, switching, horizon):
+    second, transitions = SWITCHING if switching else ("", "[]")
+    (tmp_path / "m.yaml").write_text(MODEL.format(second=second, transitions=transitions, horizon=horizon))
+    (tmp_path / "p.yaml").write_text(
+        "properties:\n  - {id: late, kind: safety, modes: [a%s], avoid: {box: {x: [0.9, 1.1], t: [%d, %d]}}}\n"
+        % (", b" if switching else "", horizon - 2, horizon))
+    model = load_model(tmp_path / "m.yaml")
+    result = BACKEND.check(model, bind(load_properties(tmp_path / "p.yaml")[0], model))
+    assert result.status != Status.SAFE
+    if result.status == Status.UNSAFE:
+        assert result.counterexample is not None
