@@ -343,7 +343,11 @@ def _run_details(explorer: _Explorer) -> dict:
                       + ("" if not opt.input_cells else
                          f"; completed blocks of {opt.input_cells} cells carried as "
                          "generators (mean and first moment of the input, |x| + |y| <= 1) plus "
-                         "their residual box, moved with the flow"))
+                         "their residual box, moved with the flow")
+                      + ("" if opt.input_cells or not (opt.rebase_generators and s.rebased) else
+                         "; in chains explored a few cells at a time, each completed cell carried as "
+                         "generators (mean and first moment of the input, |x| + |y| <= 1) plus its "
+                         "residual box, moved with the flow"))
     if s.instants:
         soundness += (f"; {s.instants} jumps at a single instant taken from the image of their cell's start "
                       f"star at that instant, bloated by the instant's width times a bound on |x'|")

@@ -27,13 +27,16 @@ class _Aggregate:
     refined: bool = False
 
 
-def interval_hull(members, invariant, count_lps):
+def interval_hull(members, invariant, count_lps, ranges: Box | None = None):
     """``(hull, kept)``: the interval hull of the member stars (LPs reported to
     ``count_lps``; every bound pushed out by a relative 1e-9 against rounding, :func:`_outward`) intersected
-    with ``invariant = (H, g)``, a box star with fresh coefficients, and the non-empty
-    members. ``hull`` is None when a member is unbounded. The hull contains every member:
-    everything reachable from them is reachable from it, and its LPs stay small however many
-    jumps and cells came before.
+    with ``invariant = (H, g)`` and with ``ranges`` (a box every reachable state lies in: the
+    bounded inputs' ranges), a box star with fresh coefficients, and the non-empty
+    members. ``hull`` is None when a member is unbounded. The hull contains every reachable
+    state of every member: everything reachable from them is reachable from it, and its LPs
+    stay small however many jumps and cells came before. Clipped to ``ranges``, a coordinate
+    that no flow moves (a bounded input) keeps its range exactly through any number of
+    aggregations, instead of gaining the outward rounding at each.
 
     Each bound ``max_k h_k(w)`` over the members ``k`` (``w = +-e_i``) is exact, with fewer LPs
     than ``2 n`` per member (:func:`_supports`): members are taken largest box bound first, and
@@ -53,6 +56,10 @@ def interval_hull(members, invariant, count_lps):
     if not kept or not np.all(np.isfinite(best)):
         return None, kept
     low, high = _outward(-best[n:], best[:n])
+    if ranges is not None:
+        low, high = np.maximum(low, ranges.low), np.minimum(high, ranges.high)
+        if np.any(low > high):                      # no member holds a reachable state
+            return None, []
     return Star.from_box(Box(low, high)).intersect_halfspaces(*invariant), kept
 
 

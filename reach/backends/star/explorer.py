@@ -18,7 +18,7 @@ from reach.backends.star.options import (ERROR_RATIO, INSTANT_WIDTH, MAX_CELLS, 
                                          StarOptions)
 from reach.backends.star.switching import group_pieces
 from reach.backends.star.transitions import (_LinearModel, _modes_leading_to, _Piece,
-                                             _unsafe_pieces, kept_rows)
+                                             _unsafe_pieces, kept_rows, misses)
 from reach.backends.star.witnesses import _Witness, extremal_signal, nearest_point, signal_pieces, trace
 from reach.memory import physical_bytes, resident_bytes
 from reach.result import Status
@@ -141,7 +141,7 @@ class _Explorer:
         self.pieces = {mode: [_Piece(data.widen(p.H, p.g)[0], p.g, p.strict, p.label) for p in pieces]
                        for mode, pieces in _unsafe_pieces(prop).items()} if data.added_clock \
             else _unsafe_pieces(prop)
-        self.pieces = group_pieces(self.pieces, getattr(data, "groups", ()))
+        self.pieces = self._reachable_pieces(group_pieces(self.pieces, getattr(data, "groups", ())))
         self.relevant = _modes_leading_to(model, set(self.pieces))
         self._guard_rows: dict[str, np.ndarray] = {}       # per mode, see _transient
         self.stats = _Stats()
@@ -150,6 +150,18 @@ class _Explorer:
         self.sets: list = []            # SetPiece of every explored segment (option keep_sets)
         self.root = initial if initial is not None else data.initial_star(model.initial)
         self.root_mode = model.initial.mode
+
+    def _reachable_pieces(self, pieces: dict) -> dict:
+        """``pieces`` without those that miss their mode's invariant (:func:`.transitions.misses`),
+        and without the modes left with none: every set a check meets a piece with -- segment,
+        entry star, instant -- is cut by the invariant, so such a piece is never met (its depth
+        LP, on stars of many coefficients, would only say so at a cost)."""
+        out = {}
+        for mode, listed in pieces.items():
+            kept = [p for p in listed if not misses(p, *self.invariants[mode], self.opt.touch_tolerance)]
+            if kept or not listed:
+                out[mode] = kept
+        return out
 
     # ---- LPs
 
@@ -294,7 +306,8 @@ class _Explorer:
         count = max(1, int(np.ceil((self.horizon - t0) / h - 1e-9)))
         handoff = block is not None and block < count
         count = block if handoff else count
-        nvars = star.nvars + (ChainInputs.generators(flow, count, self.opt.input_cells) if flow.inputs else 0)
+        input_cells = self.opt.input_cells or int(block is not None and self.opt.rebase_generators)
+        nvars = star.nvars + (ChainInputs.generators(flow, count, input_cells) if flow.inputs else 0)
         segment_vars = nvars if flow.drift else 2 * nvars + 1 + self.n
         if segment_vars > self.opt.max_coefficients or \
                 8 * 3 * (count + 1) * self.n * (nvars + 1) > MAX_CHAIN_BYTES:
@@ -306,7 +319,7 @@ class _Explorer:
         self.stats.reached = max(self.stats.reached, t0)
         self._progress()
         Phis, psis = flow.powers(h, count)
-        inputs = ChainInputs(flow, h, count, self.opt.input_cells) if flow.inputs else None
+        inputs = ChainInputs(flow, h, count, input_cells) if flow.inputs else None
         if inputs is not None and inputs.count:                  # the blocks' generators
             star = inputs.extend(star)
             point = np.concatenate([point, np.zeros(inputs.count)])   # input at its centre
@@ -513,8 +526,9 @@ class _Explorer:
         rounding fall inside); a failure under the enlarged hull falls back to the exact one.
         """
         H, g = self.invariants[mode]
+        ranges = self.data.ranges
         hull, kept = interval_hull(members, (np.vstack([H, rows[0]]), np.concatenate([g, rows[1]])),
-                                   self._lp_count)
+                                   self._lp_count, ranges)
         if not kept:
             return
         if hull is None:                                       # unbounded: explore the members
@@ -525,7 +539,7 @@ class _Explorer:
         if self.covered is not None:
             if self.covered.covers(mode, hull, self._lp_count):
                 return
-            candidates.insert(0, enlarged(hull, (H, g), rows))
+            candidates.insert(0, enlarged(hull, (H, g), rows, ranges))
         self.stats.aggregated += 1
         self.stats.members += len(kept)
         start = min(path.since for _, path in kept)

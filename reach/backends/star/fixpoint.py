@@ -49,16 +49,22 @@ def time_invariant(model) -> bool:
 MARGIN = 1e-8
 
 
-def enlarged(hull: Star, invariant, rows) -> tuple[Star, tuple]:
+def enlarged(hull: Star, invariant, rows, ranges: Box | None = None) -> tuple[Star, tuple]:
     """``(star, rows)``: the aggregate ``hull`` (a box star cut by the mode's ``invariant`` and
     the jump's ``rows``, each ``(H, g)``) with its box and ``rows`` pushed out by
-    :data:`MARGIN` ``(1 + |.|)``. It contains ``hull``, so exploring it in its place is sound,
-    and a later aggregate equal to it up to rounding lies inside it exactly."""
+    :data:`MARGIN` ``(1 + |.|)``, the box then clipped to ``ranges`` (a box every reachable
+    state lies in, see :func:`.aggregation.interval_hull`). It contains every reachable state
+    of ``hull``, so exploring it in its place is sound, and a later aggregate equal to it up to
+    rounding lies inside it exactly (in a clipped coordinate both hold the range: the margin
+    does not accumulate from one aggregate to the next)."""
     box = hull.box_bound()
     pad = MARGIN * (1.0 + np.maximum(np.abs(box.low), np.abs(box.high)))
+    low, high = box.low - pad, box.high + pad
+    if ranges is not None:
+        low, high = np.maximum(low, ranges.low), np.minimum(high, ranges.high)
     H, g = np.asarray(rows[0], float), np.asarray(rows[1], float)
     g = g + MARGIN * (1.0 + np.abs(g)) * np.linalg.norm(H, axis=1)
-    star = Star.from_box(Box(box.low - pad, box.high + pad)).intersect_halfspaces(
+    star = Star.from_box(Box(low, high)).intersect_halfspaces(
         np.vstack([invariant[0], H]), np.concatenate([invariant[1], g]))
     return star, (H, g)
 

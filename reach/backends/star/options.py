@@ -110,6 +110,11 @@ class StarOptions:
         completed block's effect carried by generators (two coefficients per input) plus a
         small box (:class:`.flowpipe.ChainInputs`); 0: the effect since the chain's start as
         one box (exact per state, not jointly).
+    rebase_generators: where ``input_cells`` is 0, a chain explored ``rebase_cells`` cells at a
+        time carries each completed cell's input effect as generators, as ``input_cells = 1``
+        would (at most ``2 rebase_cells`` coefficients per input and block, as many as the
+        block's end box adds); other chains keep the box. Off by default; the second pass of
+        a clockless model turns it on (:func:`clockless_retry`).
     """
 
     step: float | None = None
@@ -135,6 +140,7 @@ class StarOptions:
     switching_hull: bool = True
     hull_steps: int = ranged(2000, 1, 20_000)
     input_cells: int = ranged(0, 0)
+    rebase_generators: bool = False
 
     @classmethod
     def from_dict(cls, options: dict | None) -> "StarOptions":
@@ -171,9 +177,21 @@ def clockless_retry(model, options: dict | None, opt: StarOptions) -> StarOption
     (:mod:`.fixpoint`): runs that cycle through the same modes then collapse into aggregates
     that the fixpoint check closes, instead of one family of stars per cell of the first
     chains. The default comes first since an aggregate refined into its members leaves the
-    cells before it unrefined. None when no second pass applies."""
+    cells before it unrefined.
+
+    For the same reason the second pass carries time-varying inputs as generators in the
+    chains explored a few cells at a time (``rebase_generators``) where the user set neither
+    that nor ``input_cells``: the first chain's successors are aggregated at once, and a box of
+    the input effect, exact per state but not jointly, would hand them corners no signal
+    reaches together (a deadband whose disturbance both speeds the attitude rate up and moves
+    the angle) that no refinement behind the aggregate can remove; a witness through the
+    aggregate then points to an initial state and signal that do not violate. Such chains
+    add a few coefficients per block either way; a chain to the horizon would gain two per
+    cell, so it keeps the box. None when no second pass applies."""
     from reach.backends.star.fixpoint import time_invariant
 
-    if "aggregate_after" in (options or {}) or not time_invariant(model):
+    options = options or {}
+    if "aggregate_after" in options or not time_invariant(model):
         return None
-    return replace(opt, aggregate_after=0)
+    generators = not ({"input_cells", "rebase_generators"} & set(options))
+    return replace(opt, aggregate_after=0, rebase_generators=generators or opt.rebase_generators)

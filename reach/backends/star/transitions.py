@@ -91,7 +91,9 @@ class _LinearModel:
 
     ``timeless``: the modes where no time may pass (SpaceEx ``flow false``; every state has
     rate 0 there, so such a model always gets its own clock); ``zero_dwell``: whether the
-    model may have a zero-dwell cycle (:mod:`reach.model.lint`)."""
+    model may have a zero-dwell cycle (:mod:`reach.model.lint`); ``ranges``: a box every
+    reachable state lies in, the range of each bounded input on its coordinate (flow 0 in
+    every mode, never reset, so the value a run starts with) and unbounded elsewhere."""
 
     def __init__(self, model):
         from reach.model.lint import zero_dwell_cycles
@@ -107,6 +109,10 @@ class _LinearModel:
                        and all(j is not None for js in self.jumps.values() for j in js))
         self.varying = [u for u in getattr(model, "bounded_inputs", []) if u.varying]
         self.timeless = {name for name, mode in model.modes.items() if mode.timeless}
+        low, high = np.full(self.n, -np.inf), np.full(self.n, np.inf)
+        for u in getattr(model, "bounded_inputs", []):
+            low[u.index], high[u.index] = u.low, u.high
+        self.ranges = Box(low, high)
         self.zero_dwell = bool(zero_dwell_cycles(model)[0])        # a search with LPs: once
         if self.linear:
             self.flows = {name: self._flow(*self._with_clock(*mode.linear))
@@ -214,6 +220,22 @@ def _unsubsumed(jumps: list[_Jump], H_inv, g_inv) -> list[_Jump]:
                    and implies(region, k) for k in kept):
             kept.append(j)
     return kept
+
+
+def misses(piece: _Piece, H, g, tolerance: float) -> bool:
+    """Whether ``piece`` and ``{x : H x <= g}`` (a mode's invariant; rows of both normalised)
+    are disjoint by a two-row certificate: a piece row ``h x <= p`` and an invariant row
+    ``-h x <= q`` (exactly opposite as stored) with ``p < -q - tolerance max(1, |p|, |q|)``.
+    On the invariant ``h x >= -q``, beyond the piece's ``p`` by more than the touch tolerance
+    the depth LP would grant (:class:`.options.StarOptions`), so no state of the mode is in
+    the piece. Exact in floating point (only a comparison of stored rows); no LP. A deadband
+    ``|th| <= 0.02`` against the requirement ``|th| <= 0.05`` is such a pair."""
+    if not piece.H.shape[0] or not H.shape[0]:
+        return False
+    opposite = np.all(piece.H[:, None, :] == -H[None, :, :], axis=2)
+    p, q = piece.g[:, None], g[None, :]
+    apart = p < -q - tolerance * np.maximum(1.0, np.maximum(np.abs(p), np.abs(q)))
+    return bool(np.any(opposite & apart))
 
 
 def _modes_leading_to(model, targets: set[str]) -> set[str]:
