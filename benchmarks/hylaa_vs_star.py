@@ -361,6 +361,7 @@ AFF = {
     "PLAD01-BND30-h20": ("Platoon/PLAD01-BND.xml", "Platoon/PLAD01-BND30-h20-forbidden.cfg", 0.01,
                          {"input_cells": 1}),
     "PLAA01-BND50": ("Platoon/PLAA01-BND.xml", "Platoon/PLAA01-BND50-forbidden.cfg", 0.01),
+    "PLAA01-BND50-h20": ("Platoon/PLAA01-BND.xml", "Platoon/PLAA01-BND50-h20-forbidden.cfg", 0.01),
     "PLAN01-UNB50": ("Platoon/PLAN01-UNB.xml", "Platoon/PLAN01-UNB50-forbidden.cfg", 0.01),
     "SRA01-SR0-LOS": ("Rendezvous_ARCH18/SRA01-SR0_.xml", "Rendezvous_ARCH18/SRA01-SR0_-LOS.cfg", 0.1),
     "SRA01-SR0-collision": ("Rendezvous_ARCH18/SRA01-SR0_.xml", "Rendezvous_ARCH18/SRA01-SR0_-collision.cfg", 0.1),
