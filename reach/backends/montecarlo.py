@@ -74,6 +74,7 @@ from reach.stats import clopper_pearson_upper, wilson
 NAME = "montecarlo"
 KEPT_RUNS = 40                 # sampled runs kept for pictures (option keep_sets)
 SWITCH_PROBABILITY = 0.3       # chance that a random run takes an enabled may-transition at a piece start
+REPLAY_TOLERANCE = 1e-9        # relative rounding allowed on the bounds a replayed run must meet (check_run)
 
 
 @dataclass
@@ -338,16 +339,62 @@ def _signal_of(model: HybridAutomaton, data: dict | None):
     except (KeyError, TypeError, ValueError):
         raise InputError("input_signal needs step and a list of values per piece", field="input_signal") from None
     if values.ndim != 2 or values.shape[1] != len(names) or values.shape[0] == 0 or values.shape[0] > 1_000_000:
-        raise InputError(f"input_signal: expected a list of pieces of {len(names)} values", field="input_signal")
+        raise InputError(f"expected a list of pieces of {len(names)} values", field="input_signal")
     if switch is not None and (switch.shape != values.shape[:1] or np.any((switch != 0) & (switch != 1))):
-        raise InputError("input_signal: switch needs one 0 or 1 per piece", field="input_signal")
+        raise InputError("switch needs one 0 or 1 per piece", field="input_signal")
     lo = np.array([u.low for u in model.varying_inputs])
     hi = np.array([u.high for u in model.varying_inputs])
     if not (step > 0 and np.isfinite(step)):
-        raise InputError("input_signal: the step must be a positive number", field="input_signal")
-    if np.any(values < lo) or np.any(values > hi) or not np.all(np.isfinite(values)):
-        raise InputError("input_signal: a value outside the input's range", field="input_signal")
+        raise InputError("the step must be a positive number", field="input_signal")
+    if not np.all(np.isfinite(values)):
+        raise InputError("expected finite values", field="input_signal")
+    outside = (values < lo - REPLAY_TOLERANCE * (1 + np.abs(lo))) | (values > hi + REPLAY_TOLERANCE * (1 + np.abs(hi)))
+    if outside.any():
+        k, j = np.argwhere(outside)[0]
+        raise InputError(f"value {values[k, j]:.6g} of '{names[j]}' on piece {k} is outside its "
+                         f"range [{lo[j]:g}, {hi[j]:g}]", field="input_signal")
+    values = np.clip(values, lo, hi)                # rounding only
     return step, values[None, :, :], None if switch is None else switch[None, :].astype(bool)
+
+
+def check_run(model: HybridAutomaton, initial_state: list, switch_time: float | None, input_signal: dict | None,
+              transitions: list | None) -> None:
+    """Refuse (InputError naming the field) a run that is none of ``model``'s: an initial state of
+    the wrong length, not finite, outside the initial set or the initial mode's invariant; a
+    switch time where the model has no window or outside it; an input signal with values
+    outside the inputs' ranges; a transition the model does not have. Bounds are met to
+    ``REPLAY_TOLERANCE (1 + |bound|)`` (rounding in a written file)."""
+    x = np.asarray(initial_state, dtype=float)
+    if x.shape != (model.n,):
+        raise InputError(f"initial_state has {len(initial_state)} values, the model {model.n}", field="initial_state")
+    if not np.all(np.isfinite(x)):
+        raise InputError("expected a list of finite numbers", field="initial_state")
+    init = model.initial
+    slack = REPLAY_TOLERANCE * (1.0 + np.maximum(np.abs(init.low), np.abs(init.high)))
+    outside = np.flatnonzero((x < init.low - slack) | (x > init.high + slack))
+    if outside.size:
+        i = outside[0]
+        span = f"= {init.low[i]:g}" if init.low[i] == init.high[i] else f"in [{init.low[i]:g}, {init.high[i]:g}]"
+        raise InputError(f"{model.state[i]} = {x[i]:.10g} is outside the initial set ({model.state[i]} {span})",
+                         field="initial_state")
+    if not init.is_box and not PolytopeSampler(init.polytope, init.low, init.high).contains(x[None, :])[0]:
+        raise InputError("the state is outside the initial set (its polytope)", field="initial_state")
+    margins = model.modes[init.mode].invariant_margins(x[None, :])[0]
+    if np.any(margins > REPLAY_TOLERANCE * (1.0 + np.abs(x).max())):
+        raise InputError(f"the state is outside the initial set: the invariant of mode '{init.mode}' does not hold",
+                         field="initial_state")
+    if switch_time is not None:
+        window = switch_window(model)
+        if window is None:
+            raise InputError("the model has no switching window", field="switch_time")
+        lo, hi, _ = window
+        if not lo - REPLAY_TOLERANCE * (1 + abs(lo)) <= switch_time <= hi + REPLAY_TOLERANCE * (1 + abs(hi)):
+            raise InputError(f"{switch_time:g} is outside the switching window [{lo:g}, {hi:g}]", field="switch_time")
+    _signal_of(model, input_signal)
+    names = {tr.name for tr in model.transitions}
+    for k, name in enumerate(transitions or []):
+        if name not in names:
+            raise InputError(f"unknown transition '{name}'", field=f"transitions[{k}]")
 
 
 def constant_signal(model: HybridAutomaton, x0) -> dict | None:
