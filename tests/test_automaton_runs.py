@@ -30,6 +30,7 @@ from reach.cli import main
 from reach.model import load_model
 from reach.model.simulate import INVARIANT_TOLERANCE, Branches, Simulator
 from reach.model.spaceex import load_spaceex
+from reach.report import line
 from reach.result import Status
 from reach.spec import bind, load_properties
 
@@ -272,3 +273,17 @@ def test_a_timeless_mode_with_nothing_enabled_blocks_the_run(tmp_path):
     traj = Simulator(model).run(np.zeros((1, 2)), record=True)
     assert traj.blocked_at[0] == pytest.approx(2.0, abs=1e-9)
     assert list(model.modes)[traj.final_mode[0]] == "wait"
+
+
+# ------------------------------------------------------------------ the report line
+
+def test_an_unsafe_line_states_the_counterexample_not_a_probability_bound(branch):
+    model, prop, _ = branch
+    result = MONTECARLO.check(model, prop)
+    text = line(result, prop, model)
+    assert text.startswith("violated at t=4")
+    assert "margin" in text and "at the violation" in text
+    assert "P(violation)" not in text
+    k = result.details["violating_runs"]
+    assert f"violating runs: {k} of {result.details['random_runs']}" in text and 0 < k < 1000
+    assert "violation_probability_upper_95" in result.details          # --json keeps it

@@ -601,6 +601,7 @@ class MonteCarloBackend:
                        "assumes": "states checked at grid points and event instants only "
                                   "(a falsifier, not a proof)"}
             fails = int(np.count_nonzero(np.isfinite(monitor.violation_time[n_structured:])))
+            details["violating_runs"] = fails
             details["violation_probability_upper_95"] = clopper_pearson_upper(fails, opts.samples)
             found = monitor.first_violation()
             found = None if found is None else (0, found)
