@@ -560,10 +560,10 @@ class Simulator:
         pairs) at the states ``X`` (R, n): where each guard holds (margins at most ``tolerance
         (1 + |x|_inf)``; the option ``winner[r]`` holds by construction -- its guard located the
         event, as the window's instant does for its transition, whose guard is given as None),
-        and where the transition is enabled: its guard holds and the target's
-        invariant holds at the reset state ``y`` (margins at most ``INVARIANT_TOLERANCE (1 +
-        max(|x|_inf, |y|_inf))``: the rounding of the state before the jump stays allowed after a
-        reset that shrinks it)."""
+        and where the transition is enabled: its guard holds and the target's invariant holds at
+        the reset state ``y`` (margins at most ``INVARIANT_TOLERANCE (1 + max(|x|_inf,
+        |y|_inf))``: the rounding of the state before the jump stays allowed after a reset that
+        shrinks it)."""
         R, T = X.shape[0], len(options)
         guards, enabled = np.zeros((R, T), dtype=bool), np.zeros((R, T), dtype=bool)
         size = np.abs(X).max(axis=1, initial=0.0)
@@ -604,36 +604,46 @@ class Simulator:
             runs.watch(sel)
         return rows[chosen >= 0]
 
-    def _urgent_now(self, rows: np.ndarray, runs: _Runs) -> None:
-        """The runs ``rows`` at one instant (the start, after a jump or a kick) take the
-        transitions they must take at once, watched after each jump: an enabled urgent one
-        whose guard holds, and in a timeless mode any enabled one (guards tested exactly, every
-        margin at most 0, as a segment tests urgent guards: a run that has just left a guard
-        does not jump back on rounding). A run that must jump and has none enabled (an urgent
-        guard holds, or it is in a timeless mode) is blocked there; so is one still in a
-        timeless mode after as many rounds as there are modes (a cycle of jumps at one
-        instant)."""
-        for _ in range(len(self.mode_names) + 1):
+    def _urgent_now(self, rows: np.ndarray, runs: _Runs, left: int | None = None) -> None:
+        """The runs ``rows`` at one instant (the start, after a jump from mode index ``left``, or
+        after a kick) take the transitions they must take at once, watched after each jump: an
+        enabled urgent one whose guard holds, and in a timeless mode any enabled one (guards
+        tested exactly, every margin at most 0, as a segment tests urgent guards: a run that has
+        just left a guard does not jump back on rounding).
+
+        Once it has jumped at an instant, a run does not return at that instant to a mode it has
+        been in: such a cycle of jumps would be Zeno (two closed guards that meet, ``s >= phi``
+        out of a layer and ``s <= phi`` into it, both hold on the boundary), so the transition
+        that would close it is not taken then, and the run stays where it is (the flow decides).
+        A run that must jump and has none enabled (an urgent guard holds, or it is in a timeless
+        mode) is blocked there. After its first jump every jump reaches a mode not visited yet,
+        so this ends."""
+        visited = np.zeros((rows.size, len(self.mode_names)), dtype=bool)
+        slot = np.full(runs.X.shape[0], -1)
+        slot[rows] = np.arange(rows.size)
+        if left is not None:
+            visited[np.arange(rows.size), runs.mode[rows]] = True
+            visited[:, left] = True
+        while rows.size:
             moved = []
             for m_index in np.unique(runs.mode[rows]):
                 name = self.mode_names[m_index]
                 sel = rows[runs.mode[rows] == m_index]
-                if not self.instant[name]:
-                    if name in self.timeless:
-                        runs.blocked_at[sel] = runs.t[sel]
-                    continue
-                guards, enabled = self._enabled(self.instant[name], runs.X[sel], tolerance=0.0)
-                must = np.full(sel.size, name in self.timeless) | guards[:, :len(self.urgent[name])].any(axis=1)
+                options = self.instant[name]
+                guards, enabled = self._enabled(options, runs.X[sel], tolerance=0.0)
+                back = visited[slot[sel]][:, [self.mode_names.index(tr.target) for tr, _ in options]]
+                enabled &= ~back
+                urgent = len(self.urgent[name])
+                must = np.full(sel.size, name in self.timeless) | (guards & ~back)[:, :urgent].any(axis=1)
                 stuck = sel[must & ~enabled.any(axis=1)]
                 runs.blocked_at[stuck] = runs.t[stuck]
                 go = np.flatnonzero(enabled.any(axis=1))
                 if go.size:
-                    moved.append(self._jump(sel[go], self.instant[name], enabled[go], runs))
-            if not moved:
-                return
-            rows = np.concatenate(moved)
-        still = rows[np.isin(runs.mode[rows], [self.mode_names.index(m) for m in self.timeless])]
-        runs.blocked_at[still] = runs.t[still]
+                    visited[slot[sel[go]], m_index] = True
+                    jumped = self._jump(sel[go], options, enabled[go], runs)
+                    visited[slot[jumped], runs.mode[jumped]] = True
+                    moved.append(jumped)
+            rows = np.concatenate(moved) if moved else rows[:0]
 
     def _take_may(self, rows: np.ndarray, runs: _Runs) -> None:
         """Each run of ``rows`` (at a piece start) takes an enabled may-transition with a
@@ -643,7 +653,7 @@ class Simulator:
             sel = rows[runs.mode[rows] == m_index]
             if self.exits[name] and sel.size:
                 _, enabled = self._enabled(self.exits[name], runs.X[sel])
-                self._urgent_now(self._jump(sel, self.exits[name], enabled, runs), runs)
+                self._urgent_now(self._jump(sel, self.exits[name], enabled, runs), runs, m_index)
 
     def _event(self, rows: np.ndarray, Xe: np.ndarray, times: np.ndarray, options: list,
                winner: np.ndarray | None, runs: _Runs) -> None:
@@ -651,13 +661,14 @@ class Simulator:
         watchers see them there, then each takes one of the enabled ``options`` (``winner``: per
         run, the option whose guard located the event) and what it must take at once; a run
         with none enabled is blocked there."""
+        source = int(runs.mode[rows[0]])
         runs.X[rows], runs.t[rows] = Xe, times
         runs.watch(rows)
         _, enabled = self._enabled(options, Xe, winner)
         runs.blocked_at[rows[~enabled.any(axis=1)]] = times[~enabled.any(axis=1)]
         go = np.flatnonzero(enabled.any(axis=1))
         if go.size:
-            self._urgent_now(self._jump(rows[go], options, enabled[go], runs), runs)
+            self._urgent_now(self._jump(rows[go], options, enabled[go], runs), runs, source)
 
     def _segment(self, name, rows, runs: _Runs, next_kick):
         """Advance ``rows`` (all in mode ``name``) to their next event, kick, or the horizon."""
