@@ -216,8 +216,13 @@ def cmd_lint(args) -> int:
 
 
 def cmd_replay(args) -> int:
-    from reach.backends.montecarlo import replay
+    """Re-simulate a counterexample file: exit 1 if the run violates its property, 3 if not, 2 if
+    the file does not describe a run of the model (:func:`reach.backends.montecarlo.check_run`).
+    The run takes the transitions the file names at its jumps (the first enabled one where a
+    name is not enabled, or in a file without them)."""
+    from reach.backends.montecarlo import check_run, replay
     from reach.model import load_model
+    from reach.model.simulate import Branches
     from reach.result import Counterexample
     from reach.spec import bind, load_properties
 
@@ -226,12 +231,17 @@ def cmd_replay(args) -> int:
     props = [p for p in load_properties(cex.property_file) if p.id == cex.property]
     if not props:
         raise InputError(f"property '{cex.property}' is not in {cex.property_file}", args.counterexample, "property")
-    if len(cex.initial_state) != model.n:
-        raise InputError(f"initial_state has {len(cex.initial_state)} values, the model {model.n}",
-                         args.counterexample, "initial_state")
+    try:
+        check_run(model, cex.initial_state, cex.switch_time, cex.input_signal, cex.transitions)
+    except InputError as exc:
+        raise InputError(exc.message, args.counterexample, exc.field) from None
     prop = bind(props[0], model)
-    rep = replay(model, prop, cex.initial_state, cex.switch_time, cex.dt or None, cex.input_signal)
+    branches = None if cex.transitions is None else Branches(prescribed=[cex.transitions])
+    rep = replay(model, prop, cex.initial_state, cex.switch_time, cex.dt or None, cex.input_signal, branches)
     state = ", ".join(f"{n}={v:.6g}" for n, v in zip(model.state, rep.state))
+    if cex.transitions is not None and rep.transitions[:len(cex.transitions)] != cex.transitions:
+        print(printable(f"note: the run took the transitions {', '.join(rep.transitions) or '(none)'}; "
+                        f"the file names {', '.join(cex.transitions) or '(none)'}"))
     if rep.violated:
         print(printable(f"replayed: {model.name} violates '{prop.id}' at t={rep.time:.6g} in mode {rep.mode} "
                         f"(depth {rep.depth:.3g}); state {state}"))

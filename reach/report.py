@@ -9,7 +9,10 @@ unit (the constraint's or event's :class:`~reach.model.units.DisplayUnit`: a mod
     max Fx in [7.396, 7.397] N <= 10 N, margin 2.603 N
     abs(Fx) <= 10[N], abs(Fy) <= 10[N]: closest margin 2.603 N
 
-``line`` is the text summary, ``figures`` the same numbers for ``--json``.
+``line`` is the text summary, ``figures`` the same numbers for ``--json``. A violation found
+reads as its counterexample (when, where, the margin at the violating state) and, for Monte
+Carlo, how many of its i.i.d. runs violated (``violating runs: k of N``); the upper confidence
+bound on the violation probability belongs to an undecided answer only (it stays in ``details``).
 
 Margins: positive is room left before the requirement is violated. For an event bound
 ``[lo, hi]`` it is ``value - hi`` (``<=``) or ``lo - value`` (``>=``), the worst case over
@@ -195,7 +198,7 @@ def line(result, prop, model) -> str:
             text += f": smallest margin in {_with_unit(interval(*f['margin_bound']), unit)}"
             if unit is None:
                 text += " (model units)"
-        if "closest_margin" in f:
+        if "closest_margin" in f and "violation_margin" not in f:
             unit = prop.margin_unit()
             text += f": closest margin {_with_unit(number(f['closest_margin']), unit)}"
             if unit is None:
@@ -213,7 +216,9 @@ def line(result, prop, model) -> str:
         parts.append(p)
     if "margin_note" in f:
         parts.append(f["margin_note"])
-    if "violation_probability_upper_95" in d:
+    if result.status == Status.UNSAFE and "violating_runs" in d:
+        parts.append(f"violating runs: {d['violating_runs']} of {d['random_runs']}")
+    elif result.status != Status.UNSAFE and "violation_probability_upper_95" in d:
         parts.append(f"P(violation) <= {d['violation_probability_upper_95']:.2g} (95 %)")
     if "method" in d:
         parts.append(str(d["method"]))

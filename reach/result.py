@@ -32,7 +32,9 @@ class Counterexample:
     """A concrete run that violates a property: initial state, abort (switch) time, trajectory.
 
     ``model_file``/``property_file`` let ``reach replay`` rebuild everything; ``dt`` is the
-    simulator step the violation was found with.
+    simulator step the violation was found with; ``transitions`` names the transition the run
+    took at each of its jumps, in order (None in files written before it was kept: such a run
+    replays taking the first enabled transition at every jump).
     """
 
     model: str
@@ -48,6 +50,7 @@ class Counterexample:
     trajectory: dict = field(default_factory=dict)   # {"t": [...], "mode": [...], "x": [[...]]}
     found_by: str = ""
     input_signal: dict | None = None   # {"step": h, "inputs": [names], "values": [[...] per piece]}
+    transitions: list[str] | None = None   # the transition taken at each jump, in order
 
     def to_dict(self) -> dict:
         return _plain(asdict(self))
@@ -93,6 +96,10 @@ class Counterexample:
         for key in ("switch_time", "dt"):
             if data.get(key) is not None and not (_finite(data[key]) and data[key] >= 0):
                 raise InputError("expected a finite number >= 0 or null", file, key)
+        transitions = data.get("transitions")
+        if transitions is not None and not (isinstance(transitions, list)
+                                            and all(isinstance(name, str) for name in transitions)):
+            raise InputError("expected a list of transition names or null", file, "transitions")
         data.setdefault("switch_time", None)
         data.setdefault("dt", 0.0)
         for key, default in (("model", ""), ("violation_time", 0.0), ("violation_mode", ""),

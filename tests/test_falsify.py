@@ -151,7 +151,7 @@ def test_the_unit_cube_map_round_trips(u):
     model = SRA08
     param = Parameterisation(model, switch_window(model), None, 0, False)
     assert param.dim == 3
-    X, tau, _ = param.runs(np.array([u]))
+    X, tau, _, _ = param.runs(np.array([u]))
     assert np.all(X >= model.initial.low) and np.all(X <= model.initial.high)
     assert np.allclose(param.encode(X, tau, None), [u], atol=1e-12)
 

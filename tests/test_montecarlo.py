@@ -134,13 +134,21 @@ def test_cli_check_json_and_replay(tmp_path):
     replayed = subprocess.run([sys.executable, "-m", "reach", "replay", rows[0]["counterexample_file"]],
                               capture_output=True, text=True)
     assert replayed.returncode == 1 and replayed.stdout.startswith("replayed:")
-    # a tampered counterexample (start moved inside the bound) does not replay
+    # the same run against the 10 N bound does not violate it
     data = json.loads(open(rows[0]["counterexample_file"]).read())
+    (tmp_path / "other.json").write_text(json.dumps(dict(data, property_file="properties/rendezvous.yaml",
+                                                         property="thrust")))
+    other = subprocess.run([sys.executable, "-m", "reach", "replay", str(tmp_path / "other.json")],
+                           capture_output=True, text=True)
+    assert other.returncode == 3 and other.stdout.startswith("NOT replayed")
+    # a tampered counterexample (start moved out of the initial set) is no run of the model
     data["initial_state"] = [-500.0, -200.0, 0.0, 0.0, 0.0]
     (tmp_path / "tampered.json").write_text(json.dumps(data))
     tampered = subprocess.run([sys.executable, "-m", "reach", "replay", str(tmp_path / "tampered.json")],
                               capture_output=True, text=True)
-    assert tampered.returncode == 3 and tampered.stdout.startswith("NOT replayed")
+    assert tampered.returncode == 2
+    assert tampered.stderr.strip().endswith("tampered.json: initial_state: x = -500 is outside the initial set "
+                                            "(x in [-925, -875])")
 
 
 @pytest.mark.parametrize("args, message", [

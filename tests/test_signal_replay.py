@@ -175,9 +175,10 @@ def test_linear_bisections_equal_a_plain_bisection(tmp_path, p0, q0, u):
     entry = sim._first_entry("out", x[None, :], np.array([h]), guard)[0]
     want = _plain_bisection(M, x, h, lambda z: z[0] >= 0.6)[1]
     assert entry == pytest.approx(want, abs=2 * h * 2.0 ** -BISECTION_STEPS)
-    inside = sim._last_inside("out", x[None, :], np.array([h]))[0]
-    want = _plain_bisection(M, x, h, lambda z: z[0] - 0.6 > 1e-7 * (1 + np.abs(z).max()))[0]
-    assert inside == pytest.approx(want, abs=2 * h * 2.0 ** -BISECTION_STEPS)
+    inside, state = sim._last_inside("out", x[None, :], np.array([h]))
+    want = _plain_bisection(M, x, h, lambda z: z[0] > 0.6)[0]
+    assert inside[0] == pytest.approx(want, abs=2 * h * 2.0 ** -BISECTION_STEPS)
+    assert state[0, 0] <= 0.6                                   # the state the bisection found inside
 
 
 def test_piece_starts_off_the_grid_are_still_visited(tmp_path):

@@ -116,21 +116,23 @@ def test_docking_instant_of_the_nonlinear_arch_model():
 def test_runs_that_start_inside_a_guard_jump_at_once(tmp_path):
     """At t = 0, on the guard's boundary (x = 0, v < 0) and inside it, a ball launched by
     ``v := 5`` jumps at once; above the floor it does not. Several runs in one call; the
-    horizon (0.5 s) ends before any later bounce (the flight lasts 2 * 5 / g = 1.02 s)."""
+    horizon (0.5 s) ends before any later bounce (the flight lasts 2 * 5 / g = 1.02 s). The
+    initial state is watched, then the state after the jump, both at t = 0."""
     path = tmp_path / "launch.yaml"
     path.write_text(BALL.replace('"-0.5*v"', '"5"').replace("horizon: 2.5", "horizon: 0.5"))
     sim = Simulator(load_model(path))
     x0 = np.array([[0.0, -1.0], [1.0, 0.0], [-0.5, -2.0], [6.0, -1.0]])
     traj = sim.run(x0, record=True)
-    first = np.array([traj.path[i][2][0] for i in range(len(x0))])
-    np.testing.assert_array_equal(first[:, 1], [5.0, 0.0, 5.0, -1.0])
-    assert all(traj.path[i][0][0] == 0.0 for i in range(len(x0)))
+    at_start = np.array([traj.path[i][2][traj.path[i][0] == 0.0][-1] for i in range(len(x0))])
+    np.testing.assert_array_equal(at_start[:, 1], [5.0, 0.0, 5.0, -1.0])
+    assert all(np.array_equal(traj.path[i][2][0], x0[i]) for i in range(len(x0)))
+    assert traj.transitions == {0: ["bounce"], 1: ["bounce"], 2: ["bounce"], 3: []}   # 1 lands at 0.45 s
     np.testing.assert_allclose(traj.final_state[[0, 2], 1], 5.0 - G * 0.5)
 
 
 def test_urgent_transitions_chain_at_the_same_instant(tmp_path):
-    """``a -> b -> c`` with guards that already hold: the run is in ``c`` at t = 0, and its clock
-    then runs from there (``x = 0.5 + t``)."""
+    """``a -> b -> c`` with guards that already hold: the run passes through ``b`` and is in ``c``
+    at t = 0, and its clock then runs from there (``x = 0.5 + t``)."""
     path = tmp_path / "chain.yaml"
     path.write_text("name: chain\nstate: [x]\n"
                     "modes: {a: {flow: {x: 1}}, b: {flow: {x: 1}}, c: {flow: {x: 1}}}\n"
@@ -143,5 +145,6 @@ def test_urgent_transitions_chain_at_the_same_instant(tmp_path):
     c = list(model.modes).index("c")
     assert list(traj.final_mode) == [c, c]
     t, mode, X = traj.path[0]
-    assert mode[0] == c and t[0] == 0.0
+    assert [list(model.modes)[m] for m in mode[:3]] == ["a", "b", "c"] and np.all(t[:3] == 0.0)
+    assert traj.transitions[0] == ["ab", "bc"]
     np.testing.assert_allclose(traj.final_state[:, 0], 1.5)

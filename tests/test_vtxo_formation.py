@@ -135,15 +135,17 @@ def test_saturation_switches_at_the_layer_and_matches_solve_ivp(models):
     c = model.constants
     rhs, lam, phi, ref = smc_rhs(c)
     x0 = np.array([5e-3, -3e-3, c["L"] + 1.5, 0.0, 0.0, 0.0])
-    saved = model.horizon
-    model.horizon = 400.0
+    names = list(model.modes)
+    # the run starts in the mode whose invariant holds at x0 (saturated on every axis)
+    start, = [m for m in names if np.all(model.modes[m].invariant_margins(x0[None, :]) <= 0)]
+    saved = model.horizon, model.initial.mode
+    model.horizon, model.initial.mode = 400.0, start
     try:
         sim = Simulator(model)
         traj = sim.run(x0[None, :], record=True)
     finally:
-        model.horizon = saved
+        model.horizon, model.initial.mode = saved
     t, modes, X = traj.path[0]
-    names = list(model.modes)
     # the switches happen where s/phi = +-1
     changes = np.flatnonzero(modes[1:] != modes[:-1])
     assert changes.size >= 3                                    # x, y and z each enter the layer

@@ -8,8 +8,10 @@ the side of the requirement contains it; it may miss the true extremum between g
 about the change of ``q`` over one grid step, reported as ``grid_slack``.
 
 A run whose sampled extremum breaks the requirement is a counterexample: it is replayed alone
-and reported UNSAFE only if the replay breaks it too. Otherwise the answer is UNKNOWN with the
-sampled range of the extremum over the runs.
+(along the same branches where transitions can be enabled together,
+:func:`reach.backends.initial_sampling.branch_plan`) and reported UNSAFE only if the replay
+breaks it too. Otherwise the answer is UNKNOWN with the sampled range of the extremum over the
+runs.
 """
 
 from __future__ import annotations
@@ -20,8 +22,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import sympy
 
+from reach.backends.initial_sampling import branch_plan
 from reach.model.automaton import HybridAutomaton
-from reach.model.simulate import Simulator
+from reach.model.simulate import Branches, Simulator
 from reach.result import Counterexample, Result, Status
 from reach.spec.properties import BoundEvent
 from reach.stats import clopper_pearson_upper
@@ -118,19 +121,12 @@ def outside_bounds(subdomains, x0: np.ndarray, values: np.ndarray, uncertain, se
 
 
 def sample_extrema(model: HybridAutomaton, prop: BoundEvent, x0: np.ndarray, dt: float | None = None,
-                   record: bool = False):
+                   record: bool = False, branches: Branches | None = None):
     """Simulate the runs from ``x0`` (N, n): ``(monitor, trajectories, grid step)``."""
-    monitors, traj, step = sample_many(model, [prop], x0, dt, record)
-    return monitors[0], traj, step
-
-
-def sample_many(model: HybridAutomaton, props: list[BoundEvent], x0: np.ndarray, dt: float | None = None,
-                record: bool = False):
-    """One simulation of the runs from ``x0`` watched by a monitor per property."""
     sim = Simulator(model, dt)
-    monitors = [EventMonitor(model, prop, len(x0)) for prop in props]
-    traj = sim.run(np.asarray(x0, dtype=float), None, record=record, observers=monitors)
-    return monitors, traj, sim.dt
+    monitor = EventMonitor(model, prop, len(x0))
+    traj = sim.run(np.asarray(x0, dtype=float), None, record=record, observers=[monitor], branches=branches)
+    return monitor, traj, sim.dt
 
 
 @dataclass
@@ -147,6 +143,7 @@ class EventReplay:
     dt: float
     depth: float
     trajectory: dict = field(default_factory=dict)
+    transitions: list = field(default_factory=list)
 
     def counterexample(self, model, prop, found_by: str) -> Counterexample:
         return Counterexample(
@@ -154,13 +151,15 @@ class EventReplay:
             initial_state=list(map(float, self.initial_state)), switch_time=None,
             violation_time=float(self.time), violation_mode=self.mode,
             violation_state=list(map(float, self.state)), dt=self.dt, trajectory=self.trajectory,
-            found_by=found_by)
+            found_by=found_by, transitions=list(self.transitions))
 
 
-def replay_event(model: HybridAutomaton, prop: BoundEvent, initial_state, dt: float | None = None) -> EventReplay:
-    """Simulate one run and evaluate the event property along it."""
+def replay_event(model: HybridAutomaton, prop: BoundEvent, initial_state, dt: float | None = None,
+                 branches: Branches | None = None) -> EventReplay:
+    """Simulate one run (choosing among transitions enabled together by ``branches``) and
+    evaluate the event property along it; the transitions it took are recorded."""
     x0 = np.asarray(initial_state, dtype=float).reshape(1, -1)
-    monitor, traj, step = sample_extrema(model, prop, x0, dt, record=True)
+    monitor, traj, step = sample_extrema(model, prop, x0, dt, record=True, branches=branches)
     names = list(model.modes)
     times, modes, states = traj.path[0]
     trajectory = {"t": times.tolist(), "mode": [names[int(m)] for m in modes], "x": states.tolist()}
@@ -168,7 +167,7 @@ def replay_event(model: HybridAutomaton, prop: BoundEvent, initial_state, dt: fl
     mode = names[int(monitor.mode[0])] if monitor.mode[0] >= 0 else ""
     depth = value - prop.value if prop.op == "<=" else prop.value - value
     return EventReplay(bool(violates(prop, value)), value, float(monitor.time[0]), mode, monitor.state[0],
-                       x0[0], step, float(depth), trajectory)
+                       x0[0], step, float(depth), trajectory, traj.transitions[0])
 
 
 def check_events(model: HybridAutomaton, props: list[BoundEvent], samples: int, seed: int,
@@ -180,18 +179,23 @@ def check_events(model: HybridAutomaton, props: list[BoundEvent], samples: int, 
     low, high = model.initial.low, model.initial.high
     iid = low + (high - low) * rng.random((samples, model.n))
     x0 = np.vstack([structured, iid])
-    monitors, _, step = sample_many(model, props, x0, dt)
+    sim = Simulator(model, dt)
+    n_structured, choice = len(structured), None
+    if sim.max_options > 1:
+        x0, _, _, choice, n_structured = branch_plan(sim.max_options, n_structured, x0, None, None, rng)
+    monitors = [EventMonitor(model, prop, len(x0)) for prop in props]
+    sim.run(x0, None, observers=monitors, branches=None if choice is None else Branches(values=choice))
     shared = (time.perf_counter() - start) / max(len(props), 1)
     results = []
     for prop, monitor in zip(props, monitors):
         begin = time.perf_counter()
-        result = _verdict(model, prop, monitor, x0, len(structured), samples, step)
+        result = _verdict(model, prop, monitor, x0, choice, n_structured, samples, sim.dt)
         result.seconds = shared + time.perf_counter() - begin
         results.append(result)
     return results
 
 
-def _verdict(model, prop, monitor, x0, n_structured, samples, step) -> Result:
+def _verdict(model, prop, monitor, x0, choice, n_structured, samples, step) -> Result:
     values = monitor.extrema()
     visited = np.isfinite(values)
     details = {"runs": int(len(x0)), "iid_runs": int(samples), "dt": step, "sense": prop.sense,
@@ -205,7 +209,8 @@ def _verdict(model, prop, monitor, x0, n_structured, samples, step) -> Result:
     bad = np.flatnonzero(violates(prop, values))
     if bad.size:
         worst = bad[np.argmax(np.abs(values[bad] - prop.value))]
-        rep = replay_event(model, prop, x0[worst], step)
+        rep = replay_event(model, prop, x0[worst], step,
+                           None if choice is None else Branches(values=choice[worst:worst + 1]))
         if rep.violated:
             found = "structured" if worst < n_structured else "random"
             return Result("montecarlo", model.name, prop.id, Status.UNSAFE,

@@ -9,7 +9,9 @@ A run is fixed by a point ``u`` of the unit cube ``[0, 1]^d``, the concatenation
   the point of its bounding box pulled inside the polytope);
 * the switch instant of the may-transition window, ``tau = lo + u (hi - lo)``;
 * the values of the time-varying inputs on each piece ``[k step, (k+1) step)`` of the signal,
-  ``v_kj = ulo_j + u (uhi_j - ulo_j)``.
+  ``v_kj = ulo_j + u (uhi_j - ulo_j)``;
+* where several transitions can be enabled at one jump, the run's choice values
+  (:class:`reach.model.simulate.Branches`), ``u`` itself (a little below 1 at most).
 
 ``rho(u)`` is minimised by differential evolution (``scipy.optimize.differential_evolution``,
 vectorised: a whole generation is one :meth:`Simulator.run`), its initial population the runs
@@ -28,6 +30,7 @@ import numpy as np
 import scipy.optimize
 
 from reach.backends.initial_sampling import PolytopeSampler
+from reach.model.simulate import Branches
 
 NO_VISIT = 1e12        # robustness of a run that never enters a mode of the property
 FLAT = 1e-9            # a generation whose robustness values agree to this (relative) ends the evolution
@@ -45,7 +48,7 @@ class Budget:
 class Parameterisation:
     """The map ``u in [0, 1]^d -> (x0, tau, input values)`` of the module docstring."""
 
-    def __init__(self, model, window, step: float | None, pieces: int, switching: bool):
+    def __init__(self, model, window, step: float | None, pieces: int, switching: bool, choices: int = 0):
         self.model = model
         low, high = model.initial.low, model.initial.high
         self.low, self.high = low, high
@@ -55,11 +58,12 @@ class Parameterisation:
         self.window = window
         self.ulo = np.array([u.low for u in model.varying_inputs])
         self.uhi = np.array([u.high for u in model.varying_inputs])
-        self.step, self.pieces, self.switching = step, pieces, switching
-        self.dim = self.free.size + (window is not None) + self.pieces * self.ulo.size
+        self.step, self.pieces, self.switching, self.choices = step, pieces, switching, choices
+        self.dim = self.free.size + (window is not None) + self.pieces * self.ulo.size + choices
 
     def runs(self, U: np.ndarray):
-        """``(X0 (S, n), tau (S,) or None, signal or None)`` of the rows of ``U`` (S, d)."""
+        """``(X0 (S, n), tau (S,) or None, signal or None, choice values (S, choices) or None)``
+        of the rows of ``U`` (S, d)."""
         U = np.clip(np.atleast_2d(U), 0.0, 1.0)
         S = U.shape[0]
         X = np.tile((self.low + self.high) / 2, (S, 1))
@@ -75,14 +79,16 @@ class Parameterisation:
         signal = None
         if self.step is not None:
             m = self.ulo.size
-            V = self.ulo + U[:, f:].reshape(S, self.pieces, m) * (self.uhi - self.ulo)
+            V = self.ulo + U[:, f:f + self.pieces * m].reshape(S, self.pieces, m) * (self.uhi - self.ulo)
             switch = np.zeros((S, self.pieces), dtype=bool) if self.switching else None
             signal = (self.step, V, switch)
-        return X, tau, signal
+            f += self.pieces * m
+        choice = np.minimum(U[:, f:], 1.0 - 1e-12) if self.choices else None
+        return X, tau, signal, choice
 
-    def encode(self, X: np.ndarray, tau, signal) -> np.ndarray:
-        """The unit-cube points of runs given as initial states, switch instants and signals
-        (a run that never switches is put at the middle of the window)."""
+    def encode(self, X: np.ndarray, tau, signal, choice=None) -> np.ndarray:
+        """The unit-cube points of runs given as initial states, switch instants, signals and
+        choice values (a run that never switches is put at the middle of the window)."""
         parts = [(X[:, self.free] - self.low[self.free]) / (self.high - self.low)[self.free]]
         if self.window is not None:
             lo, hi, _ = self.window
@@ -92,6 +98,8 @@ class Parameterisation:
             V = signal[1][:, :self.pieces]
             parts.append(((V - self.ulo) / np.where(self.uhi > self.ulo, self.uhi - self.ulo, 1.0))
                          .reshape(X.shape[0], -1))
+        if self.choices:
+            parts.append(choice)
         return np.clip(np.concatenate(parts, axis=1), 0.0, 1.0)
 
 
@@ -102,25 +110,28 @@ class Outcome:
     X: np.ndarray                 # (1, n)
     tau: np.ndarray | None        # (1,)
     signal: tuple | None          # one run's signal
+    choice: np.ndarray | None     # (1, choices): its choice values
     monitor: object               # its SafetyMonitor
     violated: bool
     runs: int
 
 
 def falsify(model, prop, window, sim, monitor_factory, elite, budget: Budget, seed: int,
-            step: float | None = None, pieces: int = 0, switching: bool = False) -> Outcome:
+            step: float | None = None, pieces: int = 0, switching: bool = False, choices: int = 0) -> Outcome:
     """Minimise the robustness of ``prop`` (see the module docstring).
 
     ``monitor_factory(count)`` makes a SafetyMonitor for ``count`` runs; ``elite`` is
-    ``(X, tau, signal)`` of the runs closest to the unsafe set so far (seeds of the population).
+    ``(X, tau, signal, choice)`` of the runs closest to the unsafe set so far (seeds of the
+    population); ``choices`` the number of choice values per run (0: none).
     """
-    param = Parameterisation(model, window, step, pieces, switching)
+    param = Parameterisation(model, window, step, pieces, switching, choices)
     best = {"depth": np.inf, "run": None, "violated": False, "runs": 0}
 
     def evaluate(U: np.ndarray) -> np.ndarray:
-        X, tau, signal = param.runs(U)
+        X, tau, signal, choice = param.runs(U)
         monitor = monitor_factory(X.shape[0])
-        sim.run(X, tau, observers=[monitor], signal=signal)
+        sim.run(X, tau, observers=[monitor], signal=signal,
+                branches=None if choice is None else Branches(values=choice))
         best["runs"] += X.shape[0]
         hit = monitor.first_violation()
         i = hit if hit is not None else int(np.argmin(monitor.min_depth))
@@ -128,7 +139,8 @@ def falsify(model, prop, window, sim, monitor_factory, elite, budget: Budget, se
                 or monitor.min_depth[i] < best["depth"]):      # the first run stands until a closer one
             if not best["violated"]:
                 best.update(depth=float(monitor.min_depth[i]), violated=hit is not None,
-                            run=(X[i:i + 1], None if tau is None else tau[i:i + 1], _row(signal, i), monitor, i))
+                            run=(X[i:i + 1], None if tau is None else tau[i:i + 1], _row(signal, i),
+                                 None if choice is None else choice[i:i + 1], monitor, i))
         return np.where(np.isfinite(monitor.min_depth), monitor.min_depth, NO_VISIT)
 
     if param.dim == 0:
@@ -144,7 +156,7 @@ def falsify(model, prop, window, sim, monitor_factory, elite, budget: Budget, se
         vectorized=True, updating="deferred", polish=False, tol=FLAT, atol=FLAT,
         seed=rng, callback=lambda intermediate_result: best["violated"])
     if not best["violated"] and budget.polish > 0:
-        start = param.encode(best["run"][0], best["run"][1], best["run"][2])[0]
+        start = param.encode(*best["run"][:4])[0]
         if param.dim <= GRID_DIM:
             _grid_polish(evaluate, best, start, budget.polish)
             return _outcome(best)
@@ -220,7 +232,7 @@ def _row(signal, i: int):
 
 
 def _outcome(best) -> Outcome:
-    X, tau, signal, monitor, i = best["run"]
+    X, tau, signal, choice, monitor, i = best["run"]
     one = type(monitor).__new__(type(monitor))        # the chosen run's row of the batch monitor
     one.__dict__.update({k: (v[i:i + 1] if isinstance(v, np.ndarray) else v) for k, v in monitor.__dict__.items()})
-    return Outcome(X, tau, signal, one, best["violated"], best["runs"])
+    return Outcome(X, tau, signal, choice, one, best["violated"], best["runs"])

@@ -15,6 +15,10 @@ hull: ``x = x0 + N z`` with ``E x0 = f`` and ``N`` an orthonormal basis of ``nul
 Time-varying inputs ``u(t) in [lo, hi]`` are sampled as piecewise-constant signals with pieces of
 length ``step``: constant at each corner of the input box and bang-bang signals (each piece at a
 random corner) for the structured states, uniform pieces for the random ones.
+
+Choices among transitions enabled at one jump (:class:`reach.model.simulate.Branches`): each
+structured run once per branch, taking the same branch at every jump, uniform choices for the
+random ones (:func:`branch_plan`).
 """
 
 from __future__ import annotations
@@ -32,6 +36,7 @@ from reach.model.automaton import HybridAutomaton, LinearSet
 MAX_SUBSETS = 4000
 MAX_PIECES = 100_000
 TOL = 1e-9
+CHOICE_SLOTS = 8        # choice values per run where transitions may be enabled together (Branches)
 
 
 class PolytopeSampler:
@@ -200,3 +205,22 @@ def structured_signals(model: HybridAutomaton, states: int, step: float, rng):
     pick[:, :C] = corners[None, :, None, :]
     pick[:, C] = rng.integers(0, 2, size=(states, K, m))
     return np.where(pick == 1, hi, lo).reshape(states * (C + 1), K, m), C + 1
+
+
+# ---------------------------------------------------------------- branches
+
+def branch_plan(options: int, structured: int, X, tau, signal, rng):
+    """``(X, tau, signal, choice, structured)`` with choice values
+    (:class:`reach.model.simulate.Branches`, ``CHOICE_SLOTS`` per run): each of the first
+    ``structured`` runs repeated ``options`` (``B``) times, copy ``k`` with the value ``(k +
+    1/2) / B`` in every slot -- the ``k``-th enabled transition at every jump, and where only
+    ``m < B`` are enabled the ``floor(m (k + 1/2) / B)``-th, which steps by ``m / B <= 1`` with
+    ``k``, so each of the ``m`` is still taken by some copy; the other runs (``tau``, ``signal``
+    rows kept with theirs) with uniform values."""
+    order = np.r_[np.repeat(np.arange(structured), options), np.arange(structured, X.shape[0])]
+    branch = np.tile(np.arange(options), structured)
+    choice = np.concatenate([np.repeat(((branch + 0.5) / options)[:, None], CHOICE_SLOTS, axis=1),
+                             rng.random((X.shape[0] - structured, CHOICE_SLOTS))])
+    if signal is not None:
+        signal = (signal[0], signal[1][order], None if signal[2] is None else signal[2][order])
+    return X[order], None if tau is None else tau[order], signal, choice, structured * options

@@ -21,6 +21,15 @@ run would leave its invariant, and, in the random and search rounds, also at pie
 where the run's switching signal says so and a guard holds (each with probability
 ``SWITCH_PROBABILITY``). A counterexample carries its input and switching signal.
 
+Where several transitions can be enabled at one jump (two urgent guards that hold together,
+may-transitions with general guards at an exit), each run carries choice values
+(:func:`reach.backends.initial_sampling.branch_plan`): every structured run is repeated once
+per option ``k`` of the largest jump (``B`` options), taking the ``k``-th enabled one at every
+jump (values ``(k + 1/2) / B``), so each branch is covered deterministically; the i.i.d. runs
+draw uniform values (a uniform choice at each jump); where some sampled run met such a choice,
+the search perturbs them and the optimiser takes them as parameters. A counterexample names
+the transition taken at each jump.
+
 The structured and i.i.d. runs are one simulation shared by all safety properties of the call
 (one monitor each; whole blocks of grid states are tested at once, every unsafe piece of a
 mode stacked in one matrix whose rows the simulator's block product evaluates with the guards
@@ -51,12 +60,13 @@ import numpy as np
 
 from reach.backends.event_sampling import check_events, replay_event
 from reach.backends.falsify import Budget, falsify
-from reach.backends.initial_sampling import PolytopeSampler, input_signals, input_step, structured_signals
+from reach.backends.initial_sampling import (PolytopeSampler, branch_plan, input_signals, input_step,
+                                             structured_signals)
 from reach.backends.options import parse_options, ranged
 from reach.errors import InputError
 from reach.model.automaton import HybridAutomaton
 from reach.model.constraints import NUMERICAL_TOLERANCE, equality_rows, lambdify_margins
-from reach.model.simulate import Simulator, check_size, single_threaded
+from reach.model.simulate import Branches, Simulator, check_size, single_threaded
 from reach.result import Counterexample, Result, Status
 from reach.spec.properties import BoundEvent, BoundReach, BoundReachAvoid, BoundSafety
 from reach.stats import clopper_pearson_upper, wilson
@@ -64,6 +74,7 @@ from reach.stats import clopper_pearson_upper, wilson
 NAME = "montecarlo"
 KEPT_RUNS = 40                 # sampled runs kept for pictures (option keep_sets)
 SWITCH_PROBABILITY = 0.3       # chance that a random run takes an enabled may-transition at a piece start
+REPLAY_TOLERANCE = 1e-9        # relative rounding allowed on the bounds a replayed run must meet (check_run)
 
 
 @dataclass
@@ -264,6 +275,7 @@ class Replay:
     dt: float
     trajectory: dict = field(default_factory=dict)
     input_signal: dict | None = None
+    transitions: list = field(default_factory=list)
 
     def counterexample(self, model: HybridAutomaton, prop, found_by: str) -> Counterexample:
         return Counterexample(
@@ -272,23 +284,27 @@ class Replay:
             switch_time=None if self.switch_time is None else float(self.switch_time),
             violation_time=float(self.time), violation_mode=self.mode,
             violation_state=list(map(float, self.state)), dt=self.dt,
-            trajectory=self.trajectory, found_by=found_by, input_signal=self.input_signal)
+            trajectory=self.trajectory, found_by=found_by, input_signal=self.input_signal,
+            transitions=list(self.transitions))
 
 
 def replay(model: HybridAutomaton, prop: BoundSafety, initial_state, switch_time: float | None,
-           dt: float | None = None, input_signal: dict | None = None) -> Replay:
-    """Simulate exactly one run (abort at ``switch_time``, inputs ``input_signal``) on the
-    simulator's general per-segment path (independent of the block path the sampled runs took)
-    and check ``prop`` along it (an event property: its extremum along the run,
-    :func:`reach.backends.event_sampling.replay_event`)."""
+           dt: float | None = None, input_signal: dict | None = None, branches: Branches | None = None) -> Replay:
+    """Simulate exactly one run (abort at ``switch_time``, inputs ``input_signal``, its choices
+    among transitions enabled together by ``branches``, :class:`reach.model.simulate.Branches`;
+    the first enabled by default) on the simulator's general per-segment path (independent of
+    the block path the sampled runs took) and check ``prop`` along it (an event property: its
+    extremum along the run, :func:`reach.backends.event_sampling.replay_event`). The replay
+    records the transitions the run took, so its counterexample replays along the same
+    branches."""
     if isinstance(prop, BoundEvent):
-        return replay_event(model, prop, initial_state, dt)
+        return replay_event(model, prop, initial_state, dt, branches)
     with single_threaded():
-        return _replay_safety(model, prop, initial_state, switch_time, dt, input_signal)
+        return _replay_safety(model, prop, initial_state, switch_time, dt, input_signal, branches)
 
 
 def _replay_safety(model: HybridAutomaton, prop: BoundSafety, initial_state, switch_time: float | None,
-                   dt: float | None, input_signal: dict | None) -> Replay:
+                   dt: float | None, input_signal: dict | None, branches: Branches | None) -> Replay:
     sim = Simulator(model, dt)
     sim.tables = dict.fromkeys(model.modes)     # the general per-segment path, not the block path
     x0 = np.asarray(initial_state, dtype=float).reshape(1, -1)
@@ -300,9 +316,10 @@ def _replay_safety(model: HybridAutomaton, prop: BoundSafety, initial_state, swi
         if not PolytopeSampler(init.polytope, init.low, init.high).contains(x0)[0]:
             return Replay(False, float("nan"), "", np.full(model.n, np.nan), float("inf"), x0[0], switch_time,
                           sim.dt, {"note": "the initial state is outside the initial polytope"})
-    traj = sim.run(x0, tau, record=True, observers=[monitor], signal=signal)
+    traj = sim.run(x0, tau, record=True, observers=[monitor], signal=signal, branches=branches)
     rep = _replay_result(model, monitor, traj, sim, x0, switch_time)
     rep.input_signal = signal_record(model, signal, 0)
+    rep.transitions = traj.transitions[0]
     return rep
 
 
@@ -322,16 +339,62 @@ def _signal_of(model: HybridAutomaton, data: dict | None):
     except (KeyError, TypeError, ValueError):
         raise InputError("input_signal needs step and a list of values per piece", field="input_signal") from None
     if values.ndim != 2 or values.shape[1] != len(names) or values.shape[0] == 0 or values.shape[0] > 1_000_000:
-        raise InputError(f"input_signal: expected a list of pieces of {len(names)} values", field="input_signal")
+        raise InputError(f"expected a list of pieces of {len(names)} values", field="input_signal")
     if switch is not None and (switch.shape != values.shape[:1] or np.any((switch != 0) & (switch != 1))):
-        raise InputError("input_signal: switch needs one 0 or 1 per piece", field="input_signal")
+        raise InputError("switch needs one 0 or 1 per piece", field="input_signal")
     lo = np.array([u.low for u in model.varying_inputs])
     hi = np.array([u.high for u in model.varying_inputs])
     if not (step > 0 and np.isfinite(step)):
-        raise InputError("input_signal: the step must be a positive number", field="input_signal")
-    if np.any(values < lo) or np.any(values > hi) or not np.all(np.isfinite(values)):
-        raise InputError("input_signal: a value outside the input's range", field="input_signal")
+        raise InputError("the step must be a positive number", field="input_signal")
+    if not np.all(np.isfinite(values)):
+        raise InputError("expected finite values", field="input_signal")
+    outside = (values < lo - REPLAY_TOLERANCE * (1 + np.abs(lo))) | (values > hi + REPLAY_TOLERANCE * (1 + np.abs(hi)))
+    if outside.any():
+        k, j = np.argwhere(outside)[0]
+        raise InputError(f"value {values[k, j]:.6g} of '{names[j]}' on piece {k} is outside its "
+                         f"range [{lo[j]:g}, {hi[j]:g}]", field="input_signal")
+    values = np.clip(values, lo, hi)                # rounding only
     return step, values[None, :, :], None if switch is None else switch[None, :].astype(bool)
+
+
+def check_run(model: HybridAutomaton, initial_state: list, switch_time: float | None, input_signal: dict | None,
+              transitions: list | None) -> None:
+    """Refuse (InputError naming the field) a run that is none of ``model``'s: an initial state of
+    the wrong length, not finite, outside the initial set or the initial mode's invariant; a
+    switch time where the model has no window or outside it; an input signal with values
+    outside the inputs' ranges; a transition the model does not have. Bounds are met to
+    ``REPLAY_TOLERANCE (1 + |bound|)`` (rounding in a written file)."""
+    x = np.asarray(initial_state, dtype=float)
+    if x.shape != (model.n,):
+        raise InputError(f"initial_state has {len(initial_state)} values, the model {model.n}", field="initial_state")
+    if not np.all(np.isfinite(x)):
+        raise InputError("expected a list of finite numbers", field="initial_state")
+    init = model.initial
+    slack = REPLAY_TOLERANCE * (1.0 + np.maximum(np.abs(init.low), np.abs(init.high)))
+    outside = np.flatnonzero((x < init.low - slack) | (x > init.high + slack))
+    if outside.size:
+        i = outside[0]
+        span = f"= {init.low[i]:g}" if init.low[i] == init.high[i] else f"in [{init.low[i]:g}, {init.high[i]:g}]"
+        raise InputError(f"{model.state[i]} = {x[i]:.10g} is outside the initial set ({model.state[i]} {span})",
+                         field="initial_state")
+    if not init.is_box and not PolytopeSampler(init.polytope, init.low, init.high).contains(x[None, :])[0]:
+        raise InputError("the state is outside the initial set (its polytope)", field="initial_state")
+    margins = model.modes[init.mode].invariant_margins(x[None, :])[0]
+    if np.any(margins > REPLAY_TOLERANCE * (1.0 + np.abs(x).max())):
+        raise InputError(f"the state is outside the initial set: the invariant of mode '{init.mode}' does not hold",
+                         field="initial_state")
+    if switch_time is not None:
+        window = switch_window(model)
+        if window is None:
+            raise InputError("the model has no switching window", field="switch_time")
+        lo, hi, _ = window
+        if not lo - REPLAY_TOLERANCE * (1 + abs(lo)) <= switch_time <= hi + REPLAY_TOLERANCE * (1 + abs(hi)):
+            raise InputError(f"{switch_time:g} is outside the switching window [{lo:g}, {hi:g}]", field="switch_time")
+    _signal_of(model, input_signal)
+    names = {tr.name for tr in model.transitions}
+    for k, name in enumerate(transitions or []):
+        if name not in names:
+            raise InputError(f"unknown transition '{name}'", field=f"transitions[{k}]")
 
 
 def constant_signal(model: HybridAutomaton, x0) -> dict | None:
@@ -420,7 +483,7 @@ def random_plan(model: HybridAutomaton, window, count: int, rng):
 
 # ------------------------------------------------------------------ the back-end
 
-def sampled_runs(model: HybridAutomaton, sim: Simulator, X, tau, signal, structured: int) -> list:
+def sampled_runs(model: HybridAutomaton, sim: Simulator, X, tau, signal, choice, structured: int) -> list:
     """``KEPT_RUNS`` of the planned runs (half from the ``structured`` first rows -- corners and
     faces -- the rest i.i.d.) simulated again with their path recorded (disturbance-free: the
     kicks of a stochastic model are left out), one :class:`~reach.result.SetPiece` of kind
@@ -430,7 +493,8 @@ def sampled_runs(model: HybridAutomaton, sim: Simulator, X, tau, signal, structu
     first = min(KEPT_RUNS // 2, structured)
     rows = np.r_[np.arange(first), np.arange(structured, min(X.shape[0], structured + KEPT_RUNS - first))]
     sub = None if signal is None else (signal[0], signal[1][rows], None if signal[2] is None else signal[2][rows])
-    traj = sim.run(X[rows], None if tau is None else tau[rows], record=True, signal=sub)
+    traj = sim.run(X[rows], None if tau is None else tau[rows], record=True, signal=sub,
+                   branches=None if choice is None else Branches(values=choice[rows]))
     names, modes = tuple(model.state), list(model.modes)
     pieces = []
     for t, mode, states in traj.path.values():
@@ -517,39 +581,45 @@ class MonteCarloBackend:
         X = np.concatenate([Xs, Xr])
         tau = None if window is None else np.concatenate([taus, taur])
         n_structured = Xs.shape[0]
+        choice = None
+        if sim.max_options > 1:
+            X, tau, signal, choice, n_structured = branch_plan(sim.max_options, n_structured, X, tau, signal, rng)
         check_size(model, sim.dt, X.shape[0])      # all the runs' arrays are held at once
-        parts = _simulate_rounds(model, props, sim, opts, X, tau, signal, n_structured, kicks)
+        parts = _simulate_rounds(model, props, sim, opts, X, tau, signal, choice, n_structured, kicks)
         monitors = [SafetyMonitor.merged(model, p, [q[0][i] for q in parts]) for i, p in enumerate(props)]
         blocked = sum(q[1] for q in parts)
-        runs = sampled_runs(model, sim, X, tau, signal, n_structured) if opts.keep_sets else []
+        branching = choice is not None and sum(q[2] for q in parts) > 0    # a choice met, not only possible
+        runs = sampled_runs(model, sim, X, tau, signal, choice, n_structured) if opts.keep_sets else []
         shared = (time.perf_counter() - start) / len(props)
         results = []
         for prop, monitor in zip(props, monitors):
             begin = time.perf_counter()
-            rounds = [("structured+random", X, tau, monitor, signal)]
+            rounds = [("structured+random", X, tau, monitor, signal, choice)]
             details = {"dt": sim.dt, "seed": opts.seed, "structured_runs": int(n_structured),
                        "random_runs": int(opts.samples),
                        "blocked_runs": int(blocked),
                        "assumes": "states checked at grid points and event instants only "
                                   "(a falsifier, not a proof)"}
             fails = int(np.count_nonzero(np.isfinite(monitor.violation_time[n_structured:])))
+            details["violating_runs"] = fails
             details["violation_probability_upper_95"] = clopper_pearson_upper(fails, opts.samples)
             found = monitor.first_violation()
             found = None if found is None else (0, found)
             if found is None and model.disturbance is None:
-                found = self._search(model, prop, window, sim, rounds, opts, rng)
+                found = self._search(model, prop, window, sim, rounds, opts, rng, branching)
             if found is None and model.disturbance is None and opts.optimise:
-                found = self._optimise(model, prop, window, sim, rounds, opts)
+                found = self._optimise(model, prop, window, sim, rounds, opts, branching)
                 details["optimiser_runs"] = int(rounds[-1][3].runs)
             details["search_runs"] = int(sum(r[1].shape[0] for r in rounds[1:] if r[0] != "optimiser"))
             details["closest_depth"] = min(float(np.min(r[3].min_depth)) for r in rounds)
             result = Result(NAME, model.name, prop.id, Status.UNKNOWN, details=details)
             if found is not None:
                 k, i = found
-                label, Xk, tauk, _, sig = rounds[k]
+                label, Xk, tauk, _, sig, ch = rounds[k]
                 t = None if tauk is None or np.isnan(tauk[i]) else float(tauk[i])
                 if model.disturbance is None:
-                    rep = replay(model, prop, Xk[i], t, sim.dt, signal_record(model, sig, i))
+                    branches = None if ch is None else Branches(values=ch[i:i + 1])
+                    rep = replay(model, prop, Xk[i], t, sim.dt, signal_record(model, sig, i), branches)
                     if rep.violated:
                         details["found_in"] = label
                         result = Result(NAME, model.name, prop.id, Status.UNSAFE, details=details,
@@ -564,8 +634,9 @@ class MonteCarloBackend:
             results.append(result)
         return results
 
-    def _search(self, model, prop, window, sim, rounds, opts: Options, rng):
-        """Cross-entropy falsification: resample around the runs closest to the unsafe set."""
+    def _search(self, model, prop, window, sim, rounds, opts: Options, rng, branching: bool):
+        """Cross-entropy falsification: resample around the runs closest to the unsafe set
+        (their choice values too where a sampled run met several enabled transitions)."""
         low, high = model.initial.low, model.initial.high
         span = np.where(high > low, high - low, 0.0)
         sampler = None if model.initial.is_box else PolytopeSampler(model.initial.polytope, low, high)
@@ -596,16 +667,22 @@ class MonteCarloBackend:
                 base = np.concatenate([r[2] for r in rounds])[pick]
                 base = np.where(np.isnan(base), (lo + hi) / 2, base)
                 tau = np.clip(base + rng.normal(size=opts.search_size) * (hi - lo) * scale, lo, hi)
+            choice = None
+            if branching:                               # draw some choice values again
+                C = np.concatenate([r[5] for r in rounds])[pick]
+                choice = np.where(rng.random(C.shape) < scale, rng.random(C.shape), C)
             monitor = SafetyMonitor(model, prop, opts.search_size)
-            sim.run(X, tau, observers=[monitor], signal=signal)
-            rounds.append((f"search{g + 1}", X, tau, monitor, signal))
+            sim.run(X, tau, observers=[monitor], signal=signal,
+                    branches=None if choice is None else Branches(values=choice))
+            rounds.append((f"search{g + 1}", X, tau, monitor, signal, choice))
             i = monitor.first_violation()
             if i is not None:
                 return len(rounds) - 1, i
         return None
 
-    def _optimise(self, model, prop, window, sim, rounds, opts: Options):
-        """Differential evolution and Nelder-Mead on the robustness, seeded with the closest runs;
+    def _optimise(self, model, prop, window, sim, rounds, opts: Options, branching: bool):
+        """Differential evolution and Nelder-Mead on the robustness, seeded with the closest runs
+        (their choice values as parameters where a sampled run met several enabled transitions);
         appends the best run as the round ``optimiser`` (its monitor carries ``runs``, the cost)."""
         X_all = np.concatenate([r[1] for r in rounds])
         d_all = np.concatenate([r[3].min_depth for r in rounds])
@@ -616,12 +693,13 @@ class MonteCarloBackend:
         if signal is not None:
             step, pieces, switching = signal[0], signal[1].shape[1], signal[2] is not None
             elite_signal = (step, np.concatenate([r[4][1] for r in rounds])[elite], None)
+        elite_choice = np.concatenate([r[5] for r in rounds])[elite] if branching else None
         out = falsify(model, prop, window, sim, lambda count: SafetyMonitor(model, prop, count),
-                      (X_all[elite], None if tau_all is None else tau_all[elite], elite_signal),
+                      (X_all[elite], None if tau_all is None else tau_all[elite], elite_signal, elite_choice),
                       Budget(opts.generations, opts.population, opts.polish), opts.seed,
-                      step, pieces, switching)
+                      step, pieces, switching, 0 if elite_choice is None else elite_choice.shape[1])
         out.monitor.runs = out.runs
-        rounds.append(("optimiser", out.X, out.tau, out.monitor, out.signal))
+        rounds.append(("optimiser", out.X, out.tau, out.monitor, out.signal, out.choice))
         return (len(rounds) - 1, 0) if out.violated else None
 
     # ---------------------------------------------------------- reach / reach-avoid
@@ -671,9 +749,9 @@ class MonteCarloBackend:
 SAMPLE_BLOCK = 1000     # i.i.d. runs always simulated together: the unit of batches
 
 
-def _simulate_rounds(model, props, sim, opts: Options, X, tau, signal, n_structured: int, kicks) -> list:
+def _simulate_rounds(model, props, sim, opts: Options, X, tau, signal, choice, n_structured: int, kicks) -> list:
     """Simulate the structured runs (in this process) and the i.i.d. ones, monitoring every
-    property; ``[(monitor arrays per property, blocked runs)]`` in run order.
+    property; ``[(monitor arrays per property, blocked runs, runs that met a choice)]`` in run order.
 
     The i.i.d. runs are simulated in blocks of :data:`SAMPLE_BLOCK`, each block on its own
     (disturbance kicks from ``SeedSequence(seed, spawn_key=(k,))`` for block ``k``): a run's
@@ -682,12 +760,14 @@ def _simulate_rounds(model, props, sim, opts: Options, X, tau, signal, n_structu
     processes, or on a Dask ``scheduler``)."""
     def rows(a, b):
         return (X[a:b], None if tau is None else tau[a:b],
-                None if signal is None else (signal[0], signal[1][a:b], None if signal[2] is None else signal[2][a:b]))
+                None if signal is None else (signal[0], signal[1][a:b], None if signal[2] is None else signal[2][a:b]),
+                None if choice is None else choice[a:b])
 
     monitors = [SafetyMonitor(model, p, n_structured) for p in props]
-    Xs, taus, signals = rows(0, n_structured)
-    traj = sim.run(Xs, taus, observers=monitors, kicks=kicks, signal=signals)
-    parts = [([m.arrays() for m in monitors], int(np.count_nonzero(np.isfinite(traj.blocked_at))))]
+    Xs, taus, signals, choices = rows(0, n_structured)
+    traj = sim.run(Xs, taus, observers=monitors, kicks=kicks, signal=signals,
+                   branches=None if choices is None else Branches(values=choices))
+    parts = [([m.arrays() for m in monitors], *_counts(traj))]
     blocks = [(k,) + rows(a, min(a + SAMPLE_BLOCK, X.shape[0]))
               for k, a in enumerate(range(n_structured, X.shape[0], SAMPLE_BLOCK))]
     per_unit = max(1, -(-opts.batch // SAMPLE_BLOCK))
@@ -705,17 +785,24 @@ def _simulate_rounds(model, props, sim, opts: Options, X, tau, signal, n_structu
 
 
 def simulate_blocks(model, props, dt, seed, blocks) -> list:
-    """One batch (an executor unit): each block ``(k, X, tau, signal)`` of i.i.d. runs simulated
-    on its own with one monitor per property; ``[(monitor arrays, blocked runs)]``."""
+    """One batch (an executor unit): each block ``(k, X, tau, signal, choice)`` of i.i.d. runs
+    simulated on its own with one monitor per property; ``[(monitor arrays, blocked runs, runs
+    that met a choice)]``."""
     sim = Simulator(model, dt)
     out = []
     with single_threaded():
-        for k, X, tau, signal in blocks:
+        for k, X, tau, signal, choice in blocks:
             kicks = _kicks(model, np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(k,))))
             monitors = [SafetyMonitor(model, p, X.shape[0]) for p in props]
-            traj = sim.run(X, tau, observers=monitors, kicks=kicks, signal=signal)
-            out.append(([m.arrays() for m in monitors], int(np.count_nonzero(np.isfinite(traj.blocked_at)))))
+            traj = sim.run(X, tau, observers=monitors, kicks=kicks, signal=signal,
+                           branches=None if choice is None else Branches(values=choice))
+            out.append(([m.arrays() for m in monitors], *_counts(traj)))
     return out
+
+
+def _counts(traj) -> tuple:
+    """``(blocked runs, runs that met several enabled transitions at a jump)``."""
+    return int(np.count_nonzero(np.isfinite(traj.blocked_at))), int(np.count_nonzero(traj.branched))
 
 
 def _kicks(model: HybridAutomaton, rng):

@@ -20,13 +20,15 @@ from reach.backends.event_sampling import within_bound
 def _replays(row) -> bool:
     from reach.backends.montecarlo import replay
     from reach.model import load_model
+    from reach.model.simulate import Branches
     from reach.spec import bind, load_properties
 
     cex = row["counterexample"]
     model = load_model(cex["model_file"])
     prop = next(p for p in load_properties(cex["property_file"]) if p.id == cex["property"])
+    branches = None if cex.get("transitions") is None else Branches(prescribed=[cex["transitions"]])
     return replay(model, bind(prop, model), cex["initial_state"], cex["switch_time"], cex["dt"],
-                  cex.get("input_signal")).violated
+                  cex.get("input_signal"), branches).violated
 
 
 def cross_check(rows: list[dict]) -> list[dict]:

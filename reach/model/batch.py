@@ -23,8 +23,10 @@ step for step: the same grid points are visited, an urgent guard that holds at a
 is located inside the grid interval before it to the resolution of the general path's
 bisection (``Simulator._first_entry``; here :func:`first_entry`, sub-grids of that interval),
 the window switch is taken at ``tau``, the first grid point outside the invariant (beyond
-``INVARIANT_TOLERANCE (1 + |x|_inf)``) blocks the run. Only rounding differs (``(L P^j) z``
-against ``L (P^j z)``; the states at segment starts and events by :func:`taylor_flow`). In a
+``INVARIANT_TOLERANCE (1 + |x|_inf)``) is not visited and the run stops at the last instant
+inside (the segment's end is the general path's, ``Simulator._finish``). Only rounding differs
+(``(L P^j) z`` against ``L (P^j z)``; the states at segment starts and events by
+:func:`taylor_flow`). In a
 mode with a scalar state (``x' = a x + b``) the guard entry and the propagation to events are
 in closed form instead (:func:`scalar_entry`, ``h 2^-40`` late as the bisection's right end).
 A nonlinear mode with linear guards and invariant takes the same block loop with the states
@@ -319,15 +321,17 @@ def margin_rows(watchers, m_index: int) -> tuple:
     return extra, wanted
 
 
-def segment_chunk(sim, name, rows, X, mode, t, tau, blocked_at, next_kick, watchers, horizon, table):
-    """Advance ``rows`` (all in mode ``name``) to their next event, kick or the horizon, in
-    blocks of grid steps (see the module docstring)."""
+def segment_chunk(sim, name, rows, runs, next_kick, horizon, table):
+    """Advance ``rows`` (all in mode ``name``; their states, modes and times in ``runs``) to
+    their next event, kick or the horizon, in blocks of grid steps (see the module docstring);
+    the end of the segment is the general path's (``Simulator._finish``)."""
     from reach.model.simulate import INVARIANT_TOLERANCE
 
     n, dt = sim.n, sim.dt
     n_rows = rows.size
-    m_index = int(mode[rows[0]])
-    t0, k0, end, window, win_time, stop_at, count = sim.segment_limits(name, rows, t, tau, next_kick, horizon)
+    X, watchers = runs.X, runs.watchers
+    m_index = int(runs.mode[rows[0]])
+    t0, k0, end, win_time, stop_at, count = sim.segment_limits(name, rows, runs.t, runs.tau, next_kick, horizon)
     count = max(1, min(count, sim.steps + 2 - int(k0.min())))
     Y0 = table.propagate(X[rows], np.maximum(k0 * dt - t0, 0.0))
     Z = np.vstack([Y0.T, np.ones((1, n_rows))])                          # (n+1, R), at the block start
@@ -339,7 +343,6 @@ def segment_chunk(sim, name, rows, X, mode, t, tau, blocked_at, next_kick, watch
     event_time = win_time.copy()
     event_tr = np.where(np.isfinite(win_time), 0, -1)
     blocked = np.zeros(n_rows, dtype=bool)
-    block_x = np.zeros((n_rows, n))
     block_t = np.zeros(n_rows)
     last_t, last_x = t0.copy(), X[rows].copy()                       # last visited grid state
     prev_t, prev_x = t0.copy(), X[rows].copy()                       # grid state before the block
@@ -406,9 +409,9 @@ def segment_chunk(sim, name, rows, X, mode, t, tau, blocked_at, next_kick, watch
                     out_any[b] = True
                     limit_j[b] = jb
                     blocked[act[b]] = True
-                    block_x[act[b]] = S[jb, :, b]
                     block_t[act[b]] = gt[jb, b]
-        seen = valid & (gt < event_time[sel]) & (np.arange(B)[:, None] <= limit_j)
+        # the states visited: before the event, before the first grid point outside the invariant
+        seen = valid & (gt < event_time[sel]) & (np.arange(B)[:, None] < limit_j)
         notify_block(watchers, gt, S, seen, m_index, rows[sel],
                      [None if sp is None else O[:, sp[0]:sp[0] + sp[1], :] for sp in spans])
         prev_t[sel], prev_x[sel] = gt[-1], S[-1].T
@@ -423,31 +426,4 @@ def segment_chunk(sim, name, rows, X, mode, t, tau, blocked_at, next_kick, watch
         done[sel] |= out_any | (gt[-1] >= np.minimum(stop_at[sel], event_time[sel]) - 1e-12) | ~valid.any(axis=0)
         j0 = j1
         step_block = min(2 * step_block, most)
-    finish(sim, name, rows, X, mode, t, tau, blocked_at, watchers, horizon, end, event_time, event_tr,
-           blocked, block_x, block_t, last_t, last_x, table.propagate)
-
-
-def finish(sim, name, rows, X, mode, t, tau, blocked_at, watchers, horizon, end, event_time, event_tr,
-           blocked, block_x, block_t, last_t, last_x, propagate):
-    """The end of a segment: blocked runs stop, runs with an event go to it and jump, the
-    others run on to the end of the segment (a kick or the horizon)."""
-    b = np.flatnonzero(blocked)
-    X[rows[b]] = block_x[b]
-    t[rows[b]] = block_t[b]
-    blocked_at[rows[b]] = block_t[b]
-    candidates = [sim.window[name]] + [tr for tr, _ in sim.urgent[name]]
-    has_event = ~blocked & (event_tr >= 0) & (event_time <= end)
-    e = np.flatnonzero(has_event)
-    if e.size:
-        Xe = propagate(last_x[e], event_time[e] - last_t[e])
-        sim._take_events(rows[e], Xe, event_time[e], event_tr[e], candidates, sim.window[name], X, t, mode,
-                         tau, watchers)
-    q = np.flatnonzero(~blocked & ~has_event)
-    if q.size:
-        X[rows[q]] = propagate(last_x[q], end[q] - last_t[q])
-        t[rows[q]] = end[q]
-        off_grid = np.flatnonzero(end[q] - last_t[q] > 1e-9 * max(1.0, horizon))
-        if off_grid.size:
-            sel = rows[q][off_grid]
-            for f in watchers:
-                f(t[sel], X[sel], mode[sel], sel)
+    sim._finish(name, rows, runs, end, event_time, event_tr, blocked, block_t, last_t, last_x, table.propagate)

@@ -24,14 +24,30 @@ together:
   switching decisions; a piece start on the grid where a run's inputs keep their values and no
   switch is asked for changes nothing and does not end its segment); an urgent transition
   whose guard holds right after a kick is taken at that instant;
-* a run found outside its mode's invariant at a grid point with no transition taken is
-  *blocked* (it has no continuation in the automaton's semantics) and stops there;
+* a transition is *enabled* at a state where its guard holds and the target's invariant holds
+  at the reset state (both to :data:`INVARIANT_TOLERANCE`); where several of the same kind
+  are enabled at once (urgent ones whose guards hold together, may-transitions at an exit or
+  a piece start), each run takes one by its :class:`Branches`, the first enabled by default,
+  and a run that must jump and has none enabled is blocked;
+* in a mode where no time passes (``Mode.timeless``, SpaceEx ``flow false``) a run takes an
+  enabled transition (urgent or not) at the instant it enters, or is blocked there;
+* a run is a run of the automaton only while it satisfies its mode's invariant: an initial
+  state outside the initial mode's invariant is blocked at 0 and never watched; a run found
+  outside the invariant at a grid point, or whose state at its next event or segment end lies
+  outside, left it on the way and stops at the last instant it is inside (by bisection from
+  its last grid state inside, :meth:`Simulator._last_inside`), where it is watched and takes
+  an enabled may-transition with a general guard or is *blocked* (no continuation);
 * a run that takes more than ``MAX_PASSES_PER_STEP`` events inside one grid step is Zeno (its
   jumps accumulate before the horizon, as a bouncing ball's with restitution below 1): it is
   stopped there and counted as blocked, so a simulation always ends.
 
-Observers see every state a run visits (grid points and event instants) together with the
-run's mode, in time order per run; properties are monitored this way without storing paths.
+Observers see every state a run visits (grid points, event instants, the states after each
+jump) together with the run's mode, in time order per run; properties are monitored this way
+without storing paths. Every state they see lies in its mode's invariant to
+:data:`INVARIANT_TOLERANCE` ``(1 + |x|_inf)``, a hundredth of the tolerance
+``NUMERICAL_TOLERANCE (1 + |x|_inf)`` a violation must exceed
+(:func:`reach.model.constraints.violation_test`): a violation is never reported at a state
+beyond an invariant by more than rounding.
 """
 
 from __future__ import annotations
@@ -48,7 +64,7 @@ from reach.model.batch_nonlinear import rk4_step
 from reach.model.constraints import lambdify_margins
 
 BISECTION_STEPS = 40
-INVARIANT_TOLERANCE = 1e-7
+INVARIANT_TOLERANCE = 1e-11          # invariants and guards hold where margins <= this (1 + |x|_inf)
 FIRST_WINDOW = 64                 # grid points of a linear segment's first window of states
 MAX_WINDOW = 256                  # grid points of its longest window
 CHUNK_VALUES = 4_000_000          # states x steps x dims held at once in a linear segment
@@ -124,12 +140,89 @@ def batched_expm(M: np.ndarray, h: np.ndarray) -> np.ndarray:
 
 @dataclass
 class Trajectories:
-    """Final state, mode and blocking time of every run; the visited states if recorded."""
+    """Final state, mode and blocking time of every run; if recorded, the visited states and
+    the names of the transitions each run took, in order."""
 
     final_state: np.ndarray
     final_mode: np.ndarray
     blocked_at: np.ndarray                      # time a run was blocked, nan if never
+    branched: np.ndarray                        # jumps of each run at which several transitions were enabled
     path: dict = field(default_factory=dict)    # run -> (t (K,), mode (K,), x (K, n)) if recorded
+    transitions: dict = field(default_factory=dict)     # run -> [transition name, ...] if recorded
+
+
+@dataclass(frozen=True)
+class Branches:
+    """Which enabled transition each run takes where several are enabled at one jump.
+
+    A jump's options are the transitions of one kind leaving the run's mode, in the model's
+    order: its urgent ones (at a guard entry, at once after a jump or a kick), its
+    may-transitions with a general guard (at an invariant exit, at a piece start), both in a
+    mode where no time passes. With ``values`` (N, D) in ``[0, 1)``, run ``r`` with ``m``
+    enabled options at its ``j``-th jump takes the ``floor(m values[r, j mod D])``-th enabled
+    one: a value ``(k + 1/2) / B`` takes the ``k``-th of ``B`` options at every jump, uniform
+    values a uniform choice. With ``prescribed`` (per run, a list of transition names), a run
+    takes the next name of its list where that transition is enabled (and moves on in the
+    list), the first enabled one otherwise: a recorded run replays along its own branches, and
+    a path missing some jumps (a witness of the star back-end) is still followed. Neither: the
+    first enabled, at every jump.
+    """
+
+    values: np.ndarray | None = None
+    prescribed: list | None = None
+
+    def pick(self, rows: np.ndarray, count: np.ndarray, enabled: np.ndarray, names: list) -> np.ndarray:
+        """For the runs ``rows`` (``count`` each: jumps so far, or prescribed names used) with
+        ``enabled`` (R, T) over the options ``names``: the chosen option, -1 where none is
+        enabled."""
+        some = enabled.any(axis=1)
+        first = np.where(some, enabled.argmax(axis=1), -1)
+        if self.values is not None:
+            m = enabled.sum(axis=1)
+            u = self.values[rows, count % self.values.shape[1]]
+            k = np.minimum((u * m).astype(int), np.maximum(m - 1, 0))
+            rank = np.cumsum(enabled, axis=1) - 1
+            return np.where(some, (enabled & (rank == k[:, None])).argmax(axis=1), -1)
+        if self.prescribed is not None:
+            out = first.copy()
+            for i, (r, c) in enumerate(zip(rows, count)):
+                path = self.prescribed[r]
+                if c < len(path) and path[c] in names and enabled[i, names.index(path[c])]:
+                    out[i] = names.index(path[c])
+            return out
+        return first
+
+    def advances(self, rows: np.ndarray, count: np.ndarray, chosen: list) -> np.ndarray:
+        """Whether each run's count moves on after it took ``chosen`` (names): at every jump
+        with ``values``; where the prescribed name was taken with ``prescribed``."""
+        if self.prescribed is None:
+            return np.ones(len(rows), dtype=bool)
+        return np.array([c < len(self.prescribed[r]) and self.prescribed[r][c] == name
+                         for r, c, name in zip(rows, count, chosen)], dtype=bool)
+
+
+@dataclass
+class _Runs:
+    """What a simulation carries per run: state, mode, time, window switch instant, blocking
+    time; how it chooses among enabled transitions (``branches`` and each run's ``count``,
+    :meth:`Branches.pick`), how many of its jumps had a choice (``branched``), the names of the
+    transitions taken (``taken``, if recorded); and the observers."""
+
+    X: np.ndarray
+    mode: np.ndarray
+    t: np.ndarray
+    tau: np.ndarray
+    blocked_at: np.ndarray
+    watchers: list
+    branches: Branches
+    count: np.ndarray
+    branched: np.ndarray
+    taken: list | None
+
+    def watch(self, rows: np.ndarray) -> None:
+        """The observers see the runs ``rows`` as they are now."""
+        for f in self.watchers:
+            f(self.t[rows], self.X[rows], self.mode[rows], rows)
 
 
 class Simulator:
@@ -162,6 +255,11 @@ class Simulator:
             else:
                 self.exits[tr.source].append((tr, lambdify_margins(tr.guard, model.symbols)))
         self.resets = {tr.name: _reset_function(tr, model) for tr in model.transitions if tr.reset}
+        self.timeless = {m for m, mode in model.modes.items() if mode.timeless}
+        # what a run may take at an instant: urgent transitions; in a timeless mode, every one
+        self.instant = {m: self.urgent[m] + (self.exits[m] if m in self.timeless else []) for m in model.modes}
+        #: the most options one jump can have (several enabled at once need Branches to choose)
+        self.max_options = max([len(v) for table in (self.instant, self.exits) for v in table.values()] + [1])
 
     # --------------------------------------------------------------- propagation
     def propagate(self, mode: str, X: np.ndarray, h) -> np.ndarray:
@@ -234,39 +332,47 @@ class Simulator:
         """Earliest time in ``(0, h]`` at which ``guard`` holds (it holds at ``h``), by bisection."""
         return self._bisect(mode, X, h, lambda Z: np.all(guard(Z) <= 0, axis=1))[1]
 
-    def _last_inside(self, mode: str, X: np.ndarray, h: np.ndarray) -> np.ndarray:
-        """Latest time in ``[0, h)`` at which the runs are still inside the invariant
-        (inside at 0, outside at ``h``), by bisection."""
+    def inside(self, mode: str, X: np.ndarray) -> np.ndarray:
+        """Whether each state of ``X`` (N, n) lies in the invariant of ``mode``: every margin at
+        most ``INVARIANT_TOLERANCE (1 + |x|_inf)``."""
+        margins = self.model.modes[mode].invariant_margins(X)
+        return np.all(margins <= INVARIANT_TOLERANCE * (1.0 + np.abs(X).max(axis=1))[:, None], axis=1)
+
+    def _last_inside(self, mode: str, X: np.ndarray, h: np.ndarray) -> tuple:
+        """``(s, x(s))``: the latest time in ``[0, h)`` at which the runs are still inside the
+        invariant (inside at 0 to :meth:`inside`'s tolerance, outside at ``h``), by bisection,
+        and the state there. The midpoints are tested exactly (every margin at most 0), so
+        ``x(s)`` is the start state or a state the bisection found exactly inside: never
+        beyond the invariant by more than the start state is."""
         inv = self.model.modes[mode].invariant_margins
-
-        def outside(Z):
-            tol = INVARIANT_TOLERANCE * (1.0 + np.abs(Z).max(axis=1))
-            return ~np.all(inv(Z) <= tol[:, None], axis=1)
-
-        return self._bisect(mode, X, h, outside)[0]
+        lo, _, x_lo = self._bisect(mode, X, h, lambda Z: ~np.all(inv(Z) <= 0, axis=1))
+        return lo, x_lo
 
     def _bisect(self, mode: str, X: np.ndarray, h: np.ndarray, before) -> tuple:
-        """``(lo, hi)``, ``hi - lo = h 2^-BISECTION_STEPS``: :data:`BISECTION_STEPS` halvings of
-        ``[0, h]`` (one interval per run), keeping the left half where ``before(x(mid))`` holds
-        (the instant sought is at or before the midpoint), the right one otherwise.
+        """``(lo, hi, x(lo))``, ``hi - lo = h 2^-BISECTION_STEPS``: :data:`BISECTION_STEPS`
+        halvings of ``[0, h]`` (one interval per run), keeping the left half where
+        ``before(x(mid))`` holds (the instant sought is at or before the midpoint), the right one
+        otherwise; ``x(lo)`` is ``X`` or the last midpoint state where ``before`` failed.
 
         A linear mode carries the state at ``lo``: the midpoint lies ``w_j = h 2^-j`` after it
         at halving ``j``, so ``[x(mid); 1] = expm(M w_j) [x(lo); 1]``, with the exponentials of
         :meth:`_exponentials` (shared by every search from the same ``h``). A nonlinear mode
         integrates from 0 to each midpoint."""
         lo, hi = np.zeros_like(h), h.copy()
+        x_lo = X.copy()
         if mode not in self.generators:
             for _ in range(BISECTION_STEPS):
                 mid = 0.5 * (lo + hi)
-                left = before(self.propagate(mode, X, mid))
+                Z = self.propagate(mode, X, mid)
+                left = before(Z)
                 hi = np.where(left, mid, hi)
                 lo = np.where(left, lo, mid)
-            return lo, hi
+                x_lo = np.where(left[:, None], x_lo, Z)
+            return lo, hi, x_lo
         durations, which = np.unique(h, return_inverse=True)
         which = which.reshape(-1)
         halvings = tuple(2.0 ** -np.arange(1, BISECTION_STEPS + 1))
         kept = self._exponentials(mode, durations, halvings) if durations.size <= 8 else None
-        x_lo = X.copy()
         n = self.n
         for j in range(BISECTION_STEPS):
             w = 2.0 ** (-j - 1)
@@ -277,7 +383,7 @@ class Simulator:
             hi = np.where(left, mid, hi)
             lo = np.where(left, lo, mid)
             x_lo = np.where(left[:, None], x_lo, Z)
-        return lo, hi
+        return lo, hi, x_lo
 
     def _exponentials(self, mode: str, durations: np.ndarray, fractions: tuple) -> np.ndarray:
         """``expm(M d f)`` for each duration ``d`` and fraction ``f``: (D, F, n+1, n+1), kept
@@ -296,7 +402,7 @@ class Simulator:
 
     # --------------------------------------------------------------- runs
     def run(self, x0: np.ndarray, switch_times: np.ndarray | None = None, record: bool = False,
-            observers=(), kicks=None, signal=None) -> Trajectories:
+            observers=(), kicks=None, signal=None, branches: Branches | None = None) -> Trajectories:
         """Simulate runs from ``x0`` (N, n) with window switch instants ``switch_times`` (N,).
 
         ``observers``: callables ``f(t, X, mode_index, rows)`` (``t`` per row) called with the
@@ -304,18 +410,21 @@ class Simulator:
         ``signal = (step, values[, switch])``: the varying bounded inputs (``model.varying_inputs``)
         are piecewise constant, ``values[r, k]`` on ``[k step, (k+1) step)`` for run ``r``
         (``values`` is (N, K, m); the last piece lasts to the horizon); with ``switch`` (N, K)
-        booleans, run ``r`` also takes, at ``k step`` (k >= 1) where ``switch[r, k]``, the first
-        may-transition with a general guard that is enabled there (if any).
+        booleans, run ``r`` also takes, at ``k step`` (k >= 1) where ``switch[r, k]``, a
+        may-transition with a general guard that is enabled there (if any). ``branches``: which
+        of several enabled transitions each run takes (:class:`Branches`; the first by default).
         """
         X = np.array(x0, dtype=float).reshape(-1, self.n).copy()
         N = X.shape[0]
         check_size(self.model, self.dt, N)
         tau = np.full(N, np.nan) if switch_times is None else np.array(switch_times, dtype=float).reshape(N)
-        mode = np.full(N, self.mode_names.index(self.model.initial.mode))
-        t = np.zeros(N)
-        blocked_at = np.full(N, np.nan)
+        recorder = _Recorder() if record else None
+        runs = _Runs(X, np.full(N, self.mode_names.index(self.model.initial.mode)), np.zeros(N), tau,
+                     np.full(N, np.nan), list(observers) + ([recorder] if recorder else []),
+                     branches or Branches(), np.zeros(N, dtype=int), np.zeros(N, dtype=int),
+                     [[] for _ in range(N)] if record else None)
+        mode, t, blocked_at = runs.mode, runs.t, runs.blocked_at
         kick_step = self.model.disturbance.step if (kicks is not None and self.model.disturbance) else None
-        jumped: list = []                           # runs that took a may-transition at a piece start
         if signal is not None:
             if kick_step:
                 raise ValueError("input signals and disturbance kicks together are not supported")
@@ -328,7 +437,7 @@ class Simulator:
                 if columns.size:
                     X[np.ix_(sel, columns)] = values[sel, piece]
                 if switch is not None and k > 0:
-                    jumped.append(self._take_may(X, mode, sel[switch[sel, piece]]))
+                    self._take_may(sel[switch[sel, piece]], runs)
 
             kicks(0, np.arange(N))
             following = self._signal_stops(kick_step, values, switch)
@@ -342,14 +451,13 @@ class Simulator:
                 return k + 1
         next_kick = np.zeros(N) if kick_step else np.full(N, np.inf)
         kick_count = np.zeros(N, dtype=int)
-        recorder = _Recorder() if record else None
-        watchers = list(observers) + ([recorder] if recorder else [])
-        self._urgent_now(X, mode, np.arange(N))
-        for f in watchers:
-            f(t.copy(), X.copy(), mode.copy(), np.arange(N))
+        start = np.flatnonzero(self.inside(self.model.initial.mode, X))
+        blocked_at[np.setdiff1d(np.arange(N), start)] = 0.0      # not an initial state of the automaton
+        runs.watch(start)
+        self._urgent_now(start, runs)
         if self._eventless():
-            self._step_eventless(X, mode, t, kicks if kick_step else None, kick_step, watchers)
-            return Trajectories(X, mode, blocked_at, recorder.paths(N) if recorder else {})
+            self._step_eventless(X, mode, t, kicks if kick_step else None, kick_step, runs.watchers)
+            return self._trajectories(runs, recorder)
         horizon = self.model.horizon
         cell = np.full(N, -1.0)                # grid cell of each run's time at the last pass
         burst = np.zeros(N, dtype=int)         # passes without leaving that cell
@@ -370,22 +478,25 @@ class Simulator:
             if kick_step:   # disturbance kicks due now
                 due = active[np.abs(next_kick[active] - t[active]) <= 1e-9 * max(1.0, horizon)]
                 if due.size:
-                    before = mode[due].copy()
-                    jumped.clear()
                     for k in np.unique(kick_count[due]):
                         kicks(int(k), due[kick_count[due] == k])
                     kick_count[due] = following(kick_count[due], due)
                     next_kick[due] = np.where(kick_count[due] >= 0, kick_count[due] * kick_step, np.inf)
-                    self._urgent_now(X, mode, due)       # a kick may land a run inside a guard
-                    moved = due[(mode[due] != before) | np.isin(due, np.concatenate(jumped or [[]]))]
-                    if moved.size:
-                        for f in watchers:
-                            f(t[moved], X[moved], mode[moved], moved)
+                    self._urgent_now(due[np.isnan(blocked_at[due])], runs)   # a kick may land a run in a guard
+                    active = active[np.isnan(blocked_at[active])]
             for m_index, name in enumerate(self.mode_names):
                 rows = active[mode[active] == m_index]
                 if rows.size:
-                    self._segment(name, rows, X, mode, t, tau, blocked_at, next_kick, watchers)
-        return Trajectories(X, mode, blocked_at, recorder.paths(N) if recorder else {})
+                    self._segment(name, rows, runs, next_kick)
+        return self._trajectories(runs, recorder)
+
+    @staticmethod
+    def _trajectories(runs: _Runs, recorder) -> Trajectories:
+        N = runs.X.shape[0]
+        if recorder is None:
+            return Trajectories(runs.X, runs.mode, runs.blocked_at, runs.branched)
+        return Trajectories(runs.X, runs.mode, runs.blocked_at, runs.branched, recorder.paths(N),
+                            {r: list(names) for r, names in enumerate(runs.taken)})
 
     def _signal_stops(self, step: float, values: np.ndarray, switch: np.ndarray | None):
         """``following(k, rows)``: for each run of ``rows`` at piece start ``k``, the next piece
@@ -443,63 +554,123 @@ class Simulator:
             for f in watchers:
                 f(t.copy(), X, mode, rows)
 
-    def _urgent_now(self, X, mode, rows):
-        """Take urgent transitions whose guard already holds (at the start, or after a jump)."""
-        for _ in range(len(self.mode_names) + 1):
-            moved = False
-            for m_index in np.unique(mode[rows]):
-                name = self.mode_names[m_index]
-                for tr, guard in self.urgent[name]:
-                    sel = rows[mode[rows] == m_index]
-                    if sel.size:
-                        inside = sel[np.all(guard(X[sel]) <= 0, axis=1)]
-                        if inside.size:
-                            self._jump(tr, X, mode, inside)
-                            moved = True
-            if not moved:
-                return
-
-    def _take_may(self, X, mode, rows) -> np.ndarray:
-        """Each run of ``rows`` takes the first enabled may-transition with a general guard;
-        returns the runs that did."""
-        taken = []
-        for m_index in np.unique(mode[rows]):
-            todo = rows[mode[rows] == m_index]
-            for tr, guard in self.exits[self.mode_names[m_index]]:
-                if todo.size == 0:
-                    break
-                tol = INVARIANT_TOLERANCE * (1.0 + np.abs(X[todo]).max(axis=1))
-                ok = np.all(guard(X[todo]) <= tol[:, None], axis=1)
-                if ok.any():
-                    self._jump(tr, X, mode, todo[ok])
-                    taken.append(todo[ok])
-                    todo = todo[~ok]
-        return np.concatenate(taken) if taken else np.zeros(0, dtype=int)
-
-    def _take_events(self, at_rows, Xe, times, which, candidates, window, X, t, mode, tau, watchers):
-        """Runs ``at_rows`` reach their event: the state ``Xe`` at ``times``, then the jump of
-        ``candidates[which]`` (the window transition is taken once: its time is cleared), any
-        urgent transition that holds at once, and the watchers told before and after."""
-        X[at_rows] = Xe
-        t[at_rows] = times
-        for f in watchers:
-            f(times, Xe, mode[at_rows], at_rows)
-        for j_tr, tr in enumerate(candidates):
-            sel = at_rows[which == j_tr]
+    def _enabled(self, options: list, X: np.ndarray, winner: np.ndarray | None = None,
+                 tolerance: float = INVARIANT_TOLERANCE) -> tuple:
+        """``(guards, enabled)``, (R, T) each, of the transitions ``options`` (``(tr, guard)``
+        pairs) at the states ``X`` (R, n): where each guard holds (margins at most ``tolerance
+        (1 + |x|_inf)``; the option ``winner[r]`` holds by construction -- its guard located the
+        event, as the window's instant does for its transition, whose guard is given as None),
+        and where the transition is enabled: its guard holds and the target's invariant holds at
+        the reset state ``y`` (margins at most ``INVARIANT_TOLERANCE (1 + max(|x|_inf,
+        |y|_inf))``: the rounding of the state before the jump stays allowed after a reset that
+        shrinks it)."""
+        R, T = X.shape[0], len(options)
+        guards, enabled = np.zeros((R, T), dtype=bool), np.zeros((R, T), dtype=bool)
+        size = np.abs(X).max(axis=1, initial=0.0)
+        tol = tolerance * (1.0 + size)
+        for j, (tr, guard) in enumerate(options):
+            if guard is not None:                       # (the window transition's is its instant)
+                guards[:, j] = np.all(guard(X) <= tol[:, None], axis=1)
+            if winner is not None:
+                guards[:, j] |= winner == j
+            sel = np.flatnonzero(guards[:, j])
             if sel.size:
-                if tr is window:
-                    tau[sel] = np.nan
-                self._jump(tr, X, mode, sel)
-                self._urgent_now(X, mode, sel)
-                for f in watchers:
-                    f(t[sel], X[sel], mode[sel], sel)
+                Y = self.resets[tr.name](X[sel]) if tr.name in self.resets else X[sel]
+                margins = self.model.modes[tr.target].invariant_margins(Y)
+                scale = 1.0 + np.maximum(size[sel], np.abs(Y).max(axis=1, initial=0.0))
+                enabled[sel, j] = np.all(margins <= INVARIANT_TOLERANCE * scale[:, None], axis=1)
+        return guards, enabled
 
-    def _jump(self, tr, X, mode, rows):
-        mode[rows] = self.mode_names.index(tr.target)
-        if tr.name in self.resets:
-            X[rows] = self.resets[tr.name](X[rows])
+    def _jump(self, rows: np.ndarray, options: list, enabled: np.ndarray, runs: _Runs) -> np.ndarray:
+        """The runs ``rows`` (one mode) each take one of the ``enabled`` (R, T) transitions of
+        ``options`` (:meth:`Branches.pick`), the watchers see the states they land in; returns
+        the runs that jumped (those with an enabled option)."""
+        names = [tr.name for tr, _ in options]
+        chosen = runs.branches.pick(rows, runs.count[rows], enabled, names)
+        runs.branched[rows] += enabled.sum(axis=1) > 1
+        for j, (tr, _) in enumerate(options):
+            sel = rows[chosen == j]
+            if sel.size == 0:
+                continue
+            runs.count[sel] += runs.branches.advances(sel, runs.count[sel], [tr.name] * sel.size)
+            if tr.window is not None:
+                runs.tau[sel] = np.nan                  # the window transition is taken once
+            runs.mode[sel] = self.mode_names.index(tr.target)
+            if tr.name in self.resets:
+                runs.X[sel] = self.resets[tr.name](runs.X[sel])
+            if runs.taken is not None:
+                for r in sel:
+                    runs.taken[r].append(tr.name)
+            runs.watch(sel)
+        return rows[chosen >= 0]
 
-    def _segment(self, name, rows, X, mode, t, tau, blocked_at, next_kick, watchers):
+    def _urgent_now(self, rows: np.ndarray, runs: _Runs, left: int | None = None) -> None:
+        """The runs ``rows`` at one instant (the start, after a jump from mode index ``left``, or
+        after a kick) take the transitions they must take at once, watched after each jump: an
+        enabled urgent one whose guard holds, and in a timeless mode any enabled one (guards
+        tested exactly, every margin at most 0, as a segment tests urgent guards: a run that has
+        just left a guard does not jump back on rounding).
+
+        Once it has jumped at an instant, a run does not return at that instant to a mode it has
+        been in: such a cycle of jumps would be Zeno (two closed guards that meet, ``s >= phi``
+        out of a layer and ``s <= phi`` into it, both hold on the boundary), so the transition
+        that would close it is not taken then, and the run stays where it is (the flow decides).
+        A run that must jump and has none enabled (an urgent guard holds, or it is in a timeless
+        mode) is blocked there. After its first jump every jump reaches a mode not visited yet,
+        so this ends."""
+        visited = np.zeros((rows.size, len(self.mode_names)), dtype=bool)
+        slot = np.full(runs.X.shape[0], -1)
+        slot[rows] = np.arange(rows.size)
+        if left is not None:
+            visited[np.arange(rows.size), runs.mode[rows]] = True
+            visited[:, left] = True
+        while rows.size:
+            moved = []
+            for m_index in np.unique(runs.mode[rows]):
+                name = self.mode_names[m_index]
+                sel = rows[runs.mode[rows] == m_index]
+                options = self.instant[name]
+                guards, enabled = self._enabled(options, runs.X[sel], tolerance=0.0)
+                back = visited[slot[sel]][:, [self.mode_names.index(tr.target) for tr, _ in options]]
+                enabled &= ~back
+                urgent = len(self.urgent[name])
+                must = np.full(sel.size, name in self.timeless) | (guards & ~back)[:, :urgent].any(axis=1)
+                stuck = sel[must & ~enabled.any(axis=1)]
+                runs.blocked_at[stuck] = runs.t[stuck]
+                go = np.flatnonzero(enabled.any(axis=1))
+                if go.size:
+                    visited[slot[sel[go]], m_index] = True
+                    jumped = self._jump(sel[go], options, enabled[go], runs)
+                    visited[slot[jumped], runs.mode[jumped]] = True
+                    moved.append(jumped)
+            rows = np.concatenate(moved) if moved else rows[:0]
+
+    def _take_may(self, rows: np.ndarray, runs: _Runs) -> None:
+        """Each run of ``rows`` (at a piece start) takes an enabled may-transition with a
+        general guard, if it has one, and then what it must take at once."""
+        for m_index in np.unique(runs.mode[rows]):
+            name = self.mode_names[m_index]
+            sel = rows[runs.mode[rows] == m_index]
+            if self.exits[name] and sel.size:
+                _, enabled = self._enabled(self.exits[name], runs.X[sel])
+                self._urgent_now(self._jump(sel, self.exits[name], enabled, runs), runs, m_index)
+
+    def _event(self, rows: np.ndarray, Xe: np.ndarray, times: np.ndarray, options: list,
+               winner: np.ndarray | None, runs: _Runs) -> None:
+        """The runs ``rows`` (one mode) reach an event at ``times`` in the states ``Xe``: the
+        watchers see them there, then each takes one of the enabled ``options`` (``winner``: per
+        run, the option whose guard located the event) and what it must take at once; a run
+        with none enabled is blocked there."""
+        source = int(runs.mode[rows[0]])
+        runs.X[rows], runs.t[rows] = Xe, times
+        runs.watch(rows)
+        _, enabled = self._enabled(options, Xe, winner)
+        runs.blocked_at[rows[~enabled.any(axis=1)]] = times[~enabled.any(axis=1)]
+        go = np.flatnonzero(enabled.any(axis=1))
+        if go.size:
+            self._urgent_now(self._jump(rows[go], options, enabled[go], runs), runs, source)
+
+    def _segment(self, name, rows, runs: _Runs, next_kick):
         """Advance ``rows`` (all in mode ``name``) to their next event, kick, or the horizon."""
         horizon = self.model.horizon
         if name not in self.tables:
@@ -507,36 +678,35 @@ class Simulator:
         table = self.tables[name]
         if table is not None:
             for start in range(0, rows.size, BATCH_RUNS):
-                batch.segment_chunk(self, name, rows[start:start + BATCH_RUNS], X, mode, t, tau, blocked_at,
-                                    next_kick, watchers, horizon, table)
+                batch.segment_chunk(self, name, rows[start:start + BATCH_RUNS], runs, next_kick, horizon, table)
             return
-        span = float(np.max(np.minimum(next_kick[rows], horizon) - t[rows], initial=0.0))
+        span = float(np.max(np.minimum(next_kick[rows], horizon) - runs.t[rows], initial=0.0))
         count = min(self.steps + 1, int(np.ceil(span / self.dt)) + 2)
         per_run = max(1, CHUNK_VALUES // (count * self.n))
         for start in range(0, rows.size, per_run):
-            self._segment_chunk(name, rows[start:start + per_run], X, mode, t, tau, blocked_at,
-                                next_kick, watchers, horizon)
+            self._segment_chunk(name, rows[start:start + per_run], runs, next_kick, horizon)
 
     def segment_limits(self, name, rows, t, tau, next_kick, horizon):
-        """``(t0, k0, end, window, win_time, stop_at, count)`` of the runs ``rows`` in mode ``name``:
+        """``(t0, k0, end, win_time, stop_at, count)`` of the runs ``rows`` in mode ``name``:
         their start, first grid point after it, segment end (next kick or horizon), the window
-        transition and its time where it falls in the segment, the known stop and the number of
-        grid points to look at."""
+        transition's time where it falls in the segment, the known stop and the number of grid
+        points to look at."""
         t0 = t[rows]
         k0 = np.floor(t0 / self.dt + 1e-9).astype(int) + 1                 # first grid point after t0
         end = np.minimum(next_kick[rows], horizon)
-        window = self.window[name]
         win_time = np.full(rows.size, np.inf)
-        if window is not None:
+        if self.window[name] is not None:
             w = tau[rows]
             win_time = np.where((w >= t0 - 1e-12) & (w <= end), np.maximum(w, t0), np.inf)
         stop_at = np.minimum(end, win_time)                                # known limits
         count = int(np.max(np.ceil(np.minimum(stop_at, horizon) / self.dt - 1e-9) - k0 + 1, initial=0)) + 1
-        return t0, k0, end, window, win_time, stop_at, count
+        return t0, k0, end, win_time, stop_at, count
 
-    def _segment_chunk(self, name, rows, X, mode, t, tau, blocked_at, next_kick, watchers, horizon):
+    def _segment_chunk(self, name, rows, runs: _Runs, next_kick, horizon):
+        X = runs.X
         n_rows = rows.size
-        t0, k0, end, window, win_time, stop_at, count = self.segment_limits(name, rows, t, tau, next_kick, horizon)
+        t0, k0, end, win_time, stop_at, count = self.segment_limits(name, rows, runs.t, runs.tau, next_kick,
+                                                                    horizon)
         count = max(1, min(count, self.steps + 2 - int(k0.min())))
         first = k0 * self.dt
         Y0 = self.propagate(name, X[rows], np.maximum(first - t0, 0.0))
@@ -560,9 +730,7 @@ class Simulator:
         flat = (Y if finite.all() else np.where(finite[:, :, None], Y, 0.0)).reshape(-1, self.n)
         # the earliest urgent guard entry
         event_time, event_tr = win_time.copy(), np.where(np.isfinite(win_time), 0, -1)
-        candidates = [window]
         for j_tr, (tr, guard) in enumerate(guards, start=1):
-            candidates.append(tr)
             G = guard(flat).reshape(n_rows, count, -1)
             inside = np.all(G <= 0, axis=2) & valid
             hit = np.flatnonzero(inside.any(axis=1))
@@ -575,62 +743,56 @@ class Simulator:
                 better = when < event_time[hit]
                 event_time[hit[better]] = when[better]
                 event_tr[hit[better]] = j_tr
-        # invariant: the first grid point outside it blocks the run
-        inv = self.model.modes[name].invariant_margins
-        M = inv(flat).reshape(n_rows, count, -1)
-        absmax = np.abs(flat).max(axis=1).reshape(n_rows, count)
-        scale = 1.0 + absmax[:, :, None]
-        outside = np.any(M > INVARIANT_TOLERANCE * scale, axis=2) & valid & (grid_t < event_time[:, None])
+        # invariant: the first grid point outside it (before the event) ends the run's visits
+        outside = ~self.inside(name, flat).reshape(n_rows, count) & valid & (grid_t < event_time[:, None])
         blocked = outside.any(axis=1)
-        block_j = outside.argmax(axis=1)
-        if self.exits[name] and blocked.any():
-            # a may-transition enabled where the run leaves the invariant is taken there
-            b = np.flatnonzero(blocked)
-            prev_t = np.where(block_j[b] == 0, t0[b], grid_t[b, np.maximum(block_j[b] - 1, 0)])
-            prev_x = np.where((block_j[b] == 0)[:, None], X[rows[b]], Y[b, np.maximum(block_j[b] - 1, 0)])
-            s = self._last_inside(name, prev_x, grid_t[b, block_j[b]] - prev_t)
-            x_exit = self.propagate(name, prev_x, s)
-            tol = INVARIANT_TOLERANCE * (1.0 + np.abs(x_exit).max(axis=1))
-            for j_tr, (tr, guard) in enumerate(self.exits[name]):
-                free = np.flatnonzero(blocked[b])
-                ok = free[np.all(guard(x_exit[free]) <= tol[free, None], axis=1)]
-                if ok.size:
-                    candidates_exit = len(guards) + 1 + j_tr
-                    event_time[b[ok]] = prev_t[ok] + s[ok]
-                    event_tr[b[ok]] = candidates_exit
-                    blocked[b[ok]] = False
-            outside &= blocked[:, None]
-        limit = np.where(blocked, grid_t[np.arange(n_rows), block_j], np.minimum(event_time, stop_at))
-        seen = valid & (grid_t <= limit[:, None]) & (grid_t < event_time[:, None])
-        batch.notify_block(watchers, grid_t.T, Y.transpose(1, 2, 0), seen.T, int(mode[rows[0]]), rows)
-        # runs that are blocked
+        block_j = np.where(blocked, outside.argmax(axis=1), count)
+        seen = valid & (grid_t < event_time[:, None]) & (np.arange(count)[None, :] < block_j[:, None])
+        batch.notify_block(runs.watchers, grid_t.T, Y.transpose(1, 2, 0), seen.T, int(runs.mode[rows[0]]), rows)
+        last = np.where(seen.any(axis=1), (seen * np.arange(count)).max(axis=1), -1)
+        last_t = np.where(last >= 0, grid_t[np.arange(n_rows), np.maximum(last, 0)], t0)
+        last_x = np.where((last >= 0)[:, None], Y[np.arange(n_rows), np.maximum(last, 0)], X[rows])
+        block_t = grid_t[np.arange(n_rows), np.minimum(block_j, count - 1)]
+        self._finish(name, rows, runs, end, event_time, event_tr, blocked, block_t, last_t, last_x,
+                     lambda Z, h: self.propagate(name, Z, h))
+
+    def _finish(self, name, rows, runs: _Runs, end, event_time, event_tr, blocked, block_t, last_t, last_x,
+                propagate) -> None:
+        """The end of a segment of the runs ``rows`` in mode ``name``, from the last grid state
+        each visited (``last_t``, ``last_x``): a run with an event at ``event_time <= end``
+        (``event_tr`` 0 the window, ``j`` the ``j``-th urgent transition) goes to it and jumps,
+        the others go to the segment end (a kick, a piece start or the horizon). A run
+        ``blocked`` (outside the invariant at the grid time ``block_t``), or whose state at its
+        event or segment end lies outside the invariant, left it after ``last_t``: it stops at
+        the last instant inside (:meth:`_last_inside`), watched there, and takes an enabled
+        may-transition with a general guard, or is blocked. ``propagate(X, h)`` advances states
+        without event."""
+        horizon = self.model.horizon
+        has_event = ~blocked & (event_tr >= 0) & (event_time <= end)
+        stop_t = np.where(blocked, block_t, np.where(has_event, event_time, end))
+        go = np.flatnonzero(~blocked)
+        X_stop = propagate(last_x[go], stop_t[go] - last_t[go])
+        left = ~self.inside(name, X_stop) & np.isfinite(X_stop).all(axis=1)
+        blocked[go[left]] = True
+        has_event &= ~blocked
         b = np.flatnonzero(blocked)
-        X[rows[b]] = Y[b, block_j[b]]
-        t[rows[b]] = limit[b]
-        blocked_at[rows[b]] = limit[b]
-        # runs with an event: go to it exactly, jump
-        e = np.flatnonzero(~blocked & (event_tr >= 0) & (event_time <= end))
-        candidates += [tr for tr, _ in self.exits[name]]
-        if e.size:
-            last = np.where(seen[e].any(axis=1), (seen[e] * np.arange(count)).max(axis=1), -1)
-            base_t = np.where(last >= 0, grid_t[e, np.maximum(last, 0)], t0[e])
-            base_x = np.where((last >= 0)[:, None], Y[e, np.maximum(last, 0)], X[rows[e]])
-            Xe = self.propagate(name, base_x, event_time[e] - base_t)
-            self._take_events(rows[e], Xe, event_time[e], event_tr[e], candidates, window, X, t, mode,
-                              tau, watchers)
-        # the others run to the end of the segment (a kick or the horizon)
-        q = np.flatnonzero(~blocked & ~((event_tr >= 0) & (event_time <= end)))
+        if b.size:
+            s, x_exit = self._last_inside(name, last_x[b], stop_t[b] - last_t[b])
+            self._event(rows[b], x_exit, last_t[b] + s, self.exits[name], None, runs)
+        urgent = self.urgent[name]
+        window = [(self.window[name], None)]
+        for kind in (0, 1):
+            e = np.flatnonzero(has_event[go] & ((event_tr[go] > 0) == bool(kind)))
+            if e.size:
+                options = urgent if kind else window
+                winner = event_tr[go[e]] - 1 if kind else np.zeros(e.size, dtype=int)
+                self._event(rows[go[e]], X_stop[e], event_time[go[e]], options, winner, runs)
+        q = np.flatnonzero(~blocked[go] & ~has_event[go])
         if q.size:
-            last = np.where(seen[q].any(axis=1), (seen[q] * np.arange(count)).max(axis=1), -1)
-            last_t = np.where(last >= 0, grid_t[q, np.maximum(last, 0)], t0[q])
-            last_x = np.where((last >= 0)[:, None], Y[q, np.maximum(last, 0)], X[rows[q]])
-            X[rows[q]] = self.propagate(name, last_x, end[q] - last_t)
-            t[rows[q]] = end[q]
-            off_grid = np.flatnonzero(end[q] - last_t > 1e-9 * max(1.0, horizon))
-            if off_grid.size:
-                sel = rows[q][off_grid]
-                for f in watchers:
-                    f(t[sel], X[sel], mode[sel], sel)
+            sel = rows[go[q]]
+            runs.X[sel], runs.t[sel] = X_stop[q], end[go[q]]
+            off_grid = end[go[q]] - last_t[go[q]] > 1e-9 * max(1.0, horizon)
+            runs.watch(sel[off_grid])
 
 
 class _Recorder:

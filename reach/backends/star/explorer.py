@@ -856,29 +856,33 @@ class _Explorer:
     # ---- witnesses
 
     def _try_replay(self, witness: _Witness, piece: _Piece | None = None, seg: Star | None = None):
-        """Replay ``witness`` with its inputs held at the witness's initial values; with
-        time-varying inputs and the ``piece`` the segment ``seg`` meets, then also the
-        extremal input witness of :meth:`_extremal_witness`. UNSAFE (:class:`_Stop`) on the
-        first replay that violates."""
+        """Replay ``witness`` with its inputs held at the witness's initial values, along the
+        transitions of its path; with time-varying inputs and the ``piece`` the segment ``seg``
+        meets, then also the extremal input witness of :meth:`_extremal_witness`. UNSAFE
+        (:class:`_Stop`) on the first replay that violates."""
         if not self.opt.replay or self.stats.replays >= self.opt.max_replays:
             return
         try:
             from reach.backends.montecarlo import constant_signal
         except ImportError:
             return
-        x0, switch = self.initial_point(witness)
-        self._replay(witness, x0, switch, constant_signal(self.model, x0))
+        x0, switch, transitions = self.initial_point(witness)
+        self._replay(witness, x0, switch, constant_signal(self.model, x0), transitions)
         if self.data.varying and piece is not None and seg is not None:
             found = self._extremal_witness(witness, piece, seg)
             if found is not None:
                 self._replay(*found)
 
-    def _replay(self, witness: _Witness, x0, switch, signal, dt=None):
+    def _replay(self, witness: _Witness, x0, switch, signal, transitions, dt=None):
+        """One replay of ``witness``'s run: where transitions are enabled together, the run takes
+        the next one of its path's ``transitions`` (:class:`reach.model.simulate.Branches`)."""
         if self.stats.replays >= self.opt.max_replays:
             return
         from reach.backends.montecarlo import replay
+        from reach.model.simulate import Branches
         self.stats.replays += 1
-        run = replay(self.model, self.prop, x0, switch, dt or self.opt.replay_dt, signal)
+        run = replay(self.model, self.prop, x0, switch, dt or self.opt.replay_dt, signal,
+                     Branches(prescribed=[transitions]))
         self.replayed.append({"initial_state": x0.tolist(), "switch_time": switch,
                               "input_signal": None if signal is None else f"{len(signal['values'])} pieces",
                               "violated": bool(run.violated)})
@@ -888,7 +892,7 @@ class _Explorer:
                         witness=witness)
 
     def _extremal_witness(self, witness: _Witness, piece: _Piece, seg: Star):
-        """``(witness, initial state, switch time, input signal, replay step)``: a run aimed
+        """``(witness, initial state, switch time, input signal, transitions, replay step)``: a run aimed
         deepest into ``piece`` by the time-varying inputs, or None.
 
         The direction is ``c = -h_r`` for the row ``h_r x <= g_r`` of the piece that the
@@ -920,12 +924,12 @@ class _Explorer:
         t = float(aimed.state[self.clock])
         if not t > 0:
             return None
-        x0, switch = self.initial_point(aimed)
+        x0, switch, transitions = self.initial_point(aimed)
         base = self._replay_step()
         step, values = extremal_signal(flow, -piece.H[r], t, [u.low for u in self.data.varying],
                                        [u.high for u in self.data.varying], signal_pieces(t, base))
         signal = {"step": step, "inputs": [u.name for u in self.data.varying], "values": values.tolist()}
-        return aimed, x0, switch, signal, step / max(1, int(np.ceil(step / base - 1e-9)))
+        return aimed, x0, switch, signal, transitions, step / max(1, int(np.ceil(step / base - 1e-9)))
 
     def _replay_step(self) -> float:
         """The replay step asked for, or the simulator's default. A signal's replay uses the
@@ -935,20 +939,22 @@ class _Explorer:
         return self.opt.replay_dt or default_dt(self.model)
 
     def initial_point(self, witness: _Witness):
-        """Initial state and abort time of a witness, read off its coefficients."""
+        """Initial state and abort time of a witness, read off its coefficients, and the names
+        of the transitions along its path (through aggregates, the members' paths)."""
         alpha, entries = self._trace(witness.alpha, witness.path)
         m0 = self.root.nvars
         x0 = self.root.point(alpha[:m0])[:self.model.n]
         x0 = np.clip(x0, self.model.initial.low, self.model.initial.high)
+        transitions = [e.transition for e, _ in entries]
         windows = [(e, a) for e, a in entries if e.window]
         if len(windows) > 1 or any(not e.global_window for e, _ in windows):
-            return x0, None                  # not one switch at a global time: no switch
+            return x0, None, transitions     # not one switch at a global time: no switch
         if windows:
             e, a = windows[-1]
             switch = float(e.offset + e.row @ a[:e.row.size])
         else:
             switch = self._latest_abort(witness.mode)
-        return x0, switch
+        return x0, switch, transitions
 
     def _trace(self, alpha, path: _Path):
         """:func:`.witnesses.trace`, one LP per member of each aggregate on the way."""

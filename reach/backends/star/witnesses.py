@@ -1,5 +1,6 @@
 """Witnesses: LP points of over-approximated segments inside unsafe pieces, and how they
-map back to an initial state and switch time (through aggregates by nearest member points)."""
+map back to an initial state, switch time and the transitions of their path (through
+aggregates by nearest member points)."""
 
 from __future__ import annotations
 
@@ -32,9 +33,9 @@ class _Witness:
 
 
 def witness_details(explorer, w: _Witness) -> dict:
-    x0, switch = explorer.initial_point(w)
+    x0, switch, transitions = explorer.initial_point(w)
     return {"mode": w.mode, "piece": w.piece, "depth": w.depth, "state": w.state[:explorer.model.n].tolist(),
-            "initial_state": x0.tolist(), "switch_time": switch}
+            "initial_state": x0.tolist(), "switch_time": switch, "transitions": transitions}
 
 
 def nearest_point(star: Star, x):
