@@ -8,16 +8,8 @@ from pathlib import Path
 
 import pytest
 
+from cli_input import bad_input
 from reach.cli import main
-
-
-def bad_input(argv: list[str], capsys) -> str:
-    """Run ``reach ARGV``: it must exit 2 with one line on stderr, which is returned."""
-    code = main(argv)
-    err = capsys.readouterr().err
-    assert code == 2, err
-    assert err.count("\n") == 1 and "Traceback" not in err, err
-    return err.strip()
 
 
 HEATER_YAML = """name: heater

@@ -16,6 +16,7 @@ import sympy
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from cli_input import bad_input
 from reach.cli import main
 from reach.errors import InputError
 from reach.model import load_model
@@ -41,15 +42,6 @@ def write(folder: Path, body: str, cfg: str, name: str = "m") -> tuple[Path, Pat
     (folder / f"{name}.xml").write_text(HEADER + body + "</sspaceex>\n")
     (folder / f"{name}.cfg").write_text(cfg)
     return folder / f"{name}.xml", folder / f"{name}.cfg"
-
-
-def bad_input(argv: list[str], capsys) -> str:
-    """Run ``reach ARGV``: it must exit 2 with one line on stderr, which is returned."""
-    code = main(argv)
-    err = capsys.readouterr().err
-    assert code == 2, err
-    assert err.count("\n") == 1 and "Traceback" not in err, err
-    return err.strip()
 
 
 def check(xml, cfg) -> list[str]:
