@@ -298,6 +298,7 @@ class DualBound:
         size = np.abs(yb).sum() + np.abs(re).sum() + (y @ self.abs_A + np.abs(c)) @ self.magnitude
         return float(yb.sum() + re.sum() + self.units * size)
 
+
 def variable_bound(j: int, A, b, lo, hi, duals) -> float:
     """An upper bound of ``x_j`` over ``{A x <= b, lo <= x <= hi}`` that does not rest on the
     solver having converged, where ``x_j`` may be unbounded but every other variable is
