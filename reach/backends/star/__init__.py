@@ -145,6 +145,11 @@ flow with such an input, so inside the cover, strictly inside ``X``), so it is a
 affine automaton with a bounded input. Invariants, guards and resets must stay linear; UNSAFE
 needs a counterexample replayed on the nonlinear simulator.
 
+Several properties (:meth:`StarBackend.check_many`). The reachable sets do not depend on the
+property, only their refinement does: the properties of one model are explored once against the
+union of their unsafe sets, whose SAFE is each one's SAFE; where the union is violated or
+undecided, each is checked on its own.
+
 Layout: :mod:`.options` (settings, constants), :mod:`.flowpipe` (flows, segments, bounds),
 :mod:`.transitions` (the automaton as matrices), :mod:`.explorer` (the exploration),
 :mod:`.aggregation`, :mod:`.witnesses` (witnesses back to initial states), :mod:`.linearise`
@@ -167,18 +172,21 @@ from dataclasses import replace
 import numpy as np
 
 from reach import lp
+from reach.deep import call_deep
 from reach.backends.star.explorer import LOG, _Explorer, _Stop
 from reach.backends.star.flowpipe import AffineFlow, flowpipe
 from reach.backends.star.hull import check_hull
 from reach.backends.star.linearise import LinearisedModel, check_linearised
-from reach.backends.star.options import (CLOCKLESS_FIRST_STARS, DEPTH_LP_TOLERANCE, NAME, StarOptions,
-                                         clockless_retry)
+from reach.backends.star.options import (CLOCKLESS_FIRST_STARS, DEPTH_LP_TOLERANCE, FINER_FACTOR,
+                                         FINER_MAX_SECONDS, FINER_PASSES, FINER_SECONDS, NAME, StarOptions,
+                                         clockless_retry, finer_retry)
 from reach.backends.star.switching import SwitchingModel, check_switching
 from reach.backends.star.transitions import _LinearModel, _unsafe_pieces
 from reach.backends.star.witnesses import witness_details
 from reach.model.simulate import single_threaded
 from reach.result import Result, Status
 from reach.sets import Star
+from reach.spec.properties import BoundSafety
 
 __all__ = ["AffineFlow", "BACKEND", "StarBackend", "StarOptions", "arc_cells", "flowpipe",
            "safe_abort_map", "safe_abort_time"]
@@ -225,12 +233,72 @@ class StarBackend:
         with single_threaded():
             return self._check_with_retry(model, prop, options)
 
+    def check_many(self, model, props, options=None) -> list[Result]:
+        """Several safety properties of one model, explored together first: one exploration
+        against the union of their unsafe sets (:func:`_together`). Every run avoiding the
+        union avoids each set, so a SAFE of the union is a SAFE of each, with the shared time
+        split between them. Anything else (a violation of one of them, UNKNOWN) says nothing
+        about the others: each property is then checked on its own, as :meth:`check` does,
+        and the time of the joint attempt is added to theirs. With ``keep_sets`` (pictures)
+        each property keeps its own exploration."""
+        opt = options if isinstance(options, StarOptions) else StarOptions.from_dict(options)
+        if len(props) < 2 or opt.keep_sets:
+            return [self.check(model, p, options) for p in props]
+        start = time.perf_counter()
+        joint = self.check(model, _together(props), options)
+        shared = time.perf_counter() - start
+        if joint.status is Status.SAFE:
+            names = ", ".join(p.id for p in props)
+            results = []
+            for p in props:
+                details = {**joint.details, "together": f"proved in one exploration of the union of the "
+                                                        f"unsafe sets of {names} ({shared:.3g} s shared)"}
+                results.append(Result(NAME, model.name, p.id, Status.SAFE, shared / len(props),
+                                      details=details))
+            return results
+        results = [self.check(model, p, options) for p in props]
+        for r in results:
+            r.seconds += shared / len(props)
+            r.details["together"] = (f"the joint exploration of all {len(props)} properties was "
+                                     f"{joint.status.value} after {shared:.3g} s; checked one by one")
+        return results
+
     def _check_with_retry(self, model, prop, options) -> Result:
         start = time.perf_counter()
         reason = self.supports(model, prop)
         if reason is not None:
             return Result(NAME, model.name, prop.id, Status.UNSUPPORTED, details={"reason": reason})
         opt = StarOptions.from_dict(options)
+        first = self._check_aggregating(model, prop, options, opt, start)
+        spent = time.perf_counter() - start
+        budget = min(max(FINER_FACTOR * spent, FINER_SECONDS), FINER_MAX_SECONDS)
+        if opt.max_seconds is not None:
+            budget = min(budget, opt.max_seconds - spent)
+        deadline, finer, result, tried = time.perf_counter() + budget, opt, first, []
+        # the plain exploration only: the switching inclusion and the linearisation rest on cover
+        # boxes whose argument at finer steps is not settled (an unstable equilibrium under
+        # switching has been proved SAFE wrongly at step 0.1, tests/test_star_rounding.py)
+        plain = _LinearModel.of(model).linear and not (opt.switching and SwitchingModel.of(model).groups)
+        for _ in range(FINER_PASSES if plain else 0):
+            finer = finer_retry(result, finer, model.horizon, deadline - time.perf_counter())
+            if finer is None:
+                break
+            result = self._check_aggregating(model, prop, options, finer, start)
+            tried.append(f"{finer.step:.3g}")
+            if result.status is not Status.UNKNOWN:
+                result.details["semantics"] += (f"; at step {finer.step:.3g}: the default step "
+                                                f"{first.details['step']:.3g} left it undecided "
+                                                f"({first.details.get('reason', '')})")
+                return result
+        if tried:
+            first.seconds = result.seconds
+            first.details["reason"] += (f"; checked again at step {' and '.join(tried)}, still undecided: "
+                                        f"{result.details.get('reason', '')}")
+        return first
+
+    def _check_aggregating(self, model, prop, options, opt, start) -> Result:
+        """One check with ``opt``; on a clockless model first with the default aggregation, then
+        aggregating from the first jump (:func:`.options.clockless_retry`)."""
         retry = None if isinstance(options, StarOptions) else clockless_retry(model, options, opt)
         if retry is None:
             return self._check(model, prop, opt, start)
@@ -261,10 +329,11 @@ class StarBackend:
         status, counterexample = Status.SAFE, None
         details = {}
         try:
-            explorer.run()
+            call_deep(explorer.run, explorer.cancel)     # paths of thousands of jumps (reach.deep)
             if explorer.unresolved:
                 raise _Stop(Status.UNKNOWN, f"{len(explorer.unresolved)} cell(s) still meet an unsafe "
-                                            f"piece after refinement; no witness replayed",
+                                            f"piece after refinement; no witness replayed (a smaller "
+                                            f"step, -o step={explorer.h / 10:.3g}, may decide it)",
                             witness=explorer.unresolved[0])
             if opt.discrete_time:
                 raise _Stop(Status.UNKNOWN, "no violation at the grid points (discrete time: "
@@ -319,6 +388,15 @@ def _with_hull(model, prop, opt, result: Result, start: float) -> Result:
                             f"{report['argument']}; matrix exponentials in floating point (rounding "
                             f"not enclosed)")
     return Result(NAME, model.name, prop.id, Status.SAFE, result.seconds, details=details)
+
+
+def _together(props) -> BoundSafety:
+    """One safety property whose unsafe set is the union of those of ``props`` (bound to the
+    same model): per mode, every piece of every property."""
+    modes = list(dict.fromkeys(m for p in props for m in p.modes))
+    pieces = {m: [piece for p in props for piece in p.pieces.get(m, [])] for m in modes}
+    return BoundSafety("+".join(p.id for p in props), modes, pieces, props[0].symbols, props[0].file,
+                       "; ".join(p.description for p in props))
 
 
 def _substeps(flow, h: float) -> str:

@@ -4,6 +4,7 @@ refinement and aggregation (the method is described in :mod:`reach.backends.star
 from __future__ import annotations
 
 import logging
+import threading
 import time
 from dataclasses import dataclass
 
@@ -138,6 +139,10 @@ class _Explorer:
         self.covered = Covered(self.clock) if time_invariant(model) and not options.keep_sets else None
         self.last_progress = time.perf_counter()
         self.memory_limit, self.memory_read = MEMORY_FRACTION * physical_bytes(), -np.inf
+        self._leading: dict[str, set[str]] = {}
+        self._initial_sampler = None            # a polytopic initial set's (_inside_initial)
+        self.cancel = threading.Event()         # set by the caller that stopped waiting (reach.deep)
+        self.deadline = np.inf if options.max_seconds is None else time.perf_counter() + options.max_seconds
         self.pieces = {mode: [_Piece(data.widen(p.H, p.g)[0], p.g, p.strict, p.label) for p in pieces]
                        for mode, pieces in _unsafe_pieces(prop).items()} if data.added_clock \
             else _unsafe_pieces(prop)
@@ -164,6 +169,12 @@ class _Explorer:
         return out
 
     # ---- LPs
+
+    def _leading_to(self, mode: str) -> set[str]:
+        """The modes from which ``mode`` can be reached (cached)."""
+        if mode not in self._leading:
+            self._leading[mode] = _modes_leading_to(self.model, {mode})
+        return self._leading[mode]
 
     def _lp_budget(self):
         self._lp_count(1)
@@ -390,18 +401,27 @@ class _Explorer:
                 error = error + inputs.cell[:last]       # the whole cell
         for piece in self.pieces.get(mode, []):
             candidates |= self._screen(centers, bases, box, error, piece.H, piece.g, cells)
+        fanout = 0              # the most cells a transition on a cycle of modes may fire from
         for jump in self.jumps[mode]:
             if jump.target in self.relevant:
-                candidates |= self._screen(centers, bases, box, error, jump.H, jump.g, cells)
+                firing = self._screen(centers, bases, box, error, jump.H, jump.g, cells)
+                candidates |= firing
+                if jump.target in self._leading_to(mode):          # back to mode: a cycle
+                    fanout = max(fanout, len(firing))
         if self.opt.keep_sets:
             self._keep_chain(mode, grid_star, centers, bases, error, [j for j in cells if j not in candidates])
 
+        drift_limit = None if self.sweep else self.opt.aggregate_drift_coefficients
+        wide = self.opt.aggregate_fanout is not None and fanout > self.opt.aggregate_fanout and not flow.drift
         aggregate = (self.aggregate_after is not None and (not flow.drift or self.covered is not None)
-                     and path.jumps >= self.aggregate_after)
+                     and (path.jumps >= self.aggregate_after or wide)) or \
+                    (flow.drift and drift_limit is not None and star.nvars > drift_limit)
         pending: dict[int, list] | None = None if not aggregate else {} if collect is None else collect
-        for j in sorted(candidates):
+        runs = _consecutive(sorted(candidates)) if flow.drift and inputs is None and not self.opt.discrete_time \
+            else [(j, 1) for j in sorted(candidates)]
+        for j, length in runs:
             if inputs is None:
-                self._cell(mode, grid_star(j), h, path, 0, point, pending)
+                self._cell(mode, grid_star(j), length * h, path, 0, point, pending)
             elif self.opt.discrete_time:
                 self._cell(mode, grid_star(j), h, path, 0, point, pending, dev[j])
             else:
@@ -492,8 +512,13 @@ class _Explorer:
 
     def _memory_guard(self):
         """UNKNOWN once the process holds more than ``MEMORY_FRACTION`` of the machine's memory
-        (the stars' predicates grow with jumps and refinement; no out-of-memory kill)."""
+        (the stars' predicates grow with jumps and refinement; no out-of-memory kill); stops at
+        once when the caller has been interrupted (``cancel``) or the time budget is spent."""
+        if self.cancel.is_set():
+            raise _Stop(Status.UNKNOWN, "stopped: the caller was interrupted")
         now = time.perf_counter()
+        if now > self.deadline:
+            raise _Stop(Status.UNKNOWN, f"time budget of {self.opt.max_seconds:.3g} s exhausted (option max_seconds)")
         if now - self.memory_read < MEMORY_PERIOD:
             return
         self.memory_read, held = now, resident_bytes()
@@ -573,7 +598,12 @@ class _Explorer:
                     self._chain(mode, member, path.closed())
 
     def _screen(self, centers, bases, box, error, H, g, cells) -> set[int]:
-        """Cells whose segment may meet ``{H x <= g}`` by support bounds (cheap)."""
+        """Cells whose segment may meet ``{H x <= g}`` by support bounds (cheap). A cell is
+        passed over only where a bound misses a row by more than the touch tolerance
+        (``touch_tolerance * max(1, |g|, |bound|)``, as the depth LP reads a touch): the grid
+        stars carry the rounding of thousands of products, and a run that only touches a
+        closed unsafe set (``x = 1`` at the horizon against ``x < 1``) would otherwise be
+        screened out by the last digits (with 2000 cells or more of the ramp ``x' = 1``)."""
         if H.shape[0] == 0:
             return set(cells)
         lower = -_chain_bounds(centers, bases, box, -H)          # (J, rows)
@@ -581,7 +611,8 @@ class _Explorer:
             seg = lower[:len(cells)] - error[:len(cells)] @ np.abs(H).T
         else:
             seg = np.minimum(lower[:-1], lower[1:])[:len(cells)] - error[:len(cells)] @ np.abs(H).T
-        missed = np.any(seg > g, axis=1)
+        tol = self.opt.touch_tolerance * np.maximum(1.0, np.maximum(np.abs(g), np.abs(seg)))
+        missed = np.any(seg > g + tol, axis=1)
         return {j for j in cells if not missed[j]}
 
     # ---- one cell
@@ -693,7 +724,8 @@ class _Explorer:
                 self._check_whole_mode(mode, seg, path, blocks, open_, piece)
                 continue
             lower = -seg.support_bounds(-piece.H)
-            if np.any(lower > piece.g):
+            pad = self.opt.touch_tolerance * np.maximum(1.0, np.maximum(np.abs(piece.g), np.abs(lower)))
+            if np.any(lower > piece.g + pad):                          # missed beyond a touch (_screen)
                 continue
             spread, error = _block_spreads(seg, piece.H, blocks)     # (blocks, rows) each
             gain = np.where(np.array(open_)[:, None], error - (piece.g - lower), -np.inf)
@@ -944,7 +976,7 @@ class _Explorer:
         alpha, entries = self._trace(witness.alpha, witness.path)
         m0 = self.root.nvars
         x0 = self.root.point(alpha[:m0])[:self.model.n]
-        x0 = np.clip(x0, self.model.initial.low, self.model.initial.high)
+        x0 = self._inside_initial(np.clip(x0, self.model.initial.low, self.model.initial.high))
         transitions = [e.transition for e, _ in entries]
         windows = [(e, a) for e, a in entries if e.window]
         if len(windows) > 1 or any(not e.global_window for e, _ in windows):
@@ -955,6 +987,28 @@ class _Explorer:
         else:
             switch = self._latest_abort(witness.mode)
         return x0, switch, transitions
+
+    def _inside_initial(self, x0):
+        """``x0`` moved into a polytopic initial set, which the LP's point may miss by the
+        solver's tolerance (and the replay would refuse): projected onto the set's affine hull
+        (its equalities), then moved towards an interior point by the least fraction, among
+        ``1e-9, 1e-8, ..., 1``, that makes it a member. Unchanged for a box, or a member."""
+        init = self.model.initial
+        if init.is_box:
+            return x0
+        from reach.backends.initial_sampling import PolytopeSampler
+        if self._initial_sampler is None:
+            self._initial_sampler = PolytopeSampler(init.polytope, init.low, init.high)
+        sampler = self._initial_sampler
+        if sampler.contains(x0[None])[0]:
+            return x0
+        on_hull = sampler.to_x(sampler.to_z(x0[None]))[0]
+        centre = sampler.to_x(sampler.centre_z[None])[0]
+        for fraction in 10.0 ** np.arange(-9, 1):
+            x = on_hull + fraction * (centre - on_hull)
+            if sampler.contains(x[None])[0]:
+                return x
+        return x0
 
     def _trace(self, alpha, path: _Path):
         """:func:`.witnesses.trace`, one LP per member of each aggregate on the way."""
@@ -968,6 +1022,21 @@ class _Explorer:
         (the run stays in the mode as long as possible), or None if there is none."""
         his = [j.window[2] for j in self.jumps[mode] if j.window is not None and j.window[0] == self.clock]
         return max(his) if his else None
+
+
+def _consecutive(cells: list[int]) -> list[tuple[int, int]]:
+    """``(first, length)`` of each run of consecutive cell indices. In a constant-flow mode a
+    run of cells from grid star ``Y_j`` is one exact cell ``Y_j + [0, length h] b``
+    (:func:`.flowpipe._drift_segment`): one segment and one successor per transition
+    instead of one per cell, so a guard crossed over several cells does not multiply the
+    successors at every jump (``2^k`` stars after ``k`` such jumps)."""
+    runs: list[tuple[int, int]] = []
+    for j in cells:
+        if runs and runs[-1][0] + runs[-1][1] == j:
+            runs[-1] = (runs[-1][0], runs[-1][1] + 1)
+        else:
+            runs.append((j, 1))
+    return runs
 
 
 class _Deaggregate(Exception):

@@ -74,6 +74,24 @@ class StarOptions:
         sends through one transition become one star, their interval hull (see
         :meth:`_Explorer._aggregate`); refined back into the members when a check under it
         fails. None: never aggregate.
+    aggregate_fanout: successors are aggregated before ``aggregate_after`` jumps too, out of a
+        chain from which a transition on a cycle of modes may fire in more than this many cells
+        (a may-transition over a wide guard, taken again and again): explored one by one, each
+        would start a path of its own, a fan-out that multiplies at every pass round the cycle.
+        A transition that leaves the cycle for good (an abort) keeps its successors exact: its
+        fan-out does not multiply. None: no such rule.
+    aggregate_drift_coefficients: out of a mode whose flow is constant, successors are
+        aggregated likewise once the chain's star holds more than this many coefficients (on a
+        model with a clock too). Each visit adds one coefficient to such a star, so a path of
+        hundreds of jumps (a counter, a sawtooth) would hold stars of hundreds of coefficients
+        at every level, memory and time quadratic in its length; below the limit the stars stay
+        exact (a timed automaton's clock differences, which an interval hull would lose). None:
+        only where ``aggregate_after`` says.
+    max_seconds: UNKNOWN once the exploration has run this long (None: no time budget).
+    finer_retry: where a check ends UNKNOWN for want of precision (cells that refinement
+        cannot clear, jumps piling up within one step, the LP or star budget), check again
+        with the step divided by 10, up to ``FINER_PASSES`` times within a shared time budget
+        (:func:`finer_retry`).
     max_stars: UNKNOWN once this many stars (chains) have been explored.
     max_coefficients: UNKNOWN when a segment needs more coefficients than this (each
         segment of a non-constant flow doubles them: LPs and grid stacks would grow without
@@ -126,7 +144,11 @@ class StarOptions:
     max_lps: int = 50_000
     max_jumps: int | None = None
     aggregate_after: int | None = 2
+    aggregate_fanout: int | None = ranged(16, 0)
+    aggregate_drift_coefficients: int | None = ranged(256, 0)
     max_stars: int = 20_000
+    max_seconds: float | None = ranged(None, 0.0, open_low=True)
+    finer_retry: bool = True
     max_coefficients: int = 2_000
     max_deaggregations: int = 50
     touch_tolerance: float = 1e-9
@@ -195,3 +217,31 @@ def clockless_retry(model, options: dict | None, opt: StarOptions) -> StarOption
         return None
     generators = not ({"input_cells", "rebase_generators"} & set(options))
     return replace(opt, aggregate_after=0, rebase_generators=generators or opt.rebase_generators)
+
+
+#: UNKNOWN reasons that a finer step may remove (:func:`finer_retry`), as the explorer words them
+IMPRECISE = ("still meet an unsafe piece", "jumps within one time step", "LP budget", "star budget")
+#: finer passes at most, each at a tenth of the step before; their time budget together is
+#: FINER_FACTOR times the first pass's, at least FINER_SECONDS and at most FINER_MAX_SECONDS
+FINER_PASSES, FINER_FACTOR, FINER_SECONDS, FINER_MAX_SECONDS = 2, 4.0, 30.0, 120.0
+
+
+def finer_retry(result, opt: StarOptions, horizon: float, budget: float) -> StarOptions | None:
+    """The options of a next pass with the step divided by 10, after a pass (its ``result``)
+    that ended UNKNOWN for a reason in :data:`IMPRECISE`, with ``budget`` seconds left; None
+    where none applies (option ``finer_retry`` off, another outcome, too many cells, no time
+    left). The default step (horizon / 60, or a cfg's sampling time) knows nothing of the
+    model's own time scales: a sawtooth of period 1 over a horizon of 400, a ball bouncing
+    ever faster. A finer step costs time and never soundness; the passes share a time budget
+    (see :meth:`reach.backends.star.StarBackend._check_with_retry`), so a model that stays
+    undecided still ends in bounded time."""
+    from reach.result import Status
+
+    reason = result.details.get("reason", "")
+    if not opt.finer_retry or result.status is not Status.UNKNOWN or "step" not in result.details \
+            or not any(k in reason for k in IMPRECISE) or budget <= 0:
+        return None
+    step = result.details["step"] / 10
+    if horizon / step > MAX_CELLS:
+        return None
+    return replace(opt, step=step, max_seconds=budget)

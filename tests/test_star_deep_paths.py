@@ -1,0 +1,118 @@
+"""Paths of hundreds of jumps: star follows them (the search runs with a deep stack,
+:mod:`reach.deep`) and aggregates the successors of constant-flow modes on long paths, so a
+counter ticking 400 times is decided with memory that does not grow with the square of the
+path. The reference is the closed form: from ``x0`` in ``[0, 0.5]`` the counter ``c`` steps at
+``t = k - x0``, so it reaches ``k`` first at ``t = k - 0.5`` and is ``400`` at most by the horizon
+400 (``399`` at least)."""
+
+from __future__ import annotations
+
+import signal
+import sys
+import threading
+
+import pytest
+
+from reach.backends.star import BACKEND
+from reach.deep import FRAMES, call_deep
+from reach.model import load_model
+from reach.result import Status
+from reach.spec import bind, load_properties
+
+TICK = """
+name: tick
+state: [x, c, t]
+modes:
+  run:
+    flow: {x: "1", c: "0", t: "1"}
+    invariant: ["x <= 1"]
+transitions:
+  - {from: run, to: run, guard: ["x >= 1"], reset: {x: "0", c: "c + 1"}, urgent: true}
+initial: {mode: run, box: {x: [0, 0.5], c: [0, 0], t: [0, 0]}}
+horizon: 400
+"""
+
+
+PROPERTIES = """
+properties:
+  - {id: at_most, kind: safety, require: ['c <= 400.2']}
+  - {id: below, kind: safety, require: ['c <= 399.5']}
+"""
+
+
+def loaded(folder, horizon: float):
+    (folder / f"m{horizon:g}.yaml").write_text(TICK.replace("horizon: 400", f"horizon: {horizon:g}"))
+    (folder / "p.yaml").write_text(PROPERTIES)
+    model = load_model(folder / f"m{horizon:g}.yaml")
+    return model, {p.id: bind(p, model) for p in load_properties(folder / "p.yaml")}
+
+
+@pytest.fixture(scope="module")
+def tick(tmp_path_factory):
+    return loaded(tmp_path_factory.mktemp("tick"), 400)
+
+
+def test_four_hundred_jumps_are_proved(tick):
+    model, props = tick
+    result = BACKEND.check(model, props["at_most"])
+    assert result.status is Status.SAFE, result.details.get("reason")
+    assert result.details["jumps"] >= 399
+
+
+def test_the_four_hundredth_tick_is_found_and_replayed(tick):
+    """``c = 400`` first at ``t = 399.5``, from ``x0 = 0.5``."""
+    model, props = tick
+    result = BACKEND.check(model, props["below"])
+    assert result.status is Status.UNSAFE, result.details.get("reason")
+    assert result.counterexample is not None
+    assert result.details["witness"]["initial_state"][0] == pytest.approx(0.5, abs=1e-6)
+
+
+def test_drift_aggregation_is_what_keeps_the_stars_small(tmp_path):
+    """Without it every level of a 300-jump path holds a star of one more coefficient; with it
+    the successors become aggregates once their stars hold more than 256, with the same verdict."""
+    model, props = loaded(tmp_path, 300)
+    plain = BACKEND.check(model, props["at_most"], {"aggregate_drift_coefficients": None})
+    merged = BACKEND.check(model, props["at_most"], {})
+    assert plain.status is Status.SAFE and merged.status is Status.SAFE
+    assert plain.details["aggregates"] == 0 < merged.details["aggregates"]
+
+
+def test_a_deep_recursion_runs_and_a_deeper_one_ends_cleanly():
+    def depth(k):
+        return 0 if k == 0 else 1 + depth(k - 1)
+
+    assert call_deep(lambda: depth(FRAMES // 2), threading.Event()) == FRAMES // 2
+    with pytest.raises(RecursionError):
+        call_deep(lambda: depth(2 * FRAMES), threading.Event())
+    assert sys.getrecursionlimit() < FRAMES          # restored
+
+
+class _Interrupted(Exception):
+    pass
+
+
+def _interrupt(signum, frame):
+    raise _Interrupted()
+
+
+@pytest.mark.skipif(not hasattr(signal, "SIGALRM"), reason="needs SIGALRM")
+def test_an_interrupted_caller_stops_the_search_before_going_on():
+    """The time limit of a bench unit arrives as an exception in the waiting thread: the search
+    is told to stop (``cancel``) and has ended when the exception reaches the caller."""
+    cancel, ended = threading.Event(), threading.Event()
+
+    def search():
+        while not cancel.wait(0.01):
+            pass
+        ended.set()
+
+    previous = signal.signal(signal.SIGALRM, _interrupt)
+    try:
+        signal.setitimer(signal.ITIMER_REAL, 0.2)
+        with pytest.raises(_Interrupted):
+            call_deep(search, cancel)
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+    assert cancel.is_set() and ended.is_set()

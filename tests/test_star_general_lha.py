@@ -1,0 +1,122 @@
+"""star on linear hybrid automata a new user writes, with the closed forms that decide them:
+a clocked tank of constant rates (a guard crossed over several cells gives one successor, not
+one per cell), a thermostat whose switches are may-transitions over wide guards (the fan-out is
+aggregated from the first jump), a sawtooth whose period the default step does not resolve (a
+finer pass decides it) and a witness on the face of a polytopic initial set (replayed from
+inside the set)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from reach.backends.initial_sampling import PolytopeSampler
+from reach.backends.star import BACKEND
+from reach.model import load_model
+from reach.result import Status
+from reach.spec import bind, load_properties
+
+TANK = """
+name: tank
+state: [x, t]
+modes:
+  fill: {flow: {x: "2", t: "1"}, invariant: ["x <= 10"]}
+  drain: {flow: {x: "-3", t: "1"}, invariant: ["x >= 2"]}
+transitions:
+  - {from: fill, to: drain, guard: ["x >= 10"], urgent: true}
+  - {from: drain, to: fill, guard: ["x <= 2"], urgent: true}
+initial: {mode: fill, box: {x: [4, 6], t: [0, 0]}}
+horizon: 40
+"""
+
+MAY_THERMOSTAT = """
+name: may_thermostat
+state: [T, t]
+modes:
+  heat: {flow: {T: "-0.1*(T - 10) + 3", t: "1"}, invariant: ["T <= 22"]}
+  cool: {flow: {T: "-0.1*(T - 10)", t: "1"}, invariant: ["T >= 18"]}
+transitions:
+  - {from: heat, to: cool, guard: ["T >= 20"]}
+  - {from: cool, to: heat, guard: ["T <= 19"]}
+initial: {mode: heat, box: {T: [19.5, 20], t: [0, 0]}}
+horizon: 30
+"""
+
+SAWTOOTH = """
+name: sawtooth
+state: [x, y, t]
+modes:
+  up: {flow: {x: "1", y: "-y", t: "1"}, invariant: ["x <= 1"]}
+transitions:
+  - {from: up, to: up, guard: ["x >= 1"], reset: {x: "0", y: "y + 1"}, urgent: true}
+initial: {mode: up, box: {x: [0, 0.1], y: [0, 0.1], t: [0, 0]}}
+horizon: 100
+"""
+
+FACE = """
+name: face
+state: [x, y, z]
+modes:
+  go: {flow: {x: "1", y: "-0.3*y + 0.1*z", z: "-z"}}
+initial:
+  mode: go
+  box: {x: [0, 1], y: [0, 1], z: [0, 1]}
+  constraints: ["x + y <= 1", "x - 0.3*y + 0.7*z == 0.2"]
+horizon: 0.6
+"""
+
+
+def checked(tmp_path, model_text, requirements: dict, options=None) -> dict:
+    (tmp_path / "m.yaml").write_text(model_text)
+    (tmp_path / "p.yaml").write_text("properties:\n" + "".join(
+        f"  - {{id: {k}, kind: safety, require: ['{v}']}}\n" for k, v in requirements.items()))
+    model = load_model(tmp_path / "m.yaml")
+    return {p.id: BACKEND.check(model, bind(p, model), options or {})
+            for p in load_properties(tmp_path / "p.yaml")}, model
+
+
+def test_a_clocked_tank_of_constant_rates_is_decided_with_few_stars(tmp_path):
+    """The level stays in [2, 10] and reaches both ends (fill from 4..6 to 10 in at most 3 s,
+    drain to 2 in 8/3 s). Each guard is crossed over two or three cells; one successor per
+    crossing keeps the 12 jumps to a few dozen stars (one per cell: 2^13)."""
+    results, _ = checked(tmp_path, TANK, {"high": "x <= 10.1", "low": "x >= 1.9", "tight": "x <= 9.9"})
+    assert results["high"].status is Status.SAFE and results["low"].status is Status.SAFE
+    assert results["high"].details["stars"] < 100
+    assert results["tight"].status is Status.UNSAFE and results["tight"].counterexample is not None
+
+
+def test_may_transitions_over_wide_guards_are_aggregated_from_the_first_jump(tmp_path):
+    """Any run stays below 22 (the heating invariant) and some run heats up to it: a switch
+    to cool may wait until the invariant forces it."""
+    results, _ = checked(tmp_path, MAY_THERMOSTAT, {"below": "T <= 22.05", "reached": "T <= 21.95"})
+    assert results["below"].status is Status.SAFE, results["below"].details.get("reason")
+    assert results["below"].details["aggregates"] > 0
+    assert results["reached"].status is Status.UNSAFE
+
+
+def fixed_point_of_the_sawtooth() -> float:
+    """``y`` just after the k-th reset is ``y_{k-1} e^{-1} + 1`` (the period is 1): it rises to
+    ``1 / (1 - e^{-1}) = 1.582`` from below, and decays in between."""
+    return 1.0 / (1.0 - np.exp(-1.0))
+
+
+def test_a_period_the_default_step_misses_is_decided_by_a_finer_pass(tmp_path):
+    assert fixed_point_of_the_sawtooth() < 1.6
+    results, _ = checked(tmp_path, SAWTOOTH, {"bound": "y <= 1.6"})
+    result = results["bound"]
+    assert result.status is Status.SAFE, result.details.get("reason")
+    assert "left it undecided" in result.details["semantics"]
+    assert result.details["step"] == pytest.approx(100 / 60 / 10)
+    plain, _ = checked(tmp_path, SAWTOOTH, {"bound": "y <= 1.6"}, {"finer_retry": False})
+    assert plain["bound"].status is Status.UNKNOWN
+
+
+def test_a_witness_on_a_face_of_the_initial_polytope_replays_from_inside_it(tmp_path):
+    """``x + y`` grows at rate at most ``1 + 0.1 z``; the largest value at 0.6 needs a start on
+    the face ``x + y = 1``. The replayed initial state is a member of the polytope."""
+    results, model = checked(tmp_path, FACE, {"sum": "x + y <= 1.45"})
+    result = results["sum"]
+    assert result.status is Status.UNSAFE, result.details.get("reason")
+    x0 = np.asarray(result.details["witness"]["initial_state"][:3])
+    init = model.initial
+    assert PolytopeSampler(init.polytope, init.low, init.high).contains(x0[None])[0]
