@@ -362,3 +362,27 @@ def test_the_constant_pi_is_a_number_in_the_xml_and_the_cfg(tmp_path):
     model, props, docs = load_spaceex(xml, cfg)
     assert docs.model["modes"]["on"]["flow"]["T"] == "-0.1*(T - 10) + pi"
     assert props[0].raw["avoid"] == ["T >= 7*pi"]
+
+
+# ------------------------------------------------------------------ initial sets the cfg cannot give
+DRIVEN = '''<component id="osc">
+ <param name="x" type="real" local="false" dynamics="any"/>
+ <param name="u" type="real" local="false" dynamics="any"/>
+ <location id="1" name="run"><invariant>0.8 &lt;= u &lt;= 1 &amp; x &lt;= 5</invariant><flow>x' == -x + u</flow></location>
+</component>
+'''
+
+
+@pytest.mark.parametrize("initially,message", [
+    ("x == 0 & u == 0.8", "initially: 'u' is a time-varying input"),
+    ("x == 0 & x >= 1", "initially: the initial set is empty (its constraints exclude each other)"),
+    ("x == 6", "initially: the initial set meets no location's invariant"),
+])
+def test_an_initial_set_the_automaton_cannot_start_in_is_named_at_the_cfg_line(tmp_path, capsys, initially,
+                                                                               message):
+    """A time-varying input takes any value at every instant (no initial value); an empty set
+    is told apart from one that misses every invariant."""
+    xml, cfg = write(tmp_path, DRIVEN, f'system = osc\ninitially = "{initially}"\nforbidden = "x >= 2"\n'
+                                      f'time-horizon = 5\n')
+    line = bad_input(check(xml, cfg), capsys)
+    assert line.startswith(f"reach: {cfg}:2: {message}"), line

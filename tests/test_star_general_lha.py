@@ -1,6 +1,6 @@
 """star on linear hybrid automata a new user writes, with the closed forms that decide them:
 a clocked tank of constant rates (a guard crossed over several cells gives one successor, not
-one per cell), a thermostat whose switches are may-transitions over wide guards (the fan-out is
+one per cell; with a disturbance, the successors are aggregated), a thermostat whose switches are may-transitions over wide guards (the fan-out is
 aggregated from the first jump), a sawtooth whose period the default step does not resolve (a
 finer pass decides it) and a witness on the face of a polytopic initial set (replayed from
 inside the set)."""
@@ -28,6 +28,9 @@ transitions:
 initial: {mode: fill, box: {x: [4, 6], t: [0, 0]}}
 horizon: 40
 """
+
+DISTURBED_TANK = TANK.replace("x: \"2\"", "x: \"2 + d\"").replace("x: \"-3\"", "x: \"-3 + d\"").replace(
+    "modes:", "bounded_inputs:\n  d: {range: [-0.2, 0.2], varying: true}\nmodes:").replace("horizon: 40", "horizon: 20")
 
 MAY_THERMOSTAT = """
 name: may_thermostat
@@ -83,6 +86,17 @@ def test_a_clocked_tank_of_constant_rates_is_decided_with_few_stars(tmp_path):
     assert results["high"].status is Status.SAFE and results["low"].status is Status.SAFE
     assert results["high"].details["stars"] < 100
     assert results["tight"].status is Status.UNSAFE and results["tight"].counterexample is not None
+
+
+def test_a_disturbed_tank_of_constant_rates_aggregates_its_successors(tmp_path):
+    """With a disturbance ``|d| <= 0.2`` on both rates the level still stays in [2, 10] (the
+    invariants) and reaches both ends; each crossing now spans several cells whose successors
+    are aggregated after the first jumps instead of multiplying."""
+    assert "2 + d" in DISTURBED_TANK and "varying: true" in DISTURBED_TANK
+    results, _ = checked(tmp_path, DISTURBED_TANK, {"high": "x <= 10.1", "low": "x >= 1.9", "tight": "x <= 9.9"})
+    assert results["high"].status is Status.SAFE and results["low"].status is Status.SAFE
+    assert results["high"].details["aggregates"] > 0
+    assert results["tight"].status is Status.UNSAFE
 
 
 def test_may_transitions_over_wide_guards_are_aggregated_from_the_first_jump(tmp_path):

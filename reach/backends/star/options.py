@@ -69,8 +69,9 @@ class StarOptions:
         bound, but at most ``STALL_JUMPS`` jumps within one time step when the model may
         have a zero-dwell cycle (:mod:`reach.model.lint`).
     aggregate_after: successors of the jumps after the first ``aggregate_after`` ones on a
-        path, out of a mode whose flow is not constant (on a model without a clock out of every
-        mode, so the fixpoint check closes cycles of constant rates), are aggregated: the stars one chain
+        path, out of a mode whose flow is not constant or moves with a time-varying input (on a
+        model without a clock out of every mode, so the fixpoint check closes cycles of
+        constant rates), are aggregated: the stars one chain
         sends through one transition become one star, their interval hull (see
         :meth:`_Explorer._aggregate`); refined back into the members when a check under it
         fails. None: never aggregate.

@@ -711,6 +711,18 @@ class DocumentBuilder(Converter):
                  for p in parts]
         return self.relation_texts(Relation(parts, rel.ops), key, self.cfg.line(where_key))
 
+
+    def _no_input_in_initially(self, texts) -> None:
+        """A time-varying input (a real with no flow, bounded by invariants) takes any value in
+        its range at every instant: an initial constraint on it is refused at the cfg's line."""
+        for _, text in texts:
+            for v in (v for v, (_, _, varying) in self.inputs.items() if varying):
+                if re.search(rf"(?<![\w.]){re.escape(self.yaml[v])}(?![\w.])", text):
+                    raise InputError(f"initially: '{v}' is a time-varying input (no flow, bounded by the "
+                                     f"invariants): it takes any value in its range at every instant, so "
+                                     f"the initial set cannot constrain it", self.cfg.file,
+                                     line=self.cfg.line("initially"))
+
     def initial_doc(self, atoms) -> dict:
         allowed: dict[int, set] = {}
         for a in atoms:
@@ -727,9 +739,12 @@ class DocumentBuilder(Converter):
                              line=self.cfg.line("initially"))
         symbols = [sympy.Symbol(self.yaml[g], real=True) for g in self.states + list(self.inputs)]
         table = {s.name: s for s in symbols}
-        choice = []
+        choice, feasible_alone = [], False
         for key in candidates:
             texts = [t for a in atoms if isinstance(a, Relation) for t in self.cfg_relation(a, key, "initially")]
+            self._no_input_in_initially(texts)
+            alone = linear_rows([(k, _difference(t, k)) for k, t in texts], table, symbols)
+            feasible_alone = feasible_alone or alone is None or feasible(alone, len(symbols))
             for j, (rel, line) in enumerate(self.invariants[key]):
                 if j not in self.dropped[key]:
                     inv = self.relation_texts(rel, key, line)
@@ -742,8 +757,8 @@ class DocumentBuilder(Converter):
                                                     table, symbols), len(symbols)):
                 choice.append((key, texts))
         if not choice:
-            raise InputError("initially: the initial set meets no location's invariant", self.cfg.file,
-                             line=self.cfg.line("initially"))
+            what = "meets no location's invariant" if feasible_alone else "is empty (its constraints exclude each other)"
+            raise InputError(f"initially: the initial set {what}", self.cfg.file, line=self.cfg.line("initially"))
         self.lines[("initial",)] = (self.cfg.file, self.cfg.line("initially"))
         if len(choice) > 1:
             return self._start_mode(choice, atoms)
