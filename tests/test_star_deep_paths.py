@@ -116,3 +116,11 @@ def test_an_interrupted_caller_stops_the_search_before_going_on():
         signal.setitimer(signal.ITIMER_REAL, 0)
         signal.signal(signal.SIGALRM, previous)
     assert cancel.is_set() and ended.is_set()
+
+
+def test_a_time_budget_ends_a_long_chain_in_unknown(tmp_path):
+    """``max_seconds`` is checked at every invariant step and LP, not only between chains."""
+    model, props = loaded(tmp_path, 400)
+    result = BACKEND.check(model, props["at_most"], {"step": 1e-3, "max_seconds": 0.2, "finer_retry": False})
+    assert result.status is Status.UNKNOWN
+    assert "time budget of 0.2 s exhausted" in result.details["reason"]

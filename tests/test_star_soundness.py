@@ -132,3 +132,31 @@ def test_coarse_unrefined_check_of_sra08_answers_without_a_crash():
     assert result.status in (Status.UNKNOWN, Status.SAFE), result.details
     if result.status is Status.UNKNOWN:
         assert result.details["reason"]
+
+
+TOUCH_JUMP = """
+name: touch
+state: [x, t]
+modes:
+  a: {flow: {x: "1", t: "1"}, invariant: ["x <= 1"]}
+  b: {flow: {x: "0", t: "1"}}
+transitions:
+  - {from: a, to: b, guard: ["x >= 1"], urgent: true}
+initial: {mode: a, box: {x: [0, 0], t: [0, 0]}}
+horizon: 1
+"""
+
+
+@pytest.mark.parametrize("step", [1e-3, 1e-4])
+def test_a_jump_taken_at_the_horizon_is_not_lost_to_rounding(tmp_path, step):
+    """The run reaches the guard ``x = 1`` at ``t = 1``, the horizon, and jumps into ``b``, all of
+    which is unsafe. Ten thousand additions of the step fall 1e-13 short of 1: a guard test
+    without the touch tolerance took no jump there and answered SAFE."""
+    from reach.model import load_model
+    from reach.spec import bind, load_properties
+    (tmp_path / "m.yaml").write_text(TOUCH_JUMP)
+    (tmp_path / "p.yaml").write_text("properties:\n  - {id: inb, kind: safety, modes: [b], avoid: ['x >= 0']}\n")
+    model = load_model(tmp_path / "m.yaml")
+    prop = bind(load_properties(tmp_path / "p.yaml")[0], model)
+    result = BACKEND.check(model, prop, {"step": step, "finer_retry": False})
+    assert result.status is not Status.SAFE, result.details

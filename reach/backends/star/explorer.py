@@ -180,6 +180,7 @@ class _Explorer:
         self._lp_count(1)
 
     def _lp_count(self, count: int):
+        self._interrupted()
         self.stats.lps += count
         if self.stats.lps > self.opt.max_lps:
             raise _Stop(Status.UNKNOWN, f"LP budget of {self.opt.max_lps} exhausted")
@@ -379,6 +380,7 @@ class _Explorer:
         for j in sorted(extra):                  # `point` stays a point of every grid star
             if j > last or (j == last and known_empty):
                 break
+            self._interrupted()
             H, g = extra[j]
             if np.all(H @ (centers[j] + bases[j] @ point) <= g):
                 continue
@@ -419,7 +421,8 @@ class _Explorer:
         wide = self.opt.aggregate_fanout is not None and fanout > self.opt.aggregate_fanout and not flow.drift
         aggregate = (self.aggregate_after is not None and (not flow.drift or flow.inputs or self.covered is not None)
                      and (path.jumps >= self.aggregate_after or wide)) or \
-                    (flow.drift and drift_limit is not None and star.nvars > drift_limit)
+                    (self.aggregate_after is not None and flow.drift and drift_limit is not None
+                     and star.nvars > drift_limit)
         pending: dict[int, list] | None = None if not aggregate else {} if collect is None else collect
         runs = _consecutive(sorted(candidates)) if flow.drift and inputs is None and not self.opt.discrete_time \
             else [(j, 1) for j in sorted(candidates)]
@@ -453,8 +456,10 @@ class _Explorer:
 
         A chain explored block by block (a linearisation, a switching group, rebased inputs)
         starts each block from the end of the one before, whose rounding the block carries on:
-        ``inherited`` (per component) grows by ``|Phi_j| inherited`` and joins the bound, which
-        is returned per grid point for the next block. Without it, an unstable equilibrium
+        ``inherited``, a bound of that error's Euclidean norm, grows to ``||Phi_j||_2 inherited``
+        (the error moves with the flow: a rotation keeps it, an unstable mode grows it) and
+        bounds every component; returned per grid point, with the block's own rounding (the
+        norm of its componentwise bound), for the next block. Without it, an unstable equilibrium
         explored in blocks of two cells drifts by ``1e-16 e^t`` unnoticed (x' = x - 1 from
         x = 1: 0.16 at t = 35, a wrong SAFE)."""
         a = np.maximum(np.abs(star.box.low), np.abs(star.box.high))
@@ -462,20 +467,22 @@ class _Explorer:
         summed = np.abs(Phis) @ (np.abs(star.center) + np.abs(star.basis) @ a) + np.abs(psis)
         size = np.abs(centers) + np.abs(bases) @ a
         steps = np.arange(1, len(Phis) + 1)[:, None]
-        rounding = 8 * (self.n + 2) * steps * np.finfo(float).eps * summed
-        if inherited is not None:
-            rounding = rounding + np.abs(Phis) @ inherited
+        fresh = 8 * (self.n + 2) * steps * np.finfo(float).eps * summed
+        grown = np.zeros_like(fresh)
+        if inherited:
+            grown += np.linalg.norm(Phis, 2, axis=(1, 2))[:, None] * inherited
+        rounding = fresh + grown
         lost = np.any(rounding > PRECISION_LOST * np.maximum(1.0, size), axis=1)
         if np.any(lost):
             j = int(np.argmax(lost))
             raise _Stop(Status.UNKNOWN, f"precision lost in mode '{mode}': at step {j} the flow's terms "
                                         f"(size {summed[j].max():.3g}) cancel to {size[j].max():.3g} with a "
                                         f"rounding bound of {rounding[j].max():.3g}"
-                                        + (" (most of it carried from earlier blocks)" if inherited is not None
-                                           and np.any(np.abs(Phis[j]) @ inherited > rounding[j] / 2) else "")
+                                        + (" (most of it carried from earlier blocks)"
+                                           if np.any(grown[j] > fresh[j]) else "")
                                         + ", beyond what rounding can be trusted with (an unstable mode "
                                           "near its equilibrium; a shorter horizon helps)")
-        return rounding
+        return np.linalg.norm(fresh, axis=1) + grown[:, 0]
 
     def _past_cutoff(self, start: Star, path: _Path) -> bool:
         """In the safe-abort sweep: whether every run from ``start`` aborted, or (without an
@@ -528,15 +535,21 @@ class _Explorer:
         self.sets.append(SetPiece(mode, t0, t1, "star", names, tuple(stars),
                                   None if bloat is None else np.asarray(bloat, float)))
 
+    def _interrupted(self):
+        """UNKNOWN at once when the caller has been interrupted (``cancel``, :mod:`reach.deep`)
+        or the time budget is spent; checked at every chain, cell, LP and invariant step, so a
+        time limit ends the search within one LP."""
+        if self.cancel.is_set():
+            raise _Stop(Status.UNKNOWN, "stopped: the caller was interrupted")
+        if time.perf_counter() > self.deadline:
+            raise _Stop(Status.UNKNOWN, f"time budget of {self.opt.max_seconds:.3g} s exhausted (option max_seconds)")
+
     def _memory_guard(self):
         """UNKNOWN once the process holds more than ``MEMORY_FRACTION`` of the machine's memory
         (the stars' predicates grow with jumps and refinement; no out-of-memory kill); stops at
         once when the caller has been interrupted (``cancel``) or the time budget is spent."""
-        if self.cancel.is_set():
-            raise _Stop(Status.UNKNOWN, "stopped: the caller was interrupted")
+        self._interrupted()
         now = time.perf_counter()
-        if now > self.deadline:
-            raise _Stop(Status.UNKNOWN, f"time budget of {self.opt.max_seconds:.3g} s exhausted (option max_seconds)")
         if now - self.memory_read < MEMORY_PERIOD:
             return
         self.memory_read, held = now, resident_bytes()
@@ -819,15 +832,20 @@ class _Explorer:
             if self.sweep and jump.window is not None and path.abort == np.inf and \
                     self._earliest(seg) >= self.cutoff:
                 continue
-            if jump.H.shape[0] and np.any(-seg.support_bounds(-jump.H) > jump.g):
+            # the guard relaxed by the touch tolerance (as _screen): a run that meets it only
+            # within rounding (x = 1 reached at the horizon after 10^4 additions of the step,
+            # 1e-13 short) still jumps; more successors, never fewer
+            lower = -seg.support_bounds(-jump.H)
+            relaxed = jump.g + self.opt.touch_tolerance * np.maximum(1.0, np.maximum(np.abs(jump.g), np.abs(lower)))
+            if jump.H.shape[0] and np.any(lower > relaxed):
                 continue
             # runs that switch after the horizon do not matter: the clock row cuts them
             H = np.vstack([jump.H, self.clock_row])
-            g = np.append(jump.g, self.horizon)
+            g = np.append(relaxed, self.horizon * (1 + self.opt.touch_tolerance) + self.opt.touch_tolerance)
             entered = seg.intersect_halfspaces(H, g)
             if self.flows[mode].drift:
                 entered = _tightened(entered, len(g))
-                if entered is None or np.any(-entered.support_bounds(-jump.H) > jump.g):
+                if entered is None or np.any(-entered.support_bounds(-jump.H) > relaxed):
                     continue
             instant = None if cell is None or self.flows[mode].drift else \
                 self._at_instant(mode, entered, seg, H, g, *cell)
