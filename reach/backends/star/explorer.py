@@ -139,6 +139,7 @@ class _Explorer:
         self.covered = Covered(self.clock) if time_invariant(model) and not options.keep_sets else None
         self.last_progress = time.perf_counter()
         self.memory_limit, self.memory_read = MEMORY_FRACTION * physical_bytes(), -np.inf
+        self.memory_start = resident_bytes()    # what the process held before (earlier checks)
         self._leading: dict[str, set[str]] = {}
         self._initial_sampler = None            # a polytopic initial set's (_inside_initial)
         self.cancel = threading.Event()         # set by the caller that stopped waiting (reach.deep)
@@ -535,6 +536,11 @@ class _Explorer:
         self.sets.append(SetPiece(mode, t0, t1, "star", names, tuple(stars),
                                   None if bloat is None else np.asarray(bloat, float)))
 
+    def _at_horizon(self, seg: Star) -> bool:
+        """Whether ``seg`` reaches the horizon up to the touch tolerance (the chain's last cell)."""
+        latest = float(seg.support_bounds(self.clock_row[None])[0])
+        return latest >= self.horizon - self.opt.touch_tolerance * max(1.0, abs(self.horizon))
+
     def _interrupted(self):
         """UNKNOWN at once when the caller has been interrupted (``cancel``, :mod:`reach.deep`)
         or the time budget is spent; checked at every chain, cell, LP and invariant step, so a
@@ -545,14 +551,16 @@ class _Explorer:
             raise _Stop(Status.UNKNOWN, f"time budget of {self.opt.max_seconds:.3g} s exhausted (option max_seconds)")
 
     def _memory_guard(self):
-        """UNKNOWN once the process holds more than ``MEMORY_FRACTION`` of the machine's memory
-        (the stars' predicates grow with jumps and refinement; no out-of-memory kill); stops at
+        """UNKNOWN once the exploration holds more than ``MEMORY_FRACTION`` of the machine's
+        memory beyond what the process held when it started (a bench worker keeps the memory of
+        its earlier checks; the stars' predicates grow with jumps and refinement; no
+        out-of-memory kill); stops at
         once when the caller has been interrupted (``cancel``) or the time budget is spent."""
         self._interrupted()
         now = time.perf_counter()
         if now - self.memory_read < MEMORY_PERIOD:
             return
-        self.memory_read, held = now, resident_bytes()
+        self.memory_read, held = now, resident_bytes() - self.memory_start
         if held > self.memory_limit:
             raise _Stop(Status.UNKNOWN, f"memory: the exploration holds {held / 2**30:.1f} GiB, more than "
                                         f"{MEMORY_FRACTION:.0%} of this machine's "
@@ -832,16 +840,21 @@ class _Explorer:
             if self.sweep and jump.window is not None and path.abort == np.inf and \
                     self._earliest(seg) >= self.cutoff:
                 continue
-            # the guard relaxed by the touch tolerance (as _screen): a run that meets it only
-            # within rounding (x = 1 reached at the horizon after 10^4 additions of the step,
-            # 1e-13 short) still jumps; more successors, never fewer
+            # in a cell that ends at the horizon, the guard relaxed by the touch tolerance (as
+            # _screen): the grid falls short of the horizon by rounding (x = 1 reached at t = 1
+            # after 10^4 additions of the step, 1e-13 short), and a run meeting the guard only
+            # there must still jump; more successors, never fewer. Earlier cells need no
+            # allowance (the next cell straddles the guard), and keep exact timing
             lower = -seg.support_bounds(-jump.H)
-            relaxed = jump.g + self.opt.touch_tolerance * np.maximum(1.0, np.maximum(np.abs(jump.g), np.abs(lower)))
+            relaxed = jump.g
+            if self._at_horizon(seg):
+                relaxed = jump.g + self.opt.touch_tolerance * np.maximum(1.0, np.maximum(np.abs(jump.g),
+                                                                                          np.abs(lower)))
             if jump.H.shape[0] and np.any(lower > relaxed):
                 continue
             # runs that switch after the horizon do not matter: the clock row cuts them
             H = np.vstack([jump.H, self.clock_row])
-            g = np.append(relaxed, self.horizon * (1 + self.opt.touch_tolerance) + self.opt.touch_tolerance)
+            g = np.append(relaxed, self.horizon)
             entered = seg.intersect_halfspaces(H, g)
             if self.flows[mode].drift:
                 entered = _tightened(entered, len(g))
