@@ -457,10 +457,12 @@ class _Explorer:
 
         A chain explored block by block (a linearisation, a switching group, rebased inputs)
         starts each block from the end of the one before, whose rounding the block carries on:
-        ``inherited``, a bound of that error's Euclidean norm, grows to ``||Phi_j||_2 inherited``
-        (the error moves with the flow: a rotation keeps it, an unstable mode grows it) and
-        bounds every component; returned per grid point, with the block's own rounding (the
-        norm of its componentwise bound), for the next block. Without it, an unstable equilibrium
+        ``inherited = (v, s)`` bounds that error componentwise (``|e| <= v``) and in Euclidean
+        norm (``||e|| <= s``); the error moves with the flow, so at grid point ``j`` it is within
+        ``min(|Phi_j| v, ||Phi_j||_2 s)`` per component: the first stays linear under a shear
+        (``[[1, h], [0, 1]]``, whose norm compounds), the second stays put under a rotation
+        (whose ``|Phi|`` row sums compound). Both bounds, with the block's own rounding added,
+        are returned per grid point for the next block. Without it, an unstable equilibrium
         explored in blocks of two cells drifts by ``1e-16 e^t`` unnoticed (x' = x - 1 from
         x = 1: 0.16 at t = 35, a wrong SAFE)."""
         a = np.maximum(np.abs(star.box.low), np.abs(star.box.high))
@@ -469,9 +471,11 @@ class _Explorer:
         size = np.abs(centers) + np.abs(bases) @ a
         steps = np.arange(1, len(Phis) + 1)[:, None]
         fresh = 8 * (self.n + 2) * steps * np.finfo(float).eps * summed
-        grown = np.zeros_like(fresh)
-        if inherited:
-            grown += np.linalg.norm(Phis, 2, axis=(1, 2))[:, None] * inherited
+        grown, norms = np.zeros_like(fresh), np.zeros(len(Phis))
+        if inherited is not None:
+            vector, norm = inherited
+            norms = np.linalg.norm(Phis, 2, axis=(1, 2)) * norm
+            grown = np.minimum(np.abs(Phis) @ vector, norms[:, None])
         rounding = fresh + grown
         lost = np.any(rounding > PRECISION_LOST * np.maximum(1.0, size), axis=1)
         if np.any(lost):
@@ -483,7 +487,8 @@ class _Explorer:
                                            if np.any(grown[j] > fresh[j]) else "")
                                         + ", beyond what rounding can be trusted with (an unstable mode "
                                           "near its equilibrium; a shorter horizon helps)")
-        return np.linalg.norm(fresh, axis=1) + grown[:, 0]
+        carried = np.minimum(np.linalg.norm(fresh, axis=1) + norms, np.linalg.norm(rounding, axis=1))
+        return [(rounding[j], carried[j]) for j in range(len(Phis))]
 
     def _past_cutoff(self, start: Star, path: _Path) -> bool:
         """In the safe-abort sweep: whether every run from ``start`` aborted, or (without an
