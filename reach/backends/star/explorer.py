@@ -541,10 +541,15 @@ class _Explorer:
         self.sets.append(SetPiece(mode, t0, t1, "star", names, tuple(stars),
                                   None if bloat is None else np.asarray(bloat, float)))
 
+    def _touch(self, g, bound):
+        """The touch allowance of rows ``... <= g`` whose bound is ``bound``:
+        ``touch_tolerance * max(1, |g|, |bound|)``, as the depth LP reads a touch."""
+        return self.opt.touch_tolerance * np.maximum(1.0, np.maximum(np.abs(g), np.abs(bound)))
+
     def _at_horizon(self, seg: Star) -> bool:
         """Whether ``seg`` reaches the horizon up to the touch tolerance (the chain's last cell)."""
         latest = float(seg.support_bounds(self.clock_row[None])[0])
-        return latest >= self.horizon - self.opt.touch_tolerance * max(1.0, abs(self.horizon))
+        return latest >= self.horizon - self._touch(self.horizon, latest)
 
     def _interrupted(self):
         """UNKNOWN at once when the caller has been interrupted (``cancel``, :mod:`reach.deep`)
@@ -655,8 +660,7 @@ class _Explorer:
             seg = lower[:len(cells)] - error[:len(cells)] @ np.abs(H).T
         else:
             seg = np.minimum(lower[:-1], lower[1:])[:len(cells)] - error[:len(cells)] @ np.abs(H).T
-        tol = self.opt.touch_tolerance * np.maximum(1.0, np.maximum(np.abs(g), np.abs(seg)))
-        missed = np.any(seg > g + tol, axis=1)
+        missed = np.any(seg > g + self._touch(g, seg), axis=1)
         return {j for j in cells if not missed[j]}
 
     # ---- one cell
@@ -768,8 +772,7 @@ class _Explorer:
                 self._check_whole_mode(mode, seg, path, blocks, open_, piece)
                 continue
             lower = -seg.support_bounds(-piece.H)
-            pad = self.opt.touch_tolerance * np.maximum(1.0, np.maximum(np.abs(piece.g), np.abs(lower)))
-            if np.any(lower > piece.g + pad):                          # missed beyond a touch (_screen)
+            if np.any(lower > piece.g + self._touch(piece.g, lower)):   # missed beyond a touch (_screen)
                 continue
             spread, error = _block_spreads(seg, piece.H, blocks)     # (blocks, rows) each
             gain = np.where(np.array(open_)[:, None], error - (piece.g - lower), -np.inf)
@@ -851,10 +854,7 @@ class _Explorer:
             # there must still jump; more successors, never fewer. Earlier cells need no
             # allowance (the next cell straddles the guard), and keep exact timing
             lower = -seg.support_bounds(-jump.H)
-            relaxed = jump.g
-            if self._at_horizon(seg):
-                relaxed = jump.g + self.opt.touch_tolerance * np.maximum(1.0, np.maximum(np.abs(jump.g),
-                                                                                          np.abs(lower)))
+            relaxed = jump.g + self._touch(jump.g, lower) if self._at_horizon(seg) else jump.g
             if jump.H.shape[0] and np.any(lower > relaxed):
                 continue
             # runs that switch after the horizon do not matter: the clock row cuts them
