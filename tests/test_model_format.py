@@ -275,6 +275,16 @@ horizon: 4
 """
 
 
+def test_a_switch_asked_for_at_time_zero_is_taken_from_the_initial_state(tmp_path):
+    """``x`` is ``-t`` after a switch at 0 (the closed form), ``t`` without it."""
+    model = load_model(model_file(tmp_path, SWITCHED))
+    sim = Simulator(model, 0.01)
+    for first, sign in ((True, -1.0), (False, 1.0)):
+        signal = (1.0, np.zeros((1, 2, 0)), np.array([[first, False]]))
+        runs = sim.run(np.zeros((1, 1)), signal=signal)
+        assert runs.final_state[0, 0] == pytest.approx(sign * 4.0)
+
+
 def test_arbitrary_switching_is_sampled_and_replayed(tmp_path):
     """Guard-free may-transitions and no invariant: only a run that switches early goes below 0."""
     path = model_file(tmp_path, SWITCHED)
@@ -288,9 +298,9 @@ def test_arbitrary_switching_is_sampled_and_replayed(tmp_path):
     switch = np.array(cex.input_signal["switch"])
     step = cex.input_signal["step"]
     # independent: x is the integral of +1 in 'up' and -1 in 'down', the mode flipping at the
-    # piece starts k * step (k >= 1) where switch[k] is 1
+    # piece starts k * step (k >= 0) where switch[k] is 1
     t = np.linspace(0, cex.violation_time, 4001)
-    flips = np.array([k * step for k in range(1, len(switch)) if switch[k]])
+    flips = np.array([k * step for k in range(len(switch)) if switch[k]])
     rate = np.where(np.searchsorted(flips, t, side="right") % 2 == 0, 1.0, -1.0)
     x = np.concatenate([[0], np.cumsum(rate[1:] * np.diff(t))])
     assert x[-1] == pytest.approx(cex.violation_state[0], abs=2e-3) and x[-1] < -0.5

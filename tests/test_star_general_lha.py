@@ -11,8 +11,10 @@ import numpy as np
 import pytest
 
 from reach.backends.initial_sampling import PolytopeSampler
+from reach.backends.montecarlo import replay
 from reach.backends.star import BACKEND
 from reach.model import load_model
+from reach.model.simulate import Branches
 from reach.result import Status
 from reach.spec import bind, load_properties
 
@@ -99,6 +101,16 @@ def test_a_disturbed_tank_of_constant_rates_aggregates_its_successors(tmp_path):
     assert results["tight"].status is Status.UNSAFE
 
 
+def test_a_disturbed_tank_at_a_fine_step_aggregates_its_wide_crossings(tmp_path):
+    """At a step of 1/30 each crossing of the disturbed tank spans a dozen cells or more (the
+    fill ends between 1.8 and 2.3 time units after its start): its successors are aggregated
+    from the first jump (option aggregate_fanout) instead of multiplying over the first two
+    jumps. The level never passes the urgent guard at 10."""
+    results, _ = checked(tmp_path, DISTURBED_TANK, {"band": "x <= 10.05"}, {"step": 1 / 30, "finer_retry": False})
+    assert results["band"].status is Status.SAFE, results["band"].details.get("reason")
+    assert results["band"].details["stars"] < 200
+
+
 def test_may_transitions_over_wide_guards_are_aggregated_from_the_first_jump(tmp_path):
     """Any run stays below 22 (the heating invariant) and some run heats up to it: a switch
     to cool may wait until the invariant forces it."""
@@ -106,6 +118,36 @@ def test_may_transitions_over_wide_guards_are_aggregated_from_the_first_jump(tmp
     assert results["below"].status is Status.SAFE, results["below"].details.get("reason")
     assert results["below"].details["aggregates"] > 0
     assert results["reached"].status is Status.UNSAFE
+
+
+EARLY_SWITCH = MAY_THERMOSTAT.replace("horizon: 30", "horizon: 2")
+
+
+def test_a_violation_that_needs_an_early_may_transition_is_replayed(tmp_path):
+    """Within 2 min a run reaches ``cool`` below 19.8 only by switching off as soon as the
+    guard ``T >= 20`` allows: waiting until the invariant forces the switch at 22 keeps ``T``
+    above 20.9 in ``cool`` (the closed form ``10 + 12 e^{-0.1 (t - t_s)}``, ``t_s >= 1.05``).
+    Switched at 20, ``T = 10 + 10 e^{-0.1 t}`` goes below 19.8 after ``10 ln(10/9.8) = 0.202``
+    and stays above ``10 + 10 e^{-0.2} = 18.19``: the counterexample switches early, on the
+    replay grid, and replays; the floor 18.1 holds."""
+    (tmp_path / "m.yaml").write_text(EARLY_SWITCH)
+    (tmp_path / "p.yaml").write_text("properties:\n"
+                                     "  - {id: early, kind: safety, modes: [cool], require: ['T >= 19.8']}\n"
+                                     "  - {id: floor, kind: safety, modes: [cool], require: ['T >= 18.1']}\n")
+    model = load_model(tmp_path / "m.yaml")
+    props = {p.id: bind(p, model) for p in load_properties(tmp_path / "p.yaml")}
+    results = {k: BACKEND.check(model, prop, {}) for k, prop in props.items()}
+    early = results["early"]
+    assert early.status is Status.UNSAFE, early.details.get("reason")
+    cex = early.counterexample.to_dict()
+    assert cex["input_signal"]["switch"].count(1) == 1
+    switched = cex["input_signal"]["step"] * cex["input_signal"]["switch"].index(1)
+    assert switched < 1.0                               # long before the invariant forces it
+    assert cex["violation_time"] >= 10 * np.log(10 / 9.8) - 1e-9
+    run = replay(model, props["early"], cex["initial_state"],
+                 cex["switch_time"], cex["dt"], cex["input_signal"], Branches(prescribed=[cex["transitions"]]))
+    assert run.violated and run.time == pytest.approx(cex["violation_time"])
+    assert results["floor"].status is Status.SAFE, results["floor"].details.get("reason")
 
 
 def fixed_point_of_the_sawtooth() -> float:

@@ -410,8 +410,9 @@ class Simulator:
         ``signal = (step, values[, switch])``: the varying bounded inputs (``model.varying_inputs``)
         are piecewise constant, ``values[r, k]`` on ``[k step, (k+1) step)`` for run ``r``
         (``values`` is (N, K, m); the last piece lasts to the horizon); with ``switch`` (N, K)
-        booleans, run ``r`` also takes, at ``k step`` (k >= 1) where ``switch[r, k]``, a
-        may-transition with a general guard that is enabled there (if any). ``branches``: which
+        booleans, run ``r`` also takes, at ``k step`` where ``switch[r, k]``, a
+        may-transition with a general guard that is enabled there (if any; at time 0, after
+        the urgent transitions of the initial state). ``branches``: which
         of several enabled transitions each run takes (:class:`Branches`; the first by default).
         """
         X = np.array(x0, dtype=float).reshape(-1, self.n).copy()
@@ -455,6 +456,9 @@ class Simulator:
         blocked_at[np.setdiff1d(np.arange(N), start)] = 0.0      # not an initial state of the automaton
         runs.watch(start)
         self._urgent_now(start, runs)
+        if signal is not None and switch is not None:
+            first = start[switch[start, 0]]
+            self._take_may(first[np.isnan(blocked_at[first])], runs)
         if self._eventless():
             self._step_eventless(X, mode, t, kicks if kick_step else None, kick_step, runs.watchers)
             return self._trajectories(runs, recorder)

@@ -334,13 +334,15 @@ class StarBackend:
                 raise _Stop(Status.UNKNOWN, f"{len(explorer.unresolved)} cell(s) still meet an unsafe "
                                             f"piece after refinement; no witness replayed (a smaller "
                                             f"step, -o step={explorer.h / 10:.3g}, may decide it)",
-                            witness=explorer.unresolved[0])
+                            witness=explorer.unresolved[0], imprecise=True)
             if opt.discrete_time:
                 raise _Stop(Status.UNKNOWN, "no violation at the grid points (discrete time: "
                                             "behaviour between grid points is not checked)")
         except _Stop as stop:
             status, counterexample = stop.status, stop.counterexample
             details["reason"] = stop.reason
+            if stop.imprecise:
+                details["finer_step_may_decide"] = True
             if stop.witness is not None:
                 try:
                     details["witness"] = witness_details(explorer, stop.witness)

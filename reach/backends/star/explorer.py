@@ -36,6 +36,10 @@ HALF_SPREAD_CELLS = 512
 #: UNKNOWN (:meth:`_Explorer._cancellation_guard`): a thousand times the default touch tolerance
 PRECISION_LOST = 1e-6
 
+#: pieces of a replay's switching signal (:meth:`_Explorer._switching_signal`), at most: as many
+#: as a counterexample's input signal may have (:func:`reach.backends.montecarlo.replay`)
+MAX_SIGNAL_PIECES = 1_000_000
+
 
 @dataclass
 class _Entry:
@@ -82,12 +86,15 @@ class _Path:
 
 
 class _Stop(Exception):
-    """Abort the exploration: a replayed counterexample, or the LP budget is spent."""
+    """Abort the exploration: a replayed counterexample, or the LP budget is spent.
+    ``imprecise``: undecided for want of precision, which a finer step may bring
+    (:func:`.options.finer_retry`)."""
 
-    def __init__(self, status: Status, reason: str, counterexample=None, witness=None):
+    def __init__(self, status: Status, reason: str, counterexample=None, witness=None, imprecise=False):
         super().__init__(reason)
         self.status, self.reason = status, reason
         self.counterexample, self.witness = counterexample, witness
+        self.imprecise = imprecise
 
 
 @dataclass
@@ -142,6 +149,7 @@ class _Explorer:
         self.memory_start = resident_bytes()    # what the process held before (earlier checks)
         self._leading: dict[str, set[str]] = {}
         self._initial_sampler = None            # a polytopic initial set's (_inside_initial)
+        self._may = {tr.name for tr in model.transitions if not tr.urgent and tr.window is None}
         self.cancel = threading.Event()         # set by the caller that stopped waiting (reach.deep)
         self.deadline = np.inf if options.max_seconds is None else time.perf_counter() + options.max_seconds
         self.pieces = {mode: [_Piece(data.widen(p.H, p.g)[0], p.g, p.strict, p.label) for p in pieces]
@@ -184,7 +192,7 @@ class _Explorer:
         self._interrupted()
         self.stats.lps += count
         if self.stats.lps > self.opt.max_lps:
-            raise _Stop(Status.UNKNOWN, f"LP budget of {self.opt.max_lps} exhausted")
+            raise _Stop(Status.UNKNOWN, f"LP budget of {self.opt.max_lps} exhausted", imprecise=True)
 
     def _feasible(self, star: Star):
         """Coefficients of a point of ``star`` (an LP), or None if it is empty."""
@@ -308,14 +316,14 @@ class _Explorer:
                                         f"(option max_jumps; a SpaceEx cfg's iter-max sets it)")
         if path.stalled > self.stall_limit:
             raise _Stop(Status.UNKNOWN, f"{path.stalled} jumps within one time step "
-                                        f"(possible zero-dwell cycle)")
+                                        f"(possible zero-dwell cycle)", imprecise=True)
         t0 = self._earliest(star)
         if t0 > self.horizon:                   # every run of the star is past the horizon
             return
         self.stats.chains += 1
         if self.stats.chains > self.opt.max_stars:
             raise _Stop(Status.UNKNOWN, f"star budget of {self.opt.max_stars} exhausted "
-                                        f"(option max_stars)")
+                                        f"(option max_stars)", imprecise=True)
         if mode in self.data.timeless:
             self._instant(mode, star, path, point)
             return
@@ -419,14 +427,14 @@ class _Explorer:
             self._keep_chain(mode, grid_star, centers, bases, error, [j for j in cells if j not in candidates])
 
         drift_limit = None if self.sweep else self.opt.aggregate_drift_coefficients
-        wide = self.opt.aggregate_fanout is not None and fanout > self.opt.aggregate_fanout and not flow.drift
+        merged = flow.drift and inputs is None and not self.opt.discrete_time    # (_consecutive)
+        wide = self.opt.aggregate_fanout is not None and fanout > self.opt.aggregate_fanout and not merged
         aggregate = (self.aggregate_after is not None and (not flow.drift or flow.inputs or self.covered is not None)
                      and (path.jumps >= self.aggregate_after or wide)) or \
                     (self.aggregate_after is not None and flow.drift and drift_limit is not None
                      and star.nvars > drift_limit)
         pending: dict[int, list] | None = None if not aggregate else {} if collect is None else collect
-        runs = _consecutive(sorted(candidates)) if flow.drift and inputs is None and not self.opt.discrete_time \
-            else [(j, 1) for j in sorted(candidates)]
+        runs = _consecutive(sorted(candidates)) if merged else [(j, 1) for j in sorted(candidates)]
         for j, length in runs:
             if inputs is None:
                 self._cell(mode, grid_star(j), length * h, path, 0, point, pending)
@@ -828,7 +836,7 @@ class _Explorer:
         if len(self.unresolved) >= self.opt.max_unresolved:
             raise _Stop(Status.UNKNOWN, f"{len(self.unresolved)} cells still meet an unsafe "
                                         f"piece after refinement; no witness replayed",
-                        witness=self.unresolved[0])
+                        witness=self.unresolved[0], imprecise=True)
 
     def _failure_time(self, witness: _Witness, seg: Star) -> float:
         """Earliest time from which the runs behind a failing segment may violate: the
@@ -952,8 +960,12 @@ class _Explorer:
             from reach.backends.montecarlo import constant_signal
         except ImportError:
             return
-        x0, switch, transitions = self.initial_point(witness)
-        self._replay(witness, x0, switch, constant_signal(self.model, x0), transitions)
+        x0, switch, transitions, times = self._start_of(witness)
+        signal = constant_signal(self.model, x0)
+        self._replay(witness, x0, switch, signal, transitions)
+        timed = self._switching_signal(signal, transitions, times)
+        if timed is not None:
+            self._replay(witness, x0, switch, timed, transitions)
         if self.data.varying and piece is not None and seg is not None:
             found = self._extremal_witness(witness, piece, seg)
             if found is not None:
@@ -1027,20 +1039,44 @@ class _Explorer:
     def initial_point(self, witness: _Witness):
         """Initial state and abort time of a witness, read off its coefficients, and the names
         of the transitions along its path (through aggregates, the members' paths)."""
+        return self._start_of(witness)[:3]
+
+    def _start_of(self, witness: _Witness):
+        """:meth:`initial_point`, and the time of each jump along the path (the global clock
+        at the switch, read off the witness's coefficients)."""
         alpha, entries = self._trace(witness.alpha, witness.path)
         m0 = self.root.nvars
         x0 = self.root.point(alpha[:m0])[:self.model.n]
         x0 = self._inside_initial(np.clip(x0, self.model.initial.low, self.model.initial.high))
         transitions = [e.transition for e, _ in entries]
-        windows = [(e, a) for e, a in entries if e.window]
+        times = [float(e.offset + e.row @ a[:e.row.size]) for e, a in entries]
+        windows = [(e, t) for (e, _), t in zip(entries, times) if e.window]
         if len(windows) > 1 or any(not e.global_window for e, _ in windows):
-            return x0, None, transitions     # not one switch at a global time: no switch
-        if windows:
-            e, a = windows[-1]
-            switch = float(e.offset + e.row @ a[:e.row.size])
-        else:
-            switch = self._latest_abort(witness.mode)
-        return x0, switch, transitions
+            return x0, None, transitions, times     # not one switch at a global time: no switch
+        switch = windows[-1][1] if windows else self._latest_abort(witness.mode)
+        return x0, switch, transitions, times
+
+    def _switching_signal(self, signal, transitions, times):
+        """The counterexample's input signal (``signal``: the inputs held constant, or None
+        without time-varying inputs) on the replay grid, asking for a switch where the path
+        takes a may-transition (no urgency, no window): at the first grid instant at or after
+        its jump time (time 0 itself included). The replay then takes those transitions when the witness does
+        (:meth:`reach.model.simulate.Simulator.run`, ``switch``), not only where an invariant
+        forces them, as an early switch over a wide guard needs. None if the path takes no
+        may-transition (the first replay already followed it)."""
+        may = [t for name, t in zip(transitions, times) if name in self._may]
+        if not may:
+            return None
+        step = self._replay_step()
+        starts = sorted({max(0, int(np.ceil(t / step - 1e-9))) for t in may})
+        pieces = starts[-1] + 2                    # the last piece asks for no switch
+        if pieces > MAX_SIGNAL_PIECES:
+            return None
+        switch = np.zeros(pieces, dtype=int)
+        switch[starts] = 1
+        values = signal["values"][0] if signal is not None else []
+        return {"step": step, "inputs": [u.name for u in self.model.varying_inputs],
+                "values": [values] * pieces, "switch": switch.tolist()}
 
     def _inside_initial(self, x0):
         """``x0`` moved into a polytopic initial set, which the LP's point may miss by the

@@ -80,7 +80,9 @@ class StarOptions:
         (a may-transition over a wide guard, taken again and again): explored one by one, each
         would start a path of its own, a fan-out that multiplies at every pass round the cycle.
         A transition that leaves the cycle for good (an abort) keeps its successors exact: its
-        fan-out does not multiply. None: no such rule.
+        fan-out does not multiply. A constant flow without time-varying inputs needs no such
+        rule: its consecutive cells are one exact cell with one successor per transition.
+        None: no such rule.
     aggregate_drift_coefficients: out of a mode whose flow is constant, successors are
         aggregated likewise once the chain's star holds more than this many coefficients (on a
         model with a clock too). Each visit adds one coefficient to such a star, so a path of
@@ -220,8 +222,6 @@ def clockless_retry(model, options: dict | None, opt: StarOptions) -> StarOption
     return replace(opt, aggregate_after=0, rebase_generators=generators or opt.rebase_generators)
 
 
-#: UNKNOWN reasons that a finer step may remove (:func:`finer_retry`), as the explorer words them
-IMPRECISE = ("still meet an unsafe piece", "jumps within one time step", "LP budget", "star budget")
 #: finer passes at most, each at a tenth of the step before; their time budget together is
 #: FINER_FACTOR times the first pass's, at least FINER_SECONDS and at most FINER_MAX_SECONDS
 FINER_PASSES, FINER_FACTOR, FINER_SECONDS, FINER_MAX_SECONDS = 2, 4.0, 30.0, 120.0
@@ -229,7 +229,9 @@ FINER_PASSES, FINER_FACTOR, FINER_SECONDS, FINER_MAX_SECONDS = 2, 4.0, 30.0, 120
 
 def finer_retry(result, opt: StarOptions, horizon: float, budget: float) -> StarOptions | None:
     """The options of a next pass with the step divided by 10, after a pass (its ``result``)
-    that ended UNKNOWN for a reason in :data:`IMPRECISE`, with ``budget`` seconds left; None
+    that ended UNKNOWN for want of precision (``details.finer_step_may_decide``: cells that
+    refinement cannot clear, jumps piling up within one step, the LP or star budget spent),
+    with ``budget`` seconds left; None
     where none applies (option ``finer_retry`` off, another outcome, too many cells, no time
     left). The default step (horizon / 60, or a cfg's sampling time) knows nothing of the
     model's own time scales: a sawtooth of period 1 over a horizon of 400, a ball bouncing
@@ -238,9 +240,8 @@ def finer_retry(result, opt: StarOptions, horizon: float, budget: float) -> Star
     undecided still ends in bounded time."""
     from reach.result import Status
 
-    reason = result.details.get("reason", "")
     if not opt.finer_retry or result.status is not Status.UNKNOWN or "step" not in result.details \
-            or not any(k in reason for k in IMPRECISE) or budget <= 0:
+            or not result.details.get("finer_step_may_decide") or budget <= 0:
         return None
     step = result.details["step"] / 10
     if horizon / step > MAX_CELLS:
