@@ -28,29 +28,41 @@ def run_unit(model_path: str, property_path: str, backend: str, options: dict) -
                  "details": {"error": str(exc)}}]
 
 
-def plot_models(instances, folder: Path, stream) -> list[str]:
+def plot_models(instances, folder: Path, stream, executor) -> list[str]:
     """Sample runs of every model of the suite, coloured by mode, with the requirements of the
-    property files it is checked against (one PNG per model)."""
+    property files it is checked against (one PNG per model), drawn by ``executor``'s
+    workers with a progress line per model."""
+    files: dict[str, list[str]] = {}
+    for inst in instances:
+        files.setdefault(str(inst.model), []).append(str(inst.properties))
+    args = [(path, sorted(set(files[path])), str(folder)) for path in sorted(files)]
+    if args:
+        print(f"  drawing sample runs of {len(args)} models in {folder}", file=stream, flush=True)
+    written = []
+    for done, (i, (state, value)) in enumerate(executor.map_unordered(plot_unit, args), start=1):
+        if state == "ok" and value.endswith(".png"):
+            written.append(value)
+            print(f"  [{done:>3}/{len(args)}] {Path(value).name}", file=stream, flush=True)
+        else:
+            print(f"  [{done:>3}/{len(args)}] no plot for {args[i][0]}: {value or state}", file=stream, flush=True)
+    return sorted(written)
+
+
+def plot_unit(model_path: str, property_paths: list[str], folder: str) -> str:
+    """One model's sample-run plot: the PNG's path, or why there is none."""
     from reach.bench.plots import plot_model_runs
     from reach.model import load_model
     from reach.spec import bind, load_properties
 
-    files: dict[str, list[str]] = {}
-    for inst in instances:
-        files.setdefault(str(inst.model), []).append(str(inst.properties))
-    written = []
-    for path in sorted(files):
-        try:
-            model = load_model(path)
-            bound = [bind(p, model) for f in sorted(set(files[path])) if f.endswith((".yaml", ".yml"))
-                     for p in load_properties(f)]
-        except InputError as exc:
-            print(f"  no plot for {path}: {exc}", file=stream)
-            continue
-        target = folder / f"{model.name}_runs.png"
-        plot_model_runs(model, target, runs=12, bound_props=bound)
-        written.append(str(target))
-    return written
+    try:
+        model = load_model(model_path)
+        bound = [bind(p, model) for f in property_paths if f.endswith((".yaml", ".yml"))
+                 for p in load_properties(f)]
+    except InputError as exc:
+        return str(exc)
+    target = Path(folder) / f"{model.name}_runs.png"
+    plot_model_runs(model, target, runs=12, bound_props=bound)
+    return str(target)
 
 
 def plot_subdomains(rows, folder: Path) -> list[str]:
@@ -180,7 +192,7 @@ def run_suite(suite_path, backends=None, instances=None, out="results", jobs=Non
         "backends": [b for b in suite.backends if any(r.get("backend") == b for r in rows)],
         "runs": runs, "rows": rows, "cross_checks": checks,
     }
-    report["plots"] = plot_models(chosen, out / "plots", stream) + plot_subdomains(
+    report["plots"] = plot_models(chosen, out / "plots", stream, executor) + plot_subdomains(
         [r for r in rows if r.get("run") == run_id], out / "plots")
     (out / "results.json").write_text(json.dumps(report, indent=1))
     (out / "results.md").write_text(markdown_table(report, out))
