@@ -386,3 +386,44 @@ def test_an_initial_set_the_automaton_cannot_start_in_is_named_at_the_cfg_line(t
                                       f'time-horizon = 5\n')
     line = bad_input(check(xml, cfg), capsys)
     assert line.startswith(f"reach: {cfg}:2: {message}"), line
+
+
+# ------------------------------------------------------------------ constants the cfg gives
+CLOCKED = '''<component id="ramp">
+ <param name="x" type="real" local="false" dynamics="any"/>
+ <param name="t" type="real" local="false" dynamics="any"/>
+ <param name="tmax" type="real" local="false" dynamics="const"/>
+ <location id="1" name="go"><invariant>t &lt;= tmax</invariant><flow>x' == 1 &amp; t' == 1</flow></location>
+</component>
+'''
+
+
+@pytest.mark.parametrize("tmax,code", [("tmax == 5", 0), ("tmax == 7", 1), ("tmax >= 4 & tmax <= 7", 1),
+                                       ("tmax >= 4 & tmax <= 5.9", 0)])
+def test_a_constant_valued_in_initially_bounds_the_runs(tmp_path, capsys, tmax, code):
+    """The SpaceEx idiom of a ``const`` param bound to no number and given its value (or range)
+    in the cfg: ``x = t <= tmax``, so ``x >= 6`` is reached exactly when some ``tmax`` exceeds 6."""
+    xml, cfg = write(tmp_path, CLOCKED, f'system = ramp\ninitially = "x == 0 & t == 0 & {tmax}"\n'
+                                        'forbidden = "x >= 6"\ntime-horizon = 10\n')
+    assert main(["check", str(xml), str(cfg), "-b", "star"]) == code
+    model, _, _ = load_spaceex(xml, cfg)
+    assert "tmax" in model.state and model.is_linear
+
+
+def test_a_constant_without_a_value_anywhere_is_bad_input_saying_where_to_give_one(tmp_path, capsys):
+    xml, cfg = write(tmp_path, CLOCKED, 'system = ramp\ninitially = "x == 0 & t == 0"\n'
+                                        'forbidden = "x >= 6"\ntime-horizon = 10\n')
+    assert main(["check", str(xml), str(cfg), "-b", "star"]) == 2
+    assert "constant 'tmax' has no value" in capsys.readouterr().err
+
+
+def test_a_system_without_continuous_variables_is_bad_input(tmp_path, capsys):
+    body = '''<component id="sw">
+ <location id="1" name="a"/><location id="2" name="b"/>
+ <transition source="1" target="2"/>
+</component>
+'''
+    xml, cfg = write(tmp_path, body, 'system = sw\ninitially = "loc(sw) == a"\nforbidden = "loc(sw) == b"\n'
+                                     'time-horizon = 1\n')
+    assert main(["check", str(xml), str(cfg), "-b", "star"]) == 2
+    assert "no continuous variable" in capsys.readouterr().err

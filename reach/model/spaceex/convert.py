@@ -9,7 +9,9 @@ Variables. A real with a flow in some location is a state. A real with no flow a
 * otherwise bad input (an unbounded input).
 A state with flow 0 in every location that no transition assigns, the cfg's initial set does not
 mention, and the invariants only bound by the same interval everywhere, is a constant bounded
-input (Building BLDC01's ``u1' == 0``). Constants bound to numbers are substituted.
+input (Building BLDC01's ``u1' == 0``). Constants bound to numbers are substituted. A constant
+bound to no number whose value (or range) the cfg's ``initially`` gives (``tmax == 20``, a common
+SpaceEx idiom) is a state with flow 0 in every location.
 
 Initial set (SpaceEx semantics): the cfg's ``initially`` intersected with the invariant of the
 initial location; without ``loc()`` the initial locations are the location combinations whose
@@ -383,6 +385,14 @@ class DocumentBuilder(Converter):
                                      self.file, line=line)
                 for n in names_in(tokens):
                     used_where.setdefault(n, set()).add(tr.source)
+        for var in sorted(set(used_where) - states):
+            if self.flat.globals.get(var) == "const" and var in cfg_names:
+                # a constant the cfg's initially gives its value (or range): flow 0 everywhere
+                line = self._line_of(var)
+                for key in self.flat.locations:
+                    if key not in self.timeless:
+                        self.flows[key][var] = ([Token("num", "0")], line)
+                states.add(var)
         self.aliases: dict[tuple, dict[str, list]] = {key: {} for key in self.flat.locations}
         self.inputs: dict[str, tuple[float, float, bool]] = {}
         self.dropped: dict[tuple, set[int]] = {key: set() for key in self.flat.locations}
@@ -412,7 +422,8 @@ class DocumentBuilder(Converter):
     def _classify_free(self, var: str, where: set):
         line = None
         if self.flat.globals.get(var) == "const":
-            raise InputError(f"the constant '{var}' has no value (map it to a number in a bind)",
+            raise InputError(f"the constant '{var}' has no value (map it to a number in a bind, or give "
+                             "it one in the cfg's initially)",
                              self.file, line=self._line_of(var))
         aliased = {}
         bounds = {}
@@ -543,6 +554,9 @@ class DocumentBuilder(Converter):
         self.read_locations()
         cfg_names = {g for r in cfg_rel for p in r.parts for n in names_in(p) for g in self.lookup(n)}
         self.classify(cfg_names)
+        if not self.states:
+            raise self.flat.error("the system has no continuous variable (a variable with a flow): a purely "
+                                  "discrete automaton is not supported")
         self.check_size()
         self.yaml = yaml_names(self.states + list(self.inputs))
         modes = Identifiers()
