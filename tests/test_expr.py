@@ -31,6 +31,18 @@ def test_units_convert_to_model_base_units():
     assert float(parse_expr("3.986e14[m**3/s**2]", {}, W, minutes)) == pytest.approx(3.986e14 * 3600)
 
 
+def test_a_long_linear_form_is_no_deep_nesting():
+    """A sum of 300 terms (an output row of a large model) is a chain, not nesting; each
+    coefficient lands where it belongs. Parentheses nested beyond the limit are still refused."""
+    names = {f"x{i}": sympy.Symbol(f"x{i}", real=True) for i in range(300)}
+    text = " ".join(f"{'-' if i % 3 else '+'} {i + 0.5}*x{i}" for i in range(300))
+    e = parse_expr(text, names, W)
+    for i in (0, 1, 2, 299):
+        assert float(e.coeff(names[f"x{i}"])) == (-1 if i % 3 else 1) * (i + 0.5)
+    with pytest.raises(InputError, match="nested too deeply"):
+        parse_expr("(" * 80 + "x" + ")*2" * 80, NAMES, W)
+
+
 @pytest.mark.parametrize("caret, power", [
     ("x^2", "x**2"), ("-x^2 + y", "-x**2 + y"), ("k*x^3/y^2", "k*x**3/y**2"), ("2^-1*x", "2**-1*x")])
 def test_caret_is_the_power(caret, power):

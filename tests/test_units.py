@@ -81,6 +81,13 @@ def test_a_bracket_is_compatible_iff_the_exponents_agree(a, b):
         assert f"2[{ub}] compared with q [" in str(err.value)
 
 
+def test_every_term_of_a_long_sum_is_checked():
+    """A sum is read term by term (no nesting limit): the last of 200 terms still meets the rest."""
+    assert float(parse_expr(" + ".join(["1[km]"] * 200), {}, W, MINUTES, _context({}))) == pytest.approx(2e5)
+    with pytest.raises(InputError, match="added to"):
+        parse_expr(" + ".join(["1[m]"] * 200 + ["1[s]"]), {}, W, MINUTES, _context({}))
+
+
 @settings(max_examples=150, deadline=None)
 @given(unit_expressions(), unit_expressions())
 def test_a_sum_of_brackets_needs_one_dimension_and_converts_both(a, b):

@@ -208,12 +208,10 @@ class _Parser:
         self.fail(f"unsupported syntax '{type(node).__name__}'")
 
     def binary(self, node: ast.BinOp, depth: int):
-        (left, lf), (right, rf) = self.expr(node.left, depth + 1), self.expr(node.right, depth + 1)
         op = _BINARY[type(node.op)]
-        if op == "+":
-            return left + right, self.meet(node.left, lf, node.right, rf, "added to")
-        if op == "-":
-            return left - right, self.meet(node.left, lf, node.right, rf, "subtracted from")
+        if op in ("+", "-"):
+            return self.sum(node, depth)
+        (left, lf), (right, rf) = self.expr(node.left, depth + 1), self.expr(node.right, depth + 1)
         if op == "*":
             return left * right, (rf if lf is None else lf if rf is None else lf.plus(rf))
         if op == "/":
@@ -232,6 +230,22 @@ class _Parser:
             k = _fraction(right) if right.is_number else None
             form = lf.times(k) if k is not None else self.pure(node.left, lf, "the base of a power with a non-rational exponent")
         return left ** right, form
+
+    def sum(self, node: ast.BinOp, depth: int):
+        """A chain ``a + b - c + ...`` (nested to the left in the syntax tree) read term by term:
+        its length is no nesting (a linear form of 270 terms, as in the ISS model)."""
+        chain = []
+        while isinstance(node, ast.BinOp) and _BINARY.get(type(node.op)) in ("+", "-"):
+            chain.append(node)
+            node = node.left
+        first, form = self.expr(node, depth + 1)
+        terms = [first]
+        for link in reversed(chain):
+            term, tf = self.expr(link.right, depth + 1)
+            plus = _BINARY[type(link.op)] == "+"
+            form = self.meet(link.left, form, link.right, tf, "added to" if plus else "subtracted from")
+            terms.append(term if plus else -term)
+        return sympy.Add(*terms), form
 
     def call(self, node: ast.Call, depth: int):
         if not isinstance(node.func, ast.Name):
