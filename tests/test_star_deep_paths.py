@@ -124,3 +124,37 @@ def test_a_time_budget_ends_a_long_chain_in_unknown(tmp_path):
     result = BACKEND.check(model, props["at_most"], {"step": 1e-3, "max_seconds": 0.2, "finer_retry": False})
     assert result.status is Status.UNKNOWN
     assert "time budget of 0.2 s exhausted" in result.details["reason"]
+
+
+OSCILLATOR = """
+name: spring
+state: [x, v]
+modes:
+  free: {flow: {x: "v", v: "-x"}}
+initial: {mode: free, box: {x: [0.9, 1.1], v: [0, 0]}}
+horizon: 10
+"""
+
+
+@pytest.mark.parametrize("bound,status", [(1.1 + 1e-6, Status.SAFE), (-1.1 - 1e-6, Status.SAFE),
+                                          (1.09, Status.UNSAFE), (-1.09, Status.UNSAFE)])
+def test_a_chain_too_long_to_hold_is_explored_in_blocks_with_the_same_verdicts(tmp_path, monkeypatch, bound,
+                                                                                status):
+    """``x = x0 cos t``: its extremes are ``+-1.1`` (at ``t = 0, pi, 2 pi, 3 pi``). With room for
+    only 13 grid stars at a time, the chain of 600 cells runs in blocks, each from the last grid
+    star of the one before, and proves and refutes the same bounds."""
+    import reach.backends.star.explorer as explorer
+    (tmp_path / "m.yaml").write_text(OSCILLATOR)
+    require = f"x <= {bound}" if bound > 0 else f"x >= {bound}"
+    (tmp_path / "p.yaml").write_text(f"properties:\n  - {{id: b, kind: safety, require: ['{require}']}}\n")
+    model = load_model(tmp_path / "m.yaml")
+    prop = bind(load_properties(tmp_path / "p.yaml")[0], model)
+    options = {"step": 10 / 600, "finer_retry": False}
+    whole = BACKEND.check(model, prop, options)
+    monkeypatch.setattr(explorer, "MAX_CHAIN_BYTES", 8 * 3 * 3 * 4 * 14)    # n = 3 (clock), m = 3
+    blocks = BACKEND.check(model, prop, options)
+    assert whole.status is status and blocks.status is status, (whole.details.get("reason"),
+                                                                 blocks.details.get("reason"))
+    if status is Status.SAFE:                    # (a violation is found in the first block)
+        assert "explored in blocks" in blocks.details["semantics"]
+        assert "explored in blocks" not in whole.details["semantics"]

@@ -160,3 +160,39 @@ def test_a_jump_taken_at_the_horizon_is_not_lost_to_rounding(tmp_path, step):
     prop = bind(load_properties(tmp_path / "p.yaml")[0], model)
     result = BACKEND.check(model, prop, {"step": step, "finer_retry": False})
     assert result.status is not Status.SAFE, result.details
+
+
+EARLY_GUARD = """
+name: early_guard
+state: [x, y, c, t]
+modes:
+  A: {flow: {x: "-x + 2", y: "0", c: "0", t: "1"}}
+  B: {flow: {x: "0", y: "1e7", c: "0", t: "1"}}
+transitions:
+  - {from: A, to: B, guard: ["x >= 1"]}
+initial: {mode: A, box: {x: [0, 0], y: [0, 0], c: [1e9, 1e9], t: [0, 0]}}
+horizon: 1
+"""
+
+
+def test_a_replayed_switch_waits_for_its_guard_to_hold_exactly(tmp_path):
+    """``x = 2 (1 - e^{-t})`` meets the guard ``x >= 1`` at ``t = ln 2``, so ``y`` reaches at
+    most ``1e7 (1 - ln 2) = 3068528.19`` in ``B``. A coarse cell's witness asks the replay to
+    switch at a grid instant before ``ln 2``; a guard tested with a tolerance relative to the
+    state's size (``c = 1e9``) let it jump at ``x = 0.9969`` and answered UNSAFE with a run
+    that is none of the model's."""
+    from reach.model import load_model
+    from reach.spec import bind, load_properties
+    (tmp_path / "m.yaml").write_text(EARLY_GUARD)
+    (tmp_path / "p.yaml").write_text("properties:\n  - {id: top, kind: safety, modes: [B], "
+                                     "require: ['y <= 3068530.2']}\n")
+    model = load_model(tmp_path / "m.yaml")
+    prop = bind(load_properties(tmp_path / "p.yaml")[0], model)
+    assert 1e7 * (1 - np.log(2)) < 3068530.2
+    result = BACKEND.check(model, prop, {"step": 0.25})
+    assert result.status is Status.SAFE, result.details.get("reason")
+    early = np.zeros(2400, dtype=int)
+    early[1663] = 1                          # t = 0.69292 < ln 2 = 0.693147 on the grid of 1/2400
+    run = replay(model, prop, [0.0, 0.0, 1e9, 0.0], None, 1 / 2400,
+                 {"step": 1 / 2400, "inputs": [], "values": [[]] * 2400, "switch": early.tolist()})
+    assert not run.violated

@@ -651,12 +651,15 @@ class Simulator:
 
     def _take_may(self, rows: np.ndarray, runs: _Runs) -> None:
         """Each run of ``rows`` (at a piece start) takes an enabled may-transition with a
-        general guard, if it has one, and then what it must take at once."""
+        general guard, if it has one, and then what it must take at once. The guard must hold
+        exactly (no tolerance): a switch asked for at an instant is no event that located the
+        guard, and a tolerance relative to the state's size would let a run jump where the
+        guard has not yet been met."""
         for m_index in np.unique(runs.mode[rows]):
             name = self.mode_names[m_index]
             sel = rows[runs.mode[rows] == m_index]
             if self.exits[name] and sel.size:
-                _, enabled = self._enabled(self.exits[name], runs.X[sel])
+                _, enabled = self._enabled(self.exits[name], runs.X[sel], tolerance=0.0)
                 self._urgent_now(self._jump(sel, self.exits[name], enabled, runs), runs, m_index)
 
     def _event(self, rows: np.ndarray, Xe: np.ndarray, times: np.ndarray, options: list,

@@ -435,6 +435,9 @@ def _run_details(explorer: _Explorer) -> dict:
         soundness += (f"; {s.rebased} chain blocks restarted the input effect from the previous block's "
                       f"end star (grid star plus R, cut by the invariant), which holds every run still "
                       f"in the mode")
+    if s.memory_blocks:
+        soundness += (f"; chains too long to hold at once explored in blocks ({s.memory_blocks} block ends), "
+                      f"each from the grid star ending the block before, cut by the invariant")
     if s.aggregated:
         soundness += (f"; {s.aggregated} aggregates: interval hulls of the successor stars they "
                       f"replace ({s.deaggregated} refined back into their members)")

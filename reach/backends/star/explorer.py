@@ -112,6 +112,7 @@ class _Stats:
     members: int = 0                # successor stars they stand for
     deaggregated: int = 0           # aggregates refined back into their members
     rebased: int = 0                # block ends of chains with inputs (see _rebase_cells)
+    memory_blocks: int = 0          # block ends of chains too long to hold (_cells_in_memory)
     instants: int = 0               # jumps taken at one instant (see _at_instant)
 
 
@@ -241,24 +242,50 @@ class _Explorer:
             self.linearise.chain(self, mode, star, path, guess, direction)
             return
         cells = self._rebase_cells(mode)
-        if cells is None:
+        fit = self._cells_in_memory(mode, star)
+        if cells is None and fit is None:
             self._flow_chain(mode, star, path, guess, direction)
             return
         pending: dict[int, list] = {}
         inherited = None
         while star is not None:
-            handed = self._flow_chain(mode, star, path, guess, direction, cells, pending, inherited)
+            block = min(c for c in (cells, fit) if c is not None) if (cells or fit) else None
+            handed = self._flow_chain(mode, star, path, guess, direction, block, pending, inherited)
             if handed is None:
                 break
             star, guess, inherited = handed
             star = _tightened(star, len(self.invariants[mode][1])) or star
             direction = None
-            self.stats.rebased += 1
+            if cells is None:
+                self.stats.memory_blocks += 1
+            else:
+                self.stats.rebased += 1
             if self.covered is not None and self.covered.covers(mode, star, self._lp_count):
                 break
             if 4 * star.nvars > self.opt.max_coefficients:     # the rest of the chain in one piece,
                 cells = None                                   # its segments still within the limit
+            fit = self._cells_in_memory(mode, star)
         self._aggregate_pending(mode, pending)
+
+    def _cells_in_memory(self, mode: str, star: Star) -> int | None:
+        """Cells per block of a chain too long to hold at once, or None where it fits.
+
+        A chain keeps the centre and basis of each of its grid stars, ``(count + 1) n (m + 1)``
+        numbers (three such arrays while they are built); a large model over many steps
+        (ISS: 270 states and coefficients, 2000 steps, 3.6 GB) exceeds
+        :data:`.options.MAX_CHAIN_BYTES`. Without inputs, it is then explored in blocks of cells
+        that fit, each starting from the grid star that ends the block before (cut by the
+        invariant): the same stars, with the same coefficients, as one chain's
+        (:meth:`_chain`), and the rounding carried from block to block
+        (:meth:`_cancellation_guard`)."""
+        flow = self.flows[mode]
+        if flow.inputs or self.opt.discrete_time or mode in self.data.timeless:
+            return None
+        count = max(1, int(np.ceil((self.horizon - self._earliest(star)) / self.h - 1e-9)))
+        per_cell = 8 * 3 * self.n * (star.nvars + 1)
+        if (count + 1) * per_cell <= MAX_CHAIN_BYTES:
+            return None
+        return max(1, MAX_CHAIN_BYTES // per_cell - 1)
 
     def _aggregate_pending(self, mode: str, pending: dict[int, list] | None):
         """Aggregate the successors a chain in ``mode`` collected, per transition."""
