@@ -78,6 +78,21 @@ def test_required_constraint_margin_contains_the_closed_form_and_proves_safe(tmp
     assert c.initial_state[0] > 1.05
 
 
+def test_a_point_initial_state_is_a_flow_expansion_in_no_variable(tmp_path):
+    """From the single state ``x0 = 1, v0 = 0`` (no uncertain variable to expand in) the
+    spring's ``x = cos t`` stays within ``[-1, 1]``: ``x <= 1.05`` is proved, ``x <= 0.9`` fails
+    at ``t = 0``."""
+    model, props = _files(tmp_path, SPRING.replace("x: [0.9, 1.1]", "x: 1"), """
+        properties:
+          - {id: low, kind: safety, require: ["x <= 1.05"]}
+          - {id: high, kind: safety, require: ["x <= 0.9"]}
+    """)
+    assert BACKEND.check(model, props["low"], RIGOROUS).status is Status.SAFE
+    unsafe = BACKEND.check(model, props["high"], RIGOROUS)
+    assert unsafe.status is Status.UNSAFE
+    assert replay(model, props["high"], unsafe.counterexample.initial_state, None).violated
+
+
 def test_constraint_implied_by_the_mode_invariant_is_not_bounded(tmp_path):
     srna = load_model("models/SRNA01.yaml")
     los = {p.id: bind(p, srna) for p in load_properties("properties/rendezvous.yaml")}["los"]

@@ -42,7 +42,7 @@ def extrapolate(S: np.ndarray) -> float:
 
 def truncation_estimate(poly: DA) -> tuple[float, int]:
     """Largest estimated truncation error over the components of ``poly`` and the variable to
-    split (the one with the largest per-variable extrapolation)."""
+    split (the one with the largest per-variable extrapolation; -1 for a point, no variable)."""
     comps = poly.c.reshape(-1, poly.alg.size)
     total, per_var = 0.0, np.zeros(poly.alg.nvars)
     for row in comps:
@@ -50,7 +50,7 @@ def truncation_estimate(poly: DA) -> tuple[float, int]:
         total = max(total, extrapolate(p.order_norms()))
         for j in range(poly.alg.nvars):
             per_var[j] = max(per_var[j], extrapolate(p.variable_norms(j)))
-    return total, int(np.argmax(per_var))
+    return total, int(np.argmax(per_var)) if per_var.size else -1
 
 
 @dataclass
@@ -91,7 +91,7 @@ def split_domain(expand, low, high, e_tol: float, max_splits: int, measure=None,
         deeper = []
         for (lo, hi, depth), result in zip(frontier, results):
             error, var = truncation_estimate(measure(result))
-            if error > e_tol and depth < max_splits:
+            if error > e_tol and depth < max_splits and var >= 0:
                 mid = 0.5 * (lo[var] + hi[var])
                 left_hi, right_lo = hi.copy(), lo.copy()
                 left_hi[var], right_lo[var] = mid, mid

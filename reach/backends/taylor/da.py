@@ -47,7 +47,7 @@ class Algebra:
                 e = np.zeros(nvars, dtype=int)
                 np.add.at(e, list(combo), 1)
                 exps.append(e)
-        self.exps = np.array(exps, dtype=int).reshape(-1, nvars)
+        self.exps = np.array(exps, dtype=int).reshape(len(exps), nvars)     # (a point: one monomial, 1)
         self.size = len(self.exps)
         self.degree = self.exps.sum(axis=1)
         # first[k]: index of the first monomial of total degree k (monomials are graded; k <= order + 1)
