@@ -173,6 +173,16 @@ def test_random_polytopes_extreme_points_attain_the_support(seed):
     assert S.contains(pulled).all()
 
 
+def test_a_polytope_of_one_point_is_sampled_and_pulled_onto_that_point():
+    """Equalities that fix every coordinate (a SpaceEx ``initially`` of ``x == a`` terms, with
+    an inequality the point meets): every sample, vertex and pulled point is that point."""
+    E, f = np.eye(2), np.array([0.25, 0.4])
+    S = PolytopeSampler(LinearSet(np.array([[1.0, 1.0]]), np.array([1.0]), E, f), np.zeros(2), np.ones(2))
+    rng = np.random.default_rng(0)
+    for X in (S.to_x(S.vertices), S.structured(), S.uniform(5, rng), S.pull_inside(rng.normal(size=(5, 2)))):
+        assert np.allclose(X, f) and S.contains(X).all()
+
+
 def test_montecarlo_samples_the_polytope_not_its_box(tmp_path):
     path = model_file(tmp_path, TRIANGLE)
     props = model_file(tmp_path, """

@@ -138,8 +138,8 @@ class PolytopeSampler:
         slack = self.h[None, :] - Z @ self.G.T          # >= 0
         with np.errstate(divide="ignore", invalid="ignore"):
             ratio = slack / Gu
-        t_hi = np.min(np.where(Gu > TOL, ratio, np.inf), axis=1)
-        t_lo = np.max(np.where(Gu < -TOL, ratio, -np.inf), axis=1)
+        t_hi = np.min(np.where(Gu > TOL, ratio, np.inf), axis=1, initial=np.inf)
+        t_lo = np.max(np.where(Gu < -TOL, ratio, -np.inf), axis=1, initial=-np.inf)
         t_hi, t_lo = np.maximum(t_hi, 0.0), np.minimum(t_lo, 0.0)
         t = t_lo + (t_hi - t_lo) * rng.random(Z.shape[0])
         return Z + t[:, None] * u
@@ -152,7 +152,7 @@ class PolytopeSampler:
         GD = D @ self.G.T
         slack = self.h - self.G @ c
         with np.errstate(divide="ignore", invalid="ignore"):
-            lam = np.min(np.where(GD > TOL, slack[None, :] / GD, np.inf), axis=1)
+            lam = np.min(np.where(GD > TOL, slack[None, :] / GD, np.inf), axis=1, initial=np.inf)
         lam = np.clip(lam, 0.0, 1.0) * (1 - 1e-12)
         return self.to_x(c + lam[:, None] * D)
 
