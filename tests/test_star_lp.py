@@ -69,6 +69,33 @@ def test_maximize_many_gives_each_support(problem):
             assert value == expected
 
 
+@settings(max_examples=15, deadline=None)
+@given(st.integers(0, 2 ** 31 - 1), st.booleans())
+def test_large_lps_are_presolved_and_agree_with_linprog(seed, empty):
+    """Beyond ``PRESOLVE_ENTRIES`` the model is presolved (set small here, the same code path):
+    the supports agree with scipy's, and an empty polyhedron is still reported empty (presolve's
+    infeasible verdict confirmed without it)."""
+    rng = np.random.default_rng(seed)
+    n, m = 6, 40
+    A = rng.normal(size=(m, n))
+    b = rng.uniform(0.1, 1.0, m) if not empty else -rng.uniform(0.1, 1.0, m)
+    if empty:                                    # x and -x both below -0.1 in one coordinate
+        A[0], A[1], b[0], b[1] = np.eye(n)[0], -np.eye(n)[0], -0.1, -0.1
+    box = (-np.ones(n), np.ones(n))
+    C = rng.normal(size=(4, n))
+    saved, lp.PRESOLVE_ENTRIES = lp.PRESOLVE_ENTRIES, 50
+    try:
+        many = lp.maximize_many(C, A, b, box)
+    finally:
+        lp.PRESOLVE_ENTRIES = saved
+    for c, value in zip(C, many):
+        ref = linprog(-c, A_ub=A, b_ub=b, bounds=list(zip(*box)), method="highs")
+        if ref.status == 2:
+            assert value == -np.inf
+        else:
+            assert ref.status == 0 and value == pytest.approx(-ref.fun, abs=1e-6)
+
+
 def test_bounds_as_pairs_and_none():
     res = lp.maximize([1.0, 1.0], [[1.0, 2.0]], [4.0], bounds=[(0, None), (0, 1)])
     assert res.optimal and res.value == 4.0
