@@ -158,3 +158,15 @@ def test_a_chain_too_long_to_hold_is_explored_in_blocks_with_the_same_verdicts(t
     if status is Status.SAFE:                    # (a violation is found in the first block)
         assert "explored in blocks" in blocks.details["semantics"]
         assert "explored in blocks" not in whole.details["semantics"]
+
+
+def test_a_long_quiet_exploration_says_once_that_it_is_still_going(tmp_path, monkeypatch, caplog):
+    import logging
+
+    import reach.backends.star.explorer as explorer
+    monkeypatch.setattr(explorer, "QUIET_HINT_SECONDS", 0.0)
+    model, props = loaded(tmp_path, 20)
+    with caplog.at_level(logging.WARNING, logger="reach"):
+        BACKEND.check(model, props["at_most"], {})
+    hints = [r.getMessage() for r in caplog.records if "still exploring" in r.getMessage()]
+    assert len(hints) == 1 and "-o max_seconds" in hints[0]

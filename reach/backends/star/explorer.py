@@ -36,6 +36,9 @@ HALF_SPREAD_CELLS = 512
 #: UNKNOWN (:meth:`_Explorer._cancellation_guard`): a thousand times the default touch tolerance
 PRECISION_LOST = 1e-6
 
+#: seconds after which an exploration run without ``-v`` says once that it is still going
+QUIET_HINT_SECONDS = 60.0
+
 #: pieces of a replay's switching signal (:meth:`_Explorer._switching_signal`), at most: as many
 #: as a counterexample's input signal may have (:func:`reach.backends.montecarlo.replay`)
 MAX_SIGNAL_PIECES = 1_000_000
@@ -145,7 +148,8 @@ class _Explorer:
         self.stall_limit = STALL_JUMPS if data.zero_dwell else np.inf
         self.aggregate_after = None if self.sweep else options.aggregate_after
         self.covered = Covered(self.clock) if time_invariant(model) and not options.keep_sets else None
-        self.last_progress = time.perf_counter()
+        self.last_progress = self.started = time.perf_counter()
+        self.hinted = False                     # the quiet run's one hint (_progress)
         self.memory_limit, self.memory_read = MEMORY_FRACTION * physical_bytes(), -np.inf
         self.memory_start = resident_bytes()    # what the process held before (earlier checks)
         self._leading: dict[str, set[str]] = {}
@@ -191,6 +195,7 @@ class _Explorer:
 
     def _lp_count(self, count: int):
         self._interrupted()
+        self._progress()
         self.stats.lps += count
         if self.stats.lps > self.opt.max_lps:
             raise _Stop(Status.UNKNOWN, f"LP budget of {self.opt.max_lps} exhausted", imprecise=True)
@@ -613,7 +618,14 @@ class _Explorer:
                                         f"(coarser step, fewer coefficients or sooner aggregation)")
 
     def _progress(self):
+        """Progress under ``-v`` every :data:`.options.PROGRESS_SECONDS`; without it, one
+        line after :data:`QUIET_HINT_SECONDS`, so a long exploration does not look like a hang."""
         now = time.perf_counter()
+        if not self.hinted and now - self.started >= QUIET_HINT_SECONDS and not LOG.isEnabledFor(logging.INFO):
+            self.hinted = True
+            LOG.warning("star: still exploring after %.0f s (time %.6g of %.6g reached, %d stars); -v shows "
+                        "progress, -o max_seconds=S bounds the time", now - self.started, self.stats.reached,
+                        self.horizon, self.stats.chains)
         if now - self.last_progress >= PROGRESS_SECONDS:
             self.last_progress = now
             s = self.stats
