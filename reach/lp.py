@@ -235,8 +235,8 @@ def maximize_many(C, A_ub, b_ub, bounds) -> np.ndarray:
         return np.full(C.shape[0], 0.0 if np.all(b_ub >= 0) else -np.inf)
     A_ub, _, b_ub = _scaled_rows(np.asarray(A_ub, dtype=float).reshape(b_ub.size, n),
                                  np.full(b_ub.shape, -np.inf), b_ub)
-    small = A_ub.size <= PRESOLVE_ENTRIES
-    solver = _model(n, bounds, A_ub, b_ub, options={"presolve": "off"} if small else {})
+    presolve = A_ub.size > PRESOLVE_ENTRIES
+    solver = _model(n, bounds, A_ub, b_ub, options={} if presolve else {"presolve": "off"})
     solver.changeObjectiveSense(highspy.ObjSense.kMaximize)
     index = np.arange(n, dtype=np.int32)
     values = np.empty(C.shape[0])
@@ -259,10 +259,10 @@ def maximize_many(C, A_ub, b_ub, bounds) -> np.ndarray:
             solver.clearSolver()
             fresh = True
             continue
-        elif s == status.kInfeasible and not small:     # presolve's infeasible: confirmed without it
+        elif s == status.kInfeasible and presolve:      # presolve's infeasible: confirmed without it
             solver.setOptionValue("presolve", "off")
             solver.clearSolver()
-            small = True
+            presolve = False
             continue
         elif s == status.kInfeasible:
             return np.full(C.shape[0], -np.inf)

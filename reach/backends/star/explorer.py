@@ -287,10 +287,14 @@ class _Explorer:
         if flow.inputs or self.opt.discrete_time or mode in self.data.timeless:
             return None
         count = max(1, int(np.ceil((self.horizon - self._earliest(star)) / self.h - 1e-9)))
-        per_cell = 8 * 3 * self.n * (star.nvars + 1)
-        if (count + 1) * per_cell <= MAX_CHAIN_BYTES:
+        if (count + 1) * self._grid_bytes(star.nvars) <= MAX_CHAIN_BYTES:
             return None
-        return max(1, MAX_CHAIN_BYTES // per_cell - 1)
+        return max(1, MAX_CHAIN_BYTES // self._grid_bytes(star.nvars) - 1)
+
+    def _grid_bytes(self, nvars: int) -> int:
+        """Bytes a chain holds per grid star of ``nvars`` coefficients while it is built:
+        three arrays of centre and basis, ``n (nvars + 1)`` numbers each."""
+        return 8 * 3 * self.n * (nvars + 1)
 
     def _aggregate_pending(self, mode: str, pending: dict[int, list] | None):
         """Aggregate the successors a chain in ``mode`` collected, per transition."""
@@ -367,7 +371,7 @@ class _Explorer:
         nvars = star.nvars + (ChainInputs.generators(flow, count, input_cells) if flow.inputs else 0)
         segment_vars = nvars if flow.drift else 2 * nvars + 1 + self.n
         if segment_vars > self.opt.max_coefficients or \
-                8 * 3 * (count + 1) * self.n * (nvars + 1) > MAX_CHAIN_BYTES:
+                (count + 1) * self._grid_bytes(nvars) > MAX_CHAIN_BYTES:
             raise _Stop(Status.UNKNOWN, f"a segment in mode '{mode}' needs {segment_vars} coefficients "
                                         f"over {count} steps (limits: option max_coefficients = "
                                         f"{self.opt.max_coefficients}, {MAX_CHAIN_BYTES >> 20} MiB per "
@@ -1099,10 +1103,10 @@ class _Explorer:
         """The counterexample's input signal (``signal``: the inputs held constant, or None
         without time-varying inputs) on the replay grid, asking for a switch where the path
         takes a may-transition (no urgency, no window): at the first grid instant at or after
-        its jump time (time 0 itself included). The replay then takes those transitions when the witness does
-        (:meth:`reach.model.simulate.Simulator.run`, ``switch``), not only where an invariant
-        forces them, as an early switch over a wide guard needs. None if the path takes no
-        may-transition (the first replay already followed it)."""
+        its jump time (time 0 itself included). The replay then takes those transitions when
+        the witness does (:meth:`reach.model.simulate.Simulator.run`, ``switch``), not only
+        where an invariant forces them, as an early switch over a wide guard needs. None if the
+        path takes no may-transition (the first replay already followed it)."""
         may = [t for name, t in zip(transitions, times) if name in self._may]
         if not may:
             return None
