@@ -1,12 +1,12 @@
-"""The fixpoint check of clockless automata (reach.backends.star.fixpoint): an aggregate inside an
-earlier one is not explored; what is skipped is covered, and the verdicts stay sound against
+"""The fixpoint check (reach.backends.star.fixpoint): an aggregate inside an earlier one (of a
+clockless automaton: up to a shift in time) is not explored; what is skipped is covered, and the verdicts stay sound against
 an independent reference (scipy's solve_ivp with events)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 
@@ -27,6 +27,7 @@ def _star(spec, row, rhs):
 
 @settings(max_examples=200, deadline=None)
 @given(boxes, boxes, st.floats(-3, 3), st.floats(-3, 3), st.floats(-4, 4), st.floats(-4, 4))
+@example([(0.0, 0.0), (0.0, 1.0), (0.0, 0.0)], [(0.0, 0.0), (1.77e-13, 0.0), (0.0, 0.0)], 0.0, 1.0, -1.0, 0.0)
 def test_a_covered_aggregate_lies_in_the_earlier_one(old, new, a, b, g_old, g_new):
     """Whenever ``covers`` says yes, every sampled state of the new aggregate (coordinate 2 is
     the clock) is in the recorded one: inside its box and its row, and it started no later."""
@@ -41,10 +42,49 @@ def test_a_covered_aggregate_lies_in_the_earlier_one(old, new, a, b, g_old, g_ne
     assert box.low[2] >= entry.low[2]
     rng = np.random.default_rng(0)
     alphas = rng.uniform(later.box.low, later.box.high, size=(400, later.nvars))
-    inside = np.all(alphas @ later.predicate.A.T <= later.predicate.b + 1e-12, axis=1)
+    inside = np.all(alphas @ later.predicate.A.T <= later.predicate.b, axis=1)   # exactly (an LP may
+    # call a star empty that misses its row by 1e-13, and covers it)
     points = later.center + alphas[inside] @ later.basis.T
     assert np.all(points[:, :2] >= entry.low[:2] - 1e-12) and np.all(points[:, :2] <= entry.high[:2] + 1e-12)
     assert np.all(points @ row[0] <= g_old + 1e-9)
+
+
+@settings(max_examples=200, deadline=None)
+@given(boxes, boxes, st.floats(-3, 3), st.floats(-3, 3), st.floats(-4, 4), st.floats(-4, 4))
+def test_without_shift_a_covered_aggregate_lies_in_the_earlier_one_clock_included(old, new, a, b, g_old, g_new):
+    """A model with its own clock may read it (``t <= 0.8 and T >= 21.55``): there ``covers``
+    (``shift=False``) says yes only when every sampled state of the new aggregate, its clock
+    included, lies in the recorded one, so its runs are among the recorded one's."""
+    row = np.array([[a, 0.0, b]])                       # the row reads the clock too
+    earlier = _star(old, row, [g_old])
+    covered = Covered(clock=2, shift=False)
+    covered.record("m", earlier, (row, np.array([g_old])))
+    later = _star(new, row, [g_new])
+    if later.feasible_alpha() is None or not covered.covers("m", later, lambda k: None):
+        return
+    entry = earlier.box_bound()
+    rng = np.random.default_rng(0)
+    alphas = rng.uniform(later.box.low, later.box.high, size=(400, later.nvars))
+    inside = np.all(alphas @ later.predicate.A.T <= later.predicate.b, axis=1)   # exactly (an LP may
+    # call a star empty that misses its row by 1e-13, and covers it)
+    points = later.center + alphas[inside] @ later.basis.T
+    assert np.all(points >= entry.low - 1e-12) and np.all(points <= entry.high + 1e-12)
+    assert np.all(points @ row[0] <= g_old + 1e-9)
+
+
+def test_a_later_copy_of_an_aggregate_is_covered_only_where_time_does_not_matter():
+    """The same states one time unit later: a time-shifted run of the recorded aggregate's in a
+    model that does not read time (``shift``), but not covered where the clock is a state like
+    any other (the later clock interval reaches past the recorded one)."""
+    earlier = Star.from_box(Box(np.array([0.0, 0.0]), np.array([1.0, 2.0])))
+    later = Star.from_box(Box(np.array([0.0, 1.0]), np.array([1.0, 3.0])))
+    none = (np.zeros((0, 2)), np.zeros(0))
+    verdicts = {}
+    for shift in (True, False):
+        covered = Covered(clock=1, shift=shift)
+        covered.record("m", earlier, none)
+        verdicts[shift] = covered.covers("m", later, lambda k: None)
+    assert verdicts == {True: True, False: False}
 
 
 def test_enlarged_contains_the_hull_and_only_a_margin_more():

@@ -47,6 +47,9 @@ initial: {mode: heat, box: {T: [19.5, 20], t: [0, 0]}}
 horizon: 30
 """
 
+OVERLAP_THERMOSTAT = MAY_THERMOSTAT.replace("T >= 20", "T >= 19").replace("T <= 19", "T <= 21").replace(
+    "T: [19.5, 20]", "T: [19, 20]").replace("horizon: 30", "horizon: 10")
+
 SAWTOOTH = """
 name: sawtooth
 state: [x, y, t]
@@ -148,6 +151,60 @@ def test_a_violation_that_needs_an_early_may_transition_is_replayed(tmp_path):
                  cex["switch_time"], cex["dt"], cex["input_signal"], Branches(prescribed=[cex["transitions"]]))
     assert run.violated and run.time == pytest.approx(cex["violation_time"])
     assert results["floor"].status is Status.SAFE, results["floor"].details.get("reason")
+
+
+def hottest(t: float) -> float:
+    """The highest temperature at time ``t`` of the overlapping thermostat: heating all along
+    from 20, ``T = 40 - 20 e^{-0.1 t}`` (switching to cool only lowers it, and ``T`` stays
+    below the heating invariant 22 until ``t = 10 ln 10/9 = 1.05``)."""
+    return 40.0 - 20.0 * np.exp(-0.1 * t)
+
+
+def test_overlapping_guards_close_by_the_fixpoint_with_the_clock_as_a_state(tmp_path):
+    """Guards that overlap (cool from 19, heat up to 21) let every run switch back and forth
+    at one instant as often as it likes. The model has its own clock, read by the early-time
+    bounds: aggregates of later passes around the cycle lie in earlier ones, clock included,
+    and are not explored, so the ceiling (heating invariant 22, cooling only lowers ``T``) is
+    proved in a few aggregates instead of unrolling the cycle to the horizon. The early bound
+    21.5 is violated (``hottest(0.8) = 21.538``), with a replayed counterexample."""
+    assert OVERLAP_THERMOSTAT.count("T >= 19") == 1 and OVERLAP_THERMOSTAT.count("T <= 21") == 1
+    (tmp_path / "m.yaml").write_text(OVERLAP_THERMOSTAT)
+    (tmp_path / "p.yaml").write_text(
+        "properties:\n"
+        "  - {id: ceiling, kind: safety, require: ['T <= 22.01']}\n"
+        "  - {id: early, kind: safety, avoid: ['t <= 0.8', 'T >= 21.5']}\n")
+    model = load_model(tmp_path / "m.yaml")
+    assert model.global_clock is not None
+    props = {p.id: bind(p, model) for p in load_properties(tmp_path / "p.yaml")}
+    ceiling = BACKEND.check(model, props["ceiling"], {})
+    assert ceiling.status is Status.SAFE, ceiling.details.get("reason")
+    assert ceiling.details["covered_aggregates"] > 0
+    assert "the clock included" in ceiling.details["semantics"]
+    assert hottest(0.8) > 21.5
+    early = BACKEND.check(model, props["early"], {})
+    assert early.status is Status.UNSAFE, early.details.get("reason")
+    cex = early.counterexample.to_dict()
+    assert cex["violation_time"] <= 0.8 + 1e-9
+    run = replay(model, props["early"], cex["initial_state"], cex["switch_time"], cex["dt"],
+                 cex.get("input_signal"), Branches(prescribed=[cex["transitions"]]))
+    assert run.violated
+
+
+@pytest.mark.parametrize("depth", [1, 3])
+def test_refinement_inside_refinement_is_bounded(tmp_path, depth):
+    """The early bound 21.55 holds (``hottest(0.8) = 21.538``) but no aggregate around the
+    cycle keeps when each temperature was reached, and each refinement's members carry twice
+    the coefficients of the level before. At most ``max_nested_refinements`` levels are
+    refined; past them the failure counts as unresolved: UNKNOWN, never UNSAFE, in a few
+    seconds instead of a cascade that outlasts any budget."""
+    assert hottest(0.8) < 21.55
+    (tmp_path / "m.yaml").write_text(OVERLAP_THERMOSTAT)
+    (tmp_path / "p.yaml").write_text("properties:\n  - {id: early, kind: safety, avoid: ['t <= 0.8', 'T >= 21.55']}\n")
+    model = load_model(tmp_path / "m.yaml")
+    prop = bind(load_properties(tmp_path / "p.yaml")[0], model)
+    result = BACKEND.check(model, prop, {"finer_retry": False, "max_nested_refinements": depth})
+    assert result.status in (Status.UNKNOWN, Status.SAFE), result.details.get("reason")
+    assert 1 <= result.details["nested_refinements"] <= depth
 
 
 def fixed_point_of_the_sawtooth() -> float:

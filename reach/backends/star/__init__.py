@@ -443,10 +443,14 @@ def _run_details(explorer: _Explorer) -> dict:
                       f"replace ({s.deaggregated} refined back into their members)")
     if explorer.data.added_clock:
         soundness += "; the model has no global clock: one was added (rate 1, 0 initially, never reset)"
-    if explorer.covered is not None and explorer.covered.pruned:
+    if explorer.covered is not None and explorer.covered.pruned and explorer.covered.shift:
         soundness += (f"; {explorer.covered.pruned} aggregates not explored: their states lie in an earlier "
                       "aggregate of the same mode entered no later, and the automaton does not depend "
                       "on time (the added clock), so their runs are time-shifted runs of that one's")
+    elif explorer.covered is not None and explorer.covered.pruned:
+        soundness += (f"; {explorer.covered.pruned} aggregates not explored: their states, the clock "
+                      "included, lie in an earlier aggregate of the same mode, so their runs are among "
+                      "that one's")
     if explorer.data.timeless:
         soundness += (f"; modes where no time passes ({', '.join(sorted(explorer.data.timeless))}): "
                       f"each entry star is checked once and jumps out at once (every state has rate 0 "
@@ -457,6 +461,7 @@ def _run_details(explorer: _Explorer) -> dict:
             "deepest_refinement": s.deepest, "lps": s.lps, "replays": explorer.replayed,
             "jumps": s.jumps, "latest_chain_start": s.reached, "aggregates": s.aggregated,
             "aggregated_stars": s.members, "refined_aggregates": s.deaggregated,
+            "nested_refinements": s.nested,
             "covered_aggregates": 0 if explorer.covered is None else explorer.covered.pruned,
             "rebased_blocks": s.rebased, "instant_jumps": s.instants}
 

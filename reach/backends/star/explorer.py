@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from reach.backends.star.aggregation import _Aggregate, interval_hull
-from reach.backends.star.fixpoint import Covered, enlarged, time_invariant
+from reach.backends.star.fixpoint import Covered, applies, enlarged, time_invariant
 from reach.backends.star.flowpipe import (ChainInputs, _block_spreads, _chain_abs_bounds, _chain_bounds, _depth,
                                           _plus_box, _segment, _tightened)
 from reach.backends.star.options import (ERROR_RATIO, INSTANT_WIDTH, MAX_CELLS, MAX_CHAIN_BYTES, MEMORY_FRACTION,
@@ -72,6 +72,7 @@ class _Path:
     stalled: int = 0
     origin: _Aggregate | None = None
     since: float = 0.0             # earliest clock when ``stalled`` was last reset
+    nested: int = 0                # aggregates refined into their members along the history
 
     def descend(self, entry: _Entry, block: int, can_refine: bool, clock: float,
                 step: float) -> "_Path":
@@ -80,12 +81,13 @@ class _Path:
         moved = clock >= self.since + step
         return _Path(self.entries + (entry,), self.blocks + (block,), self.open + (can_refine,), abort,
                      self.jumps + 1, 0 if moved else self.stalled + 1, self.origin,
-                     clock if moved else self.since)
+                     clock if moved else self.since, self.nested)
 
-    def closed(self) -> "_Path":
-        """The same history with no cell left to bisect."""
+    def refined(self) -> "_Path":
+        """The history of a member of an aggregate being refined: no cell left to bisect, one
+        refinement more."""
         return _Path(self.entries, self.blocks, (False,) * len(self.open), self.abort, self.jumps,
-                     self.stalled, self.origin, self.since)
+                     self.stalled, self.origin, self.since, self.nested + 1)
 
 
 class _Stop(Exception):
@@ -114,6 +116,7 @@ class _Stats:
     aggregated: int = 0             # aggregates formed
     members: int = 0                # successor stars they stand for
     deaggregated: int = 0           # aggregates refined back into their members
+    nested: int = 0                 # the most refinements on one history (max_nested_refinements)
     rebased: int = 0                # block ends of chains with inputs (see _rebase_cells)
     memory_blocks: int = 0          # block ends of chains too long to hold (_cells_in_memory)
     instants: int = 0               # jumps taken at one instant (see _at_instant)
@@ -147,7 +150,8 @@ class _Explorer:
         self.max_jumps = np.inf if options.max_jumps is None else options.max_jumps
         self.stall_limit = STALL_JUMPS if data.zero_dwell else np.inf
         self.aggregate_after = None if self.sweep else options.aggregate_after
-        self.covered = Covered(self.clock) if time_invariant(model) and not options.keep_sets else None
+        self.covered = Covered(self.clock, time_invariant(model)) if applies(model) and not options.keep_sets \
+            else None
         self.last_progress = self.started = time.perf_counter()
         self.hinted = False                     # the quiet run's one hint (_progress)
         self.memory_limit, self.memory_read = MEMORY_FRACTION * physical_bytes(), -np.inf
@@ -465,7 +469,8 @@ class _Explorer:
         drift_limit = None if self.sweep else self.opt.aggregate_drift_coefficients
         merged = flow.drift and inputs is None and not self.opt.discrete_time    # (_consecutive)
         wide = self.opt.aggregate_fanout is not None and fanout > self.opt.aggregate_fanout and not merged
-        aggregate = (self.aggregate_after is not None and (not flow.drift or flow.inputs or self.covered is not None)
+        shifts = self.covered is not None and self.covered.shift
+        aggregate = (self.aggregate_after is not None and (not flow.drift or flow.inputs or shifts)
                      and (path.jumps >= self.aggregate_after or wide)) or \
                     (self.aggregate_after is not None and flow.drift and drift_limit is not None
                      and star.nvars > drift_limit)
@@ -670,6 +675,7 @@ class _Explorer:
         start = min(path.since for _, path in kept)
         jumps = max(path.jumps for _, path in kept)
         stalled = min(path.stalled for _, path in kept)
+        nested = max(path.nested for _, path in kept)
         kept_sets = len(self.sets)
         for k, (star, star_rows) in enumerate(candidates):
             agg = _Aggregate(mode, star, kept)
@@ -677,8 +683,8 @@ class _Explorer:
                 mark = self.covered.mark()
                 self.covered.record(mode, star, star_rows)
             try:
-                self._chain(mode, star, _Path(jumps=jumps, stalled=stalled, origin=agg, since=start),
-                            star.box.center)
+                self._chain(mode, star, _Path(jumps=jumps, stalled=stalled, origin=agg, since=start,
+                                              nested=nested), star.box.center)
                 return
             except _Deaggregate as failure:
                 if failure.target is not agg:
@@ -692,10 +698,11 @@ class _Explorer:
                     continue
                 agg.refined = True
                 self.stats.deaggregated += 1
-                LOG.info("aggregate of %d stars entering '%s' refined into its members (%s)",
-                         len(kept), mode, failure.witness.piece)
+                self.stats.nested = max(self.stats.nested, nested + 1)
+                LOG.info("aggregate of %d stars entering '%s' refined into its members (%s; up to %d "
+                         "coefficients)", len(kept), mode, failure.witness.piece, max(m.nvars for m, _ in kept))
                 for member, path in kept:
-                    self._chain(mode, member, path.closed())
+                    self._chain(mode, member, path.refined())
 
     def _screen(self, centers, bases, box, error, H, g, cells) -> set[int]:
         """Cells whose segment may meet ``{H x <= g}`` by support bounds (cheap). A cell is
@@ -873,7 +880,8 @@ class _Explorer:
             self.cutoff = min(self.cutoff, self._failure_time(witness, seg))
             return
         path = witness.path
-        if path.origin is not None and self.stats.deaggregated < self.opt.max_deaggregations:
+        if path.origin is not None and self.stats.deaggregated < self.opt.max_deaggregations \
+                and path.nested < self.opt.max_nested_refinements:
             raise _Deaggregate(witness, path.origin)
         self.unresolved.append(witness)
         if len(self.unresolved) >= self.opt.max_unresolved:

@@ -1,30 +1,33 @@
-"""Aggregates covered by an earlier one: the fixpoint check of time-invariant automata.
+"""Aggregates covered by an earlier one: the fixpoint check.
 
-When the model has no global clock, the explorer adds its own (:class:`.transitions._LinearModel`,
-``added_clock``), and nothing in the automaton or the property depends on time itself: flows,
-invariants, guards, resets and unsafe pieces are rows over the model's states, and a
-time-varying input may take any value of its box at any instant. A run that enters mode ``m``
-in state ``x`` at time ``t`` is then the run entering ``m`` in ``x`` at any ``t' <= t``, shifted
-by ``t - t'``; its states are the same, and the earlier run reaches the horizon later.
+An aggregate (:func:`.aggregation.interval_hull`) is a box cut by rows over the model's states.
+A later aggregate ``S`` entering the same mode whose states, the clock included, lie in an
+earlier one ``S'`` (its box inside the box of ``S'`` in every coordinate, and every row of
+``S'`` holding on ``S``) adds no run: every run from ``S`` is a run from ``S'``, whose runs are
+explored to the horizon. It is not explored (SpaceEx's and PHAVer's fixpoint check). This
+holds for any automaton whose future is decided by its mode and state alone, the clock being
+one of its coordinates; it is off with abort windows (a path's first switch in a window dates
+its later ones) and when the explored sets are kept for pictures.
+
+A model without a global clock gets a stronger check (``shift``). The explorer adds its own
+clock (:class:`.transitions._LinearModel`, ``added_clock``), and nothing in the automaton or
+the property depends on time itself: flows, invariants, guards, resets and unsafe pieces are
+rows over the model's states, and a time-varying input may take any value of its box at any
+instant. A run that enters mode ``m`` in state ``x`` at time ``t`` is then the run entering
+``m`` in ``x`` at any ``t' <= t``, shifted by ``t - t'``; its states are the same, and the
+earlier run reaches the horizon later. Since an aggregate's box is the product of a set of
+states ``X'`` with its whole clock interval ``[t'_lo, t'_hi]``, a later aggregate whose states
+lie in ``X'`` and whose clock starts no earlier (``t_lo >= t'_lo``) is covered, whatever its
+clock's upper end: every ``(x, t)`` of ``S`` has ``(x, t'_lo)`` in the earlier aggregate.
 
 The sets computed along two paths that reach the same states differ by rounding (about
 1e-9 relative), so an aggregate is explored enlarged by :data:`MARGIN` where that decides
 nothing (a check that fails under the enlarged hull is redone under the exact one).
 
-An aggregate (:func:`.aggregation.interval_hull`) is a box cut by rows over the model's
-states only, so it is the product of a set of states ``X'`` with its whole clock interval
-``[t'_lo, t'_hi]``. A later aggregate ``S`` entering the same mode whose states lie in ``X'``
-(its box inside the box of ``X'`` in every model coordinate, and every row of ``X'`` holding on
-``S``) and whose clock starts no earlier (``t_lo >= t'_lo``) adds no state: every ``(x, t)`` of
-``S`` has ``(x, t'_lo)`` in the earlier aggregate, whose runs are explored to the horizon. It is
-not explored (SpaceEx's and PHAVer's fixpoint check, with time as the order).
-
-This holds while the earlier aggregate's exploration stands: an aggregate refined back into
-its members (:meth:`.explorer._Explorer._aggregate`) is forgotten with everything recorded
-after it (explored depth first, so those are its descendants, whose exploration is redone
-from the members). The check is off for models with their own clock, for abort windows
-(they date switches) and when the explored sets are kept for pictures (the pruned time would
-be missing from a plot against time).
+Either argument holds while the earlier aggregate's exploration stands: an aggregate refined
+back into its members (:meth:`.explorer._Explorer._aggregate`) is forgotten with everything
+recorded after it (explored depth first, so those are its descendants, whose exploration is
+redone from the members).
 """
 
 from __future__ import annotations
@@ -37,10 +40,16 @@ from reach import lp
 from reach.sets import Box, Star
 
 
+def applies(model) -> bool:
+    """Whether the fixpoint check applies: the model has no abort window (windows date
+    switches)."""
+    return not any(t.window is not None for t in model.transitions)
+
+
 def time_invariant(model) -> bool:
-    """Whether the check may use this module's argument: the model has no global clock (the
-    explorer adds its own, which nothing reads) and no abort window (windows date switches)."""
-    return model.global_clock is None and not any(t.window is not None for t in model.transitions)
+    """Whether the check may also shift runs in time (``shift``, module docstring): it applies
+    and the model has no global clock (the explorer adds its own, which nothing reads)."""
+    return applies(model) and model.global_clock is None
 
 
 #: relative margin by which a recorded aggregate is enlarged (box and jump rows): a later
@@ -85,9 +94,12 @@ class _Explored:
 
 @dataclass
 class Covered:
-    """The explored aggregates, in the order they were entered."""
+    """The explored aggregates, in the order they were entered; ``shift``: a later aggregate
+    is covered whatever the upper end of its clock (the time-invariant argument of the module
+    docstring), else only within the earlier one's clock interval."""
 
     clock: int
+    shift: bool = True
     entries: list[_Explored] = field(default_factory=list)
     pruned: int = 0
 
@@ -109,13 +121,14 @@ class Covered:
 
     def covers(self, mode: str, hull: Star, count_lps) -> bool:
         """Whether an earlier aggregate of ``mode`` holds every state of ``hull`` (a star inside
-        the mode's invariant) and started no later (module docstring); each jump row not
-        settled by the boxes costs one LP over ``hull`` (reported to ``count_lps``)."""
+        the mode's invariant), the clock within its interval or, with ``shift``, starting no
+        earlier (module docstring); each jump row not settled by the boxes costs one LP over
+        ``hull`` (reported to ``count_lps``)."""
         box = hull.box_bound()
         low, high, start = box.low, box.high, float(box.low[self.clock])
         if np.isnan(low).any() or np.isnan(high).any():     # NaN fails every test below: not covered
             return False
-        states = np.arange(low.size) != self.clock
+        states = np.arange(low.size) != self.clock if self.shift else np.ones(low.size, dtype=bool)
         for entry in self.entries:
             if entry.mode != mode or entry.start > start:
                 continue

@@ -100,6 +100,12 @@ class StarOptions:
         segment of a non-constant flow doubles them: LPs and grid stacks would grow without
         bound; aggregation keeps the count down).
     max_deaggregations: at most this many aggregates are refined back into their members.
+    max_nested_refinements: an aggregate is refined only where fewer than this many
+        refinements lie on its members' histories (an aggregate formed from the successors
+        of a refined aggregate's member is one level deeper). Where the aggregates of a
+        zero-dwell cycle (guards that overlap) each lose the same precision, every level
+        refines again with members of twice the coefficients; past this depth the failure
+        counts as unresolved (UNKNOWN, sooner) instead.
     touch_tolerance: relative LP tolerance. With piece rows of unit norm, the depth LP's
         answer counts as exact up to ``tol = touch_tolerance * max(1, |g_r|, |h_r . c|)``
         (largest over the piece's rows ``h_r x <= g_r``, ``c`` the segment's centre; at least
@@ -154,6 +160,7 @@ class StarOptions:
     finer_retry: bool = True
     max_coefficients: int = 2_000
     max_deaggregations: int = 50
+    max_nested_refinements: int = ranged(3, 0)
     touch_tolerance: float = 1e-9
     replay_dt: float | None = None
     keep_sets: bool = False

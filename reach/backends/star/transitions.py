@@ -92,8 +92,9 @@ class _LinearModel:
     ``timeless``: the modes where no time may pass (SpaceEx ``flow false``; every state has
     rate 0 there, so such a model always gets its own clock); ``zero_dwell``: whether the
     model may have a zero-dwell cycle (:mod:`reach.model.lint`); ``ranges``: a box every
-    reachable state lies in, the range of each bounded input on its coordinate (flow 0 in
-    every mode, never reset, so the value a run starts with) and unbounded elsewhere."""
+    reachable state lies in: the range of each bounded input on its coordinate (flow 0 in
+    every mode, never reset, so the value a run starts with), the clock at least 0 (it
+    starts at 0 and never decreases), unbounded elsewhere."""
 
     def __init__(self, model):
         from reach.model.lint import zero_dwell_cycles
@@ -112,6 +113,7 @@ class _LinearModel:
         low, high = np.full(self.n, -np.inf), np.full(self.n, np.inf)
         for u in getattr(model, "bounded_inputs", []):
             low[u.index], high[u.index] = u.low, u.high
+        low[self.clock] = 0.0
         self.ranges = Box(low, high)
         self.zero_dwell = bool(zero_dwell_cycles(model)[0])        # a search with LPs: once
         if self.linear:
