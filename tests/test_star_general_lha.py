@@ -1,14 +1,17 @@
 """star on linear hybrid automata a new user writes, with the closed forms that decide them:
 a clocked tank of constant rates (a guard crossed over several cells gives one successor, not
-one per cell; with a disturbance, the successors are aggregated), a thermostat whose switches are may-transitions over wide guards (the fan-out is
-aggregated from the first jump), a sawtooth whose period the default step does not resolve (a
-finer pass decides it) and a witness on the face of a polytopic initial set (replayed from
-inside the set)."""
+one per cell; with a disturbance, the successors are aggregated), a thermostat whose switches
+are may-transitions over wide guards (the fan-out is aggregated from the first jump), one whose
+guards overlap (a zero-dwell cycle, closed by the fixpoint check with the clock as a state;
+refinement inside refinement bounded), a saturated PD loop whose hysteresis band the default
+step does not resolve and a sawtooth whose period it misses (a finer pass decides both) and a
+witness on the face of a polytopic initial set (replayed from inside the set)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy.integrate import solve_ivp
 
 from reach.backends.initial_sampling import PolytopeSampler
 from reach.backends.montecarlo import replay
@@ -205,6 +208,63 @@ def test_refinement_inside_refinement_is_bounded(tmp_path, depth):
     result = BACKEND.check(model, prop, {"finer_retry": False, "max_nested_refinements": depth})
     assert result.status in (Status.UNKNOWN, Status.SAFE), result.details.get("reason")
     assert 1 <= result.details["nested_refinements"] <= depth
+
+
+DINT_HYSTERESIS = """
+name: dint_hysteresis
+state: [x, v, t]
+bounded_inputs:
+  b: {range: [-0.01, 0.01]}
+modes:
+  sat_neg:
+    flow: {x: "v", v: "-0.2 + b", t: "1"}
+    invariant: ["-x - 1.4*v <= -0.2"]
+  linear:
+    flow: {x: "v", v: "-x - 1.4*v + b", t: "1"}
+    invariant: ["-x - 1.4*v >= -0.202", "-x - 1.4*v <= 0.202"]
+  sat_pos:
+    flow: {x: "v", v: "0.2 + b", t: "1"}
+    invariant: ["-x - 1.4*v >= 0.2"]
+transitions:
+  - {from: sat_neg, to: linear, guard: ["-x - 1.4*v >= -0.2"], urgent: true}
+  - {from: linear, to: sat_neg, guard: ["-x - 1.4*v <= -0.202"], urgent: true}
+  - {from: linear, to: sat_pos, guard: ["-x - 1.4*v >= 0.202"], urgent: true}
+  - {from: sat_pos, to: linear, guard: ["-x - 1.4*v <= 0.2"], urgent: true}
+initial: {mode: sat_neg, box: {x: [4, 5], v: [-0.1, 0.1], t: [0, 0]}}
+horizon: 40
+"""
+
+
+def lowest_speed(x0: float, v0: float, b: float) -> float:
+    """The lowest ``v`` of the saturated PD loop from ``(x0, v0)`` with the bias ``b`` (scipy):
+    saturated until ``u = -x - 1.4 v`` reaches -0.2, then linear. ``v`` is lowest where
+    ``v' = u + b = 0``, long before ``u`` reaches the other band at 0.202, so the other modes
+    do not matter."""
+    def saturated(_, z):
+        return [z[1], -0.2 + b]
+
+    def leaves(_, z):
+        return -z[0] - 1.4 * z[1] + 0.2
+    leaves.terminal, leaves.direction = True, 1
+    first = solve_ivp(saturated, (0, 40), [x0, v0], events=leaves, rtol=1e-11, atol=1e-13, max_step=0.01)
+    second = solve_ivp(lambda _, z: [z[1], -z[0] - 1.4 * z[1] + b], (first.t[-1], 40), first.y[:, -1],
+                       rtol=1e-11, atol=1e-13, max_step=0.01)
+    return float(min(first.y[1].min(), second.y[1].min()))
+
+
+def test_switching_faster_than_the_step_is_decided_at_a_finer_step(tmp_path):
+    """A saturated PD double integrator whose linear band has a hysteresis of 0.002: at the
+    default step (40/60) each cell crosses the band back and forth, and the aggregates chatter
+    (thousands of jumps, a few thousandths of a second apart, until the LP budget). After
+    ``CHATTER_JUMPS`` jumps within one step the pass is undecided and a finer one proves the
+    speed bound, true by 0.004 (scipy: the lowest speed from the far corner with the bias
+    against it is -1.1756)."""
+    worst = min(lowest_speed(x0, v0, b) for x0 in (4, 5) for v0 in (-0.1, 0.1) for b in (-0.01, 0.01))
+    assert -1.18 < worst < -1.17
+    results, _ = checked(tmp_path, DINT_HYSTERESIS, {"speed": "v >= -1.18"})
+    result = results["speed"]
+    assert result.status is Status.SAFE, result.details.get("reason")
+    assert "switching faster than the step resolves" in result.details["semantics"]
 
 
 def fixed_point_of_the_sawtooth() -> float:

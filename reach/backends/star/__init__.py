@@ -69,7 +69,9 @@ possible switch at every cell of every chain (option ``switching``).
 Jumps. ``max_jumps`` bounds the jumps along a path (none by default). When the model may
 have a zero-dwell cycle (:mod:`reach.model.lint`), a path may take at most ``STALL_JUMPS``
 jumps while its earliest clock advances by less than one time step; beyond, UNKNOWN (a
-Zeno-like run cannot be followed to the horizon). Paths too deep for the recursion end
+Zeno-like run cannot be followed to the horizon). Any other model may take ``CHATTER_JUMPS``
+such jumps: more mean switching faster than the step resolves (a hysteresis band crossed
+back and forth within one cell), and the UNKNOWN asks for a finer step. Paths too deep for the recursion end
 in UNKNOWN too. A witness whose path takes more
 than one window switch, or a window on a clock other than the global one, is replayed
 without a switch time (the simulator takes one switch at a global time): if that run does

@@ -14,9 +14,9 @@ from reach.backends.star.aggregation import _Aggregate, interval_hull
 from reach.backends.star.fixpoint import Covered, applies, enlarged, time_invariant
 from reach.backends.star.flowpipe import (ChainInputs, _block_spreads, _chain_abs_bounds, _chain_bounds, _depth,
                                           _plus_box, _segment, _tightened)
-from reach.backends.star.options import (ERROR_RATIO, INSTANT_WIDTH, MAX_CELLS, MAX_CHAIN_BYTES, MEMORY_FRACTION,
-                                         MEMORY_PERIOD, NAME, PROGRESS_SECONDS, STALL_JUMPS, TIGHT_RATIO,
-                                         StarOptions)
+from reach.backends.star.options import (CHATTER_JUMPS, ERROR_RATIO, INSTANT_WIDTH, MAX_CELLS, MAX_CHAIN_BYTES,
+                                         MEMORY_FRACTION, MEMORY_PERIOD, NAME, PROGRESS_SECONDS, STALL_JUMPS,
+                                         TIGHT_RATIO, StarOptions)
 from reach.backends.star.switching import group_pieces
 from reach.backends.star.transitions import (_LinearModel, _modes_leading_to, _Piece,
                                              _unsafe_pieces, kept_rows, misses)
@@ -148,7 +148,7 @@ class _Explorer:
                              f"cells; at most {MAX_CELLS:.0e} (use a larger step)", field="options.star.step")
         self.flows, self.invariants, self.jumps = dict(data.flows), data.invariants, data.fired
         self.max_jumps = np.inf if options.max_jumps is None else options.max_jumps
-        self.stall_limit = STALL_JUMPS if data.zero_dwell else np.inf
+        self.stall_limit = STALL_JUMPS if data.zero_dwell else CHATTER_JUMPS
         self.aggregate_after = None if self.sweep else options.aggregate_after
         self.covered = Covered(self.clock, time_invariant(model)) if applies(model) and not options.keep_sets \
             else None
@@ -355,8 +355,9 @@ class _Explorer:
             raise _Stop(Status.UNKNOWN, f"more than {self.max_jumps} discrete jumps on a path "
                                         f"(option max_jumps; a SpaceEx cfg's iter-max sets it)")
         if path.stalled > self.stall_limit:
-            raise _Stop(Status.UNKNOWN, f"{path.stalled} jumps within one time step "
-                                        f"(possible zero-dwell cycle)", imprecise=True)
+            cause = "possible zero-dwell cycle" if self.stall_limit == STALL_JUMPS else \
+                "switching faster than the step resolves"
+            raise _Stop(Status.UNKNOWN, f"{path.stalled} jumps within one time step ({cause})", imprecise=True)
         t0 = self._earliest(star)
         if t0 > self.horizon:                   # every run of the star is past the horizon
             return
@@ -674,7 +675,7 @@ class _Explorer:
         self.stats.members += len(kept)
         start = min(path.since for _, path in kept)
         jumps = max(path.jumps for _, path in kept)
-        stalled = min(path.stalled for _, path in kept)
+        stalled = max(path.stalled for _, path in kept if path.since == start)   # as from ``start``
         nested = max(path.nested for _, path in kept)
         kept_sets = len(self.sets)
         for k, (star, star_rows) in enumerate(candidates):

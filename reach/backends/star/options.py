@@ -27,6 +27,11 @@ HIGHS_DEFAULT_TOLERANCE = 1e-7
 #: in a model that may have a zero-dwell cycle, this many jumps on a path while its
 #: earliest clock advances by less than one time step end the check (UNKNOWN)
 STALL_JUMPS = 10
+
+#: in any other model, this many: the switching is then faster than the step resolves (a
+#: hysteresis band crossed within one cell, back and forth), and a finer step decides sooner
+#: than the coarse one (:func:`finer_retry`)
+CHATTER_JUMPS = 100
 MAX_CELLS = 1_000_000             # grid cells over the horizon (horizon / step) a check may start with
 
 
@@ -67,7 +72,7 @@ class StarOptions:
     max_lps: LP budget; when exhausted the answer is UNKNOWN.
     max_jumps: bound on discrete jumps along a path; UNKNOWN beyond. None (default): no
         bound, but at most ``STALL_JUMPS`` jumps within one time step when the model may
-        have a zero-dwell cycle (:mod:`reach.model.lint`).
+        have a zero-dwell cycle (:mod:`reach.model.lint`), ``CHATTER_JUMPS`` otherwise.
     aggregate_after: successors of the jumps after the first ``aggregate_after`` ones on a
         path, out of a mode whose flow is not constant or moves with a time-varying input (on a
         model without a clock out of every mode, so the fixpoint check closes cycles of
