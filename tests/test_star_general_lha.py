@@ -193,6 +193,34 @@ def test_overlapping_guards_close_by_the_fixpoint_with_the_clock_as_a_state(tmp_
     assert run.violated
 
 
+PUMP = """
+name: pump
+state: [h, time]
+modes:
+  filling: {flow: {h: "2 - 0.1*h", time: "1"}, invariant: ["h <= 8"]}
+  draining: {flow: {h: "-0.5*h", time: "1"}, invariant: ["h >= 2"]}
+transitions:
+  - {from: filling, to: draining, guard: ["h >= 5"]}
+  - {from: draining, to: filling, guard: ["h <= 6"]}
+initial: {mode: filling, box: {h: [3, 4], time: [0, 0]}}
+horizon: 20
+"""
+
+
+def test_a_cycle_entered_late_closes_though_rounding_moves_each_start(tmp_path):
+    """The pump's first switch comes at ``time >= 0.65`` (from 4, ``h = 20 - 16 e^{-0.1 t}``
+    reaches 5 then), so every aggregate of the overlapping cycle starts there, and outward
+    rounding would lower each start by about 1e-7: none would lie in an earlier one, clock
+    included, and the cycle would be unrolled without end. Time only runs forward, so each
+    hull keeps the start of the aggregate it descends from; the cycle closes and both bounds
+    the invariants give (``h <= 8`` filling, ``h >= 2`` draining, each mode moving ``h``
+    away from the other's bound) are proved."""
+    results, _ = checked(tmp_path, PUMP, {"top": "h <= 8.01", "bottom": "h >= 1.99"}, {"finer_retry": False})
+    for result in results.values():
+        assert result.status is Status.SAFE, result.details.get("reason")
+        assert result.details["covered_aggregates"] > 0
+
+
 @pytest.mark.parametrize("depth", [1, 3])
 def test_refinement_inside_refinement_is_bounded(tmp_path, depth):
     """The early bound 21.55 holds (``hottest(0.8) = 21.538``) but no aggregate around the

@@ -83,11 +83,11 @@ class _Path:
                      self.jumps + 1, 0 if moved else self.stalled + 1, self.origin,
                      clock if moved else self.since, self.nested)
 
-    def refined(self) -> "_Path":
-        """The history of a member of an aggregate being refined: no cell left to bisect, one
-        refinement more."""
+    def closed(self, refinements: int = 0) -> "_Path":
+        """The same history with no cell left to bisect (its cells' frames are gone), and
+        ``refinements`` more (a member of an aggregate being refined: one)."""
         return _Path(self.entries, self.blocks, (False,) * len(self.open), self.abort, self.jumps,
-                     self.stalled, self.origin, self.since, self.nested + 1)
+                     self.stalled, self.origin, self.since, self.nested + refinements)
 
 
 class _Stop(Exception):
@@ -658,18 +658,23 @@ class _Explorer:
         """
         H, g = self.invariants[mode]
         ranges = self.data.ranges
+        if self.covered is not None and not self.covered.shift:
+            ranges = self._clock_from(ranges, min(0.0 if p.origin is None else p.origin.star.box_bound().low[self.clock]
+                                                  for _, p in members))
         hull, kept = interval_hull(members, (np.vstack([H, rows[0]]), np.concatenate([g, rows[1]])),
                                    self._lp_count, ranges)
         if not kept:
             return
         if hull is None:                                       # unbounded: explore the members
             for star, path in kept:
-                self._chain(mode, star, path)
+                self._chain(mode, star, path.closed())
             return
         candidates = [(hull, rows)]
         if self.covered is not None:
             if self.covered.covers(mode, hull, self._lp_count):
                 return
+            if not self.covered.shift:                         # the clock's start is exact
+                ranges = self._clock_from(ranges, hull.box_bound().low[self.clock])
             candidates.insert(0, enlarged(hull, (H, g), rows, ranges))
         self.stats.aggregated += 1
         self.stats.members += len(kept)
@@ -703,7 +708,22 @@ class _Explorer:
                 LOG.info("aggregate of %d stars entering '%s' refined into its members (%s; up to %d "
                          "coefficients)", len(kept), mode, failure.witness.piece, max(m.nvars for m, _ in kept))
                 for member, path in kept:
-                    self._chain(mode, member, path.refined())
+                    self._chain(mode, member, path.closed(refinements=1))
+
+    def _clock_from(self, ranges: Box, start: float) -> Box:
+        """``ranges`` with the clock at least ``start``.
+
+        The fixpoint check of a model with its own clock (:mod:`.fixpoint`, not ``shift``)
+        needs a later aggregate's clock to start no earlier than the aggregate it descends
+        from; outward rounding would move each start down a little (1e-7 at clock 10), and
+        around a cycle of modes no aggregate would ever lie in an earlier one. But time only
+        runs forward: every state reached from an aggregate has a clock at least the
+        aggregate's least one. So the hull of successors is clipped at the least clock of
+        the aggregates its members descend from (0 for the initial star's), and an enlarged
+        hull keeps its own least clock."""
+        low = ranges.low.copy()
+        low[self.clock] = max(low[self.clock], start)
+        return Box(low, ranges.high)
 
     def _screen(self, centers, bases, box, error, H, g, cells) -> set[int]:
         """Cells whose segment may meet ``{H x <= g}`` by support bounds (cheap). A cell is

@@ -6,7 +6,9 @@ earlier one ``S'`` (its box inside the box of ``S'`` in every coordinate, and ev
 ``S'`` holding on ``S``) adds no run: every run from ``S`` is a run from ``S'``, whose runs are
 explored to the horizon. It is not explored (SpaceEx's and PHAVer's fixpoint check). This
 holds for any automaton whose future is decided by its mode and state alone, the clock being
-one of its coordinates; it is off with abort windows (a path's first switch in a window dates
+one of its coordinates (outward rounding would move each later aggregate's clock start down
+a little; since time only runs forward, the explorer keeps it at the start of the aggregate it
+descends from, ``_Explorer._clock_from``); it is off with abort windows (a path's first switch in a window dates
 its later ones) and when the explored sets are kept for pictures.
 
 A model without a global clock gets a stronger check (``shift``). The explorer adds its own
