@@ -1,6 +1,6 @@
 """The fixpoint check (reach.backends.star.fixpoint): an aggregate inside an earlier one (of a
-clockless automaton: up to a shift in time) is not explored; what is skipped is covered, and the verdicts stay sound against
-an independent reference (scipy's solve_ivp with events)."""
+clockless automaton: up to a shift in time) is not explored; what is skipped is covered, and
+the verdicts stay sound against an independent reference (scipy's solve_ivp with events)."""
 
 from __future__ import annotations
 

@@ -659,8 +659,8 @@ class _Explorer:
         H, g = self.invariants[mode]
         ranges = self.data.ranges
         if self.covered is not None and not self.covered.shift:
-            ranges = self._clock_from(ranges, min(0.0 if p.origin is None else p.origin.star.box_bound().low[self.clock]
-                                                  for _, p in members))
+            starts = [0.0 if p.origin is None else p.origin.star.box_bound().low[self.clock] for _, p in members]
+            ranges = self._clock_from(ranges, min(starts))
         hull, kept = interval_hull(members, (np.vstack([H, rows[0]]), np.concatenate([g, rows[1]])),
                                    self._lp_count, ranges)
         if not kept:
