@@ -23,6 +23,8 @@ unbounded is asked again without presolve before it counts as an error.
 
 from __future__ import annotations
 
+import time
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
@@ -179,10 +181,31 @@ def _scaled_rows(A, low, high):
     return A * factor[:, None], low * factor, high * factor
 
 
+#: the time.perf_counter() instant at which LPs stop (:func:`deadline`)
+_DEADLINE = [float("inf")]
+
+
+@contextmanager
+def deadline(at: float):
+    """Every LP solved within stops at ``at`` (a ``time.perf_counter()`` instant; HiGHS's
+    time limit): one stopped there decides nothing (``nan`` from :func:`maximize_many`, an
+    :class:`LPError` from :func:`minimize`), as any solver failure. A search with a time
+    budget then ends within it even where one LP of a large star would take minutes."""
+    previous = _DEADLINE[0]
+    _DEADLINE[0] = min(previous, at)
+    try:
+        yield
+    finally:
+        _DEADLINE[0] = previous
+
+
 def _run(solver):
-    """Solve; the model status (``kSolveError`` if the run itself failed)."""
+    """Solve, within the :func:`deadline`; the model status (``kSolveError`` if the run itself
+    failed)."""
     from highspy import _core as highspy
 
+    if _DEADLINE[0] < float("inf"):
+        solver.setOptionValue("time_limit", max(1e-3, _DEADLINE[0] - time.perf_counter()))
     if solver.run() == highspy.HighsStatus.kError:
         return highspy.HighsModelStatus.kSolveError
     return solver.getModelStatus()

@@ -4,6 +4,8 @@ the same verdict (optimal, infeasible, unbounded), the same optimum, and a feasi
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -200,3 +202,20 @@ def test_maximize_many_over_no_variables_is_the_point_or_empty():
     C = np.zeros((2, 0))
     assert list(lp.maximize_many(C, np.zeros((1, 0)), [0.5], (np.zeros(0), np.zeros(0)))) == [0.0, 0.0]
     assert list(lp.maximize_many(C, np.zeros((1, 0)), [-0.5], (np.zeros(0), np.zeros(0)))) == [-np.inf] * 2
+
+
+def test_an_lp_past_the_deadline_decides_nothing():
+    """Under :func:`reach.lp.deadline` HiGHS stops at the instant given: an LP that takes far
+    longer (a dense 800 x 300 polytope, a tenth of a second or more of simplex) started after it gives ``nan``
+    from ``maximize_many`` (the caller falls back to a bound it can argue without the LP) and
+    an LPError from ``minimize``, never a value. Without the deadline the same LP is solved."""
+    rng = np.random.default_rng(7)
+    A = rng.normal(size=(800, 300))
+    b = 1.0 + rng.uniform(size=800)                    # 0 is inside: feasible and bounded
+    box = (np.full(300, -10.0), np.full(300, 10.0))
+    c = rng.normal(size=(1, 300))
+    with lp.deadline(time.perf_counter() - 1.0):
+        assert np.isnan(lp.maximize_many(c, A, b, box)).all()
+        with pytest.raises(lp.LPError):
+            lp.minimize(c[0], A, b, bounds=box)
+    assert np.isfinite(lp.maximize_many(c, A, b, box)).all()

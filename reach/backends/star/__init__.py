@@ -354,6 +354,8 @@ class StarBackend:
         except lp.LPError as failure:
             status = Status.UNKNOWN
             details["reason"] = f"LP solver failure, nothing concluded: {failure}"
+            if time.perf_counter() > explorer.deadline:             # stopped by the time budget
+                details["reason"] = f"time budget of {opt.max_seconds:.3g} s exhausted (option max_seconds)"
         except ArithmeticError as failure:         # overflow, or a cell far too long for the flow
             status = Status.UNKNOWN
             details["reason"] = f"nothing concluded: {failure}"

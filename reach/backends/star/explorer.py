@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from reach import lp
 from reach.backends.star.aggregation import _Aggregate, interval_hull
 from reach.backends.star.fixpoint import Covered, applies, enlarged, time_invariant
 from reach.backends.star.flowpipe import (ChainInputs, _block_spreads, _chain_abs_bounds, _chain_bounds, _depth,
@@ -241,8 +242,9 @@ class _Explorer:
         return (tight, point) if point is not None else (None, None)
 
     def run(self):
-        start = self.root.intersect_halfspaces(*self.invariants[self.root_mode])
-        self._chain(self.root_mode, start, _Path(), self.root.box.center)
+        with lp.deadline(self.deadline):
+            start = self.root.intersect_halfspaces(*self.invariants[self.root_mode])
+            self._chain(self.root_mode, start, _Path(), self.root.box.center)
 
     def _chain(self, mode: str, star: Star, path: _Path, guess=None, direction=None):
         """Explore ``star`` in ``mode`` up to the horizon (:meth:`_flow_chain`); in a mode with a
