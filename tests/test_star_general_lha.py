@@ -221,6 +221,21 @@ def test_a_cycle_entered_late_closes_though_rounding_moves_each_start(tmp_path):
         assert result.details["covered_aggregates"] > 0
 
 
+def test_a_band_on_both_invariants_closes(tmp_path):
+    """``18 <= T <= 22`` in one property, each bound exactly an invariant of the overlapping
+    thermostat (cool keeps ``T >= 18``, heat ``T <= 22``, and each mode moves ``T`` away from
+    the other's bound): every aggregate touches both bounds. Its hull takes them from the rows
+    exactly, and the enlarged hull stays within the touch tolerance of them, so the cycle
+    closes as for one bound alone."""
+    assert 'invariant: ["T <= 22"]' in OVERLAP_THERMOSTAT and 'invariant: ["T >= 18"]' in OVERLAP_THERMOSTAT
+    (tmp_path / "m.yaml").write_text(OVERLAP_THERMOSTAT)
+    (tmp_path / "p.yaml").write_text("properties:\n  - {id: band, kind: safety, require: ['T >= 18', 'T <= 22']}\n")
+    model = load_model(tmp_path / "m.yaml")
+    result = BACKEND.check(model, bind(load_properties(tmp_path / "p.yaml")[0], model), {"finer_retry": False})
+    assert result.status is Status.SAFE, result.details.get("reason")
+    assert result.details["covered_aggregates"] > 0
+
+
 @pytest.mark.parametrize("depth", [1, 3])
 def test_refinement_inside_refinement_is_bounded(tmp_path, depth):
     """The early bound 21.55 holds (``hottest(0.8) = 21.538``) but no aggregate around the

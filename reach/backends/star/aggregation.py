@@ -55,12 +55,32 @@ def interval_hull(members, invariant, count_lps, ranges: Box | None = None):
     kept = [members[k] for k in sorted(nonempty)]
     if not kept or not np.all(np.isfinite(best)):
         return None, kept
-    low, high = _outward(-best[n:], best[:n])
+    low, high = _axis_clipped(*_outward(-best[n:], best[:n]), *invariant)
     if ranges is not None:
         low, high = np.maximum(low, ranges.low), np.minimum(high, ranges.high)
         if np.any(low > high):                      # no member holds a reachable state
             return None, []
     return Star.from_box(Box(low, high)).intersect_halfspaces(*invariant), kept
+
+
+def _axis_clipped(low, high, H, g):
+    """``[low, high]`` cut by the rows of ``H x <= g`` that read one coordinate (``a x_i <= g``,
+    bounds rounded outward): the hull is cut by those rows anyway, so its states stay, and
+    a bound at an invariant (``T <= 22``) is the row's exact value instead of an LP's
+    rounded one, which the fixpoint check can compare exactly (:mod:`.fixpoint`)."""
+    H, g = np.asarray(H, float).reshape(-1, low.size), np.asarray(g, float).reshape(-1)
+    single = np.count_nonzero(H, axis=1) == 1
+    if not np.any(single):
+        return low, high
+    low, high = low.copy(), high.copy()
+    for row, bound in zip(H[single], g[single]):
+        i = int(np.flatnonzero(row)[0])
+        value = bound / row[i]
+        if row[i] > 0:
+            high[i] = min(high[i], np.nextafter(value, np.inf))
+        else:
+            low[i] = max(low[i], np.nextafter(value, -np.inf))
+    return low, high
 
 
 def _outward(low, high):

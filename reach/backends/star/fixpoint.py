@@ -59,11 +59,16 @@ def time_invariant(model) -> bool:
 #: the earlier set up to those errors is then inside the enlarged one exactly
 MARGIN = 1e-8
 
+#: the same for a row that reads one coordinate (a bound at an invariant, ``T <= 22``): hulls
+#: take such a bound exactly (:func:`.aggregation.interval_hull`), and the enlarged hull stays
+#: within the touch tolerance (1e-9) of a property bounded there
+AXIS_MARGIN = 5e-10
+
 
 def enlarged(hull: Star, invariant, rows, ranges: Box | None = None) -> tuple[Star, tuple]:
     """``(star, rows)``: the aggregate ``hull`` (a box star cut by the mode's ``invariant`` and
     the jump's ``rows``, each ``(H, g)``) with its box and ``rows`` pushed out by
-    :data:`MARGIN` ``(1 + |.|)``, the box then clipped to ``ranges`` (a box every reachable
+    :data:`MARGIN` ``(1 + |.|)`` (rows reading one coordinate by :data:`AXIS_MARGIN`), the box then clipped to ``ranges`` (a box every reachable
     state lies in, see :func:`.aggregation.interval_hull`). It contains every reachable state
     of ``hull``, so exploring it in its place is sound, and a later aggregate equal to it up to
     rounding lies inside it exactly (in a clipped coordinate both hold the range: the margin
@@ -74,7 +79,8 @@ def enlarged(hull: Star, invariant, rows, ranges: Box | None = None) -> tuple[St
     if ranges is not None:
         low, high = np.maximum(low, ranges.low), np.minimum(high, ranges.high)
     H, g = np.asarray(rows[0], float), np.asarray(rows[1], float)
-    g = g + MARGIN * (1.0 + np.abs(g)) * np.linalg.norm(H, axis=1)
+    margin = np.where(np.count_nonzero(H, axis=1) == 1, AXIS_MARGIN, MARGIN) if H.size else np.zeros(0)
+    g = g + margin * (1.0 + np.abs(g)) * np.linalg.norm(H, axis=1)
     star = Star.from_box(Box(low, high)).intersect_halfspaces(
         np.vstack([invariant[0], H]), np.concatenate([invariant[1], g]))
     return star, (H, g)
