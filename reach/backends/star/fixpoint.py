@@ -68,8 +68,9 @@ AXIS_MARGIN = 5e-10
 def enlarged(hull: Star, invariant, rows, ranges: Box | None = None) -> tuple[Star, tuple]:
     """``(star, rows)``: the aggregate ``hull`` (a box star cut by the mode's ``invariant`` and
     the jump's ``rows``, each ``(H, g)``) with its box and ``rows`` pushed out by
-    :data:`MARGIN` ``(1 + |.|)`` (rows reading one coordinate by :data:`AXIS_MARGIN`), the box then clipped to ``ranges`` (a box every reachable
-    state lies in, see :func:`.aggregation.interval_hull`). It contains every reachable state
+    :data:`MARGIN` ``(1 + |.|)`` (rows reading one coordinate by :data:`AXIS_MARGIN`), the
+    box then clipped to ``ranges`` (a box every reachable state lies in, see
+    :func:`.aggregation.interval_hull`). It contains every reachable state
     of ``hull``, so exploring it in its place is sound, and a later aggregate equal to it up to
     rounding lies inside it exactly (in a clipped coordinate both hold the range: the margin
     does not accumulate from one aggregate to the next)."""
