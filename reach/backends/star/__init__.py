@@ -353,9 +353,7 @@ class StarBackend:
                     details["witness"] = {"mode": w.mode, "piece": w.piece, "depth": w.depth}
         except lp.LPError as failure:
             status = Status.UNKNOWN
-            details["reason"] = f"LP solver failure, nothing concluded: {failure}"
-            if time.perf_counter() > explorer.deadline:             # stopped by the time budget
-                details["reason"] = f"time budget of {opt.max_seconds:.3g} s exhausted (option max_seconds)"
+            details["reason"] = explorer.out_of_time() or f"LP solver failure, nothing concluded: {failure}"
         except ArithmeticError as failure:         # overflow, or a cell far too long for the flow
             status = Status.UNKNOWN
             details["reason"] = f"nothing concluded: {failure}"

@@ -63,13 +63,18 @@ def interval_hull(members, invariant, count_lps, ranges: Box | None = None):
     return Star.from_box(Box(low, high)).intersect_halfspaces(*invariant), kept
 
 
+def one_coordinate(H) -> np.ndarray:
+    """Which rows of ``H`` read exactly one coordinate (``a x_i <= g``: a bound on one state)."""
+    return np.count_nonzero(H, axis=1) == 1
+
+
 def _axis_clipped(low, high, H, g):
     """``[low, high]`` cut by the rows of ``H x <= g`` that read one coordinate (``a x_i <= g``,
     bounds rounded outward): the hull is cut by those rows anyway, so its states stay, and
     a bound at an invariant (``T <= 22``) is the row's exact value instead of an LP's
     rounded one, which the fixpoint check can compare exactly (:mod:`.fixpoint`)."""
     H, g = np.asarray(H, float).reshape(-1, low.size), np.asarray(g, float).reshape(-1)
-    single = np.count_nonzero(H, axis=1) == 1
+    single = one_coordinate(H)
     if not np.any(single):
         return low, high
     low, high = low.copy(), high.copy()

@@ -357,8 +357,7 @@ class _Explorer:
             raise _Stop(Status.UNKNOWN, f"more than {self.max_jumps} discrete jumps on a path "
                                         f"(option max_jumps; a SpaceEx cfg's iter-max sets it)")
         if path.stalled > self.stall_limit:
-            cause = "possible zero-dwell cycle" if self.stall_limit == STALL_JUMPS else \
-                "switching faster than the step resolves"
+            cause = "possible zero-dwell cycle" if self.data.zero_dwell else "switching faster than the step resolves"
             raise _Stop(Status.UNKNOWN, f"{path.stalled} jumps within one time step ({cause})", imprecise=True)
         t0 = self._earliest(star)
         if t0 > self.horizon:                   # every run of the star is past the horizon
@@ -609,8 +608,15 @@ class _Explorer:
         time limit ends the search within one LP."""
         if self.cancel.is_set():
             raise _Stop(Status.UNKNOWN, "stopped: the caller was interrupted")
+        reason = self.out_of_time()
+        if reason is not None:
+            raise _Stop(Status.UNKNOWN, reason)
+
+    def out_of_time(self) -> str | None:
+        """Why the search must stop for time (option ``max_seconds``), or None while it may go on."""
         if time.perf_counter() > self.deadline:
-            raise _Stop(Status.UNKNOWN, f"time budget of {self.opt.max_seconds:.3g} s exhausted (option max_seconds)")
+            return f"time budget of {self.opt.max_seconds:.3g} s exhausted (option max_seconds)"
+        return None
 
     def _memory_guard(self):
         """UNKNOWN once the exploration holds more than ``MEMORY_FRACTION`` of the machine's
@@ -661,8 +667,9 @@ class _Explorer:
         H, g = self.invariants[mode]
         ranges = self.data.ranges
         if self.covered is not None and not self.covered.shift:
-            starts = [0.0 if p.origin is None else p.origin.star.box_bound().low[self.clock] for _, p in members]
-            ranges = self._clock_from(ranges, min(starts))
+            origins = {id(p.origin): p.origin for _, p in members}.values()     # each once
+            ranges = self._clock_from(ranges, min(0.0 if a is None else a.star.box_bound().low[self.clock]
+                                                  for a in origins))
         hull, kept = interval_hull(members, (np.vstack([H, rows[0]]), np.concatenate([g, rows[1]])),
                                    self._lp_count, ranges)
         if not kept:

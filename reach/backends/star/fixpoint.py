@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from reach import lp
+from reach.backends.star.aggregation import one_coordinate
 from reach.sets import Box, Star
 
 
@@ -80,7 +81,7 @@ def enlarged(hull: Star, invariant, rows, ranges: Box | None = None) -> tuple[St
     if ranges is not None:
         low, high = np.maximum(low, ranges.low), np.minimum(high, ranges.high)
     H, g = np.asarray(rows[0], float), np.asarray(rows[1], float)
-    margin = np.where(np.count_nonzero(H, axis=1) == 1, AXIS_MARGIN, MARGIN) if H.size else np.zeros(0)
+    margin = np.where(one_coordinate(H), AXIS_MARGIN, MARGIN) if H.size else np.zeros(0)
     g = g + margin * (1.0 + np.abs(g)) * np.linalg.norm(H, axis=1)
     star = Star.from_box(Box(low, high)).intersect_halfspaces(
         np.vstack([invariant[0], H]), np.concatenate([invariant[1], g]))
