@@ -223,6 +223,7 @@ def cmd_replay(args) -> int:
     from reach.backends.montecarlo import check_run, replay
     from reach.model import load_model
     from reach.model.simulate import Branches
+    from reach.report import margin_at
     from reach.result import Counterexample
     from reach.spec import bind, load_properties
 
@@ -243,8 +244,11 @@ def cmd_replay(args) -> int:
         print(printable(f"note: the run took the transitions {', '.join(rep.transitions) or '(none)'}; "
                         f"the file names {', '.join(cex.transitions) or '(none)'}"))
     if rep.violated:
+        there = margin_at(prop, rep.mode, rep.state)
+        depth = (f"deepest margin {rep.depth:.4g} along the run" if there is None else
+                 f"margin {there:.4g} there, deepest {rep.depth:.4g} along the run")
         print(printable(f"replayed: {model.name} violates '{prop.id}' at t={rep.time:.6g} in mode {rep.mode} "
-                        f"(depth {rep.depth:.3g}); state {state}"))
+                        f"({depth}); state {state}"))
         return 1
     print(printable(f"NOT replayed: {model.name} satisfies '{prop.id}' along this run "
                     f"(closest margin {rep.depth:.4g})"))

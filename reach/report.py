@@ -139,12 +139,18 @@ def figures(result, prop, model) -> dict:
 
 def _depth_at_violation(cex, prop) -> float | None:
     """The margin (negative: how far past) of the counterexample's violating state."""
-    if cex is None or cex.violation_mode not in prop.pieces or len(cex.violation_state) != len(prop.symbols):
+    return None if cex is None else margin_at(prop, cex.violation_mode, cex.violation_state)
+
+
+def margin_at(prop, mode: str, state) -> float | None:
+    """The margin of a bound property at one state in ``mode`` (negative: how far past its
+    bound), None where the property says nothing there."""
+    if mode not in prop.pieces or len(state) != len(prop.symbols):
         return None
-    test = prop.violation(cex.violation_mode)
+    test = prop.violation(mode)
     if test is None:
         return None
-    _, depth = test(np.asarray(cex.violation_state, dtype=float).reshape(1, -1))
+    _, depth = test(np.asarray(state, dtype=float).reshape(1, -1))
     return float(depth[0]) if np.isfinite(depth[0]) else None
 
 

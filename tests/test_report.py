@@ -5,6 +5,7 @@ units; 1 m/s = 60 m/min.
 """
 
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -219,4 +220,9 @@ def test_a_counterexample_replays_from_any_working_folder(tmp_path, monkeypatch,
     monkeypatch.chdir(tmp_path)
     capsys.readouterr()
     assert main(["replay", str(moved / "out" / "thermostat_below_20p5_star.json")]) == 1
-    assert "replayed: thermostat violates 'below_20p5'" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "replayed: thermostat violates 'below_20p5'" in out
+    # the margin at the violating state is that state's distance past the bound T <= 20.5
+    T = float(re.search(r"state T=([-\d.e]+)", out).group(1))
+    there = float(re.search(r"margin ([-\d.e]+) there", out).group(1))
+    assert there == pytest.approx(20.5 - T, abs=1e-5) and there < 0

@@ -24,6 +24,8 @@ candidate: the back-end replays it alone before it reports UNSAFE.
 
 from __future__ import annotations
 
+import math
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -43,6 +45,7 @@ class Budget:
     generations: int = 20      # differential evolution generations
     population: int = 40       # candidates per generation
     polish: int = 60           # Nelder-Mead evaluations (single runs)
+    deadline: float = math.inf  # time.perf_counter() past which the search stops with what it has
 
 
 class Parameterisation:
@@ -154,15 +157,16 @@ def falsify(model, prop, window, sim, monitor_factory, elite, budget: Budget, se
     scipy.optimize.differential_evolution(
         lambda U: evaluate(U.T), [(0.0, 1.0)] * param.dim, init=init, maxiter=budget.generations,
         vectorized=True, updating="deferred", polish=False, tol=FLAT, atol=FLAT,
-        seed=rng, callback=lambda intermediate_result: best["violated"])
-    if not best["violated"] and budget.polish > 0:
+        seed=rng, callback=lambda intermediate_result: best["violated"] or time.perf_counter() > budget.deadline)
+    if not best["violated"] and budget.polish > 0 and time.perf_counter() <= budget.deadline:
         start = param.encode(*best["run"][:4])[0]
         if param.dim <= GRID_DIM:
-            _grid_polish(evaluate, best, start, budget.polish)
+            _grid_polish(evaluate, best, start, budget)
             return _outcome(best)
         try:
             scipy.optimize.minimize(
-                lambda u: _stop_at_violation(best, evaluate(u[None, :]))[0], start, method="Nelder-Mead",
+                lambda u: _stop_at_violation(best, evaluate(u[None, :]), budget.deadline)[0], start,
+                method="Nelder-Mead",
                 bounds=[(0.0, 1.0)] * param.dim,
                 options={"maxfev": budget.polish, "xatol": 1e-9, "fatol": 0.0,
                          "initial_simplex": _simplex(start)})
@@ -185,19 +189,19 @@ def latin_hypercube(rng: np.random.Generator, count: int, dim: int) -> np.ndarra
     return (perms.T - u) / count
 
 
-def _grid_polish(evaluate, best, start: np.ndarray, budget: int) -> None:
+def _grid_polish(evaluate, best, start: np.ndarray, budget: Budget) -> None:
     """The polish of a search over at most :data:`GRID_DIM` parameters, batched: in each of
     :data:`GRID_ROUNDS` rounds a grid of ``G^d`` points (``G^d <= budget / rounds``) spanning
     ``centre +- w`` is one :meth:`Simulator.run`; the best point so far becomes the centre and
     ``w`` shrinks to the grid's spacing (``w`` starts at the Nelder-Mead simplex edge, 0.05)."""
     d = start.size
-    G = max(3, int(np.floor((budget / GRID_ROUNDS) ** (1.0 / d))))
+    G = max(3, int(np.floor((budget.polish / GRID_ROUNDS) ** (1.0 / d))))
     centre, w = start.copy(), 0.05
     for _ in range(GRID_ROUNDS):
         axes = [np.clip(np.linspace(c - w, c + w, G), 0.0, 1.0) for c in centre]
         U = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, d)
         values = evaluate(U)
-        if best["violated"]:
+        if best["violated"] or time.perf_counter() > budget.deadline:
             return
         k = int(np.argmin(values))
         if values[k] <= best["depth"]:
@@ -206,11 +210,11 @@ def _grid_polish(evaluate, best, start: np.ndarray, budget: int) -> None:
 
 
 class _Found(Exception):
-    """Ends the polish at the first violating run."""
+    """Ends the polish at the first violating run, or when the time budget is spent."""
 
 
-def _stop_at_violation(best, values):
-    if best["violated"]:
+def _stop_at_violation(best, values, deadline: float):
+    if best["violated"] or time.perf_counter() > deadline:
         raise _Found
     return values
 

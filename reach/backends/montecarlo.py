@@ -53,6 +53,7 @@ and ``samples`` i.i.d. initial states (:mod:`reach.backends.event_sampling`).
 from __future__ import annotations
 
 import itertools
+import math
 import time
 from dataclasses import dataclass, field
 
@@ -93,6 +94,7 @@ class Options:
     population: int = ranged(40, 5, 1_000_000)    # runs per generation
     polish: int = ranged(60, 0, 1_000_000)        # polish runs from the best point (reach.backends.falsify)
     keep_sets: bool = False        # safety: KEPT_RUNS sampled runs in Result.sets (pictures)
+    max_seconds: float | None = ranged(None, 0.0, open_low=True)  # safety: no search or optimisation past it
 
     @classmethod
     def from_dict(cls, options: dict | None) -> "Options":
@@ -556,6 +558,7 @@ class MonteCarloBackend:
     def _safety(self, model, props: list[BoundSafety], opts: Options) -> list[Result]:
         """Structured and i.i.d. runs shared by all properties, then a search per property."""
         start = time.perf_counter()
+        deadline = math.inf if opts.max_seconds is None else start + opts.max_seconds
         rng = np.random.default_rng(opts.seed)
         window = switch_window(model)
         sim = Simulator(model, opts.dt)
@@ -606,10 +609,13 @@ class MonteCarloBackend:
             found = monitor.first_violation()
             found = None if found is None else (0, found)
             if found is None and model.disturbance is None:
-                found = self._search(model, prop, window, sim, rounds, opts, rng, branching)
-            if found is None and model.disturbance is None and opts.optimise:
-                found = self._optimise(model, prop, window, sim, rounds, opts, branching)
+                found = self._search(model, prop, window, sim, rounds, opts, rng, branching, deadline)
+            if found is None and model.disturbance is None and opts.optimise and time.perf_counter() <= deadline:
+                found = self._optimise(model, prop, window, sim, rounds, opts, branching, deadline)
                 details["optimiser_runs"] = int(rounds[-1][3].runs)
+            if found is None and time.perf_counter() > deadline:
+                details["note"] = (f"time budget of {opts.max_seconds:.3g} s (option max_seconds) "
+                                   f"ended the search")
             details["search_runs"] = int(sum(r[1].shape[0] for r in rounds[1:] if r[0] != "optimiser"))
             details["closest_depth"] = min(float(np.min(r[3].min_depth)) for r in rounds)
             result = Result(NAME, model.name, prop.id, Status.UNKNOWN, details=details)
@@ -634,15 +640,18 @@ class MonteCarloBackend:
             results.append(result)
         return results
 
-    def _search(self, model, prop, window, sim, rounds, opts: Options, rng, branching: bool):
+    def _search(self, model, prop, window, sim, rounds, opts: Options, rng, branching: bool, deadline: float):
         """Cross-entropy falsification: resample around the runs closest to the unsafe set
-        (their choice values too where a sampled run met several enabled transitions)."""
+        (their choice values too where a sampled run met several enabled transitions); no
+        generation starts past ``deadline``."""
         low, high = model.initial.low, model.initial.high
         span = np.where(high > low, high - low, 0.0)
         sampler = None if model.initial.is_box else PolytopeSampler(model.initial.polytope, low, high)
         ulo = np.array([u.low for u in model.varying_inputs])
         uhi = np.array([u.high for u in model.varying_inputs])
         for g in range(opts.search_rounds):
+            if time.perf_counter() > deadline:
+                break
             X_all = np.concatenate([r[1] for r in rounds])
             d_all = np.concatenate([r[3].min_depth for r in rounds])
             elite = np.argsort(d_all)[:max(5, opts.search_size // 10)]
@@ -680,7 +689,7 @@ class MonteCarloBackend:
                 return len(rounds) - 1, i
         return None
 
-    def _optimise(self, model, prop, window, sim, rounds, opts: Options, branching: bool):
+    def _optimise(self, model, prop, window, sim, rounds, opts: Options, branching: bool, deadline: float):
         """Differential evolution and Nelder-Mead on the robustness, seeded with the closest runs
         (their choice values as parameters where a sampled run met several enabled transitions);
         appends the best run as the round ``optimiser`` (its monitor carries ``runs``, the cost)."""
@@ -696,7 +705,7 @@ class MonteCarloBackend:
         elite_choice = np.concatenate([r[5] for r in rounds])[elite] if branching else None
         out = falsify(model, prop, window, sim, lambda count: SafetyMonitor(model, prop, count),
                       (X_all[elite], None if tau_all is None else tau_all[elite], elite_signal, elite_choice),
-                      Budget(opts.generations, opts.population, opts.polish), opts.seed,
+                      Budget(opts.generations, opts.population, opts.polish, deadline), opts.seed,
                       step, pieces, switching, 0 if elite_choice is None else elite_choice.shape[1])
         out.monitor.runs = out.runs
         rounds.append(("optimiser", out.X, out.tau, out.monitor, out.signal, out.choice))

@@ -29,10 +29,12 @@ guards, the invariants of the modes it leaves and its resets all linear (affine 
     G_j x_j <= g_j,  I_j x_j <= i_j,  x_{j+1} = R_j x_j + r_j      (j = 0 .. k-1)
 
 in the stacked states (strict inequalities relaxed to non-strict ones, which only makes it
-larger). If it is empty by more than the LP tolerance, consecutive passes through the cycle are
+larger), here for the cycle taken twice (``k`` = twice its length: a relaxation oscillator's
+reset ``x := 0.5`` off its guard ``x >= 1.5`` is taken once at an instant, never twice). If it
+is empty by more than the LP tolerance, consecutive double passes through the cycle are
 separated by a positive distance that a continuous flow crosses only in positive time on any
 bounded region: no zero-dwell run goes round it. When it is not empty, the finding names a state
-where every jump of the cycle can happen at once, so a reader can check it.
+where every jump of the cycle, twice over, can happen at once, so a reader can check it.
 
 Each finding is one line naming the file, the field and the mode cycle (the shortest
 :data:`MAX_REPORTED` cycles, then a count)::
@@ -155,15 +157,16 @@ def zero_time_witness(n: int, jumps) -> tuple[bool, np.ndarray | None]:
 def zero_dwell_cycles(model) -> tuple[list, bool]:
     """``(found, complete)``: ``found`` lists ``(modes, transition names, state)`` for simple
     mode cycles (``modes``: ``[m0, m1, ..., m0]``), one choice of transition per step, on which
-    no clock is reset and bounded below by a larger constant and whose jumps can be taken at one
-    instant (``state``: a start state where they can, None when a nonlinear constraint left that
+    no clock is reset and bounded below by a larger constant and whose jumps can be taken twice
+    round at one instant (``state``: a start state where they can, None when a nonlinear constraint left that
     open); ``complete``: whether every offending cycle is in the list.
 
     Depth-first search over chains of transitions that can be taken at one instant: a chain
     that cannot be is never extended, since no cycle through it can be traversed in zero time
     (so nothing offending is pruned). A cycle is found once, from its transition of smallest
     index. At most :data:`MAX_CYCLES` chains are tried and :data:`MAX_REPORTED` + 1 findings
-    kept."""
+    kept. A chain that cannot be taken once at one instant is pruned; a cycle is reported when
+    it can be taken twice (see the module doc)."""
     transitions = model.transitions
     signature = [edge_signature(model, tr) for tr in transitions]
     jumps = [linear_jump(model, tr) for tr in transitions]
@@ -199,8 +202,9 @@ def zero_dwell_cycles(model) -> tuple[list, bool]:
                 if not cycle_is_safe([signature[j] for j in cycle]):
                     shift = min(range(len(cycle)), key=lambda i: order[transitions[cycle[i]].source])
                     cycle = cycle[shift:] + cycle[:shift]
-                    if shift:
-                        state = zero_time_witness(model.n, [jumps[j] for j in cycle])[1]
+                    possible, state = zero_time_witness(model.n, [jumps[j] for j in cycle] * 2)
+                    if not possible:
+                        continue
                     modes = [transitions[j].source for j in cycle] + [transitions[cycle[0]].source]
                     found.append((modes, [transitions[j].name for j in cycle], state))
                     if len(found) > MAX_REPORTED:
@@ -217,8 +221,8 @@ def lint(model) -> list[str]:
     cycles = sorted(cycles, key=lambda found: len(found[0]))
     findings = []
     for cycle, names, state in cycles[:MAX_REPORTED]:
-        at = ("" if state is None else ", and its jumps " + ", ".join(names) + " can all be taken at one instant from "
-              + ", ".join(f"{v}={x + 0.0:.6g}" for v, x in zip(model.state, state)))
+        at = ("" if state is None else ", and its jumps " + ", ".join(names)
+              + " can all be taken twice round at one instant from " + ", ".join(f"{v}={x + 0.0:.6g}" for v, x in zip(model.state, state)))
         findings.append(f"{model.file}: transitions: possible zero-dwell cycle {' -> '.join(cycle)} "
                         f"(no clock reset on it is bounded below by a positive guard{at})")
     if len(cycles) > MAX_REPORTED or not complete:

@@ -294,8 +294,11 @@ class StarBackend:
                 return result
         if tried:
             first.seconds = result.seconds
+            budget = ("option max_seconds" if opt.max_seconds is not None else
+                      f"the finer passes share {FINER_FACTOR:g} times the first pass's time, "
+                      f"{FINER_SECONDS:g} to {FINER_MAX_SECONDS:g} s; -o max_seconds=S sets it")
             first.details["reason"] += (f"; checked again at step {' and '.join(tried)}, still undecided: "
-                                        f"{result.details.get('reason', '')}")
+                                        f"{result.details.get('reason', '')} ({budget})")
         return first
 
     def _check_aggregating(self, model, prop, options, opt, start) -> Result:

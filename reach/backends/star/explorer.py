@@ -613,9 +613,10 @@ class _Explorer:
             raise _Stop(Status.UNKNOWN, reason)
 
     def out_of_time(self) -> str | None:
-        """Why the search must stop for time (option ``max_seconds``), or None while it may go on."""
+        """Why the search must stop for time (option ``max_seconds``, or the finer passes' share
+        of the time, see :func:`reach.backends.star.finer_retry`), or None while it may go on."""
         if time.perf_counter() > self.deadline:
-            return f"time budget of {self.opt.max_seconds:.3g} s exhausted (option max_seconds)"
+            return f"time budget of {self.opt.max_seconds:.3g} s exhausted"
         return None
 
     def _memory_guard(self):
