@@ -261,6 +261,9 @@ def test_names_the_system_lacks_in_initially_are_bad_input(tmp_path, extra, mess
     (NETWORK, 'initially = "x == 0 | x == 1"\n', "union of initial sets"),
     (NETWORK, 'initially = "x == 0 & y == 0"\nforbidden = "x <= "\n', "empty side"),
     (NETWORK.replace("</component>\n<component id=\"b\">", "<bogus>", 1), "", "invalid XML"),
+    (NETWORK.replace("x' == k", "x' == 0 5*k"), "", "missing operator between '0' and '5'"),
+    (NETWORK, 'initially = "x == 0 & y == 0"\nforbidden = "x >= 6 2"\n', "missing operator between '6' and '2'"),
+    (NETWORK, 'initially = "x == 0 & y x == 0"\n', "missing operator between 'y' and 'x'"),
 ])
 def test_constructs_outside_scope_name_the_construct_and_line(tmp_path, capsys, body, cfg, needle):
     text = 'system = sys\ntime-horizon = 1\n' + (cfg or 'initially = "loc(A)==off & loc(B)==idle & x == 0 & y == 0"\n')

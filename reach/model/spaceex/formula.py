@@ -176,6 +176,8 @@ class _Parser:
                 ops.append(tok.text)
                 current = []
             else:
+                if current and _juxtaposed(current[-1], tok):
+                    raise FormulaError(f"missing operator between '{current[-1].text}' and '{tok.text}'")
                 current.append(tok)
             self.i += 1
         parts.append(current)
@@ -185,6 +187,14 @@ class _Parser:
         if any(not p for p in parts):
             raise FormulaError("a relation has an empty side")
         return Relation(parts, ops)
+
+
+def _juxtaposed(left: Token, right: Token) -> bool:
+    """Two operands side by side with no operator between (``6 2``, ``x 1``, ``2 x``, ``) (``):
+    a typo, never a product (``2*x`` must be written); a function call ``sin(`` is not one."""
+    ends = left.kind in ("num", "name") or left.text in (")", "'")
+    begins = right.kind in ("num", "name") or right.text == "("
+    return ends and begins and not (left.kind == "name" and right.text == "(")
 
 
 def parse_formula(text: str) -> list[list]:
