@@ -226,6 +226,13 @@ def line(result, prop, model) -> str:
         parts.append(f"violating runs: {d['violating_runs']} of {d['random_runs']}")
     elif result.status != Status.UNSAFE and "violation_probability_upper_95" in d:
         parts.append(f"P(violation) <= {d['violation_probability_upper_95']:.2g} (95 %)")
+    if d.get("blocked_runs"):
+        total = d.get("structured_runs", 0) + d.get("random_runs", 0)
+        parts.append(f"{d['blocked_runs']} of {total} runs stopped before the horizon and were watched "
+                     f"up to there only (no transition allowed, or too many jumps in one step of "
+                     f"{number(d['dt'])}: a smaller -o dt may carry them on)")
+    if result.status != Status.UNSAFE and d.get("note"):
+        parts.append(str(d["note"]))
     if "method" in d:
         parts.append(str(d["method"]))
     if "remainder" in d:

@@ -176,3 +176,34 @@ def test_cli_bad_input_is_one_line_and_exit_2(args, message):
     out = subprocess.run([sys.executable, "-m", "reach", *args], capture_output=True, text=True)
     assert out.returncode == 2
     assert out.stderr.count("\n") == 1 and message in out.stderr and "Traceback" not in out.stderr
+
+
+COUNTER = """
+name: counter
+state: [n, c]
+modes:
+  tick: {flow: false}
+  wait: {flow: {n: 0, c: 1}, invariant: ["c <= 1"]}
+transitions:
+  - {from: tick, to: wait, reset: {n: "n + 1", c: 0}, urgent: true}
+  - {from: wait, to: tick, guard: ["c >= 1"], urgent: true}
+initial: {mode: tick, box: {n: 0, c: 0}}
+horizon: 5.5
+"""
+
+
+@pytest.mark.parametrize("backend", ["montecarlo", "star"])
+def test_a_counter_through_a_mode_where_no_time_passes_is_caught_and_replays(tmp_path, backend):
+    """n = k + 1 on (k, k + 1] (closed form): the bound n <= 5.5 fails at t = 5, n <= 6.5 holds.
+    Each pass through ``tick`` returns at one instant to ``wait``, one higher."""
+    (tmp_path / "counter.yaml").write_text(COUNTER)
+    (tmp_path / "p.yaml").write_text("properties:\n  - {id: n6, kind: safety, require: ['n <= 5.5']}\n"
+                                     "  - {id: n7, kind: safety, require: ['n <= 6.5']}\n")
+    options = FAST if backend == "montecarlo" else {}
+    bad, good = check_files(tmp_path / "counter.yaml", tmp_path / "p.yaml", backend, options)
+    assert bad.status == Status.UNSAFE
+    assert good.status == (Status.SAFE if backend == "star" else Status.UNKNOWN)
+    cex = bad.counterexample
+    assert abs(cex.violation_time - 5.0) < 1e-6 and cex.violation_state[0] == 6.0
+    prop = bind(load_properties(tmp_path / "p.yaml")[0], load_model(tmp_path / "counter.yaml"))
+    assert replay(load_model(tmp_path / "counter.yaml"), prop, cex.initial_state, cex.switch_time, cex.dt).violated

@@ -35,3 +35,41 @@ def test_a_zeno_ball_stops_at_its_accumulation_instant(tmp_path):
     doc["transitions"][0]["reset"] = {"v": "-v"}
     (tmp_path / "elastic.yaml").write_text(yaml.safe_dump(doc))
     assert np.isnan(Simulator(load_model(tmp_path / "elastic.yaml")).run(np.array([[X0, V0]])).blocked_at[0])
+
+
+def _counter(tmp_path, tick: dict, horizon: float, name: str = "counter"):
+    """A counter: ``tick`` adds one to n and restarts the clock c at once (urgent, no guard);
+    ``wait`` lets c run to 1 and hands back to ``tick``. n = k + 1 on (k, k + 1)."""
+    doc = {"name": name, "state": ["n", "c"], "horizon": horizon,
+           "modes": {"tick": tick, "wait": {"flow": {"n": 0, "c": 1}, "invariant": ["c <= 1"]}},
+           "transitions": [{"from": "tick", "to": "wait", "reset": {"n": "n + 1", "c": 0}, "urgent": True},
+                           {"from": "wait", "to": "tick", "guard": ["c >= 1"], "urgent": True}],
+           "initial": {"mode": "tick", "box": {"n": 0, "c": 0}}}
+    (tmp_path / f"{name}.yaml").write_text(yaml.safe_dump(doc))
+    return load_model(tmp_path / f"{name}.yaml")
+
+
+def test_a_counter_passes_again_and_again_through_a_mode_where_no_time_passes(tmp_path):
+    """Each pass through ``tick`` comes back at one instant to ``wait``, the mode the run just
+    left, in another state (n one higher, c = 0): a jump that changes the state, not a Zeno
+    cycle. Closed form: n = 6 on (5, 5.5], with the run never blocked, whether ``tick`` is
+    timeless (SpaceEx ``flow false``) or has zero rates."""
+    for tick in ({"flow": False}, {"flow": {"n": 0, "c": 0}}):
+        sim = Simulator(_counter(tmp_path, tick, 5.5))
+        traj = sim.run(np.array([[0.0, 0.0]]))
+        assert np.isnan(traj.blocked_at[0])
+        assert traj.final_state[0, 0] == 6.0 and abs(traj.final_state[0, 1] - 0.5) < 1e-9
+
+
+def test_jumps_at_one_instant_that_never_repeat_a_state_end_as_zeno(tmp_path):
+    """Two modes where no time passes hand a run back and forth, n one higher each time:
+    infinitely many jumps at t = 0. The run is blocked there, after MAX_JUMPS_AT_INSTANT."""
+    from reach.model.simulate import MAX_JUMPS_AT_INSTANT
+    doc = {"name": "spin", "state": ["n"], "horizon": 1,
+           "modes": {"a": {"flow": False}, "b": {"flow": False}},
+           "transitions": [{"from": "a", "to": "b", "reset": {"n": "n + 1"}},
+                           {"from": "b", "to": "a", "reset": {"n": "n + 1"}}],
+           "initial": {"mode": "a", "box": {"n": 0}}}
+    (tmp_path / "spin.yaml").write_text(yaml.safe_dump(doc))
+    traj = Simulator(load_model(tmp_path / "spin.yaml")).run(np.array([[0.0]]))
+    assert traj.blocked_at[0] == 0.0 and traj.final_state[0, 0] == MAX_JUMPS_AT_INSTANT

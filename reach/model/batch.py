@@ -238,7 +238,7 @@ def first_entry(sim, name: str, X: np.ndarray, h: np.ndarray, guard, sub: SubSte
         z = np.vstack([X[sel].T, np.ones((1, sel.size))])               # [x(lo); 1], (n+1, R)
         lo = np.zeros(sel.size)
         for r in range(sub.rounds):
-            inside = (G[r] @ z).reshape(-1, K, sel.size).max(axis=0) <= 0  # (2^b, R)
+            inside = (G[r] @ z).reshape(-1, K, sel.size).max(axis=0, initial=-np.inf) <= 0  # (2^b, R)
             inside[-1] = True                                         # the right end holds
             k = inside.argmax(axis=0)                                 # first end that holds
             moved = np.flatnonzero(k > 0)
@@ -268,7 +268,7 @@ def scalar_entry(flow, rows, x0: np.ndarray, h: np.ndarray) -> np.ndarray:
         else:
             s = (c[None, :] - x0[:, None]) / b
     s = np.where(holds | ~np.isfinite(s), 0.0, s)
-    entry = np.clip(s.max(axis=1), 0.0, None) + h * 2.0 ** (-BISECTION_STEPS)
+    entry = np.clip(s.max(axis=1, initial=0.0), 0.0, None) + h * 2.0 ** (-BISECTION_STEPS)
     return np.minimum(entry, h)
 
 

@@ -72,6 +72,7 @@ BATCH_RUNS = 4096                 # runs of one linear segment advanced together
 MAX_STEPS = 5_000_000             # grid steps over the horizon (horizon / dt)
 EXPONENTIALS_BYTES = 64 * 2 ** 20  # exponentials kept for recurring durations (Simulator._exponentials)
 MAX_PASSES_PER_STEP = 50          # events of one run inside one grid step before it counts as Zeno
+MAX_JUMPS_AT_INSTANT = 1000       # jumps of one run at one instant before it counts as Zeno
 MEMORY_BUDGET = 4 * 2 ** 30       # bytes the simulator may plan to hold at once
 RUN_BYTES_PER_VALUE = 8 * 24      # per run and state value: the arrays a batch of runs carries
 
@@ -608,46 +609,58 @@ class Simulator:
             runs.watch(sel)
         return rows[chosen >= 0]
 
-    def _urgent_now(self, rows: np.ndarray, runs: _Runs, left: int | None = None) -> None:
-        """The runs ``rows`` at one instant (the start, after a jump from mode index ``left``, or
-        after a kick) take the transitions they must take at once, watched after each jump: an
-        enabled urgent one whose guard holds, and in a timeless mode any enabled one (guards
-        tested exactly, every margin at most 0, as a segment tests urgent guards: a run that has
-        just left a guard does not jump back on rounding).
+    def _urgent_now(self, rows: np.ndarray, runs: _Runs, left: int | None = None,
+                    left_X: np.ndarray | None = None) -> None:
+        """The runs ``rows`` at one instant (the start, after a jump from mode index ``left``
+        out of the states ``left_X``, or after a kick) take the transitions they must take at
+        once, watched after each jump: an enabled urgent one whose guard holds, and in a
+        timeless mode any enabled one (guards tested exactly, every margin at most 0, as a
+        segment tests urgent guards: a run that has just left a guard does not jump back on
+        rounding).
 
-        Once it has jumped at an instant, a run does not return at that instant to a mode it has
-        been in: such a cycle of jumps would be Zeno (two closed guards that meet, ``s >= phi``
-        out of a layer and ``s <= phi`` into it, both hold on the boundary), so the transition
-        that would close it is not taken then, and the run stays where it is (the flow decides).
-        A run that must jump and has none enabled (an urgent guard holds, or it is in a timeless
-        mode) is blocked there. After its first jump every jump reaches a mode not visited yet,
-        so this ends."""
-        visited = np.zeros((rows.size, len(self.mode_names)), dtype=bool)
+        At one instant a run does not take a jump that lands it in a mode and state it has
+        already been in at that instant: such a cycle of jumps would be Zeno (two closed guards
+        that meet, ``s >= phi`` out of a layer and ``s <= phi`` into it, both hold on the
+        boundary), so the transition that would close it is not taken then, and the run stays
+        where it is (the flow decides). A jump whose reset changes the state goes on (a counter
+        ``n := n + 1`` through a mode where no time passes comes back to the mode it left, one
+        higher). A run that must jump and has none enabled (an urgent guard holds, or it is in
+        a timeless mode) is blocked there, as is one still jumping after
+        :data:`MAX_JUMPS_AT_INSTANT` jumps at the instant (a reset that never repeats a state)."""
+        count = len(self.mode_names)
+        seen = np.full((rows.size, count, runs.X.shape[1]), np.nan)    # (run, mode): its state there
         slot = np.full(runs.X.shape[0], -1)
         slot[rows] = np.arange(rows.size)
         if left is not None:
-            visited[np.arange(rows.size), runs.mode[rows]] = True
-            visited[:, left] = True
-        while rows.size:
+            seen[np.arange(rows.size), left] = left_X
+            seen[np.arange(rows.size), runs.mode[rows]] = runs.X[rows]
+        for _ in range(MAX_JUMPS_AT_INSTANT):
+            if not rows.size:
+                return
             moved = []
             for m_index in np.unique(runs.mode[rows]):
                 name = self.mode_names[m_index]
                 sel = rows[runs.mode[rows] == m_index]
                 options = self.instant[name]
                 guards, enabled = self._enabled(options, runs.X[sel], tolerance=0.0)
-                back = visited[slot[sel]][:, [self.mode_names.index(tr.target) for tr, _ in options]]
+                back = np.zeros_like(enabled)
+                for j, (tr, _) in enumerate(options):
+                    before = seen[slot[sel], self.mode_names.index(tr.target)]
+                    after = self.resets[tr.name](runs.X[sel]) if tr.name in self.resets else runs.X[sel]
+                    back[:, j] = np.all(before == after, axis=1)
                 enabled &= ~back
                 urgent = len(self.urgent[name])
                 must = np.full(sel.size, name in self.timeless) | (guards & ~back)[:, :urgent].any(axis=1)
                 stuck = sel[must & ~enabled.any(axis=1)]
                 runs.blocked_at[stuck] = runs.t[stuck]
-                go = np.flatnonzero(enabled.any(axis=1))
+                go = sel[enabled.any(axis=1)]
                 if go.size:
-                    visited[slot[sel[go]], m_index] = True
-                    jumped = self._jump(sel[go], options, enabled[go], runs)
-                    visited[slot[jumped], runs.mode[jumped]] = True
+                    seen[slot[go], m_index] = runs.X[go]
+                    jumped = self._jump(go, options, enabled[enabled.any(axis=1)], runs)
+                    seen[slot[jumped], runs.mode[jumped]] = runs.X[jumped]
                     moved.append(jumped)
             rows = np.concatenate(moved) if moved else rows[:0]
+        runs.blocked_at[rows] = runs.t[rows]
 
     def _take_may(self, rows: np.ndarray, runs: _Runs) -> None:
         """Each run of ``rows`` (at a piece start) takes an enabled may-transition with a
@@ -660,7 +673,9 @@ class Simulator:
             sel = rows[runs.mode[rows] == m_index]
             if self.exits[name] and sel.size:
                 _, enabled = self._enabled(self.exits[name], runs.X[sel], tolerance=0.0)
-                self._urgent_now(self._jump(sel, self.exits[name], enabled, runs), runs, m_index)
+                before = runs.X[sel].copy()
+                jumped = self._jump(sel, self.exits[name], enabled, runs)
+                self._urgent_now(jumped, runs, m_index, before[np.isin(sel, jumped)])
 
     def _event(self, rows: np.ndarray, Xe: np.ndarray, times: np.ndarray, options: list,
                winner: np.ndarray | None, runs: _Runs) -> None:
@@ -675,7 +690,8 @@ class Simulator:
         runs.blocked_at[rows[~enabled.any(axis=1)]] = times[~enabled.any(axis=1)]
         go = np.flatnonzero(enabled.any(axis=1))
         if go.size:
-            self._urgent_now(self._jump(rows[go], options, enabled[go], runs), runs, source)
+            jumped = self._jump(rows[go], options, enabled[go], runs)
+            self._urgent_now(jumped, runs, source, Xe[go][np.isin(rows[go], jumped)])
 
     def _segment(self, name, rows, runs: _Runs, next_kick):
         """Advance ``rows`` (all in mode ``name``) to their next event, kick, or the horizon."""

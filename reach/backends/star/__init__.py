@@ -294,11 +294,12 @@ class StarBackend:
                 return result
         if tried:
             first.seconds = result.seconds
-            budget = ("option max_seconds" if opt.max_seconds is not None else
-                      f"the finer passes share {FINER_FACTOR:g} times the first pass's time, "
-                      f"{FINER_SECONDS:g} to {FINER_MAX_SECONDS:g} s; -o max_seconds=S sets it")
-            first.details["reason"] += (f"; checked again at step {' and '.join(tried)}, still undecided: "
-                                        f"{result.details.get('reason', '')} ({budget})")
+            reason = result.details.get("reason", "")
+            if "time budget of" in reason:              # whose budget (:meth:`_Explorer.out_of_time`)
+                reason += (" (option max_seconds)" if opt.max_seconds is not None else
+                           f" (the finer passes share {FINER_FACTOR:g} times the first pass's time, "
+                           f"{FINER_SECONDS:g} to {FINER_MAX_SECONDS:g} s; -o max_seconds=S sets it)")
+            first.details["reason"] += f"; checked again at step {' and '.join(tried)}, still undecided: {reason}"
         return first
 
     def _check_aggregating(self, model, prop, options, opt, start) -> Result:
