@@ -203,8 +203,9 @@ def cmd_lint(args) -> int:
     files = []
     for name in args.models:
         path = Path(name)
-        if path.is_dir():
-            files.extend(sorted(p for p in path.glob("*.yaml") if not p.name.startswith("_")))
+        if path.is_dir():                   # its models: property files are passed over
+            files.extend(sorted(p for p in path.glob("*.yaml")
+                                if not p.name.startswith("_") and not _is_property_file(p)))
         else:
             files.append(find_model(name))
     findings = [line for f in files for line in load_model(f).lints]
@@ -213,6 +214,14 @@ def cmd_lint(args) -> int:
     if not findings:
         print(f"no findings ({len(files)} model{'s' if len(files) != 1 else ''})")
     return 1 if findings else 0
+
+
+def _is_property_file(path: Path) -> bool:
+    """A YAML file of properties (a top-level ``properties`` and no ``modes``), not a model."""
+    from reach import yamlio
+
+    data = yamlio.load(path).data
+    return isinstance(data, dict) and "properties" in data and "modes" not in data
 
 
 def cmd_replay(args) -> int:

@@ -28,6 +28,8 @@ def read_bytes(path, suffixes: tuple[str, ...] | None = None, what: str = "file"
     """The bytes of a regular file of at most ``max_bytes`` bytes (an InputError otherwise)."""
     path = Path(path)
     shown = printable(str(path))
+    if path.is_dir():
+        raise InputError(f"a folder, not a file (a {what} must be a plain file)", shown)
     if suffixes is not None and path.suffix.lower() not in suffixes:
         raise InputError(f"a {what} must be a {' or '.join(suffixes)} file", shown)
     try:

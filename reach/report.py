@@ -75,6 +75,17 @@ def requirement(prop) -> str:
     return ""
 
 
+def _where(prop, model, shown: int = 4) -> str:
+    """`` (in m1, m2)`` where a safety property applies in some of the model's modes only (a
+    SpaceEx forbidden set with ``loc(...) ==``, a property's ``modes:``); the first ``shown``
+    of them, then a count."""
+    modes = list(getattr(prop, "pieces", {}) or [])
+    if getattr(prop, "kind", "") != "safety" or model is None or not modes or len(modes) >= len(model.modes):
+        return ""
+    names = ", ".join(modes[:shown]) + (f" and {len(modes) - shown} more" if len(modes) > shown else "")
+    return f" (in {names})"
+
+
 def _avoid_text(pieces_by_mode) -> str:
     """An unsafe set as written: the union of its pieces (conjunctions of constraints), each
     named once, with the modes it applies in where that is not every mode of the property:
@@ -97,7 +108,7 @@ def _bound_value(prop) -> str:
 
 def figures(result, prop, model) -> dict:
     """The result's figures in the requirement's units (JSON-ready)."""
-    out: dict = {"requirement": requirement(prop)}
+    out: dict = {"requirement": requirement(prop) + _where(prop, model)}
     kind = getattr(prop, "kind", "")
     d = result.details
     if kind == "event":
@@ -116,8 +127,10 @@ def figures(result, prop, model) -> dict:
     elif kind == "safety":
         unit = prop.margin_unit()
         out["unit"] = unit.text if unit is not None else None
+        dims = {c.dimension for pieces in prop.pieces.values() for piece in pieces for c in piece}
         if unit is None:
-            out["unit_note"] = "requirements of different dimensions: margins in model units"
+            out["unit_note"] = ("requirements of different dimensions: margins in model units" if len(dims) > 1
+                                else "margins in model units")
         if "closest_depth" in d:
             out["closest_margin"] = _in(unit, d["closest_depth"])
         if "margin_bound" in d:
@@ -219,6 +232,8 @@ def line(result, prop, model) -> str:
         p = f"P in {interval(*result.probability)}"
         if "at_least" in f:
             p += f", required >= {number(f['at_least'])}"
+            if float(result.probability[1]) < float(f["at_least"]):
+                p += " (wholly below it: a violation, with no single run to show for it)"
         parts.append(p)
     if "margin_note" in f:
         parts.append(f["margin_note"])

@@ -42,7 +42,7 @@ def test_safety_margin_in_newtons_next_to_the_requirement(sra01):
     thrust = _prop(sra01, "properties/rendezvous.yaml", "thrust")
     result = Result("montecarlo", "SRA01", "thrust", Status.UNKNOWN, details={"closest_depth": 9371.0})
     assert figures(result, thrust, sra01)["closest_margin"] == pytest.approx(9371 / 3600)
-    assert line(result, thrust, sra01).startswith("abs(Fx) <= 10[N], abs(Fy) <= 10[N]: closest margin 2.603 N")
+    assert line(result, thrust, sra01).startswith("abs(Fx) <= 10[N], abs(Fy) <= 10[N] (in approach, rendezvous): closest margin 2.603 N")
 
 
 def test_a_proved_margin_bound_in_newtons(sra01):
@@ -52,7 +52,7 @@ def test_a_proved_margin_bound_in_newtons(sra01):
     result = Result("taylor", "SRA01", "thrust", Status.SAFE, details={"margin_bound": [9371.15, 10817.6]})
     assert figures(result, thrust, sra01)["margin_bound"] == pytest.approx([9371.15 / 3600, 10817.6 / 3600])
     assert line(result, thrust, sra01).startswith(
-        "abs(Fx) <= 10[N], abs(Fy) <= 10[N]: smallest margin in [2.603, 3.005] N")
+        "abs(Fx) <= 10[N], abs(Fy) <= 10[N] (in approach, rendezvous): smallest margin in [2.603, 3.005] N")
 
 
 def test_velocity_margin_in_metres_per_second(sra01):
@@ -150,7 +150,7 @@ def test_an_avoided_set_reads_as_avoid(tmp_path, sra01):
                     "    avoid: ['x >= 5[m]']\n")
     wall = bind(load_properties(path)[0], sra01)
     result = Result("montecarlo", "SRA01", "wall", Status.UNKNOWN, details={"closest_depth": 60.0})
-    assert line(result, wall, sra01).startswith("avoid x >= 5[m]: closest margin 60 m")
+    assert line(result, wall, sra01).startswith("avoid x >= 5[m] (in passive): closest margin 60 m")
 
 
 def test_a_model_without_units_shows_no_unit_of_time():

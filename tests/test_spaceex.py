@@ -283,6 +283,15 @@ def test_entity_declarations_are_refused(tmp_path, capsys):
     assert "document type declarations" in capsys.readouterr().err
 
 
+def test_a_misspelt_required_cfg_key_is_named_at_its_line(tmp_path, capsys):
+    text = ('system = sys\n# horizon\ntime-horizn = 1\n'
+            'initially = "loc(A)==off & loc(B)==idle & x == 0 & y == 0"\nforbidden = "x >= 5"\n')
+    xml, cfg = write(tmp_path, NETWORK, text)
+    assert main(["check", str(xml), str(cfg), "-b", "montecarlo"]) == 2
+    assert capsys.readouterr().err.strip() == (f"reach: {cfg}:3: no 'time-horizon' "
+                                               f"(is 'time-horizn' a misspelling of it?)")
+
+
 def test_missing_cfg_is_bad_input(tmp_path):
     (tmp_path / "m.xml").write_text(HEADER + NETWORK + "</sspaceex>\n")
     with pytest.raises(InputError, match="no .cfg"):
@@ -462,7 +471,7 @@ def test_folders_and_wrong_suffixes_are_bad_input(tmp_path, capsys):
     assert ".cfg" in capsys.readouterr().err
     (tmp_path / "m.cfg").write_text("system = s\n")
     assert main(["import", str(tmp_path / "m.xml"), str(tmp_path / "m.cfg"), "--out", str(tmp_path)]) == 2
-    assert "not a regular file" in capsys.readouterr().err
+    assert "a folder, not a file" in capsys.readouterr().err
 
 
 NESTED = '''<component id="lag">

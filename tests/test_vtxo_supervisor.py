@@ -138,6 +138,7 @@ def test_lint_finds_the_zeno_cycle_and_cli_reports_it(capsys):
     assert cli(["lint", MODEL]) == 0
     assert "no findings" in capsys.readouterr().out
     assert cli(["lint", "models/no_such_model.yaml"]) == 2
+    assert cli(["lint", "properties"]) == 0           # a folder's property files are no models
 
 
 def test_shipped_models_lint_clean_except_the_zeno_variant():

@@ -30,7 +30,9 @@ def unsupported_window(model) -> str | None:
         return None
     for tr in windows:
         if tr.window is None:
-            return f"the may-transition '{tr.name}' has a guard that is not a clock window"
+            what = "no guard" if not tr.guard else "a guard that is not a clock window (lo <= t <= hi)"
+            return (f"the may-transition '{tr.name}' has {what}: taylor handles one switch within a "
+                    f"clock window, not switching at any time (star and montecarlo do)")
     if len({tr.window for tr in windows}) > 1:
         return "more than one may-transition window"
     if len({tr.source for tr in windows}) < len(windows):

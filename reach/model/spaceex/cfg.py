@@ -7,6 +7,7 @@ SpaceEx's own algorithms (scenario, directions, tolerances, output) and are kept
 
 from __future__ import annotations
 
+import difflib
 from dataclasses import dataclass, field
 
 from reach.errors import InputError
@@ -25,6 +26,14 @@ class Config:
 
     def line(self, key: str) -> int | None:
         return self.values[key][1] if key in self.values else None
+
+    def missing(self, key: str) -> InputError:
+        """The error for a required key the file lacks, at a key spelt like it if there is one."""
+        near = difflib.get_close_matches(key, list(self.values), n=1, cutoff=0.75)
+        if near:
+            return InputError(f"no '{key}' (is '{near[0]}' a misspelling of it?)", self.file,
+                              line=self.values[near[0]][1])
+        return InputError(f"no '{key}'", self.file, line=1)
 
     def number(self, key: str) -> float | None:
         if key not in self.values:

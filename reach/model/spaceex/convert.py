@@ -606,7 +606,7 @@ class DocumentBuilder(Converter):
         data["transitions"] = self.transitions_out
         horizon = cfg.number("time-horizon")
         if horizon is None:
-            raise InputError("no 'time-horizon'", cfg.file, line=1)
+            raise cfg.missing("time-horizon")
         data["horizon"] = horizon
         lines[("horizon",)] = (cfg.file, cfg.line("time-horizon"))
         notes = {"source": self.file, "config": cfg.file}
@@ -657,7 +657,9 @@ class DocumentBuilder(Converter):
         text = self.cfg.text(key)
         if text is None or not text.strip():
             if required:
-                raise InputError(f"no '{key}'", self.cfg.file, line=self.cfg.line(key) or 1)
+                if self.cfg.text(key) is None:
+                    raise self.cfg.missing(key)
+                raise InputError(f"no '{key}'", self.cfg.file, line=self.cfg.line(key))
             return []
         try:
             return parse_formula(text)
