@@ -127,10 +127,9 @@ def figures(result, prop, model) -> dict:
     elif kind == "safety":
         unit = prop.margin_unit()
         out["unit"] = unit.text if unit is not None else None
-        dims = {c.dimension for pieces in prop.pieces.values() for piece in pieces for c in piece}
         if unit is None:
-            out["unit_note"] = ("requirements of different dimensions: margins in model units" if len(dims) > 1
-                                else "margins in model units")
+            out["unit_note"] = ("requirements of different dimensions: margins in model units"
+                                if len(prop.dimensions()) > 1 else "margins in model units")
         if "closest_depth" in d:
             out["closest_margin"] = _in(unit, d["closest_depth"])
         if "margin_bound" in d:
@@ -184,6 +183,8 @@ def _margin_note(result, kind: str, out: dict) -> str | None:
 
 def line(result, prop, model) -> str:
     """One line: the figures in the requirement's units beside the requirement."""
+    from reach.checking import violated
+
     d = result.details
     if result.status == Status.UNSUPPORTED:
         return d.get("reason", "")
@@ -232,7 +233,7 @@ def line(result, prop, model) -> str:
         p = f"P in {interval(*result.probability)}"
         if "at_least" in f:
             p += f", required >= {number(f['at_least'])}"
-            if float(result.probability[1]) < float(f["at_least"]):
+            if violated(result):
                 p += " (wholly below it: a violation, with no single run to show for it)"
         parts.append(p)
     if "margin_note" in f:

@@ -47,6 +47,9 @@ class Budget:
     polish: int = 60           # Nelder-Mead evaluations (single runs)
     deadline: float = math.inf  # time.perf_counter() past which the search stops with what it has
 
+    def spent(self) -> bool:
+        return time.perf_counter() > self.deadline
+
 
 class Parameterisation:
     """The map ``u in [0, 1]^d -> (x0, tau, input values)`` of the module docstring."""
@@ -157,15 +160,15 @@ def falsify(model, prop, window, sim, monitor_factory, elite, budget: Budget, se
     scipy.optimize.differential_evolution(
         lambda U: evaluate(U.T), [(0.0, 1.0)] * param.dim, init=init, maxiter=budget.generations,
         vectorized=True, updating="deferred", polish=False, tol=FLAT, atol=FLAT,
-        seed=rng, callback=lambda intermediate_result: best["violated"] or time.perf_counter() > budget.deadline)
-    if not best["violated"] and budget.polish > 0 and time.perf_counter() <= budget.deadline:
+        seed=rng, callback=lambda intermediate_result: best["violated"] or budget.spent())
+    if not best["violated"] and budget.polish > 0 and not budget.spent():
         start = param.encode(*best["run"][:4])[0]
         if param.dim <= GRID_DIM:
             _grid_polish(evaluate, best, start, budget)
             return _outcome(best)
         try:
             scipy.optimize.minimize(
-                lambda u: _stop_at_violation(best, evaluate(u[None, :]), budget.deadline)[0], start,
+                lambda u: _stop_at_violation(best, evaluate(u[None, :]), budget)[0], start,
                 method="Nelder-Mead",
                 bounds=[(0.0, 1.0)] * param.dim,
                 options={"maxfev": budget.polish, "xatol": 1e-9, "fatol": 0.0,
@@ -201,7 +204,7 @@ def _grid_polish(evaluate, best, start: np.ndarray, budget: Budget) -> None:
         axes = [np.clip(np.linspace(c - w, c + w, G), 0.0, 1.0) for c in centre]
         U = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, d)
         values = evaluate(U)
-        if best["violated"] or time.perf_counter() > budget.deadline:
+        if best["violated"] or budget.spent():
             return
         k = int(np.argmin(values))
         if values[k] <= best["depth"]:
@@ -213,8 +216,8 @@ class _Found(Exception):
     """Ends the polish at the first violating run, or when the time budget is spent."""
 
 
-def _stop_at_violation(best, values, deadline: float):
-    if best["violated"] or time.perf_counter() > deadline:
+def _stop_at_violation(best, values, budget: Budget):
+    if best["violated"] or budget.spent():
         raise _Found
     return values
 

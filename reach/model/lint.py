@@ -158,8 +158,8 @@ def zero_dwell_cycles(model) -> tuple[list, bool]:
     """``(found, complete)``: ``found`` lists ``(modes, transition names, state)`` for simple
     mode cycles (``modes``: ``[m0, m1, ..., m0]``), one choice of transition per step, on which
     no clock is reset and bounded below by a larger constant and whose jumps can be taken twice
-    round at one instant (``state``: a start state where they can, None when a nonlinear constraint left that
-    open); ``complete``: whether every offending cycle is in the list.
+    round at one instant (``state``: a start state where they can, None when a nonlinear
+    constraint left that open); ``complete``: whether every offending cycle is in the list.
 
     Depth-first search over chains of transitions that can be taken at one instant: a chain
     that cannot be is never extended, since no cycle through it can be traversed in zero time
@@ -222,7 +222,8 @@ def lint(model) -> list[str]:
     findings = []
     for cycle, names, state in cycles[:MAX_REPORTED]:
         at = ("" if state is None else ", and its jumps " + ", ".join(names)
-              + " can all be taken twice round at one instant from " + ", ".join(f"{v}={x + 0.0:.6g}" for v, x in zip(model.state, state)))
+              + " can all be taken twice round at one instant from "
+              + ", ".join(f"{v}={x + 0.0:.6g}" for v, x in zip(model.state, state)))
         findings.append(f"{model.file}: transitions: possible zero-dwell cycle {' -> '.join(cycle)} "
                         f"(no clock reset on it is bounded below by a positive guard{at})")
     if len(cycles) > MAX_REPORTED or not complete:

@@ -653,10 +653,11 @@ class Simulator:
                 must = np.full(sel.size, name in self.timeless) | (guards & ~back)[:, :urgent].any(axis=1)
                 stuck = sel[must & ~enabled.any(axis=1)]
                 runs.blocked_at[stuck] = runs.t[stuck]
-                go = sel[enabled.any(axis=1)]
+                can = enabled.any(axis=1)
+                go = sel[can]
                 if go.size:
                     seen[slot[go], m_index] = runs.X[go]
-                    jumped = self._jump(go, options, enabled[enabled.any(axis=1)], runs)
+                    jumped = self._jump(go, options, enabled[can], runs)
                     seen[slot[jumped], runs.mode[jumped]] = runs.X[jumped]
                     moved.append(jumped)
             rows = np.concatenate(moved) if moved else rows[:0]

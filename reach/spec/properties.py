@@ -119,15 +119,22 @@ class BoundSafety:
 
         return violation
 
+    def constraints(self) -> list[Constraint]:
+        """Every constraint of every unsafe piece."""
+        return [c for pieces in self.pieces.values() for piece in pieces for c in piece]
+
+    def dimensions(self) -> set:
+        """The dimensions of those constraints (None for one without units)."""
+        return {c.dimension for c in self.constraints()}
+
     def margin_unit(self) -> DisplayUnit | None:
         """The unit of a depth or margin into the unsafe pieces: the requirement's unit if every
         constraint of every piece has one dimension, else None (then depths are model units of
         mixed dimensions)."""
-        constraints = [c for pieces in self.pieces.values() for piece in pieces for c in piece]
-        dims = {c.dimension for c in constraints}
+        dims = self.dimensions()
         if len(dims) != 1 or None in dims:
             return None
-        return next((c.unit for c in constraints if c.unit is not None), None)
+        return next((c.unit for c in self.constraints() if c.unit is not None), None)
 
 
 @dataclass

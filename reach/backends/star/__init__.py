@@ -175,7 +175,7 @@ import numpy as np
 
 from reach import lp
 from reach.deep import call_deep
-from reach.backends.star.explorer import LOG, _Explorer, _Stop
+from reach.backends.star.explorer import LOG, OUT_OF_TIME, _Explorer, _Stop
 from reach.backends.star.flowpipe import AffineFlow, flowpipe
 from reach.backends.star.hull import check_hull
 from reach.backends.star.linearise import LinearisedModel, check_linearised
@@ -295,7 +295,7 @@ class StarBackend:
         if tried:
             first.seconds = result.seconds
             reason = result.details.get("reason", "")
-            if "time budget of" in reason:              # whose budget (:meth:`_Explorer.out_of_time`)
+            if OUT_OF_TIME in reason:                   # whose budget (:meth:`_Explorer.out_of_time`)
                 reason += (" (option max_seconds)" if opt.max_seconds is not None else
                            f" (the finer passes share {FINER_FACTOR:g} times the first pass's time, "
                            f"{FINER_SECONDS:g} to {FINER_MAX_SECONDS:g} s; -o max_seconds=S sets it)")

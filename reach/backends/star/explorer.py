@@ -40,6 +40,9 @@ PRECISION_LOST = 1e-6
 #: seconds after which an exploration run without ``-v`` says once that it is still going
 QUIET_HINT_SECONDS = 60.0
 
+#: how an UNKNOWN for time begins (:meth:`_Explorer.out_of_time`; the finer passes name whose)
+OUT_OF_TIME = "time budget of"
+
 #: pieces of a replay's switching signal (:meth:`_Explorer._switching_signal`), at most: as many
 #: as a counterexample's input signal may have (:func:`reach.backends.montecarlo.replay`)
 MAX_SIGNAL_PIECES = 1_000_000
@@ -616,7 +619,7 @@ class _Explorer:
         """Why the search must stop for time (option ``max_seconds``, or the finer passes' share
         of the time, see :func:`reach.backends.star.finer_retry`), or None while it may go on."""
         if time.perf_counter() > self.deadline:
-            return f"time budget of {self.opt.max_seconds:.3g} s exhausted"
+            return f"{OUT_OF_TIME} {self.opt.max_seconds:.3g} s exhausted"
         return None
 
     def _memory_guard(self):

@@ -657,7 +657,7 @@ class DocumentBuilder(Converter):
         text = self.cfg.text(key)
         if text is None or not text.strip():
             if required:
-                if self.cfg.text(key) is None:
+                if text is None:
                     raise self.cfg.missing(key)
                 raise InputError(f"no '{key}'", self.cfg.file, line=self.cfg.line(key))
             return []
