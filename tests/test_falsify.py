@@ -196,3 +196,55 @@ def test_the_latin_hypercube_is_scipys(seed, count, dim):
     assert ours_rng.random() == ref_rng.random()
     for axis in ours.T:
         assert np.array_equal(np.sort(np.floor(axis * count)), np.arange(count))
+
+
+def _fake_search(objective, violation_below=-np.inf):
+    """``(evaluate, best, batches)``: ``evaluate`` records each batch and keeps the best point in
+    ``best`` as :func:`reach.backends.falsify.falsify`'s does (``violated`` below the threshold)."""
+    best = {"depth": np.inf, "violated": False, "point": None}
+    batches = []
+
+    def evaluate(U):
+        values = np.array([objective(u) for u in U])
+        batches.append(U.shape[0])
+        k = int(np.argmin(values))
+        if values[k] < best["depth"] and not best["violated"]:
+            best.update(depth=float(values[k]), point=U[k].copy(), violated=bool(values[k] <= violation_below))
+        return values
+    return evaluate, best, batches
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.lists(st.floats(-1.0, 2.0), min_size=3, max_size=8), st.integers(0, 2 ** 31))
+def test_the_gradient_polish_reaches_the_projection_of_a_quadratic_minimum(centre, seed):
+    """``rho(u) = |u - c|^2`` on the unit cube is least at the projection of ``c`` (coordinates
+    outside ``[0, 1]`` held by a face, as a bang-bang signal's values are): the polish reaches it
+    from a random start, simulating in batches only."""
+    from reach.backends.falsify import Budget, _gradient_polish
+    c = np.array(centre)
+    evaluate, best, batches = _fake_search(lambda u: float(np.sum((u - c) ** 2)))
+    start = np.random.default_rng(seed).random(c.size)
+    f = evaluate(start[None, :])[0]
+    _gradient_polish(evaluate, best, start, f, 4000, Budget())
+    np.testing.assert_allclose(best["point"], np.clip(c, 0.0, 1.0), atol=2e-3)
+    assert sum(batches[1:]) <= 4000 and all(b > 1 for b in batches[1:])
+
+
+def test_the_gradient_polish_stops_at_the_first_violation():
+    from reach.backends.falsify import Budget, _gradient_polish
+    evaluate, best, batches = _fake_search(lambda u: float(u.sum() - 1.0), violation_below=0.0)
+    start = np.full(4, 0.9)
+    f = evaluate(start[None, :])[0]
+    _gradient_polish(evaluate, best, start, f, 100_000, Budget())
+    assert best["violated"] and best["depth"] <= 0.0
+    assert len(batches) <= 1 + 2 * 30        # it stopped there, not at the budget or the step floor
+
+
+def test_the_polish_starts_are_the_best_distinct_points():
+    from reach.backends.falsify import DISTINCT, _distinct_best
+    population = np.array([[0.5, 0.5], [0.51, 0.5], [0.9, 0.1], [0.5 + 2 * DISTINCT, 0.5], [0.0, 0.0]])
+    energies = np.array([1.0, 0.5, 3.0, 2.0, 0.1])
+    kept = _distinct_best(population, energies, np.array([0.0, 0.02]))
+    # [0, 0] is too near the best run's point; [0.5, 0.5] too near [0.51, 0.5], which is better
+    assert [tuple(u) for u, _ in kept] == [(0.51, 0.5), (0.5 + 2 * DISTINCT, 0.5), (0.9, 0.1)]
+    assert [f for _, f in kept] == [0.5, 2.0, 3.0]

@@ -58,3 +58,22 @@ def test_a_requirement_below_the_sampled_peak_is_never_safe(vdp, sampled_peak, t
                            {"remainder": "rigorous", "refine": 1})
     assert result.status is not Status.SAFE
     assert result.bound[1] >= sampled_peak
+
+
+def test_a_budget_cuts_the_flowpipe_short_and_says_so(vdp, tmp_path):
+    """The flowpipe of the check above (several seconds) under ``max_seconds=0.5``: no step starts
+    past it, the bound is unbounded, the reason names the option; nothing is kept for a later
+    check, which, without the budget, proves the bound as before."""
+    import time
+
+    from reach.backends.taylor.problem import _ENCLOSURES, FLOWPIPE_SECONDS
+    prop = _prop(vdp, tmp_path, 2.75)
+    _ENCLOSURES.clear()                 # the checks above keep their stretches
+    started = time.perf_counter()
+    cut = BACKEND.check(vdp, prop, {"remainder": "rigorous", "max_seconds": 0.5})
+    assert time.perf_counter() - started < FLOWPIPE_SECONDS / 4       # it stopped, not the flowpipe's own cap
+    assert cut.status is Status.UNKNOWN and cut.bound[1] == np.inf
+    assert "time budget of 0.5 s (option max_seconds)" in cut.details["note"]
+    assert "refine" not in cut.details["note"]
+    again = BACKEND.check(vdp, prop, {"remainder": "rigorous", "refine": 1})
+    assert again.status is Status.SAFE

@@ -202,3 +202,19 @@ def test_a_model_without_a_clock_gets_one_for_events_past_a_switch(tmp_path, flo
     if expected == Status.UNSAFE:
         cex = result.counterexample
         assert replay(model, prop, cex.initial_state, cex.switch_time, cex.dt or None).violated
+
+
+def test_a_spent_time_budget_bounds_nothing_and_names_the_option(tmp_path):
+    model, props = _files(tmp_path, SPRING, """
+        properties:
+          - {id: low, kind: safety, require: ["x <= 1.2"]}
+    """)
+    result = BACKEND.check(model, props["low"], {**RIGOROUS, "max_seconds": 1e-9})
+    assert result.status is Status.UNKNOWN
+    assert result.details["margin_bound"] == [-np.inf, np.inf]
+    assert "time budget of 1e-09 s (option max_seconds) exhausted" in result.details["reason"]
+    # a budget the check stays within changes nothing
+    within = BACKEND.check(model, props["low"], {**RIGOROUS, "max_seconds": 600})
+    free = BACKEND.check(model, props["low"], RIGOROUS)
+    assert within.status is free.status is Status.SAFE
+    assert within.details["margin_bound"] == free.details["margin_bound"]

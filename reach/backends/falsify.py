@@ -16,10 +16,14 @@ A run is fixed by a point ``u`` of the unit cube ``[0, 1]^d``, the concatenation
 ``rho(u)`` is minimised by differential evolution (``scipy.optimize.differential_evolution``,
 vectorised: a whole generation is one :meth:`Simulator.run`), its initial population the runs
 closest to the unsafe set so far plus a Latin hypercube (ended early where a generation's
-robustness values all agree to a relative 1e-9: a flat landscape), then polished from the best
-point: by Nelder-Mead, or for at most two parameters by a batched grid refinement (a few
-simulations of many runs instead of many of one). The search stops at the first violating run. A violation found here is only a
-candidate: the back-end replays it alone before it reports UNSAFE.
+robustness values all agree to a relative 1e-9: a flat landscape), then polished by a batched
+projected gradient descent (forward differences, a line search along the two steepest descents
+in the max-norm) from the best run and from the best distinct points of the final population
+(the landscape of a hybrid run has kinks where a jump moves across a signal piece, and descent
+stops at them), or for at most two parameters by a batched grid refinement around the best
+run: a few simulations of many runs instead of many of one. The search stops at the
+first violating run. A violation found here is only a candidate: the back-end replays it alone
+before it reports UNSAFE.
 """
 
 from __future__ import annotations
@@ -38,13 +42,18 @@ NO_VISIT = 1e12        # robustness of a run that never enters a mode of the pro
 FLAT = 1e-9            # a generation whose robustness values agree to this (relative) ends the evolution
 GRID_DIM = 2           # up to this many parameters the polish is a batched grid refinement
 GRID_ROUNDS = 5
+FD_STEP = 1e-3         # widest forward-difference step of the gradient polish (unit cube)
+MIN_STEP = 1e-7        # the gradient polish ends when its trust radius shrinks below this
+LINE_STEPS = 8         # step lengths r, r/2, ..., r 2^-7 tried along each descent direction
+POLISH_STARTS = 3      # the gradient polish starts from the best run and the best distinct points of
+DISTINCT = 0.05        # the final population (max-norm distance in the unit cube), sharing the runs
 
 
 @dataclass
 class Budget:
     generations: int = 20      # differential evolution generations
     population: int = 40       # candidates per generation
-    polish: int = 60           # Nelder-Mead evaluations (single runs)
+    polish: int = 1000         # polish runs (grid refinement or gradient descent, batched)
     deadline: float = math.inf  # time.perf_counter() past which the search stops with what it has
 
     def spent(self) -> bool:
@@ -157,25 +166,33 @@ def falsify(model, prop, window, sim, monitor_factory, elite, budget: Budget, se
     seeds = param.encode(*elite)[: size // 2]
     fill = latin_hypercube(rng, size - seeds.shape[0], param.dim)
     init = np.concatenate([seeds, fill])
-    scipy.optimize.differential_evolution(
+    evolved = scipy.optimize.differential_evolution(
         lambda U: evaluate(U.T), [(0.0, 1.0)] * param.dim, init=init, maxiter=budget.generations,
         vectorized=True, updating="deferred", polish=False, tol=FLAT, atol=FLAT,
         seed=rng, callback=lambda intermediate_result: best["violated"] or budget.spent())
-    if not best["violated"] and budget.polish > 0 and not budget.spent():
-        start = param.encode(*best["run"][:4])[0]
-        if param.dim <= GRID_DIM:
-            _grid_polish(evaluate, best, start, budget)
-            return _outcome(best)
-        try:
-            scipy.optimize.minimize(
-                lambda u: _stop_at_violation(best, evaluate(u[None, :]), budget)[0], start,
-                method="Nelder-Mead",
-                bounds=[(0.0, 1.0)] * param.dim,
-                options={"maxfev": budget.polish, "xatol": 1e-9, "fatol": 0.0,
-                         "initial_simplex": _simplex(start)})
-        except _Found:
-            pass
+    if best["violated"] or budget.polish <= 0 or budget.spent():
+        return _outcome(best)
+    start = param.encode(*best["run"][:4])[0]
+    if param.dim <= GRID_DIM:
+        _grid_polish(evaluate, best, start, budget)
+        return _outcome(best)
+    starts = [(start, best["depth"])] + _distinct_best(evolved.population, evolved.population_energies, start)
+    for u, f in starts[:POLISH_STARTS]:
+        _gradient_polish(evaluate, best, u, f, budget.polish // POLISH_STARTS, budget)
+        if best["violated"] or budget.spent():
+            break
     return _outcome(best)
+
+
+def _distinct_best(population: np.ndarray, energies: np.ndarray, other: np.ndarray) -> list:
+    """The final population's points from best to worst, ``(u, rho(u))``, each farther than
+    :data:`DISTINCT` (max-norm) from ``other`` and from those before it."""
+    kept: list = []
+    for k in np.argsort(energies, kind="stable"):
+        u = population[k]
+        if all(np.abs(u - v).max() > DISTINCT for v in [other] + [p for p, _ in kept]):
+            kept.append((u, float(energies[k])))
+    return kept
 
 
 def latin_hypercube(rng: np.random.Generator, count: int, dim: int) -> np.ndarray:
@@ -196,7 +213,7 @@ def _grid_polish(evaluate, best, start: np.ndarray, budget: Budget) -> None:
     """The polish of a search over at most :data:`GRID_DIM` parameters, batched: in each of
     :data:`GRID_ROUNDS` rounds a grid of ``G^d`` points (``G^d <= budget / rounds``) spanning
     ``centre +- w`` is one :meth:`Simulator.run`; the best point so far becomes the centre and
-    ``w`` shrinks to the grid's spacing (``w`` starts at the Nelder-Mead simplex edge, 0.05)."""
+    ``w`` shrinks to the grid's spacing (``w`` starts at 0.05)."""
     d = start.size
     G = max(3, int(np.floor((budget.polish / GRID_ROUNDS) ** (1.0 / d))))
     centre, w = start.copy(), 0.05
@@ -212,23 +229,47 @@ def _grid_polish(evaluate, best, start: np.ndarray, budget: Budget) -> None:
         w *= 2.0 / (G - 1)
 
 
-class _Found(Exception):
-    """Ends the polish at the first violating run, or when the time budget is spent."""
-
-
-def _stop_at_violation(best, values, budget: Budget):
-    if best["violated"] or budget.spent():
-        raise _Found
-    return values
-
-
-def _simplex(start: np.ndarray, size: float = 0.05) -> np.ndarray:
-    """A simplex of edge ``size`` at ``start`` inside the unit cube (each vertex steps inwards)."""
-    d = start.size
-    S = np.tile(start, (d + 1, 1))
-    for j in range(d):
-        S[j + 1, j] += size if start[j] + size <= 1.0 else -size
-    return S
+def _gradient_polish(evaluate, best, start: np.ndarray, value: float, runs: int, budget: Budget) -> None:
+    """The polish of a search over more than :data:`GRID_DIM` parameters: projected descent on
+    the unit cube in a trust radius ``r``, every simulation batched. From the best point ``u``
+    (robustness ``f``), one :meth:`Simulator.run` of ``d`` rows gives the forward differences
+    ``g_j = (rho(u + h_j e_j) - f) / h_j`` (``h_j = +-min(FD_STEP, r)``, stepping inwards; a
+    coordinate whose step leaves every mode of the property unvisited gets ``g_j = 0``, and so
+    does one a face of the cube holds: ``u_j = 1`` and ``g_j < 0``, or ``u_j = 0`` and ``g_j >
+    0``); a second run tries the points ``clip(u - a D)`` for the steepest descents in the
+    max-norm ``D = g / |g|_inf`` and ``D = sign(g)`` (the bang-bang direction that a
+    box-constrained signal's optimum usually takes) and the step lengths ``a = r 2^-k``, ``k = 0
+    .. LINE_STEPS - 1``. The best point becomes ``u`` if it lowers ``f``, and ``r`` twice its
+    step; otherwise ``r`` halves below the shortest step tried. The polish ends after
+    ``budget.polish`` runs, once ``r`` is below :data:`MIN_STEP`, at a violation, or when the
+    time budget is spent."""
+    u, f, d, radius = start.copy(), value, start.size, 0.5
+    lengths = 2.0 ** -np.arange(LINE_STEPS)
+    used = 0
+    while used + d + 2 * LINE_STEPS <= runs and radius >= MIN_STEP:
+        h = min(FD_STEP, radius)
+        steps = np.where(u + h <= 1.0, h, -h)
+        values = evaluate(u + np.diag(steps))
+        used += d
+        if best["violated"] or budget.spent():
+            return
+        g = np.where(values < NO_VISIT, (values - f) / steps, 0.0)
+        g[((u >= 1.0) & (g < 0.0)) | ((u <= 0.0) & (g > 0.0))] = 0.0    # held by the cube's faces
+        scale = np.abs(g).max()
+        if scale == 0.0 or not np.isfinite(scale):
+            radius /= 4.0
+            continue
+        directions = np.stack([g / scale, np.sign(g)])
+        trial = np.clip(u - (radius * lengths[:, None, None] * directions[None]).reshape(-1, d), 0.0, 1.0)
+        values = evaluate(trial)
+        used += trial.shape[0]
+        if best["violated"] or budget.spent():
+            return
+        k = int(np.argmin(values))
+        if values[k] < f:
+            u, f, radius = trial[k], float(values[k]), min(1.0, 2.0 * radius * lengths[k // 2])
+        else:
+            radius *= lengths[-1] / 2.0
 
 
 def _row(signal, i: int):

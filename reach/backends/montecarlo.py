@@ -9,8 +9,8 @@ Safety properties. Runs are drawn in three rounds, each one numpy batch:
    the unsafe set (``search_rounds`` generations);
 4. *optimiser* (``optimise``, deterministic models): the robustness (smallest depth) minimised
    over the initial state, the switch instant and the input values by differential evolution
-   seeded with the closest runs so far, then Nelder-Mead (a batched grid refinement for at most
-   two parameters) (:mod:`reach.backends.falsify`).
+   seeded with the closest runs so far, then a batched projected gradient descent (a grid
+   refinement for at most two parameters) (:mod:`reach.backends.falsify`).
 
 A polytopic initial set is sampled by its vertices, facet points and centre (structured) and
 uniformly by hit-and-run (random); time-varying bounded inputs are piecewise-constant signals
@@ -92,7 +92,7 @@ class Options:
     optimise: bool = True          # falsification by optimisation after the search (reach.backends.falsify)
     generations: int = ranged(20, 0, 100_000)     # differential evolution generations
     population: int = ranged(40, 5, 1_000_000)    # runs per generation
-    polish: int = ranged(60, 0, 1_000_000)        # polish runs from the best point (reach.backends.falsify)
+    polish: int = ranged(1000, 0, 1_000_000)      # polish runs from the best point (reach.backends.falsify)
     keep_sets: bool = False        # safety: KEPT_RUNS sampled runs in Result.sets (pictures)
     max_seconds: float | None = ranged(None, 0.0, open_low=True)  # safety: no search or optimisation past it
 
@@ -690,7 +690,7 @@ class MonteCarloBackend:
         return None
 
     def _optimise(self, model, prop, window, sim, rounds, opts: Options, branching: bool, deadline: float):
-        """Differential evolution and Nelder-Mead on the robustness, seeded with the closest runs
+        """Differential evolution and a gradient polish on the robustness, seeded with the closest runs
         (their choice values as parameters where a sampled run met several enabled transitions);
         appends the best run as the round ``optimiser`` (its monitor carries ``runs``, the cost)."""
         X_all = np.concatenate([r[1] for r in rounds])

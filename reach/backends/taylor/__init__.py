@@ -46,6 +46,7 @@ from reach.backends.options import option_error, parse_options, ranged
 from reach.backends.taylor.ads import Subdomain, split_domain, truncation_estimate
 from reach.backends.taylor.bound import contenders, enclose, estimated_remainder, next_order_remainder
 from reach.backends.taylor.da import DA, algebra, stack
+from reach.backends.taylor.deadline import Deadline, OutOfTime
 from reach.backends.taylor.flow import Unsmooth
 from reach.backends.taylor.keys import picklable
 from reach.backends.taylor.nominal import NominalFailure
@@ -81,6 +82,7 @@ class Options:
     jobs: int = ranged(1, 1, 256)                  # local worker processes for ADS boxes and sweeps
     scheduler: object = None        # or a Dask scheduler address (or Client) to run them on
     keep_sets: bool = False         # rigorous mode: the step enclosures in Result.sets (pictures)
+    max_seconds: float | None = ranged(None, 0.0, open_low=True)  # per property: nothing starts past it (.deadline)
 
     @classmethod
     def from_dict(cls, options: dict | None) -> "Options":
@@ -127,22 +129,30 @@ class TaylorBackend:
         return None
 
     def check(self, model, prop, options=None) -> Result:
-        if isinstance(prop, BoundSafety):
-            return check_safety(self, model, prop, options)
         opts = Options.from_dict(options)
+        deadline = Deadline.start(opts.max_seconds)
+        if isinstance(prop, BoundSafety):
+            return check_safety(self, model, prop, opts, deadline)
+        return self.check_event(model, prop, opts, deadline)
+
+    def check_event(self, model, prop: BoundEvent, opts: Options, deadline: Deadline) -> Result:
+        """An event property's bound, nothing started past the ``deadline``."""
+        opts = replace(opts)            # _check_event may set the remainder
         model, _ = with_switch_time(model)
         model, prop = _clocked(model, prop)
         try:
             with _unit_runner(opts, picklable(model, prop)) as run_units:
-                return self._check_event(model, prop, opts, run_units)
-        except NominalFailure as err:
+                return self._check_event(model, prop, opts, run_units, deadline)
+        except (NominalFailure, OutOfTime) as err:
             return Result(self.name, model.name, prop.id, Status.UNKNOWN, bound=(-np.inf, np.inf),
                           details={"reason": f"{err}: nothing was bounded", "remainder": opts.remainder,
                                    "subdomain_count": 0, "share_meeting_requirement": 0.0})
 
-    def _check_event(self, model, prop, opts: Options, run_units) -> Result:
+    def _check_event(self, model, prop, opts: Options, run_units, deadline: Deadline) -> Result:
         """:meth:`check` of an event property, its work units run by ``run_units(fn, arg_list)``
-        (:func:`_unit_runner`)."""
+        (:func:`_unit_runner`). Past the ``deadline`` no ADS level starts (OutOfTime: nothing is
+        bounded), no sweep branch (its subdomain is unbounded) and no refinement level (the
+        bound so far stands: refining only narrows it)."""
         avoid = isinstance(next(iter(prop.quantity.values())), tuple)
         if avoid:       # a non-smooth margin: bounded by the verified sweep only
             opts.remainder = "rigorous"
@@ -161,6 +171,8 @@ class TaylorBackend:
         def expand_level(boxes):
             """A level's boxes in batches (:mod:`.lockstep`), one per worker, on as many of the
             ``jobs`` workers as give each at least :data:`MIN_SHARE` boxes."""
+            if deadline.passed():
+                raise OutOfTime(deadline.text)
             full = [full_box(c, h) for c, h in boxes]
             workers = max(1, min(opts.jobs, len(full) // MIN_SHARE))
             chunks = [list(part) for part in np.array_split(np.arange(len(full)), workers)]
@@ -188,7 +200,7 @@ class TaylorBackend:
             if rigorous:
                 started = time.perf_counter()
                 sweeps = run_units(sweep_box, [(model, prop, opts.order, opts.step_tol, opts.integration_tol,
-                                                *full_box(sub.center, sub.half_width), opts.keep_sets)
+                                                *full_box(sub.center, sub.half_width), opts.keep_sets, deadline)
                                                for sub in subs])
                 for sweep in sweeps:
                     kept_sets.extend(_set_pieces(model, sweep.pop("sets", [])))
@@ -251,6 +263,9 @@ class TaylorBackend:
         # nor decides more of the box (on SRNA01 the width left after one level is error radius,
         # which halving does not reduce: refine=2 gave the bounds of refine=1 at twice the time)
         for _ in range(opts.refine):
+            if deadline.passed():
+                log.info("refinement stopped: %s", deadline.text)
+                break
             reached = progress(rows)
             floor = max(inner(r) for r in rows)
             open_rows = [r for r in rows if not decided(r) or outer(r) > floor]
@@ -316,7 +331,8 @@ class TaylorBackend:
                 whys = sorted({r["verified"]["why"] for r in rows if r["verified"].get("why")})
                 details["note"] = (f"the bound is open on {1 - meets - violates:.0%} of the box"
                                    + (f" ({whys[0]})" if whys else "")
-                                   + f"; -o refine={opts.refine + 2} halves the subdomains that hold it open")
+                                   + ("" if deadline.passed() else
+                                      f"; -o refine={opts.refine + 2} halves the subdomains that hold it open"))
         else:
             details["assumptions"] = [
                 "the truncation remainder is " + ("extrapolated from the coefficient decay (eq. 28)"

@@ -23,6 +23,7 @@ import numpy as np
 import sympy
 
 from reach.backends.taylor.da import DA, algebra
+from reach.backends.taylor.deadline import NONE, Deadline
 from reach.backends.taylor.event import (event_map_steps, fixed_time_map_steps, initial_state, local_extrema,
                                          refine_time_steps)
 from reach.backends.taylor.flow import compile_expressions, compile_numeric
@@ -237,10 +238,10 @@ class EventProblem:
 
     # ------------------------------------------------------------ rigorous (verified sweep)
     def _enclosure(self, code: ModeCode, x0: list[DA], error: np.ndarray, duration: float, rel_tol: float,
-                   tol: float):
+                   tol: float, deadline: Deadline = NONE):
         """The verified enclosure of one mode's stretch from ``x0 + [-error, error]``, shared by the
         properties of a model (it does not depend on the quantity): kept for the last few
-        subdomains."""
+        subdomains (a flowpipe cut short by the ``deadline`` is not kept)."""
         key = fingerprint(self.model, code.name, [x.c for x in x0], error, duration, rel_tol, tol)
         if key in _ENCLOSURES:
             _ENCLOSURES.move_to_end(key)
@@ -263,9 +264,14 @@ class EventProblem:
                     break
                 why = "the logarithmic-norm error bound does not close"
             if enc is None:
+                if deadline.left() <= 0:
+                    raise ArithmeticError(deadline.text)
                 try:
-                    enc = self._flowpipe(code, x0, error, duration, float(run.nodes[1] - run.nodes[0]))
+                    enc = self._flowpipe(code, x0, error, duration, float(run.nodes[1] - run.nodes[0]),
+                                         min(FLOWPIPE_SECONDS, deadline.left()))
                 except ArithmeticError as err:    # kept too: the next property need not try again
+                    if deadline.passed():
+                        raise ArithmeticError(f"mode '{code.name}': {deadline.text}") from None
                     enc = ArithmeticError(f"mode '{code.name}': {why}; {err}")
             _ENCLOSURES[key] = (enc, self.model)      # the model stays alive with its entry
             while len(_ENCLOSURES) > KEEP_ENCLOSURES:
@@ -275,7 +281,8 @@ class EventProblem:
             raise enc
         return enc
 
-    def _flowpipe(self, code: ModeCode, x0: list[DA], error: np.ndarray, duration: float, h0: float):
+    def _flowpipe(self, code: ModeCode, x0: list[DA], error: np.ndarray, duration: float, h0: float,
+                  budget: float = FLOWPIPE_SECONDS):
         """The stretch by a Taylor-model flowpipe (:mod:`.tm_flowpipe`: validated Picard steps,
         QR-preconditioned symbolic remainders), where the logarithmic-norm bound of
         :func:`.verified.enclose_stretch` does not close (an expanding flow such as Van der Pol's).
@@ -283,7 +290,7 @@ class EventProblem:
         for an initial box), carries states of constant rate (clocks) exactly, and sets its steps
         for an error growth of ``FLOWPIPE_TOL`` times the state's size per unit time. Raises
         ArithmeticError (the sweep's reason) when a step cannot be validated or the time budget
-        of ``FLOWPIPE_SECONDS`` is spent."""
+        (``FLOWPIPE_SECONDS``, or what is left of the check's) is spent."""
         box = np.array([TM(at_sigma(x, -1.0), -e, e).bound() for x, e in zip(x0, error)], dtype=float)
         if not np.all(np.isfinite(box)):
             raise ArithmeticError(f"no verified enclosure in mode '{code.name}' (unbounded start)")
@@ -292,10 +299,10 @@ class EventProblem:
         tol = FLOWPIPE_TOL * np.maximum(1.0, np.abs(box).max(axis=1))
         inside = lambda end: code.inside(end, True) is not None
         return stretch_from_box(code.f, box[:, 0], box[:, 1], x0[0].alg.order, exact, tol, duration,
-                                h0, inside, FLOWPIPE_SECONDS)
+                                h0, inside, budget)
 
     def sweep(self, center: np.ndarray, half_width: np.ndarray, order: int, rel_tol: float,
-              tol: float, keep_sets: bool = False) -> dict:
+              tol: float, keep_sets: bool = False, deadline: Deadline = NONE) -> dict:
         """Rigorous bounds of the extremum of ``q`` over the listed modes' stretches.
 
         In each mode the verified enclosure (:mod:`.verified`) runs until the step whose end lies
@@ -313,7 +320,8 @@ class EventProblem:
         lower end is the best bound of ``q`` at the initial mode's step nodes that no run can
         have left the mode before, or on an entry box that every run passes through (a chain
         of exits, each the only one possible in its mode). With ``keep_sets`` the result's
-        ``"sets"`` lists every step's enclosure box (:func:`_step_box`)."""
+        ``"sets"`` lists every step's enclosure box (:func:`_step_box`). Past the ``deadline`` no
+        branch starts: the bound is unbounded, its reason the budget."""
         T = self.model.horizon
         m = len(self.uncertain)
         sign = 1.0 if self.prop.sense == "max" else -1.0
@@ -323,6 +331,8 @@ class EventProblem:
         branches = [(self.model.initial.mode, x0, np.zeros(len(x0)), 0.0, 0, True)]
         while branches:
             mode, x0, x0_error, t_earliest, hop, sure = branches.pop()
+            if deadline.passed():
+                return _unbounded(deadline.text)
             if hop > MAX_SWITCHES:
                 return _unbounded(f"more than {MAX_SWITCHES} mode switches")
             code = self.code(mode)
@@ -335,7 +345,7 @@ class EventProblem:
                         inner = max(inner, lo if sign > 0 else -hi)
                 continue
             try:
-                enc = self._enclosure(code, x0, x0_error, T - t_earliest, rel_tol, tol)
+                enc = self._enclosure(code, x0, x0_error, T - t_earliest, rel_tol, tol, deadline)
             except ArithmeticError as err:
                 return _unbounded(str(err))
             stretches += 1

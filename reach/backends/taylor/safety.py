@@ -105,10 +105,11 @@ def _implied(model, mode: str, piece) -> bool:
     return False
 
 
-def check_safety(backend, model, prop: BoundSafety, options: dict | None):
-    """Check every margin event of ``prop`` and combine: SAFE when each is SAFE (a rigorous
-    lower end of the margin above the requirement) or implied by invariants; otherwise UNKNOWN
-    with the margin bounds (estimated ones say so)."""
+def check_safety(backend, model, prop: BoundSafety, opts, deadline):
+    """Check every margin event of ``prop`` (options ``opts``, all within one ``deadline``) and
+    combine: SAFE when each is SAFE (a rigorous lower end of the margin above the requirement)
+    or implied by invariants; otherwise UNKNOWN with the margin bounds (estimated ones say so)
+    and, for the first margin left open, why."""
     rows, statuses, lows, highs, counterexample = [], [], [], [], None
     sets: list = []             # keep_sets: the enclosures of the first margin's sweeps (the same flow for each)
     for part in margins(model, prop):
@@ -117,7 +118,7 @@ def check_safety(backend, model, prop: BoundSafety, options: dict | None):
                          "argument": f"implied by the invariant of {', '.join(part.implied_in)}"})
             statuses.append(Status.SAFE)
             continue
-        result = backend.check(model, part.event, options)
+        result = backend.check_event(model, part.event, opts, deadline)
         sets = sets or result.sets
         lo, hi = result.bound
         if result.status != Status.SAFE and counterexample is None:
@@ -129,7 +130,8 @@ def check_safety(backend, model, prop: BoundSafety, options: dict | None):
         rows.append({"constraint": part.text, "status": result.status.value, "margin_bound": [lo, hi],
                      "modes": part.event.modes, "implied_in": part.implied_in, "remainder": d["remainder"],
                      "subdomain_count": d["subdomain_count"], "share_meeting_requirement": d["share_meeting_requirement"],
-                     **({"avoid": True} if part.avoid else {})})
+                     **({"avoid": True} if part.avoid else {}),
+                     **({"why": d.get("reason") or d.get("note")} if d.get("reason") or d.get("note") else {})})
     status = Status.SAFE if all(s == Status.SAFE for s in statuses) else Status.UNKNOWN
     if counterexample is not None:
         status = Status.UNSAFE
@@ -146,8 +148,10 @@ def check_safety(backend, model, prop: BoundSafety, options: dict | None):
             "every run in the listed modes is positive (taylor rigorous sweep), or is implied by a mode "
             "invariant; see 'constraints'")
     else:
-        open_rows = [r["constraint"] for r in rows if r["status"] != "SAFE"]
-        details["reason"] = "margin not proved for " + "; ".join(open_rows)
+        open_rows = [r for r in rows if r["status"] != "SAFE"]
+        whys = [r["why"] for r in open_rows if "why" in r]
+        details["reason"] = ("margin not proved for " + "; ".join(r["constraint"] for r in open_rows)
+                             + (f" ({whys[0]})" if whys else ""))
     if counterexample is not None:
         details["argument"] = ("a point of a subdomain whose margin bound reaches below zero (its centre or a "
                                "corner), mapped back to an initial state and switch time and replayed by the simulator")

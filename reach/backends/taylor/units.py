@@ -14,6 +14,7 @@ import ctypes
 from functools import lru_cache
 
 from reach.backends.taylor.bound import truncate
+from reach.backends.taylor.deadline import NONE, Deadline
 from reach.backends.taylor.keys import fingerprint
 from reach.backends.taylor.problem import EventProblem
 from reach.model.simulate import single_threaded
@@ -69,7 +70,7 @@ def _truncated(maps: dict, order: int, expand_order: int) -> dict:
 
 
 def sweep_box(model, prop, order: int, rel_tol: float, tol: float, center, half_width,
-              keep_sets: bool = False) -> dict:
+              keep_sets: bool = False, deadline: Deadline = NONE) -> dict:
     """The rigorous sweep of one subdomain (:meth:`EventProblem.sweep`)."""
     with single_threaded():
-        return problem(model, prop).sweep(center, half_width, order, rel_tol, tol, keep_sets)
+        return problem(model, prop).sweep(center, half_width, order, rel_tol, tol, keep_sets, deadline)
