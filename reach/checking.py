@@ -142,6 +142,8 @@ def check_spaceex(xml_path, cfg_path, backend_name: str, options: dict | None = 
         from reach.errors import InputError
         from reach.model.spaceex import read_cfg
         cfg = read_cfg(cfg_path)
+        if cfg.text("forbidden") is None and cfg.near("forbidden"):
+            raise cfg.missing("forbidden")
         raise InputError("the cfg forbids nothing: there is no property to check (add a forbidden "
                          "set; 'reach import' converts the model alone)", str(cfg_path),
                          "forbidden", cfg.line("forbidden") or 1)

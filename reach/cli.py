@@ -235,6 +235,7 @@ def cmd_replay(args) -> int:
     from reach.report import margin_at
     from reach.result import Counterexample
     from reach.spec import bind, load_properties
+    from reach.spec.properties import BoundEvent
 
     cex = Counterexample.load(args.counterexample)
     model = load_model(cex.model_file)
@@ -252,6 +253,13 @@ def cmd_replay(args) -> int:
     if cex.transitions is not None and rep.transitions[:len(cex.transitions)] != cex.transitions:
         print(printable(f"note: the run took the transitions {', '.join(rep.transitions) or '(none)'}; "
                         f"the file names {', '.join(cex.transitions) or '(none)'}"))
+    if isinstance(prop, BoundEvent):        # the extremum along the run against the requirement
+        sense = "min" if prop.sense == "min" else "max"
+        verdict = "replayed" if rep.violated else "NOT replayed"
+        print(printable(f"{verdict}: {model.name} {'violates' if rep.violated else 'satisfies'} '{prop.id}': "
+                        f"{sense} {prop.text or 'of the quantity'} = {rep.value:.6g} at t={rep.time:.6g} in mode "
+                        f"{rep.mode or '(none)'}, required {prop.op} {prop.value:g}"))
+        return 1 if rep.violated else 3
     if rep.violated:
         there = margin_at(prop, rep.mode, rep.state)
         depth = (f"deepest margin {rep.depth:.4g} along the run" if there is None else

@@ -78,9 +78,12 @@ def requirement(prop) -> str:
 def _where(prop, model, shown: int = 4) -> str:
     """`` (in m1, m2)`` where a safety property applies in some of the model's modes only (a
     SpaceEx forbidden set with ``loc(...) ==``, a property's ``modes:``); the first ``shown``
-    of them, then a count."""
+    of them, then a count. Nothing where the requirement's text names the modes of each of its
+    pieces already (:func:`_avoid_text`: pieces that differ from mode to mode)."""
     modes = list(getattr(prop, "pieces", {}) or [])
     if getattr(prop, "kind", "") != "safety" or model is None or not modes or len(modes) >= len(model.modes):
+        return ""
+    if len({tuple(" and ".join(c.text for c in piece) for piece in pieces) for pieces in prop.pieces.values()}) > 1:
         return ""
     names = ", ".join(modes[:shown]) + (f" and {len(modes) - shown} more" if len(modes) > shown else "")
     return f" (in {names})"

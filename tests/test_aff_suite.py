@@ -266,13 +266,16 @@ def test_plad01_over_the_reports_horizon_clears_30_and_star_proves_it_with_input
     PLAD01-BND30 is safe. star proves it once the lead acceleration's effect crosses the
     switches as generators (``input_cells = 1``) and the time-triggered switches are taken at
     their instant; with the effect as one box per chain the corners it carries through the
-    switch at t = 5 reach past -30 (UNKNOWN, never a wrong answer)."""
+    switch at t = 5 reach past -30 (UNKNOWN, never a wrong answer); by default, that undecided
+    box is followed by a pass with the effect as generators, which proves it."""
     model, props = _imported("PLAD01-BND30-h20")
     assert model.horizon == 20.0
     least = _platoon_least_spacing(model, model.horizon)
     assert -27.0 < least[0] < -26.5 and -24.5 < least[1] < -23.5 and least[2] > -30
     assert all(STAR.check(model, prop, {"input_cells": 1}).status.value == "SAFE" for prop in props)
-    assert STAR.check(model, props[1], {}).status.value == "UNKNOWN"
+    assert STAR.check(model, props[1], {"input_cells": 0}).status.value == "UNKNOWN"
+    default = STAR.check(model, props[1], {})
+    assert default.status.value == "SAFE" and "input effect carried as generators" in default.details["semantics"]
 
 
 def test_filtered_oscillator_x_flows_towards_plus_minus_0p7():

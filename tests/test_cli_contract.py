@@ -14,6 +14,7 @@ from __future__ import annotations
 import contextlib
 import copy
 import io
+import json
 import math
 import os
 import re
@@ -225,3 +226,23 @@ def test_generated_models_keep_the_contract(changes, command, tmp_path_factory):
     if code == 2:
         assert err.count("\n") == 1, (changes, err)
     assert (_snapshot(work.parent), _snapshot(REPO)) == outside
+
+
+def test_an_event_counterexample_replays_from_the_command_line(tmp_path):
+    """``x' = v, v' = -x`` from x0 in [0.9, 1.1], v0 = 0: x(t) = x0 cos t, so the largest x is
+    1.1 (at t = 0 and 2 pi), above the required 1.05. Monte Carlo's counterexample file replays:
+    exit 1 and the extremum of the run it names, which the closed form gives."""
+    (tmp_path / "m.yaml").write_text(
+        "name: spring\nstate: [x, v]\nmodes:\n  m:\n    flow: {x: v, v: -x}\n"
+        "initial: {mode: m, box: {x: [0.9, 1.1], v: 0}}\nhorizon: 7\n")
+    (tmp_path / "p.yaml").write_text(
+        "properties:\n  - {id: peak, kind: event, modes: [m], maximize: x, require: '<= 1.05'}\n")
+    code, out, err = run(["check", "m.yaml", "p.yaml", "-b", "montecarlo", "--counterexamples", "cex"], tmp_path)
+    assert code == 1, out + err
+    path = next((tmp_path / "cex").glob("*.json"))
+    x0 = json.loads(path.read_text())["initial_state"][0]
+    code, out, err = run(["replay", str(path)], tmp_path)
+    assert code == 1 and not err, out + err
+    value = float(out.split("max x = ")[1].split()[0])
+    assert value == pytest.approx(x0, abs=1e-4) and value > 1.05
+    assert "required <= 1.05" in out

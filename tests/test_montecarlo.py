@@ -43,10 +43,11 @@ def test_safe_instance_is_unknown_with_an_upper_bound_never_safe():
     assert results[0].details["closest_depth"] / 3600 == pytest.approx(10 - 7.40, abs=0.01)
 
 
-def test_the_time_budget_stops_the_search_and_the_optimiser_not_the_sampled_runs():
-    """``max_seconds`` bounds the falsification after the sampled runs: with a budget spent
-    before the search begins there is no search generation and no optimiser run, the sampled
-    runs are all there and the answer stays UNKNOWN, with the budget named."""
+def test_the_time_budget_stops_the_sampling_the_search_and_the_optimiser():
+    """``max_seconds`` bounds the whole check: with a budget spent before the i.i.d. runs begin
+    only the structured runs are simulated, there is no search generation and no optimiser
+    run, the answer stays UNKNOWN, the violation bound counts the runs actually sampled (none:
+    1), and the note names the budget and how many runs it left unsampled."""
     opts = {**FAST, "search_rounds": 3, "generations": 2, "population": 10, "polish": 5}
     (free,) = check_files("models/SRA01.yaml", "properties/rendezvous.yaml", "montecarlo", opts, only=["los"])
     (cut,) = check_files("models/SRA01.yaml", "properties/rendezvous.yaml", "montecarlo",
@@ -54,8 +55,10 @@ def test_the_time_budget_stops_the_search_and_the_optimiser_not_the_sampled_runs
     assert free.status == cut.status == Status.UNKNOWN
     assert free.details["search_runs"] == 3 * 50 and free.details["optimiser_runs"] > 0
     assert cut.details["search_runs"] == 0 and "optimiser_runs" not in cut.details
-    assert cut.details["random_runs"] == free.details["random_runs"] == 200
-    assert "option max_seconds" in cut.details["note"]
+    assert free.details["random_runs"] == 200 and cut.details["random_runs"] == 0
+    assert cut.details["violation_probability_upper_95"] == 1.0
+    assert "option max_seconds" in cut.details["note"] and "after 0 of 200 random runs" in cut.details["note"]
+    assert free.details["closest_depth"] <= cut.details["closest_depth"]
 
 
 def test_late_abort_collides_with_the_0p2_box_and_misses_the_0p1_box():

@@ -73,3 +73,29 @@ def test_jumps_at_one_instant_that_never_repeat_a_state_end_as_zeno(tmp_path):
     (tmp_path / "spin.yaml").write_text(yaml.safe_dump(doc))
     traj = Simulator(load_model(tmp_path / "spin.yaml")).run(np.array([[0.0]]))
     assert traj.blocked_at[0] == 0.0 and traj.final_state[0, 0] == MAX_JUMPS_AT_INSTANT
+
+
+def test_an_equality_guard_on_the_invariant_boundary_is_taken_there(tmp_path):
+    """SpaceEx's ``x == 2`` (imported as ``x >= 2, x <= 2``) out of ``x <= 2`` (urgent): the guard holds only at the instant the
+    run reaches the boundary, at no grid point. A sawtooth x' = 1 from x0, reset x := x - 1 at
+    x = 2: closed form x(T) = 1 + frac(x0 - 1 + T) for x0 in [1, 2), with floor(x0 - 1 + T)
+    jumps; no run is blocked, on the block path or the general one, nor with zero-rate modes
+    between (a timeless mode ``hold`` with an equality guard ``y == 0``)."""
+    doc = {"name": "saw", "state": ["x", "y"], "horizon": 4.3,
+           "modes": {"up": {"flow": {"x": 1, "y": 0}, "invariant": ["x <= 2"]},
+                     "hold": {"flow": False}},
+           "transitions": [{"from": "up", "to": "hold", "guard": ["x >= 2", "x <= 2"], "urgent": True},
+                           {"from": "hold", "to": "up", "guard": ["y >= 0", "y <= 0"], "reset": {"x": "x - 1"},
+                            "urgent": True}],
+           "initial": {"mode": "up", "box": {"x": [1, 1.9], "y": 0}}}
+    (tmp_path / "saw.yaml").write_text(yaml.safe_dump(doc))
+    model = load_model(tmp_path / "saw.yaml")
+    x0 = np.linspace(1.0, 1.9, 7)
+    for general in (False, True):
+        sim = Simulator(model)
+        if general:
+            sim.tables = dict.fromkeys(model.modes)
+        traj = sim.run(np.column_stack([x0, np.zeros_like(x0)]))
+        assert np.all(np.isnan(traj.blocked_at))
+        expected = 1.0 + np.mod(x0 - 1.0 + 4.3, 1.0)
+        np.testing.assert_allclose(traj.final_state[:, 0], expected, atol=1e-6)

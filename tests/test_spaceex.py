@@ -292,6 +292,17 @@ def test_a_misspelt_required_cfg_key_is_named_at_its_line(tmp_path, capsys):
                                                f"(is 'time-horizn' a misspelling of it?)")
 
 
+def test_a_misspelt_forbidden_key_is_named_at_its_line(tmp_path, capsys):
+    """``forbidden`` may be absent (``reach import`` converts the model alone), but ``reach
+    check`` needs it: a key spelt like it is named where it stands."""
+    text = ('system = sys\ntime-horizon = 1\n'
+            'initially = "loc(A)==off & loc(B)==idle & x == 0 & y == 0"\nforbiden = "x >= 5"\n')
+    xml, cfg = write(tmp_path, NETWORK, text)
+    assert main(["check", str(xml), str(cfg), "-b", "montecarlo"]) == 2
+    assert capsys.readouterr().err.strip() == (f"reach: {cfg}:4: no 'forbidden' "
+                                               f"(is 'forbiden' a misspelling of it?)")
+
+
 def test_missing_cfg_is_bad_input(tmp_path):
     (tmp_path / "m.xml").write_text(HEADER + NETWORK + "</sspaceex>\n")
     with pytest.raises(InputError, match="no .cfg"):

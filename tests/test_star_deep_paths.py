@@ -170,3 +170,40 @@ def test_a_long_quiet_exploration_says_once_that_it_is_still_going(tmp_path, mon
         BACKEND.check(model, props["at_most"], {})
     hints = [r.getMessage() for r in caplog.records if "still exploring" in r.getMessage()]
     assert len(hints) == 1 and "-o max_seconds" in hints[0]
+
+
+DOCK = """
+name: dock
+state: [x, v]
+bounded_inputs:
+  u: {range: [-0.1, 0.1], varying: true}
+modes:
+  approach: {flow: {x: v, v: u}, invariant: ["x <= 0"]}
+  recoil: {flow: {x: v, v: u}}
+transitions:
+  - {from: approach, to: recoil, guard: ["x >= 0"], reset: {v: "-0.5*v", x: "x - 0.02"}, urgent: true}
+initial: {mode: approach, box: {x: [-1, -0.9], v: [0.2, 0.3]}}
+horizon: 10
+"""
+
+
+@pytest.mark.parametrize("budget", [2.0, 6.0])
+def test_one_time_budget_bounds_every_pass_of_a_check(tmp_path, budget):
+    """A clockless model with a time-varying input whose bound star cannot settle quickly (it
+    holds: the largest x in recoil is about 1.82, from bang-bang inputs): the first pass, the
+    clockless model's second pass and the finer passes share one budget, which the reason
+    names as given."""
+    import time
+
+    (tmp_path / "dock.yaml").write_text(DOCK)
+    (tmp_path / "p.yaml").write_text("properties:\n  - {id: far, kind: safety, modes: [recoil], "
+                                     "require: ['x <= 2.0']}\n")
+    model = load_model(tmp_path / "dock.yaml")
+    prop = bind(load_properties(tmp_path / "p.yaml")[0], model)
+    started = time.perf_counter()
+    result = BACKEND.check(model, prop, {"max_seconds": budget})
+    elapsed = time.perf_counter() - started
+    assert result.status is not Status.UNSAFE
+    if result.status is Status.UNKNOWN:
+        assert f"time budget of {budget:g} s exhausted (option max_seconds)" in result.details["reason"]
+    assert elapsed < 1.5 * budget + 2.0

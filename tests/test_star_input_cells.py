@@ -131,3 +131,38 @@ def test_a_check_past_its_memory_share_is_unknown_naming_memory(tmp_path, monkey
     monkeypatch.setattr(explorer, "MEMORY_FRACTION", 1e-9)
     result = _check(tmp_path, "x >= -10", input_cells=2)
     assert result.status is Status.UNKNOWN and "memory" in result.details["reason"]
+
+
+DOUBLE_INTEGRATOR = """
+name: double_integrator
+state: [x, v]
+bounded_inputs:
+  u: {range: [-1, 1], varying: true}
+modes:
+  go: {flow: {x: v, v: u}}
+initial: {mode: go, box: {x: 0, v: 0}}
+horizon: 2
+"""
+
+
+@pytest.mark.parametrize("bound,status", [(1.05, Status.SAFE), (0.95, Status.UNSAFE)])
+def test_a_box_that_loses_the_inputs_correlation_is_followed_by_generators(tmp_path, bound, status):
+    """``x - v = int_0^T (T - 1 - s) u(s) ds`` from rest, largest over |u| <= 1 and T <= 2 at
+    T = 2 with u = sign(1 - s): 1. The box of the input effect (exact per state, not jointly)
+    puts the largest x with the smallest v, far above 1, so the default pass is undecided; the
+    pass with the effect as generators decides both sides, and its counterexample replays."""
+    from reach.backends.montecarlo import replay
+
+    (tmp_path / "m.yaml").write_text(DOUBLE_INTEGRATOR)
+    (tmp_path / "p.yaml").write_text(f"properties:\n  - {{id: p, kind: safety, require: ['x - v <= {bound}']}}\n")
+    model = load_model(tmp_path / "m.yaml")
+    prop = bind(load_properties(tmp_path / "p.yaml")[0], model)
+    boxed = BACKEND.check(model, prop, {"finer_retry": False, "input_cells": 0})
+    assert boxed.status is Status.UNKNOWN
+    result = BACKEND.check(model, prop, {})
+    assert result.status is status
+    if status is Status.SAFE:
+        assert "input effect carried as generators" in result.details["semantics"]
+    else:
+        c = result.counterexample
+        assert replay(model, prop, c.initial_state, c.switch_time, input_signal=c.input_signal).violated

@@ -588,7 +588,13 @@ class MonteCarloBackend:
         if sim.max_options > 1:
             X, tau, signal, choice, n_structured = branch_plan(sim.max_options, n_structured, X, tau, signal, rng)
         check_size(model, sim.dt, X.shape[0])      # all the runs' arrays are held at once
-        parts = _simulate_rounds(model, props, sim, opts, X, tau, signal, choice, n_structured, kicks)
+        parts, kept = _simulate_rounds(model, props, sim, opts, X, tau, signal, choice, n_structured, kicks,
+                                       time.time() + (deadline - time.perf_counter()))
+        if kept.size < X.shape[0]:          # the time budget left i.i.d. blocks unsimulated
+            X, tau, choice = X[kept], None if tau is None else tau[kept], None if choice is None else choice[kept]
+            if signal is not None:
+                signal = (signal[0], signal[1][kept], None if signal[2] is None else signal[2][kept])
+        sampled = X.shape[0] - n_structured
         monitors = [SafetyMonitor.merged(model, p, [q[0][i] for q in parts]) for i, p in enumerate(props)]
         blocked = sum(q[1] for q in parts)
         branching = choice is not None and sum(q[2] for q in parts) > 0    # a choice met, not only possible
@@ -599,13 +605,16 @@ class MonteCarloBackend:
             begin = time.perf_counter()
             rounds = [("structured+random", X, tau, monitor, signal, choice)]
             details = {"dt": sim.dt, "seed": opts.seed, "structured_runs": int(n_structured),
-                       "random_runs": int(opts.samples),
+                       "random_runs": int(sampled),
                        "blocked_runs": int(blocked),
                        "assumes": "states checked at grid points and event instants only "
                                   "(a falsifier, not a proof)"}
             fails = int(np.count_nonzero(np.isfinite(monitor.violation_time[n_structured:])))
             details["violating_runs"] = fails
-            details["violation_probability_upper_95"] = clopper_pearson_upper(fails, opts.samples)
+            details["violation_probability_upper_95"] = clopper_pearson_upper(fails, sampled)
+            if sampled < opts.samples:
+                details["note"] = (f"time budget of {opts.max_seconds:.3g} s (option max_seconds) ended the "
+                                   f"sampling after {sampled} of {opts.samples} random runs")
             found = monitor.first_violation()
             found = None if found is None else (0, found)
             if found is None and model.disturbance is None:
@@ -613,7 +622,7 @@ class MonteCarloBackend:
             if found is None and model.disturbance is None and opts.optimise and time.perf_counter() <= deadline:
                 found = self._optimise(model, prop, window, sim, rounds, opts, branching, deadline)
                 details["optimiser_runs"] = int(rounds[-1][3].runs)
-            if found is None and time.perf_counter() > deadline:
+            if found is None and time.perf_counter() > deadline and "note" not in details:
                 details["note"] = (f"time budget of {opts.max_seconds:.3g} s (option max_seconds) "
                                    f"ended the search")
             details["search_runs"] = int(sum(r[1].shape[0] for r in rounds[1:] if r[0] != "optimiser"))
@@ -758,9 +767,13 @@ class MonteCarloBackend:
 SAMPLE_BLOCK = 1000     # i.i.d. runs always simulated together: the unit of batches
 
 
-def _simulate_rounds(model, props, sim, opts: Options, X, tau, signal, choice, n_structured: int, kicks) -> list:
+def _simulate_rounds(model, props, sim, opts: Options, X, tau, signal, choice, n_structured: int, kicks,
+                     deadline: float = math.inf) -> tuple[list, np.ndarray]:
     """Simulate the structured runs (in this process) and the i.i.d. ones, monitoring every
-    property; ``[(monitor arrays per property, blocked runs, runs that met a choice)]`` in run order.
+    property; ``([(monitor arrays per property, blocked runs, runs that met a choice)], rows)``:
+    the parts in the order of ``rows``, the indices of the runs simulated. No block of i.i.d.
+    runs starts after ``deadline`` (a ``time.time()`` instant, which worker processes share):
+    those simulated are the structured ones and a leading part of each batch's blocks.
 
     The i.i.d. runs are simulated in blocks of :data:`SAMPLE_BLOCK`, each block on its own
     (disturbance kicks from ``SeedSequence(seed, spawn_key=(k,))`` for block ``k``): a run's
@@ -777,30 +790,38 @@ def _simulate_rounds(model, props, sim, opts: Options, X, tau, signal, choice, n
     traj = sim.run(Xs, taus, observers=monitors, kicks=kicks, signal=signals,
                    branches=None if choices is None else Branches(values=choices))
     parts = [([m.arrays() for m in monitors], *_counts(traj))]
-    blocks = [(k,) + rows(a, min(a + SAMPLE_BLOCK, X.shape[0]))
-              for k, a in enumerate(range(n_structured, X.shape[0], SAMPLE_BLOCK))]
+    starts = list(range(n_structured, X.shape[0], SAMPLE_BLOCK))
+    blocks = [(k,) + rows(a, min(a + SAMPLE_BLOCK, X.shape[0])) for k, a in enumerate(starts)]
     per_unit = max(1, -(-opts.batch // SAMPLE_BLOCK))
-    units = [(model, props, sim.dt, opts.seed, blocks[i:i + per_unit]) for i in range(0, len(blocks), per_unit)]
+    units = [(model, props, sim.dt, opts.seed, blocks[i:i + per_unit], deadline)
+             for i in range(0, len(blocks), per_unit)]
     if len(units) <= 1 or (opts.jobs <= 1 and opts.scheduler is None):
-        return parts + [part for unit in units for part in simulate_blocks(*unit)]
-    from reach.executors import make_executor
+        out = [simulate_blocks(*unit) for unit in units]
+    else:
+        from reach.executors import make_executor
 
-    out = [None] * len(units)
-    for i, (status, value) in make_executor(opts.jobs, opts.scheduler).map_unordered(simulate_blocks, units):
-        if status != "ok":
-            raise RuntimeError(f"a Monte Carlo batch did not finish ({status})")
-        out[i] = value
-    return parts + [part for unit in out for part in unit]
+        out = [None] * len(units)
+        for i, (status, value) in make_executor(opts.jobs, opts.scheduler).map_unordered(simulate_blocks, units):
+            if status != "ok":
+                raise RuntimeError(f"a Monte Carlo batch did not finish ({status})")
+            out[i] = value
+    done = [j for i, unit in enumerate(out) for j in range(i * per_unit, i * per_unit + len(unit))]
+    kept = np.concatenate([np.arange(n_structured)] + [np.arange(starts[j], min(starts[j] + SAMPLE_BLOCK, X.shape[0]))
+                                                       for j in done]).astype(int)
+    return parts + [part for unit in out for part in unit], kept
 
 
-def simulate_blocks(model, props, dt, seed, blocks) -> list:
+def simulate_blocks(model, props, dt, seed, blocks, deadline: float = math.inf) -> list:
     """One batch (an executor unit): each block ``(k, X, tau, signal, choice)`` of i.i.d. runs
-    simulated on its own with one monitor per property; ``[(monitor arrays, blocked runs, runs
-    that met a choice)]``."""
+    simulated on its own with one monitor per property, none started after ``deadline``
+    (``time.time()``); ``[(monitor arrays, blocked runs, runs that met a choice)]`` of the
+    blocks simulated, a leading part of ``blocks``."""
     sim = Simulator(model, dt)
     out = []
     with single_threaded():
         for k, X, tau, signal, choice in blocks:
+            if time.time() > deadline:
+                break
             kicks = _kicks(model, np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(k,))))
             monitors = [SafetyMonitor(model, p, X.shape[0]) for p in props]
             traj = sim.run(X, tau, observers=monitors, kicks=kicks, signal=signal,

@@ -70,6 +70,7 @@ MODE_FIELDS = {"flow", "control", "invariant", "description"}
 TRANSITION_FIELDS = {"from", "to", "guard", "urgent", "reset", "description"}
 RESERVED = set(FUNCTIONS) | set(CONSTANTS)
 MAX_EXTENDS = 8
+MAX_HORIZON = 1e12             # model time units: beyond, grid steps of horizon / 60 overflow exp(A h)
 
 
 def read_with_templates(path: Path, depth: int = 0, chain=()) -> Doc:
@@ -214,6 +215,9 @@ class _Builder:
         horizon = self.number(self.need("horizon"), self.where("horizon"), dimension=TIME, what="the horizon")
         if horizon <= 0:
             raise self.where("horizon").error("horizon must be positive")
+        if horizon > MAX_HORIZON:
+            raise self.where("horizon").error(f"horizon {horizon:g} is beyond {MAX_HORIZON:g} time units: "
+                                              f"the grid steps' exponentials would overflow")
         clocks = [i for i in range(len(self.state))
                   if all(m.flow[i] == 1 for m in modes.values())]
         for tr in transitions:

@@ -789,7 +789,9 @@ class Simulator:
         ``blocked`` (outside the invariant at the grid time ``block_t``), or whose state at its
         event or segment end lies outside the invariant, left it after ``last_t``: it stops at
         the last instant inside (:meth:`_last_inside`), watched there, and takes an enabled
-        may-transition with a general guard, or is blocked. ``propagate(X, h)`` advances states
+        transition whose guard holds there, urgent or a may-transition with a general guard, or
+        is blocked. (An urgent guard that holds only on the invariant's boundary, SpaceEx's
+        ``x == 2`` out of ``x <= 2``, holds at no grid point: it is met at the exit.) ``propagate(X, h)`` advances states
         without event."""
         horizon = self.model.horizon
         has_event = ~blocked & (event_tr >= 0) & (event_time <= end)
@@ -799,11 +801,11 @@ class Simulator:
         left = ~self.inside(name, X_stop) & np.isfinite(X_stop).all(axis=1)
         blocked[go[left]] = True
         has_event &= ~blocked
+        urgent = self.urgent[name]
         b = np.flatnonzero(blocked)
         if b.size:
             s, x_exit = self._last_inside(name, last_x[b], stop_t[b] - last_t[b])
-            self._event(rows[b], x_exit, last_t[b] + s, self.exits[name], None, runs)
-        urgent = self.urgent[name]
+            self._event(rows[b], x_exit, last_t[b] + s, urgent + self.exits[name], None, runs)
         window = [(self.window[name], None)]
         for kind in (0, 1):
             e = np.flatnonzero(has_event[go] & ((event_tr[go] > 0) == bool(kind)))

@@ -7,6 +7,8 @@ mode: star segments filled, taylor step boxes outlined, Monte Carlo runs as thin
 sampled run outside a set would show a soundness problem at a glance). The unsafe pieces of the
 properties that can be drawn in the plane are shaded red (targets green,
 :mod:`reach.plotting.requirements`); a counterexample run is drawn in black.
+The legend (an entry per back-end and mode, styled as drawn) sits below the axes and the title
+is wrapped to their width (:mod:`reach.plotting.layout`).
 """
 
 from __future__ import annotations
@@ -159,15 +161,52 @@ def _view(drawn, cexs) -> tuple[float, float, float, float]:
     return float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1])
 
 
+def set_style(backend: str, kind: str, colour) -> dict:
+    """How the sets of ``backend`` in a mode of colour ``colour`` are drawn, as keyword arguments
+    for both the collection (``PolyCollection`` for ``polygons``, ``LineCollection`` for
+    ``paths``) and its legend handle (``Patch``, ``Line2D``), so the legend shows what is drawn."""
+    from matplotlib.colors import to_rgb
+
+    if kind == "paths":                 # sampled runs: thin lines, darker than the mode's sets
+        return {"color": tuple(0.6 * np.array(to_rgb(colour))) + (0.8,), "linewidth": 0.6, "zorder": 4}
+    style = STYLE.get(backend, STYLE["star"])
+    return {"facecolor": colour if style["fill"] else "none", "edgecolor": colour, "alpha": style["alpha"],
+            "linewidth": style["lw"] or 0.3, "zorder": 2 if style["fill"] else 3}
+
+
+def grouped(props: dict[str, set], shown_modes: list[str]) -> dict[str, list[str]]:
+    """``{modes: [property ids]}`` from ``{id: modes}``: the properties with the same modes
+    together, the modes as text (``every mode drawn`` when they are all of several)."""
+    out: dict[str, list[str]] = {}
+    for prop, modes in sorted(props.items()):
+        text = ("every mode drawn" if len(shown_modes) > 1 and set(modes) == set(shown_modes)
+                else ", ".join(sorted(modes, key=shown_modes.index)))
+        out.setdefault(text, []).append(prop)
+    return out
+
+
+#: how a requirement region is drawn (its legend patch alike)
+REGION_STYLE = {"alpha": 0.12, "hatch": "//", "linewidth": 0.8, "zorder": 0}
+WHAT = {"star": "star flowpipe segments (outer)", "taylor": "taylor step enclosures (rigorous)",
+        "montecarlo": "montecarlo sampled runs"}
+
+
 def plot_reach_sets(model, results_by_backend: dict, bound_props, axes, out: Path, exact: bool = True,
                     title: str | None = None, modes: list[str] | None = None, view=None, ax=None) -> dict:
     """Draw the sets of ``results_by_backend`` (``{backend: [Result]}``) on ``axes`` (two
     :class:`reach.plotting.axes.Axis`) into ``out`` (or onto the matplotlib ``ax`` given).
     ``modes``: only these; ``view``: ``(x0, x1, y0, y1)`` instead of the data's extent. Returns
-    what was drawn: polygons and runs per back-end, and the properties not drawable here."""
+    what was drawn: polygons and runs per back-end, and the properties not drawable here.
+
+    The legend has one entry per back-end and mode drawn, styled as its sets are
+    (:func:`set_style`), and sits below the axes, over no data; the title (one line of verdicts
+    per back-end) is wrapped to the axes' width (:func:`reach.plotting.layout.arrange`). Each
+    collection's gid is ``backend:mode``."""
     plt = pyplot()
     from matplotlib.collections import LineCollection, PolyCollection
     from matplotlib.patches import Patch
+
+    from reach.plotting.layout import arrange
 
     drawn = projected(model, results_by_backend, axes, exact, checked=checked_modes(bound_props), modes=modes,
                       bound_props=bound_props)
@@ -175,73 +214,70 @@ def plot_reach_sets(model, results_by_backend: dict, bound_props, axes, out: Pat
     view = view or _view(drawn, cexs)
     own = ax is None
     if own:
-        fig, ax = plt.subplots(figsize=(8, 6.5))
+        fig, ax = plt.subplots(figsize=(8, 6.5), layout="constrained")
     names = list(model.modes)
     colours = {m: plt.cm.tab10(i % 10) for i, m in enumerate(names)}
     shown_modes = sorted({m for d in drawn.values() for m in d}, key=names.index)
     found, hidden, view = regions(model, bound_props, axes, shown_modes, view)
     handles = []
+    painted = set()
     for region in found:
         colour = "tab:red" if region.kind == "unsafe" else "tab:green"
-        ax.add_patch(plt.Polygon(region.polygon, closed=True, facecolor=colour, alpha=0.12,
-                                 edgecolor=colour, lw=0.8, hatch="//", zorder=0))
+        key = (region.kind, np.round(region.polygon, 12).tobytes())
+        if key in painted:              # the same piece in another mode: shading twice darkens it
+            continue
+        painted.add(key)
+        ax.add_patch(plt.Polygon(region.polygon, closed=True, facecolor=colour, edgecolor=colour, **REGION_STYLE))
     for kind, colour, text in (("unsafe", "tab:red", "unsafe"), ("target", "tab:green", "target")):
         props = {}
         for r in found:
             if r.kind == kind:
                 props.setdefault(r.prop, set()).add(r.mode)
         if props:
-            where = "; ".join(f"{p} in {', '.join(sorted(m, key=names.index))}" for p, m in sorted(props.items()))
-            handles.append(Patch(facecolor=colour, alpha=0.25, hatch="//", edgecolor=colour,
-                                 label=f"{text}: {where}"))
+            where = "; ".join(f"{', '.join(ps)} in {ms}" for ms, ps in grouped(props, shown_modes).items())
+            handles.append(Patch(facecolor=colour, edgecolor=colour, label=f"{text}: {where}", **REGION_STYLE))
     counts = {}
+    entries = {}                        # (backend, mode) -> legend handle
     for backend, modes_drawn in drawn.items():
-        style = STYLE.get(backend, STYLE["star"])
         for mode, (kind, arrays) in modes_drawn.items():
             counts[f"{backend}/{mode}"] = len(arrays)
-            c = colours[mode]
+            style = set_style(backend, kind, colours[mode])
+            what = WHAT.get(backend, backend) if kind == "polygons" else f"{backend} sampled runs"
+            label = f"mode {mode}: {what}"
             if kind == "polygons":
-                coll = PolyCollection(arrays, closed=True, facecolors=[c] if style["fill"] else "none",
-                                      edgecolors=[c], alpha=style["alpha"], linewidths=style["lw"] or 0.3,
-                                      zorder=2 if style["fill"] else 3)
+                coll = PolyCollection(arrays, closed=True, facecolors=[style["facecolor"]],
+                                      edgecolors=[style["edgecolor"]], alpha=style["alpha"],
+                                      linewidths=style["linewidth"], zorder=style["zorder"])
+                entries[backend, mode] = Patch(label=label, **style)
             else:
-                coll = LineCollection(arrays, colors=[tuple(0.6 * np.array(c[:3])) + (0.8,)],
-                                      linewidths=0.6, zorder=4)
+                coll = LineCollection(arrays, colors=[style["color"]], linewidths=style["linewidth"],
+                                      zorder=style["zorder"])
+                entries[backend, mode] = plt.Line2D([], [], label=label, **{**style, "linewidth": 1.2})
+            coll.set_gid(f"{backend}:{mode}")
             ax.add_collection(coll)
-    for mode in shown_modes:
-        handles.append(Patch(facecolor=colours[mode], alpha=0.5, label=f"mode {mode}"))
-    for backend, modes_drawn in drawn.items():
-        if not modes_drawn:
-            continue
-        kind = next(iter(modes_drawn.values()))[0]
-        style = STYLE.get(backend, STYLE["star"])
-        what = {"star": "star flowpipe segments (outer)", "taylor": "taylor step enclosures (rigorous)",
-                "montecarlo": "montecarlo sampled runs"}.get(backend, backend)
-        if kind == "paths":
-            handles.append(plt.Line2D([], [], color="0.3", lw=0.8, label=what))
-        else:
-            handles.append(Patch(facecolor="0.6" if style["fill"] else "none", edgecolor="0.3",
-                                 alpha=0.6, label=what))
+    handles += [entries[b, m] for m in shown_modes for b in drawn if (b, m) in entries]
     for label, path, point in cexs:
         ax.plot(path[:, 0], path[:, 1], "-", color="k", lw=1.2, zorder=5)
         ax.plot(*point, "X", color="k", ms=9, zorder=6)
-        handles.append(plt.Line2D([], [], color="k", marker="X", lw=1.2, label=label))
+    if cexs:
+        by_backend = {}
+        for label, _, _ in cexs:
+            backend, _, rest = label.partition(": ")
+            by_backend.setdefault(backend, []).append(rest.removesuffix(" counterexample"))
+        text = "; ".join(f"{b}: {', '.join(ps)}" for b, ps in by_backend.items())
+        handles.append(plt.Line2D([], [], color="k", marker="X", lw=1.2, label=f"counterexample runs ({text})"))
     ax.set_xlim(view[0], view[1])
     ax.set_ylim(view[2], view[3])
     ax.set_xlabel(axes[0].label)
     ax.set_ylabel(axes[1].label)
     ax.grid(True, alpha=0.25)
     if title is None:
-        verdicts = "; ".join(f"{b}: " + ", ".join(f"{r.property} {r.status.value}" for r in rs)
-                             for b, rs in results_by_backend.items())
+        verdicts = "\n".join(f"{b}: " + ", ".join(f"{r.property} {r.status.value}" for r in rs)
+                              for b, rs in results_by_backend.items())
         title = f"{model.name}: {axes[1].name} against {axes[0].name}\n{verdicts}"
-    ax.set_title(title, fontsize=9)
-    if hidden:
-        ax.text(0.01, 0.01, "not drawable in this plane: " + ", ".join(hidden), transform=ax.transAxes,
-                fontsize=7, color="0.35", va="bottom")
-    ax.legend(handles=handles, loc="best", fontsize=7, framealpha=0.85)
+    arrange(ax, title, handles, legend_title="not drawable in this plane: " + ", ".join(hidden) if hidden else None,
+            grow=own)
     if own:
-        fig.tight_layout()
         out.parent.mkdir(parents=True, exist_ok=True)
         fig.savefig(out, dpi=110)
         plt.close(fig)

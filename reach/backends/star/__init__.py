@@ -168,6 +168,7 @@ time up to which every abort is proven safe (Fig. 5 of the rendezvous benchmark)
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import replace
 
@@ -175,13 +176,13 @@ import numpy as np
 
 from reach import lp
 from reach.deep import call_deep
-from reach.backends.star.explorer import LOG, OUT_OF_TIME, _Explorer, _Stop
+from reach.backends.star.explorer import LOG, OUT_OF_TIME, _Explorer, _Stop, budget_text
 from reach.backends.star.flowpipe import AffineFlow, flowpipe
 from reach.backends.star.hull import check_hull
 from reach.backends.star.linearise import LinearisedModel, check_linearised
 from reach.backends.star.options import (CLOCKLESS_FIRST_STARS, DEPTH_LP_TOLERANCE, FINER_FACTOR,
                                          FINER_MAX_SECONDS, FINER_PASSES, FINER_SECONDS, NAME, StarOptions,
-                                         clockless_retry, finer_retry)
+                                         clockless_retry, finer_retry, inputs_retry)
 from reach.backends.star.switching import SwitchingModel, check_switching
 from reach.backends.star.transitions import _LinearModel, _unsafe_pieces
 from reach.backends.star.witnesses import witness_details
@@ -209,6 +210,21 @@ _SOUNDNESS = (
 
 _DISCRETE = ("discrete time: states checked and switched at grid points t = k*h only "
              "(Hylaa's semantics); behaviour between grid points is not covered")
+
+
+def _with_budget(options, opt: StarOptions, share: float):
+    """``options`` (a dict of options or StarOptions, ``opt`` read from them) with ``share`` of
+    their time budget."""
+    if opt.max_seconds is None:
+        return options
+    if isinstance(options, StarOptions):
+        return replace(options, max_seconds=opt.max_seconds * share)
+    return {**(options or {}), "max_seconds": opt.max_seconds * share}
+
+
+#: the share of ``max_seconds`` the joint exploration of several properties may take
+#: (:meth:`StarBackend.check_many`): each property may still need its own whole budget after it
+JOINT_SHARE = 0.25
 
 
 class StarBackend:
@@ -241,13 +257,14 @@ class StarBackend:
         union avoids each set, so a SAFE of the union is a SAFE of each, with the shared time
         split between them. Anything else (a violation of one of them, UNKNOWN) says nothing
         about the others: each property is then checked on its own, as :meth:`check` does,
-        and the time of the joint attempt is added to theirs. With ``keep_sets`` (pictures)
-        each property keeps its own exploration."""
+        and the time of the joint attempt is added to theirs. The joint attempt has
+        ``JOINT_SHARE`` of the time budget ``max_seconds``. With ``keep_sets`` (pictures) each
+        property keeps its own exploration."""
         opt = options if isinstance(options, StarOptions) else StarOptions.from_dict(options)
         if len(props) < 2 or opt.keep_sets:
             return [self.check(model, p, options) for p in props]
         start = time.perf_counter()
-        joint = self.check(model, _together(props), options)
+        joint = self.check(model, _together(props), _with_budget(options, opt, JOINT_SHARE))
         shared = time.perf_counter() - start
         if joint.status is Status.SAFE:
             names = ", ".join(p.id for p in props)
@@ -273,10 +290,20 @@ class StarBackend:
         opt = StarOptions.from_dict(options)
         first = self._check_aggregating(model, prop, options, opt, start)
         spent = time.perf_counter() - start
-        budget = min(max(FINER_FACTOR * spent, FINER_SECONDS), FINER_MAX_SECONDS)
-        if opt.max_seconds is not None:
-            budget = min(budget, opt.max_seconds - spent)
+        share = min(max(FINER_FACTOR * spent, FINER_SECONDS), FINER_MAX_SECONDS)
+        left = math.inf if opt.max_seconds is None else opt.max_seconds - spent
+        budget = min(share, left)
         deadline, finer, result, tried = time.perf_counter() + budget, opt, first, []
+        latest = first                                  # the last pass run
+        correlated = inputs_retry(model, options, first, opt, budget)
+        if correlated is not None:
+            latest = self._check(model, prop, correlated, start)
+            tried.append(f"{first.details['step']:.3g} with the input effect as generators")
+            if latest.status is not Status.UNKNOWN:
+                latest.details["semantics"] += (f"; with the input effect carried as generators (blocks of "
+                                                f"{correlated.input_cells} cells): its box left it undecided "
+                                                f"({first.details.get('reason', '')})")
+                return latest
         # the plain exploration only: the switching inclusion and the linearisation explore in
         # blocks over cover boxes and fall back to the switching hull; their finer passes are not
         # yet validated against references (tests/test_star_rounding.py runs them at fine steps)
@@ -285,26 +312,31 @@ class StarBackend:
             finer = finer_retry(result, finer, model.horizon, deadline - time.perf_counter())
             if finer is None:
                 break
-            result = self._check_aggregating(model, prop, options, finer, start)
+            result = latest = self._check_aggregating(model, prop, options, finer, start)
             tried.append(f"{finer.step:.3g}")
             if result.status is not Status.UNKNOWN:
                 result.details["semantics"] += (f"; at step {finer.step:.3g}: the default step "
                                                 f"{first.details['step']:.3g} left it undecided "
                                                 f"({first.details.get('reason', '')})")
                 return result
-        if tried:
-            first.seconds = result.seconds
-            reason = result.details.get("reason", "")
-            if OUT_OF_TIME in reason:                   # whose budget (:meth:`_Explorer.out_of_time`)
-                reason += (" (option max_seconds)" if opt.max_seconds is not None else
-                           f" (the finer passes share {FINER_FACTOR:g} times the first pass's time, "
-                           f"{FINER_SECONDS:g} to {FINER_MAX_SECONDS:g} s; -o max_seconds=S sets it)")
-            first.details["reason"] += f"; checked again at step {' and '.join(tried)}, still undecided: {reason}"
+        if not tried:
+            if OUT_OF_TIME in first.details.get("reason", ""):
+                first.details["reason"] += " (option max_seconds)"
+            return first
+        first.seconds = latest.seconds
+        reason = latest.details.get("reason", "")
+        if OUT_OF_TIME in reason:                       # whose budget (:meth:`_Explorer.out_of_time`)
+            reason += (" (option max_seconds)" if left <= share else
+                       f" (the finer passes share {FINER_FACTOR:g} times the first pass's time, "
+                       f"{FINER_SECONDS:g} to {FINER_MAX_SECONDS:g} s, within -o max_seconds)")
+        first.details["reason"] += f"; checked again at step {' and '.join(tried)}, still undecided: {reason}"
         return first
 
     def _check_aggregating(self, model, prop, options, opt, start) -> Result:
         """One check with ``opt``; on a clockless model first with the default aggregation, then
-        aggregating from the first jump (:func:`.options.clockless_retry`)."""
+        aggregating from the first jump (:func:`.options.clockless_retry`), both within one time
+        budget ``opt.max_seconds``."""
+        began = time.perf_counter()
         retry = None if isinstance(options, StarOptions) else clockless_retry(model, options, opt)
         if retry is None:
             return self._check(model, prop, opt, start)
@@ -312,7 +344,15 @@ class StarBackend:
         first = self._check(model, prop, replace(opt, max_stars=budget), start)
         if first.status is not Status.UNKNOWN or first.details.get("stars", 0) <= budget:
             return first
+        if opt.max_seconds is not None:         # the second pass has what the first left of the budget
+            left = opt.max_seconds - (time.perf_counter() - began)
+            if left <= 0:
+                return first
+            retry = replace(retry, max_seconds=left)
         result = self._check(model, prop, retry, start)
+        if opt.max_seconds is not None and "reason" in result.details:     # name the whole budget
+            result.details["reason"] = result.details["reason"].replace(budget_text(retry.max_seconds),
+                                                                        budget_text(opt.max_seconds))
         result.details["semantics"] += (f"; the default aggregation took more than {budget} stars, so "
                                         f"the check started over aggregating from the first jump")
         return result
@@ -490,7 +530,7 @@ def safe_abort_time(model, props, low, high, options=None) -> float:
         raise ValueError(f"model '{model.name}' has no abort window to sweep")
     if not _LinearModel.of(model).linear:
         raise ValueError(f"model '{model.name}': the safe-abort sweep needs affine flows")
-    opt = StarOptions.from_dict({**dict(options or {}), "replay": False})
+    opt = StarOptions.from_dict({"max_seconds": None, **dict(options or {}), "replay": False})
     initial = Star.from_box(_LinearModel.of(model).initial_box(low, high))
     latest = max(w[2] for w in windows)
     for prop in props:

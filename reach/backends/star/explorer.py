@@ -43,6 +43,11 @@ QUIET_HINT_SECONDS = 60.0
 #: how an UNKNOWN for time begins (:meth:`_Explorer.out_of_time`; the finer passes name whose)
 OUT_OF_TIME = "time budget of"
 
+
+def budget_text(seconds: float) -> str:
+    """Why an exploration stopped for time (:meth:`_Explorer.out_of_time`)."""
+    return f"{OUT_OF_TIME} {seconds:.3g} s exhausted"
+
 #: pieces of a replay's switching signal (:meth:`_Explorer._switching_signal`), at most: as many
 #: as a counterexample's input signal may have (:func:`reach.backends.montecarlo.replay`)
 MAX_SIGNAL_PIECES = 1_000_000
@@ -619,7 +624,7 @@ class _Explorer:
         """Why the search must stop for time (option ``max_seconds``, or the finer passes' share
         of the time, see :func:`reach.backends.star.finer_retry`), or None while it may go on."""
         if time.perf_counter() > self.deadline:
-            return f"{OUT_OF_TIME} {self.opt.max_seconds:.3g} s exhausted"
+            return budget_text(self.opt.max_seconds)
         return None
 
     def _memory_guard(self):

@@ -95,7 +95,9 @@ class StarOptions:
         at every level, memory and time quadratic in its length; below the limit the stars stay
         exact (a timed automaton's clock differences, which an interval hull would lose). None:
         only where ``aggregate_after`` says.
-    max_seconds: UNKNOWN once the exploration has run this long (None: no time budget).
+    max_seconds: UNKNOWN once the check of a property (finer passes included) has run this
+        long (default 120 s: a check that has not ended by then is better told than waited
+        for; None: no time budget).
     finer_retry: where a check ends UNKNOWN for want of precision (cells that refinement
         cannot clear, jumps piling up within one step, the LP or star budget), check again
         with the step divided by 10, up to ``FINER_PASSES`` times within a shared time budget
@@ -161,7 +163,7 @@ class StarOptions:
     aggregate_fanout: int | None = ranged(16, 0)
     aggregate_drift_coefficients: int | None = ranged(256, 0)
     max_stars: int = 20_000
-    max_seconds: float | None = ranged(None, 0.0, open_low=True)
+    max_seconds: float | None = ranged(120.0, 0.0, open_low=True)
     finer_retry: bool = True
     max_coefficients: int = 2_000
     max_deaggregations: int = 50
@@ -232,6 +234,32 @@ def clockless_retry(model, options: dict | None, opt: StarOptions) -> StarOption
         return None
     generators = not ({"input_cells", "rebase_generators"} & set(options))
     return replace(opt, aggregate_after=0, rebase_generators=generators or opt.rebase_generators)
+
+
+#: cells per input block of the pass that keeps the input effect's correlation (:func:`inputs_retry`)
+INPUT_RETRY_CELLS = 4
+
+
+def inputs_retry(model, options: dict | StarOptions | None, result, opt: StarOptions,
+                 budget: float) -> StarOptions | None:
+    """The options of a pass that carries the effect of time-varying inputs as generators
+    (``input_cells = INPUT_RETRY_CELLS``), after a pass with the default box (``input_cells =
+    0``: the effect since the chain's start, exact per state but not jointly) that ended
+    UNKNOWN for want of precision, with ``budget`` seconds left; None where none applies (no
+    time-varying input, the user chose ``input_cells`` or ``rebase_generators``, another
+    outcome, no time left). The box's corners combine extremes no one signal reaches together
+    (a double integrator's ``x - v``: the largest x and the smallest v need opposite inputs),
+    which no refinement of the cells removes; the generators keep the correlation at a few
+    coefficients per block, which on long horizons costs more than the box (the platoon
+    PLAN01 takes minutes), hence a second pass, not the default."""
+    from reach.result import Status
+
+    chosen = set(options) if isinstance(options, dict) else set()
+    if (not model.varying_inputs or isinstance(options, StarOptions) or opt.input_cells
+            or {"input_cells", "rebase_generators"} & chosen or result.status is not Status.UNKNOWN
+            or not result.details.get("finer_step_may_decide") or budget <= 0):
+        return None
+    return replace(opt, input_cells=INPUT_RETRY_CELLS, max_seconds=budget)
 
 
 #: finer passes at most, each at a tenth of the step before; their time budget together is

@@ -17,7 +17,10 @@ Bounds, by the ``remainder`` option:
 * ``estimated`` (the paper's eq. 28) and ``next-order``: each candidate is enclosed by eq. (27)
   plus an estimated remainder (:mod:`.bound`). They assume that perturbed runs have no other local
   extremum than the continuations of the nominal ones and switch through the same guard face, and
-  that the remainder estimate holds: the verdict is UNKNOWN with the bound.
+  that the remainder estimate holds: the verdict is UNKNOWN with the bound. Where the candidates
+  miss part of the run (more than ``MAX_SWITCHES`` switches before the horizon, a nominal run
+  stationary in ``q``: :class:`.problem.Candidates`) the bound's outer end is open and
+  ``details["note"]`` says why.
 * ``rigorous``: a verified enclosure of every run on the subdomain (:mod:`.verified`: Taylor-model
   defect bound, logarithmic-norm Gronwall estimate; where that bound does not close, as on an
   expanding flow, a Taylor-model flowpipe with QR-preconditioned symbolic remainders,
@@ -51,7 +54,7 @@ from reach.backends.taylor.flow import Unsmooth
 from reach.backends.taylor.keys import picklable
 from reach.backends.taylor.nominal import NominalFailure
 from reach.backends.taylor import units
-from reach.backends.taylor.problem import EventProblem, global_clock
+from reach.backends.taylor.problem import EventProblem, global_clock, unsupported_switch
 from reach.backends.taylor.units import expand_boxes, sweep_box
 from reach.result import Result, Status
 from reach.backends.taylor.safety import check_safety, margins
@@ -106,6 +109,13 @@ class TaylorBackend:
     name = "taylor"
 
     def supports(self, model, prop) -> str | None:
+        if not isinstance(prop, (BoundSafety, BoundEvent)):
+            return "taylor checks safety and event properties only"
+        if model.disturbance is not None:
+            return "stochastic models are not handled (the flow must be deterministic)"
+        reason = unsupported_window(model) or unsupported_switch(model)
+        if reason is not None:
+            return reason
         if isinstance(prop, BoundSafety):
             for part in margins(model, prop):
                 if part.event is not None:
@@ -113,13 +123,6 @@ class TaylorBackend:
                     if reason is not None:
                         return f"{part.text}: {reason}"
             return None
-        if not isinstance(prop, BoundEvent):
-            return "taylor checks safety and event properties only"
-        if model.disturbance is not None:
-            return "stochastic models are not handled (the flow must be deterministic)"
-        reason = unsupported_window(model)
-        if reason is not None:
-            return reason
         model, _ = with_switch_time(model)
         model, prop = _clocked(model, prop)
         try:
@@ -222,9 +225,13 @@ class TaylorBackend:
                     estimated = (pick(b[0] for b in bounds.values()), pick(b[1] for b in bounds.values()))
                 else:           # the nominal run visits no listed mode: the empty extremum
                     estimated = (-np.inf, -np.inf) if prop.sense == "max" else (np.inf, np.inf)
+                if polys.gap is not None:   # runs may reach beyond every candidate: no outer end
+                    estimated = (estimated[0], np.inf) if prop.sense == "max" else (-np.inf, estimated[1])
                 row = {"low": sub.low, "high": sub.high, "splits": sub.splits,
                        "truncation_estimate": sub.error, "converged": sub.converged, "candidates": bounds,
                        "bound": sweep["bound"] if rigorous else estimated}
+                if polys.gap is not None:
+                    row["gap"] = polys.gap
                 if rigorous:
                     row["estimated_bound"], row["verified"] = estimated, sweep
                 out.append(row)
@@ -343,6 +350,10 @@ class TaylorBackend:
                 "the integration error of the flow is negligible",
             ]
             details["why_not_safe"] = "the remainder is estimated; remainder: rigorous proves bounds"
+            gaps = sorted({r["gap"] for r in rows if "gap" in r})
+            if gaps:
+                details["note"] = (f"the candidates miss part of the run ({gaps[0]}): the bound's "
+                                   f"{'upper' if prop.sense == 'max' else 'lower'} end is open")
             status, coverage = Status.UNKNOWN, 0.0
         return Result(self.name, model.name, prop.id, status, bound=(lo, hi), coverage=coverage,
                       details=details, sets=kept_sets)

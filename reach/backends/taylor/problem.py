@@ -10,8 +10,11 @@ takes). In each mode the property lists, the extremum of ``q`` over the run is o
   after a switch, since runs enter later modes at different times).
 
 The state after a switch is the crossing map (reset applied), so the next mode's maps are maps of
-the same initial deviations. :meth:`EventProblem.sweep` is the rigorous counterpart
-(:mod:`.verified`).
+the same initial deviations. The chain is followed until the horizon, or until no listed mode can
+be reached any more; where it stops earlier (more than ``MAX_SWITCHES`` switches), or where the
+nominal run is stationary in ``q`` and perturbed runs are not (their extrema there continue no
+nominal one), the candidates say so (:class:`Candidates`). :meth:`EventProblem.sweep` is the
+rigorous counterpart (:mod:`.verified`).
 """
 
 from __future__ import annotations
@@ -124,6 +127,15 @@ class ModeCode:
         return None
 
 
+class Candidates(dict):
+    """The candidate maps of one box, by name. ``gap`` says why they may miss the extremum of
+    some runs (None when they follow the run to the horizon): the expansion stopped before the
+    horizon, or the nominal run is stationary in ``q`` where perturbed runs are not. Then they
+    bound only the inner end of the extremum (the runs reach each candidate's value)."""
+
+    gap: str | None = None
+
+
 class Largest:
     """``max_j g_j`` of Taylor models, enclosed by ``[max_j lo_j, max_j hi_j]``: the depth to an
     avoid set ``{g_j <= 0 for all j}`` (positive outside it)."""
@@ -138,6 +150,46 @@ class Largest:
 
 def _first(fn):
     return lambda x: fn(x)[0]
+
+
+def unsupported_switch(model) -> str | None:
+    """Why some switch of ``model`` is not a guard crossing that the candidates and the sweep can
+    follow, or None. Both follow a run in a mode until it crosses into an urgent guard through a
+    face: a mode where no time passes (SpaceEx ``flow false``), an urgent guard without
+    constraints (it holds on entry) and a guard with no interior (an equality ``x == c``: a run
+    meets it at an instant, and crosses no face into it) switch otherwise."""
+    for name, mode in model.modes.items():
+        if mode.timeless:
+            return (f"no time passes in mode '{name}' (flow false): taylor follows runs that leave a mode "
+                    "by crossing into a guard, not instantaneous switches (star and montecarlo do)")
+    for tr in model.transitions:
+        if not tr.urgent:
+            continue
+        if not tr.guard:
+            return (f"the urgent transition '{tr.name}' has no guard (it fires on entering '{tr.source}'): "
+                    "taylor follows runs that leave a mode by crossing into a guard (star and montecarlo do)")
+        pair = _equality(tr.guard, model.symbols)
+        if pair is not None:
+            return (f"the guard of '{tr.name}' is an equality ({pair[0].text} and {pair[1].text}): a run meets "
+                    "it at an instant without crossing into it, which taylor does not detect; write the "
+                    "inequality the flow crosses (e.g. x >= c where the invariant keeps x <= c)")
+    return None
+
+
+def _equality(guard, symbols):
+    """Two linear constraints of ``guard`` that leave it no interior (``a.x <= c`` and
+    ``a.x >= c``, or a tighter pair), or None."""
+    rows = [(c, affine_coefficients(c.g, symbols)) for c in guard]
+    rows = [(c, a, b) for c, coeffs in rows if coeffs is not None for a, b in [coeffs] if np.any(a)]
+    for i, (c1, a1, b1) in enumerate(rows):
+        for c2, a2, b2 in rows[i + 1:]:
+            k = int(np.argmax(np.abs(a1)))
+            lam = -a2[k] / a1[k]                      # a2 = -lam a1 with lam > 0: opposite sides
+            if lam > 0 and np.allclose(a2, -lam * a1, rtol=1e-12, atol=0.0):
+                width = -b1 - b2 / lam                # a1.x lies in [b2 / lam, -b1]
+                if width <= 1e-12 * (1.0 + abs(b1)):
+                    return c1, c2
+    return None
 
 
 def global_clock(model) -> int | None:
@@ -174,11 +226,11 @@ class EventProblem:
         return self._codes[name]
 
     # ------------------------------------------------------------ estimated (event maps)
-    def candidates(self, center: np.ndarray, half_width: np.ndarray, order: int, tol: float) -> dict:
+    def candidates(self, center: np.ndarray, half_width: np.ndarray, order: int, tol: float) -> Candidates:
         """Taylor maps (in the subdomain's scaled deviations) of the extremum candidates."""
         return run_one(self.candidate_steps(center, half_width, order, tol))
 
-    def candidates_batch(self, boxes: list, order: int, tol: float) -> list[dict]:
+    def candidates_batch(self, boxes: list, order: int, tol: float) -> list[Candidates]:
         """:meth:`candidates` of many boxes ``(center, half_width)``, their DA propagations run
         together as one batch (:mod:`.lockstep`)."""
         return run_batch([self.candidate_steps(c, h, order, tol) for c, h in boxes])
@@ -187,7 +239,7 @@ class EventProblem:
         """:meth:`candidates` as a generator that yields its DA propagations."""
         T = self.model.horizon
         X = initial_state(algebra(order, len(self.uncertain)), center, half_width, self.uncertain)
-        mode, t0, out, visited = self.model.initial.mode, 0.0, {}, set()
+        mode, t0, out = self.model.initial.mode, 0.0, Candidates()
         sign = 1.0 if self.prop.sense == "max" else -1.0
         for hop in range(MAX_SWITCHES + 1):
             code = self.code(mode)
@@ -212,7 +264,13 @@ class EventProblem:
                     t_e, _ = yield from refine_time_steps(code.f, code.qdot, run.solution, tk, order)
                     em = yield from event_map_steps(code.f, code.qdot, X, run.nodes, t_e, order)
                     out[f"{mode}:extremum@{t0 + t_e:.6g}"] = code.q(em.state)
-            visited.add(mode)
+                flat = _plateau(values)
+                if flat is not None and out.gap is None:
+                    em = yield from fixed_time_map_steps(code.f, X, run.nodes, float(run.nodes[flat]))
+                    if _varies(code.qdot(em.state)):
+                        out.gap = (f"the nominal run is stationary in the quantity at t = {t0 + run.nodes[flat]:.6g} "
+                                   f"in mode '{mode}' and perturbed runs are not: their extrema there "
+                                   "continue no nominal one")
             if leave is None:
                 if code.q is not None:
                     if hop == 0:
@@ -228,13 +286,14 @@ class EventProblem:
             em = yield from event_map_steps(code.f, face, X, run.nodes, t_e, order)
             if code.q is not None:
                 out[f"{mode}:exit@{t0 + t_e:.6g}"] = code.q(em.state)
-            if visited >= set(self.prop.modes):
+            if not self._leads_to_property(ex.transition.target):
                 return out
             X = ex.reset(em.state) if ex.reset else em.state
             t0, mode = t0 + t_e, ex.transition.target
             if self.clock is None:
                 raise ValueError("events after a mode switch need a global clock state")
-        raise ValueError(f"more than {MAX_SWITCHES} mode switches")
+        out.gap = f"the expansion stopped at t = {t0:.6g}: more than {MAX_SWITCHES} mode switches"
+        return out
 
     # ------------------------------------------------------------ rigorous (verified sweep)
     def _enclosure(self, code: ModeCode, x0: list[DA], error: np.ndarray, duration: float, rel_tol: float,
@@ -440,6 +499,19 @@ class EventProblem:
                 seen.add(name)
                 todo += [tr.target for tr in self.model.outgoing(name) if tr.urgent]
         return False
+
+
+def _plateau(values: np.ndarray) -> int | None:
+    """The first node at which ``values`` stays put (equal to the next within rounding), or None."""
+    steps = np.abs(np.diff(values))
+    still = np.flatnonzero(steps <= 1e-12 * (1.0 + np.abs(values[:-1])))
+    return int(still[0]) if still.size else None
+
+
+def _varies(p: DA) -> bool:
+    """Whether ``p`` depends on the deviations beyond rounding."""
+    coeffs = np.abs(p.c.reshape(-1))
+    return bool(np.max(coeffs[1:], initial=0.0) > 1e-12 * (1.0 + coeffs[0]))
 
 
 def _step_box(mode: str, X, step, t_earliest: float, clock: int | None) -> tuple:

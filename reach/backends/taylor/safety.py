@@ -48,23 +48,31 @@ class Margin:
 
 
 def margins(model, prop: BoundSafety) -> list[Margin]:
-    """The margin events of a safety property, one per unsafe piece (pieces are listed in the
-    same order in every mode)."""
+    """The margin events of a safety property, one per unsafe piece. A piece is known by the
+    texts of its constraints (and, for pieces of the same texts in a mode, as the two sides of
+    ``abs(e) <= c``, by its place among them): its ``g`` may differ from mode to mode (a control
+    law substituted), and the modes need not share their pieces (a SpaceEx forbidden set whose
+    terms name different locations)."""
     modes = [m for m in prop.modes if prop.pieces.get(m)]
-    if not modes:
-        return []
-    count = len(prop.pieces[modes[0]])
+    groups: dict = {}               # (texts, place among those texts) -> {mode: piece}
+    sides: dict = {}                # texts -> how many pieces of those texts a mode has
+    for m in modes:
+        seen: dict = {}
+        for piece in prop.pieces[m]:
+            texts = tuple(c.text for c in piece)
+            place = seen[texts] = seen.get(texts, 0) + 1
+            groups.setdefault((texts, place), {})[m] = piece
+            sides[texts] = max(sides.get(texts, 0), place)
     out = []
-    for j in range(count):
-        per_mode = {m: prop.pieces[m][j] for m in modes}
-        first = per_mode[modes[0]]
+    for j, ((texts, place), per_mode) in enumerate(groups.items()):
+        in_modes = list(per_mode)
+        first = per_mode[in_modes[0]]
         avoid = len(first) > 1 or not first[0].text.startswith("not (")
-        text = first[0].text[len("not ("):-1] if not avoid else " and ".join(c.text for c in first)
-        sides = [k for k in range(count) if prop.pieces[modes[0]][k][0].text == first[0].text]
-        if len(sides) > 1:        # abs(e) <= c: the constraints e <= c and -e <= c
-            text += f" (side {sides.index(j) + 1} of {len(sides)})"
-        implied = [] if avoid else [m for m in modes if _implied(model, m, per_mode[m][0])]
-        listed = [m for m in modes if m not in implied]
+        text = first[0].text[len("not ("):-1] if not avoid else " and ".join(texts)
+        if sides[texts] > 1:        # abs(e) <= c: the constraints e <= c and -e <= c
+            text += f" (side {place} of {sides[texts]})"
+        implied = [] if avoid else [m for m in in_modes if _implied(model, m, per_mode[m][0])]
+        listed = [m for m in in_modes if m not in implied]
         if not listed:
             out.append(Margin(text, None, implied, avoid))
             continue

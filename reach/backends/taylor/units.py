@@ -16,7 +16,7 @@ from functools import lru_cache
 from reach.backends.taylor.bound import truncate
 from reach.backends.taylor.deadline import NONE, Deadline
 from reach.backends.taylor.keys import fingerprint
-from reach.backends.taylor.problem import EventProblem
+from reach.backends.taylor.problem import Candidates, EventProblem
 from reach.model.simulate import single_threaded
 
 _PROBLEMS: dict[str, tuple] = {}
@@ -65,8 +65,10 @@ def keep_freed_memory() -> None:
     mallopt(m_trim_threshold, 256 << 20)
 
 
-def _truncated(maps: dict, order: int, expand_order: int) -> dict:
-    return {name: truncate(p, order) if expand_order > order else p for name, p in maps.items()}
+def _truncated(maps: Candidates, order: int, expand_order: int) -> Candidates:
+    out = Candidates({name: truncate(p, order) if expand_order > order else p for name, p in maps.items()})
+    out.gap = maps.gap
+    return out
 
 
 def sweep_box(model, prop, order: int, rel_tol: float, tol: float, center, half_width,

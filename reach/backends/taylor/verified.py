@@ -63,6 +63,9 @@ from reach.backends.taylor.tm import TM, _imul
 ROUNDING = 1e-12              # relative allowance for floating-point rounding
 MIN_STEP = 1e-8               # shortest step of a stretch, relative to its duration
 SHIFTS = (1e-3, 1e-2, 1e-1, 1.0)   # Lyapunov shifts alpha, relative to the spectral radius
+# the least ratio of a Lyapunov metric's smallest eigenvalue to its largest: below it the sign of
+# the smallest is rounding (a nilpotent Jacobian, spectral radius 0, gives condition numbers of 1e24)
+MIN_METRIC_RATIO = 1e-12
 
 
 @lru_cache(maxsize=None)
@@ -199,7 +202,8 @@ def jacobian_box(f, low: np.ndarray, high: np.ndarray) -> tuple[np.ndarray, np.n
 
 
 def lyapunov_metric(J0: np.ndarray, shift: float) -> np.ndarray | None:
-    """``S`` with ``(J0 - a I)' S + S (J0 - a I) = -I``, ``a = max(0, max Re eig J0) + shift rho(J0)``."""
+    """``S`` with ``(J0 - a I)' S + S (J0 - a I) = -I``, ``a = max(0, max Re eig J0) + shift rho(J0)``,
+    scaled to largest eigenvalue 1; None where it is not positive definite beyond rounding."""
     eig = np.linalg.eigvals(J0)
     a = max(0.0, float(np.max(eig.real))) + shift * max(float(np.max(np.abs(eig))), 1e-12)
     A = J0 - a * np.eye(len(J0))
@@ -208,8 +212,10 @@ def lyapunov_metric(J0: np.ndarray, shift: float) -> np.ndarray | None:
     except (np.linalg.LinAlgError, ValueError):
         return None
     S = 0.5 * (S + S.T)
+    if not np.all(np.isfinite(S)):
+        return None
     w = np.linalg.eigvalsh(S)
-    if not np.all(np.isfinite(S)) or w[0] <= 0:
+    if w[0] <= MIN_METRIC_RATIO * w[-1]:      # not positive definite beyond rounding
         return None
     return S / w[-1]
 

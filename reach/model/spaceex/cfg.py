@@ -27,12 +27,17 @@ class Config:
     def line(self, key: str) -> int | None:
         return self.values[key][1] if key in self.values else None
 
+    def near(self, key: str) -> str | None:
+        """A key of the file spelt like ``key`` (and not it), if there is one."""
+        near = difflib.get_close_matches(key, [k for k in self.values if k != key], n=1, cutoff=0.75)
+        return near[0] if near else None
+
     def missing(self, key: str) -> InputError:
         """The error for a required key the file lacks, at a key spelt like it if there is one."""
-        near = difflib.get_close_matches(key, list(self.values), n=1, cutoff=0.75)
+        near = self.near(key)
         if near:
-            return InputError(f"no '{key}' (is '{near[0]}' a misspelling of it?)", self.file,
-                              line=self.values[near[0]][1])
+            return InputError(f"no '{key}' (is '{near}' a misspelling of it?)", self.file,
+                              line=self.values[near][1])
         return InputError(f"no '{key}'", self.file, line=1)
 
     def number(self, key: str) -> float | None:
