@@ -238,8 +238,16 @@ def cmd_replay(args) -> int:
     from reach.spec.properties import BoundEvent
 
     cex = Counterexample.load(args.counterexample)
-    model = load_model(cex.model_file)
-    props = [p for p in load_properties(cex.property_file) if p.id == cex.property]
+    def named(key: str) -> str:
+        """The file the counterexample names under ``key``, which must be there."""
+        path = getattr(cex, key)
+        if not Path(path).exists():
+            raise InputError(f"'{path}' is neither beside the counterexample nor in the working folder",
+                             args.counterexample, key)
+        return path
+
+    model = load_model(named("model_file"))
+    props = [p for p in load_properties(named("property_file")) if p.id == cex.property]
     if not props:
         raise InputError(f"property '{cex.property}' is not in {cex.property_file}", args.counterexample, "property")
     try:

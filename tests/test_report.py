@@ -226,3 +226,13 @@ def test_a_counterexample_replays_from_any_working_folder(tmp_path, monkeypatch,
     T = float(re.search(r"state T=([-\d.e]+)", out).group(1))
     there = float(re.search(r"margin ([-\d.e]+) there", out).group(1))
     assert there == pytest.approx(20.5 - T, abs=1e-5) and there < 0
+
+
+def test_a_note_that_explains_a_negative_margin_is_said_once(sra01):
+    """A bound reaching past the requirement (margin -0.5 N) with the back-end's note on why it is
+    open: the note explains the margin and is not repeated after it."""
+    event = _prop(load_model("models/SRNA01.yaml"), "properties/rendezvous_events.yaml", "thrust_x_max")
+    note = "the bound is open on 25% of the box; -o refine=2 halves the subdomains that hold it open"
+    result = Result("taylor", "SRNA01", event.id, Status.UNKNOWN, bound=(25180.0, 37800.0), details={"note": note})
+    text = line(result, event, sra01)
+    assert "margin -0.5 N" in text and text.count(note) == 1

@@ -181,13 +181,36 @@ def test_linear_bisections_equal_a_plain_bisection(tmp_path, p0, q0, u):
     assert state[0, 0] <= 0.6                                   # the state the bisection found inside
 
 
-def test_piece_starts_off_the_grid_are_still_visited(tmp_path):
-    """With pieces that are no multiple of the grid step, every piece start, even one that keeps
-    the input's value, stays an instant the run is watched at (as grid points and events are)."""
-    model, _ = _load(tmp_path)
-    sim = Simulator(model, dt=0.3)
-    values = np.full((1, 16, 1), 0.25)
-    traj = sim.run(np.array([[0.0, 0.0, 0.25]]), record=True, signal=(STEP, values))
-    times = traj.path[0][0]
-    starts = STEP * np.arange(1, 16)
-    assert np.all(np.min(np.abs(times[None, :] - starts[:, None]), axis=1) < 1e-12)
+INTEGRATOR = """
+name: integrator
+state: [x]
+bounded_inputs:
+  u: {range: [-1, 1], varying: true}
+modes:
+  run: {flow: {x: u}}
+initial: {mode: run, box: {x: 0}}
+horizon: 1
+"""
+
+
+@pytest.mark.parametrize("dt", [None, 0.1, 0.03, 0.07, 0.0333])
+def test_a_signal_replays_the_same_at_any_step(tmp_path, dt):
+    """x' = u with pieces of 0.1: x is the running sum of the pieces' values times 0.1, largest
+    0.2 (first at t = 0.4; x = 0.19 at t = 0.39). A replay at a step the pieces are no multiple
+    of refines its grid to them: violated past 0.19, never past 0.21, at whatever ``dt``."""
+    (tmp_path / "m.yaml").write_text(INTEGRATOR)
+    (tmp_path / "p.yaml").write_text("properties:\n  - {id: lo, kind: safety, require: ['x <= 0.19']}\n"
+                                     "  - {id: hi, kind: safety, require: ['x <= 0.21']}\n")
+    model = load_model(tmp_path / "m.yaml")
+    lo, hi = (bind(p, model) for p in load_properties(tmp_path / "p.yaml"))
+    signal = {"step": 0.1, "inputs": ["u"], "values": [[v] for v in [1, -1, 1, 1, -1, 1, -1, -1, 1, 1, -1]]}
+    hit = replay(model, lo, [0.0, 0.0], None, dt, signal)
+    assert hit.violated and 0.39 - 1e-9 <= hit.time <= 0.4 + 1e-9
+    assert not replay(model, hi, [0.0, 0.0], None, dt, signal).violated
+
+
+def test_the_simulator_refuses_pieces_off_its_grid(tmp_path):
+    (tmp_path / "m.yaml").write_text(INTEGRATOR)
+    sim = Simulator(load_model(tmp_path / "m.yaml"), 0.03)
+    with pytest.raises(ValueError, match="not a multiple"):
+        sim.run(np.zeros((1, 2)), None, signal=(0.1, np.ones((1, 11, 1)), None))

@@ -70,3 +70,64 @@ def test_an_empty_member_is_dropped():
                                lambda count: None)
     assert [path for _, path in kept] == ["full"]
     assert np.allclose(hull.box_bound().low, 0.0) and np.allclose(hull.box_bound().high, 1.0)
+
+
+PERIODIC = """
+name: periodic
+state: [x, y, tau]
+modes:
+  A: {flow: {x: "-0.2*x + y", y: "-x - 0.2*y", tau: 1}, invariant: ["tau <= 1"]}
+  B: {flow: {x: "0.1*x + 0.5", y: "-0.3*y + 0.2*x", tau: 1}, invariant: ["tau <= 1"]}
+  C: {flow: {x: "-0.5*x", y: "x - y + 1", tau: 1}, invariant: ["tau <= 1"]}
+transitions:
+  - {from: A, to: B, guard: ["tau >= 1"], reset: {tau: 0}, urgent: true}
+  - {from: B, to: C, guard: ["tau >= 1"], reset: {tau: 0, x: "0.8*x + 0.3", y: "0.9*y - 0.2"}, urgent: true}
+  - {from: C, to: A, guard: ["tau >= 1"], reset: {tau: 0}, urgent: true}
+initial: {mode: A, box: {x: [1, 1.2], y: [0, 0.2], tau: 0}}
+horizon: 12.5
+"""
+
+_FLOWS = {"A": ([[-0.2, 1], [-1, -0.2]], [0, 0]), "B": ([[0.1, 0], [0.2, -0.3]], [0.5, 0]),
+          "C": ([[-0.5, 0], [1, -1]], [0, 1])}
+
+
+def _least_y(x0, y0, samples=200) -> float:
+    """The least y of the run from (x0, y0): exact affine flows (expm of the augmented matrix)
+    on 1 s stretches A, B, C, A, ..., the reset into C applied, sampled densely."""
+    import scipy.linalg
+
+    z, least, mode, t = np.array([x0, y0, 1.0]), y0, "A", 0.0
+    order = {"A": "B", "B": "C", "C": "A"}
+    while t < 12.5:
+        A, b = _FLOWS[mode]
+        M = np.zeros((3, 3))
+        M[:2, :2], M[:2, 2] = A, b
+        length = min(1.0, 12.5 - t)
+        for s in np.linspace(0, length, samples):
+            least = min(least, (scipy.linalg.expm(M * s) @ z)[1])
+        z = scipy.linalg.expm(M * length) @ z
+        if mode == "B":
+            z = np.array([0.8 * z[0] + 0.3, 0.9 * z[1] - 0.2, 1.0])
+        mode, t = order[mode], t + length
+    return least
+
+
+def test_a_periodic_switch_with_affine_resets_against_exact_flows(tmp_path):
+    """Every run switches at t = 1, 2, ... (a clock reset at each jump, no global clock), 12
+    times, with an affine reset into C: the least y of the runs (about -0.827, exact flows from a
+    grid of the initial box) is proved above -0.835; -0.82 is crossed by a run, so it is never
+    SAFE."""
+    from reach.backends.star import BACKEND
+    from reach.model import load_model
+    from reach.result import Status
+    from reach.spec import bind, load_properties
+
+    least = min(_least_y(x0, y0) for x0 in np.linspace(1, 1.2, 5) for y0 in np.linspace(0, 0.2, 5))
+    assert -0.835 < least < -0.82
+    (tmp_path / "m.yaml").write_text(PERIODIC)
+    (tmp_path / "p.yaml").write_text("properties:\n  - {id: low, kind: safety, require: ['y >= -0.835']}\n"
+                                     "  - {id: high, kind: safety, require: ['y >= -0.82']}\n")
+    model = load_model(tmp_path / "m.yaml")
+    low, high = (bind(p, model) for p in load_properties(tmp_path / "p.yaml"))
+    assert BACKEND.check(model, low).status is Status.SAFE
+    assert BACKEND.check(model, high).status is not Status.SAFE

@@ -307,12 +307,16 @@ def replay(model: HybridAutomaton, prop: BoundSafety, initial_state, switch_time
 
 def _replay_safety(model: HybridAutomaton, prop: BoundSafety, initial_state, switch_time: float | None,
                    dt: float | None, input_signal: dict | None, branches: Branches | None) -> Replay:
+    signal = _signal_of(model, input_signal)
     sim = Simulator(model, dt)
+    if signal is not None and not sim.on_grid(signal[0]):
+        # the grid refined so that every piece of the signal starts on it (a witness's signal
+        # replayed at another step, or a file whose dt is missing)
+        sim = Simulator(model, signal[0] / math.ceil(signal[0] / sim.dt - 1e-9))
     sim.tables = dict.fromkeys(model.modes)     # the general per-segment path, not the block path
     x0 = np.asarray(initial_state, dtype=float).reshape(1, -1)
     tau = None if switch_time is None else np.array([float(switch_time)])
     monitor = SafetyMonitor(model, prop, 1)
-    signal = _signal_of(model, input_signal)
     if not model.initial.is_box:
         init = model.initial
         if not PolytopeSampler(init.polytope, init.low, init.high).contains(x0)[0]:

@@ -431,6 +431,8 @@ class Simulator:
             if kick_step:
                 raise ValueError("input signals and disturbance kicks together are not supported")
             kick_step, values = float(signal[0]), np.asarray(signal[1], dtype=float)
+            if not self.on_grid(kick_step):
+                raise ValueError(f"the signal's pieces ({kick_step:g}) are not a multiple of the step {self.dt:g}")
             switch = None if len(signal) < 3 or signal[2] is None else np.asarray(signal[2], dtype=bool)
             columns = np.array([u.index for u in self.model.varying_inputs], dtype=int)
 
@@ -503,22 +505,25 @@ class Simulator:
         return Trajectories(runs.X, runs.mode, runs.blocked_at, runs.branched, recorder.paths(N),
                             {r: list(names) for r, names in enumerate(runs.taken)})
 
+    def on_grid(self, step: float) -> bool:
+        """Whether pieces of length ``step`` start on the grid over the whole horizon: ``step`` a
+        multiple of ``dt`` up to a drift of 1e-9 of the horizon. A signal's pieces must (callers
+        refine the grid to it: :func:`reach.backends.montecarlo.replay`)."""
+        ratio = step / self.dt
+        pieces = int(np.ceil(self.model.horizon / step))
+        return round(ratio) >= 1 and abs(ratio - round(ratio)) * pieces * self.dt <= 1e-9 * max(1.0, self.model.horizon)
+
     def _signal_stops(self, step: float, values: np.ndarray, switch: np.ndarray | None):
         """``following(k, rows)``: for each run of ``rows`` at piece start ``k``, the next piece
         start at which its segment must stop (-1: none before the horizon).
 
         A piece start changes nothing where the inputs keep their values and no switch is asked
-        for; if it lies on the grid (``step`` a multiple of ``dt``), the states a segment visits
-        through it are those it would visit stopping there, so only the other piece starts stop a
-        segment: where the values change, where a switch is asked (every start past the last
-        piece if its switch is asked). Off the grid, every piece start stops (the run is watched
-        there).
+        for; on the grid (``step`` a multiple of ``dt``, :meth:`on_grid`) the states a segment
+        visits through it are those it would visit stopping there, so only the other piece starts
+        stop a segment: where the values change, where a switch is asked (every start past the
+        last piece if its switch is asked).
         """
         N, K = values.shape[:2]
-        ratio = step / self.dt
-        pieces = int(np.ceil(self.model.horizon / step))
-        if abs(ratio - round(ratio)) * pieces * self.dt > 1e-9 * max(1.0, self.model.horizon) or round(ratio) < 1:
-            return lambda k, rows: k + 1
         stop = np.zeros((N, K + 1), dtype=bool)
         stop[:, 1:K] = np.any(values[:, 1:] != values[:, :-1], axis=2)
         if switch is not None:
