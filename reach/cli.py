@@ -232,7 +232,7 @@ def cmd_replay(args) -> int:
     from reach.backends.montecarlo import check_run, replay
     from reach.model import load_model
     from reach.model.simulate import Branches
-    from reach.report import margin_at
+    from reach.report import margin_at, quantity
     from reach.result import Counterexample
     from reach.spec import bind, load_properties
     from reach.spec.properties import BoundEvent
@@ -262,11 +262,10 @@ def cmd_replay(args) -> int:
         print(printable(f"note: the run took the transitions {', '.join(rep.transitions) or '(none)'}; "
                         f"the file names {', '.join(cex.transitions) or '(none)'}"))
     if isinstance(prop, BoundEvent):        # the extremum along the run against the requirement
-        sense = "min" if prop.sense == "min" else "max"
         verdict = "replayed" if rep.violated else "NOT replayed"
         print(printable(f"{verdict}: {model.name} {'violates' if rep.violated else 'satisfies'} '{prop.id}': "
-                        f"{sense} {prop.text or 'of the quantity'} = {rep.value:.6g} at t={rep.time:.6g} in mode "
-                        f"{rep.mode or '(none)'}, required {prop.op} {prop.value:g}"))
+                        f"{prop.sense} {prop.text or 'quantity'} = {quantity(prop, rep.value, 6)} at t={rep.time:.6g} "
+                        f"in mode {rep.mode or '(none)'}, required {prop.op} {quantity(prop, prop.value)}"))
         return 1 if rep.violated else 3
     if rep.violated:
         there = margin_at(prop, rep.mode, rep.state)

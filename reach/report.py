@@ -83,10 +83,15 @@ def _where(prop, model, shown: int = 4) -> str:
     modes = list(getattr(prop, "pieces", {}) or [])
     if getattr(prop, "kind", "") != "safety" or model is None or not modes or len(modes) >= len(model.modes):
         return ""
-    if len({tuple(" and ".join(c.text for c in piece) for piece in pieces) for pieces in prop.pieces.values()}) > 1:
+    if len({tuple(map(_piece_text, pieces)) for pieces in prop.pieces.values()}) > 1:
         return ""
     names = ", ".join(modes[:shown]) + (f" and {len(modes) - shown} more" if len(modes) > shown else "")
     return f" (in {names})"
+
+
+def _piece_text(piece) -> str:
+    """An unsafe piece (a conjunction of constraints) as written."""
+    return " and ".join(con.text for con in piece)
 
 
 def _avoid_text(pieces_by_mode) -> str:
@@ -96,7 +101,7 @@ def _avoid_text(pieces_by_mode) -> str:
     modes: dict[str, list[str]] = {}
     for mode, pieces in pieces_by_mode.items():
         for piece in pieces:
-            modes.setdefault(" and ".join(con.text for con in piece), []).append(mode)
+            modes.setdefault(_piece_text(piece), []).append(mode)
     every = len(pieces_by_mode)
     alone = len(modes) == 1
     return "avoid " + " or ".join(
@@ -105,8 +110,13 @@ def _avoid_text(pieces_by_mode) -> str:
         for text, where in modes.items())
 
 
+def quantity(prop, value: float, digits: int = 4) -> str:
+    """An event property's quantity ``value`` (model units) in its requirement's unit."""
+    return _with_unit(number(_in(prop.unit, value), digits), prop.unit)
+
+
 def _bound_value(prop) -> str:
-    return _with_unit(number(_in(prop.unit, prop.value)), prop.unit)
+    return quantity(prop, prop.value)
 
 
 def figures(result, prop, model) -> dict:

@@ -12,7 +12,7 @@ import pytest
 
 from reach.cli import main
 from reach.model import load_model
-from reach.report import figures, json_row, line
+from reach.report import figures, json_row, line, quantity
 from reach.result import Counterexample, Result, Status
 from reach.spec import bind, load_properties
 
@@ -36,6 +36,7 @@ def test_ten_newtons_is_36000_model_units(sra01):
     assert f["margin"] == pytest.approx((36000 - 26630) / 3600)
     assert f["required"] == {"op": "<=", "value": pytest.approx(10.0)}
     assert line(result, event, sra01) == "max Fx in [6.994, 7.397] N <= 10 N, margin 2.603 N"
+    assert quantity(event, 26630.0, 6) == "7.39722 N"            # as reach replay shows an extremum
 
 
 def test_safety_margin_in_newtons_next_to_the_requirement(sra01):
