@@ -18,6 +18,7 @@ from reach.backends.montecarlo import replay
 from reach.model import load_model
 from reach.model.simulate import BISECTION_STEPS, Simulator
 from reach.spec import bind, load_properties
+from model_files import load_files
 
 # x'' = -x + c + u/2 with c = +1 in ``out`` and -1 in ``home``: a limit cycle switching at
 # p = +-0.6, wherever the switching level is met (inside a piece, generically)
@@ -198,11 +199,9 @@ def test_a_signal_replays_the_same_at_any_step(tmp_path, dt):
     """x' = u with pieces of 0.1: x is the running sum of the pieces' values times 0.1, largest
     0.2 (first at t = 0.4; x = 0.19 at t = 0.39). A replay at a step the pieces are no multiple
     of refines its grid to them: violated past 0.19, never past 0.21, at whatever ``dt``."""
-    (tmp_path / "m.yaml").write_text(INTEGRATOR)
-    (tmp_path / "p.yaml").write_text("properties:\n  - {id: lo, kind: safety, require: ['x <= 0.19']}\n"
-                                     "  - {id: hi, kind: safety, require: ['x <= 0.21']}\n")
-    model = load_model(tmp_path / "m.yaml")
-    lo, hi = (bind(p, model) for p in load_properties(tmp_path / "p.yaml"))
+    model, props = load_files(tmp_path, INTEGRATOR, "properties:\n  - {id: lo, kind: safety, require: ['x <= 0.19']}\n"
+                                                    "  - {id: hi, kind: safety, require: ['x <= 0.21']}\n")
+    lo, hi = props["lo"], props["hi"]
     signal = {"step": 0.1, "inputs": ["u"], "values": [[v] for v in [1, -1, 1, 1, -1, 1, -1, -1, 1, 1, -1]]}
     hit = replay(model, lo, [0.0, 0.0], None, dt, signal)
     assert hit.violated and 0.39 - 1e-9 <= hit.time <= 0.4 + 1e-9

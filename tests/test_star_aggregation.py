@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 from reach.backends.star.aggregation import interval_hull
 from reach.sets import Box, Star
 from reach.sets.hpolytope import HPolytope
+from model_files import load_files
 
 
 @st.composite
@@ -118,16 +119,12 @@ def test_a_periodic_switch_with_affine_resets_against_exact_flows(tmp_path):
     grid of the initial box) is proved above -0.835; -0.82 is crossed by a run, so it is never
     SAFE."""
     from reach.backends.star import BACKEND
-    from reach.model import load_model
     from reach.result import Status
-    from reach.spec import bind, load_properties
 
     least = min(_least_y(x0, y0) for x0 in np.linspace(1, 1.2, 5) for y0 in np.linspace(0, 0.2, 5))
     assert -0.835 < least < -0.82
-    (tmp_path / "m.yaml").write_text(PERIODIC)
-    (tmp_path / "p.yaml").write_text("properties:\n  - {id: low, kind: safety, require: ['y >= -0.835']}\n"
-                                     "  - {id: high, kind: safety, require: ['y >= -0.82']}\n")
-    model = load_model(tmp_path / "m.yaml")
-    low, high = (bind(p, model) for p in load_properties(tmp_path / "p.yaml"))
+    model, props = load_files(tmp_path, PERIODIC, "properties:\n  - {id: low, kind: safety, require: ['y >= -0.835']}\n"
+                                                  "  - {id: high, kind: safety, require: ['y >= -0.82']}\n")
+    low, high = props["low"], props["high"]
     assert BACKEND.check(model, low).status is Status.SAFE
     assert BACKEND.check(model, high).status is not Status.SAFE

@@ -18,6 +18,7 @@ from reach.deep import FRAMES, call_deep
 from reach.model import load_model
 from reach.result import Status
 from reach.spec import bind, load_properties
+from model_files import load_files
 
 TICK = """
 name: tick
@@ -195,11 +196,9 @@ def test_one_time_budget_bounds_every_pass_of_a_check(tmp_path, budget):
     names as given."""
     import time
 
-    (tmp_path / "dock.yaml").write_text(DOCK)
-    (tmp_path / "p.yaml").write_text("properties:\n  - {id: far, kind: safety, modes: [recoil], "
-                                     "require: ['x <= 2.0']}\n")
-    model = load_model(tmp_path / "dock.yaml")
-    prop = bind(load_properties(tmp_path / "p.yaml")[0], model)
+    model, props = load_files(tmp_path, DOCK, "properties:\n  - {id: far, kind: safety, modes: [recoil], "
+                                              "require: ['x <= 2.0']}\n")
+    prop = props["far"]
     started = time.perf_counter()
     result = BACKEND.check(model, prop, {"max_seconds": budget})
     elapsed = time.perf_counter() - started

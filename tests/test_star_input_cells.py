@@ -17,6 +17,7 @@ from reach.backends.star.flowpipe import AffineFlow
 from reach.model import load_model
 from reach.result import Status
 from reach.spec import bind, load_properties
+from model_files import load_files
 
 PUSHED = """
 name: pushed_then_released
@@ -153,10 +154,9 @@ def test_a_box_that_loses_the_inputs_correlation_is_followed_by_generators(tmp_p
     pass with the effect as generators decides both sides, and its counterexample replays."""
     from reach.backends.montecarlo import replay
 
-    (tmp_path / "m.yaml").write_text(DOUBLE_INTEGRATOR)
-    (tmp_path / "p.yaml").write_text(f"properties:\n  - {{id: p, kind: safety, require: ['x - v <= {bound}']}}\n")
-    model = load_model(tmp_path / "m.yaml")
-    prop = bind(load_properties(tmp_path / "p.yaml")[0], model)
+    model, props = load_files(tmp_path, DOUBLE_INTEGRATOR,
+                              f"properties:\n  - {{id: p, kind: safety, require: ['x - v <= {bound}']}}\n")
+    prop = props["p"]
     boxed = BACKEND.check(model, prop, {"finer_retry": False, "input_cells": 0})
     assert boxed.status is Status.UNKNOWN
     result = BACKEND.check(model, prop, {})

@@ -3,8 +3,6 @@
 
 from __future__ import annotations
 
-import textwrap
-
 import numpy as np
 import pytest
 
@@ -15,6 +13,7 @@ from reach.backends.taylor.window import with_switch_time
 from reach.model.loader import load_model
 from reach.result import Status
 from reach.spec.properties import bind, load_properties
+from model_files import load_files
 
 RIGOROUS = {"remainder": "rigorous"}
 
@@ -47,17 +46,8 @@ horizon: 4
 """
 
 
-def _files(tmp_path, model_text, props_text):
-    model = tmp_path / "model.yaml"
-    model.write_text(textwrap.dedent(model_text))
-    props = tmp_path / "props.yaml"
-    props.write_text(textwrap.dedent(props_text))
-    m = load_model(str(model))
-    return m, {p.id: bind(p, m) for p in load_properties(str(props))}
-
-
 def test_required_constraint_margin_contains_the_closed_form_and_proves_safe(tmp_path):
-    model, props = _files(tmp_path, SPRING, """
+    model, props = load_files(tmp_path, SPRING, """
         properties:
           - {id: low, kind: safety, require: ["x <= 1.2"]}
           - {id: high, kind: safety, require: ["x <= 1.05"]}
@@ -82,7 +72,7 @@ def test_a_point_initial_state_is_a_flow_expansion_in_no_variable(tmp_path):
     """From the single state ``x0 = 1, v0 = 0`` (no uncertain variable to expand in) the
     spring's ``x = cos t`` stays within ``[-1, 1]``: ``x <= 1.05`` is proved, ``x <= 0.9`` fails
     at ``t = 0``."""
-    model, props = _files(tmp_path, SPRING.replace("x: [0.9, 1.1]", "x: 1"), """
+    model, props = load_files(tmp_path, SPRING.replace("x: [0.9, 1.1]", "x: 1"), """
         properties:
           - {id: low, kind: safety, require: ["x <= 1.05"]}
           - {id: high, kind: safety, require: ["x <= 0.9"]}
@@ -120,7 +110,7 @@ def test_avoid_set_after_a_window_against_the_closed_form(tmp_path, horizon, sta
     """Passive x = x0 + 2 tau - t >= 2 + 2 - T: the box |x| <= 0.5 is missed by 1 for T = 2.5
     (SAFE, proved step by step) and entered for T = 5 (a switch time and initial state that
     replay)."""
-    model, props = _files(tmp_path, RAMP.format(lo=1.0, hi=1.5, horizon=horizon), """
+    model, props = load_files(tmp_path, RAMP.format(lo=1.0, hi=1.5, horizon=horizon), """
         properties:
           - {id: hit, kind: safety, modes: [back], avoid: {box: {x: [-0.5, 0.5]}}}
     """)
@@ -157,7 +147,7 @@ def test_thrust_safety_margin_agrees_with_the_event_file():
 def test_kept_sets_of_a_safety_check_hold_the_closed_form_runs(tmp_path):
     """With ``keep_sets`` a safety answer carries the rigorous step boxes, and the closed-form
     runs x(t) = x0 cos t, v(t) = -x0 sin t lie in the boxes of their time (the picture's promise)."""
-    model, props = _files(tmp_path, SPRING, """
+    model, props = load_files(tmp_path, SPRING, """
         properties:
           - {id: low, kind: safety, require: ["x <= 1.2"]}
     """)
@@ -205,7 +195,7 @@ def test_a_model_without_a_clock_gets_one_for_events_past_a_switch(tmp_path, flo
 
 
 def test_a_spent_time_budget_bounds_nothing_and_names_the_option(tmp_path):
-    model, props = _files(tmp_path, SPRING, """
+    model, props = load_files(tmp_path, SPRING, """
         properties:
           - {id: low, kind: safety, require: ["x <= 1.2"]}
     """)

@@ -5,8 +5,6 @@ against closed forms and solve_ivp)."""
 
 from __future__ import annotations
 
-import textwrap
-
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
@@ -14,20 +12,11 @@ from scipy.integrate import solve_ivp
 from reach.backends.taylor import BACKEND
 from reach.backends.taylor.verified import _metric_factors, lyapunov_metric
 from reach.checking import check_spaceex
-from reach.model.loader import load_model
 from reach.result import Status
-from reach.spec.properties import BoundSafety, bind, load_properties
+from reach.spec.properties import BoundSafety
+from model_files import load_files
 
 RIGOROUS = {"remainder": "rigorous"}
-
-
-def _files(tmp_path, model_text, props_text):
-    model = tmp_path / "model.yaml"
-    model.write_text(textwrap.dedent(model_text))
-    props = tmp_path / "props.yaml"
-    props.write_text(textwrap.dedent(props_text))
-    m = load_model(str(model))
-    return m, {p.id: bind(p, m) for p in load_properties(str(props))}
 
 
 # ------------------------------------------------------------------ switches taylor cannot follow
@@ -65,19 +54,19 @@ properties:
     ("[]", "has no guard"),
 ])
 def test_guards_entered_without_crossing_are_refused_with_a_reason(tmp_path, guard, why):
-    model, props = _files(tmp_path, SWITCHED.format(guard=guard), PROPS)
+    model, props = load_files(tmp_path, SWITCHED.format(guard=guard), PROPS)
     assert why in BACKEND.supports(model, props["p"])
 
 
 def test_a_guard_crossed_through_a_face_is_supported(tmp_path):
-    model, props = _files(tmp_path, SWITCHED.format(guard='["x >= 1"]'), PROPS)
+    model, props = load_files(tmp_path, SWITCHED.format(guard='["x >= 1"]'), PROPS)
     assert BACKEND.supports(model, props["p"]) is None
 
 
 def test_unsafe_pieces_that_differ_between_modes_are_separate_margins(tmp_path):
     """x = x0 + t in a until x = 1, then x = 1 - (t - 1 + x0) in b, T = 2.5: 'x >= 2' (in a)
     has margin 2 - 1 = 1, 'x <= -1' (in a and b) has min(x(T)) + 1 = 0.5 - 0.2 = 0.3."""
-    model, props = _files(tmp_path, SWITCHED.format(guard='["x >= 1"]'), """
+    model, props = load_files(tmp_path, SWITCHED.format(guard='["x >= 1"]'), """
         properties:
           - {id: high, kind: safety, modes: [a], avoid: ["x >= 2"]}
           - {id: low, kind: safety, modes: [a, b], avoid: ["x <= -1"]}
@@ -150,7 +139,7 @@ def _tri_max_x(horizon: float) -> float:
 
 def test_estimated_candidates_follow_a_cycle_back_into_listed_modes(tmp_path):
     """Five switches in 5.5 s: the maximum (1.72, after t = 3) is on a later visit of a mode."""
-    model, props = _files(tmp_path, TRI.format(horizon=5.5), TRI_PROPS)
+    model, props = load_files(tmp_path, TRI.format(horizon=5.5), TRI_PROPS)
     result = BACKEND.check(model, props["xmax"], {})
     truth = _tri_max_x(5.5)
     assert truth > 1.7
@@ -162,7 +151,7 @@ def test_estimated_candidates_follow_a_cycle_back_into_listed_modes(tmp_path):
 def test_estimated_bound_past_the_switch_limit_is_open_and_says_why(tmp_path):
     """Twelve switches in 12.5 s: the candidates stop after eight; the maximum (2.32 at t = 11)
     may lie beyond them, so the upper end is open and the reason given."""
-    model, props = _files(tmp_path, TRI.format(horizon=12.5), TRI_PROPS)
+    model, props = load_files(tmp_path, TRI.format(horizon=12.5), TRI_PROPS)
     result = BACKEND.check(model, props["xmax"], {})
     lo, hi = result.bound
     assert hi == np.inf and lo <= _tri_max_x(12.5)
@@ -199,7 +188,7 @@ def test_lyapunov_metric_of_a_nilpotent_jacobian_is_positive_definite_or_refused
 
 
 def test_rigorous_margin_of_a_double_integrator_holds_the_closed_form(tmp_path):
-    model, props = _files(tmp_path, DI, DI_PROPS)
+    model, props = load_files(tmp_path, DI, DI_PROPS)
     result = BACKEND.check(model, props["xv"], RIGOROUS)
     lo, hi = result.details["margin_bound"]
     assert lo <= -0.05 + 1e-9 and hi >= -0.05 - 1e-9
@@ -210,7 +199,7 @@ def test_rigorous_margin_of_a_double_integrator_holds_the_closed_form(tmp_path):
 def test_estimated_margin_is_open_where_the_nominal_run_is_stationary(tmp_path):
     """At u = 0 the margin is constant (0.45) along the run, and the extremum of the other runs
     (t = 1) continues no nominal one: the estimate must not claim [0.45, 0.45]."""
-    model, props = _files(tmp_path, DI, DI_PROPS)
+    model, props = load_files(tmp_path, DI, DI_PROPS)
     result = BACKEND.check(model, props["xv"], {})
     row = result.details["constraints"][0]
     assert row["margin_bound"][0] <= -0.05
@@ -219,7 +208,7 @@ def test_estimated_margin_is_open_where_the_nominal_run_is_stationary(tmp_path):
 
 def test_a_quantity_constant_on_every_run_keeps_its_bound(tmp_path):
     """q = c with c' = 0: every run is stationary, its start is its extremum, c0 in [0, 1]."""
-    model, props = _files(tmp_path, """
+    model, props = load_files(tmp_path, """
         name: still
         state: [x, c]
         modes:
