@@ -69,21 +69,20 @@ def _parse_options(pairs: list[str]) -> dict:
 
 
 def cmd_check(args) -> int:
-    from reach.checking import check_files, is_spaceex
-    from reach.model import load_model
-    from reach.spec import bind, load_properties
+    from reach.backends import validate_options
+    from reach.checking import check_model, is_spaceex, load_bound, resolve_backend
 
     if is_spaceex(args.model):
         return cmd_check_spaceex(args)
     _verbose(args)
-    model_path = find_model(args.model)
-    model = load_model(model_path)
-    for finding in model.lints:
+    backend = resolve_backend(args.backend)
+    options = _parse_options(args.option)
+    validate_options(args.backend, options)
+    model, props = load_bound(find_model(args.model), args.properties, args.property)
+    for finding in model.lints:             # after every input is read: bad input is one line
         print(printable(f"warning: {finding}"), file=sys.stderr)
-    results = check_files(model_path, args.properties, args.backend, _parse_options(args.option),
-                          args.property)
-    bound = {p.id: bind(p, model) for p in load_properties(args.properties)
-             if not args.property or p.id in args.property}
+    results = check_model(backend, model, props, options)
+    bound = {p.id: p for p in props}
     saved = {}
     if args.counterexamples:
         out = Path(args.counterexamples)
@@ -105,8 +104,9 @@ def _verbose(args) -> None:
 
 def _report(args, results, bound: dict, model, saved: dict, title: str, empty: str | None = None) -> int:
     """Print the results (text or ``--json``) in the requirement's units; the exit code."""
-    from reach.checking import exit_code
+    from reach.checking import exit_code, violated
     from reach.report import json_row
+    from reach.result import Status
 
     if args.json:
         rows = [json_row(r, bound.get(r.property), model, saved.get(r.property)) for r in results]
@@ -116,7 +116,8 @@ def _report(args, results, bound: dict, model, saved: dict, title: str, empty: s
     if not results and empty:
         print(printable(f"  {empty}"))
     for r in results:
-        print(printable(f"  {r.property:<16} {r.status.value:<11} {r.seconds:8.2f} s  "
+        status = "VIOLATED" if r.status == Status.UNKNOWN and violated(r) else r.status.value   # no run to show
+        print(printable(f"  {r.property:<16} {status:<11} {r.seconds:8.2f} s  "
                         f"{summary(r, bound.get(r.property), model)}"))
         if r.property in saved:
             print(printable(f"  {'':<16} counterexample: {saved[r.property]}  (reach replay {saved[r.property]})"))

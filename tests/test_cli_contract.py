@@ -246,3 +246,35 @@ def test_an_event_counterexample_replays_from_the_command_line(tmp_path):
     value = float(out.split("max x = ")[1].split()[0])
     assert value == pytest.approx(x0, abs=1e-4) and value > 1.05
     assert "required <= 1.05" in out
+
+
+KICKED_DRIFT = """
+name: kicked_drift
+state: [x, v]
+modes:
+  coast: {flow: {x: v, v: 0}}
+initial: {mode: coast, box: {x: 0, v: 0.1}}
+horizon: 100
+disturbance:
+  gaussian: {mean: [0], cov: [1.0e-6]}
+  enters: [v]
+  step: 10
+"""
+
+
+@pytest.mark.parametrize("low, high, code, violated", [(20, 21, 1, True), (9, 11, 0, False)])
+def test_a_probability_wholly_below_its_threshold_reads_as_a_violation(tmp_path, capsys, low, high, code,
+                                                                      violated):
+    """x(100) = 10 up to kicks of standard deviation 1e-3 m/s: P(x in [20, 21]) is 0 (below 0.9: a
+    violation with no run to show, status UNKNOWN, exit 1, shown as VIOLATED and ``violated:
+    true`` in --json), P(x in [9, 11]) is 1 (SAFE, exit 0)."""
+    (tmp_path / "m.yaml").write_text(KICKED_DRIFT)
+    (tmp_path / "p.yaml").write_text(f"properties:\n  - {{id: there, kind: reach, at: 100, target: "
+                                     f"{{box: {{x: [{low}, {high}]}}}}, probability: {{at_least: 0.9}}}}\n")
+    files = [str(tmp_path / "m.yaml"), str(tmp_path / "p.yaml"), "-b", "fsr"]
+    assert main(["check", *files]) == code
+    text = capsys.readouterr().out
+    assert ("VIOLATED" in text) == violated and ("SAFE" in text) == (not violated)
+    assert main(["check", *files, "--json"]) == code
+    (row,) = json.loads(capsys.readouterr().out)
+    assert row["violated"] is violated and row["status"] == ("unknown" if violated else "safe")

@@ -109,6 +109,31 @@ def test_misused_inputs_are_bad_input(tmp_path, edit, needle):
         load_model(model_file(tmp_path, text))
 
 
+@pytest.mark.parametrize("states, inputs, ok", [(999, 0, True), (1000, 0, True), (1000, 1, False),
+                                                 (5000, 0, False)])
+def test_more_variables_than_a_model_may_have_are_bad_input_at_the_state_line(tmp_path, capsys, states,
+                                                                                inputs, ok):
+    """At most MAX_VARIABLES states and bounded inputs (20 000 states took 22 GB to load):
+    beyond, exit 2 naming the file's ``state`` line, before the flows are built."""
+    from cli_input import bad_input
+    from reach.model.automaton import MAX_VARIABLES
+
+    names = [f"q{i}" for i in range(states)]
+    bounded = "bounded_inputs: {u: {range: [0, 1]}}\n" if inputs else ""
+    flow = ", ".join(f"{q}: 1" for q in names)
+    box = ", ".join(f"{q}: 0" for q in names)
+    text = (f"name: big\nstate: [{', '.join(names)}]\n{bounded}modes:\n  go: {{flow: {{{flow}}}}}\n"
+            f"initial: {{mode: go, box: {{{box}}}}}\nhorizon: 1\n")
+    path = tmp_path / "big.yaml"
+    path.write_text(text)
+    assert states + inputs <= MAX_VARIABLES if ok else states + inputs > MAX_VARIABLES
+    if ok:
+        assert load_model(path).n == states + inputs
+        return
+    err = bad_input(["lint", str(path)], capsys)
+    assert f"big.yaml:2: state: {states + inputs} states and inputs" in err
+
+
 def test_flow_false_and_the_added_clock(tmp_path):
     text = TRIANGLE.replace("still: {flow: {x: 0, y: 0}}", "still: {flow: {x: 1, y: 0}}\n  stop: {flow: false}")
     text = text.replace("horizon: 1", "transitions:\n  - {from: still, to: stop, guard: [\"x >= 2\"], urgent: true}\n"

@@ -147,22 +147,20 @@ horizon: 2
 
 
 @pytest.mark.parametrize("bound,status", [(1.05, Status.SAFE), (0.95, Status.UNSAFE)])
-def test_a_box_that_loses_the_inputs_correlation_is_followed_by_generators(tmp_path, bound, status):
+def test_the_input_box_cut_along_the_requirement_decides_in_the_first_pass(tmp_path, bound, status):
     """``x - v = int_0^T (T - 1 - s) u(s) ds`` from rest, largest over |u| <= 1 and T <= 2 at
     T = 2 with u = sign(1 - s): 1. The box of the input effect (exact per state, not jointly)
-    puts the largest x with the smallest v, far above 1, so the default pass is undecided; the
-    pass with the effect as generators decides both sides, and its counterexample replays."""
+    puts the largest x with the smallest v, at 2 + 2 = 4 over T = 2; cut along ``x - v`` by the
+    input's exact support there, ``int_0^T |T - 1 - s| ds``, the first pass (one box per chain,
+    no generators, no finer step) decides both sides, and its counterexample replays."""
     from reach.backends.montecarlo import replay
 
     model, props = load_files(tmp_path, DOUBLE_INTEGRATOR,
                               f"properties:\n  - {{id: p, kind: safety, require: ['x - v <= {bound}']}}\n")
     prop = props["p"]
-    boxed = BACKEND.check(model, prop, {"finer_retry": False, "input_cells": 0})
-    assert boxed.status is Status.UNKNOWN
-    result = BACKEND.check(model, prop, {})
+    result = BACKEND.check(model, prop, {"finer_retry": False, "input_cells": 0})
     assert result.status is status
-    if status is Status.SAFE:
-        assert "input effect carried as generators" in result.details["semantics"]
-    else:
+    assert "input effect carried as generators" not in result.details["semantics"]
+    if status is Status.UNSAFE:
         c = result.counterexample
         assert replay(model, prop, c.initial_state, c.switch_time, input_signal=c.input_signal).violated

@@ -185,3 +185,20 @@ def test_deviation_bound_grows_with_the_horizon_asked():
     flow = AffineFlow(A, np.zeros(3), B, u_r)
     for count in (1, 2, 3, 7, 4):
         assert flow.deviation(h, count) == pytest.approx(fresh[:count + 1], rel=1e-12, abs=1e-15)
+
+
+def test_directed_deviation_is_the_exact_support_along_a_row_not_the_boxs():
+    """``x' = v, v' = -x - 0.4 v + u``, ``|u| <= 1``: along ``c = (1, -0.5)`` the input's exact
+    support at ``t`` is ``int_0^t |c^T e^{A s} B| ds`` (scipy quad, an independent reference).
+    The directed bound covers it at every grid point, within ``O(h^2)``, and lies well below
+    what the box gives along ``c`` (``|c| R``, each component's worst signal at once)."""
+    A, B, c = np.array([[0.0, 1.0], [-1.0, -0.4]]), np.array([[0.0], [1.0]]), np.array([[1.0, -0.5]])
+    h, count = 0.05, 80
+    flow = AffineFlow(A, np.zeros(2), B, np.array([1.0]))
+    directed = flow.deviation(h, count, c)[:, 0]
+    box = np.abs(c) @ flow.deviation(h, count).T
+    for j in (10, 40, 80):
+        exact = quad(lambda s: abs((c @ expm(A * s) @ B)[0, 0]), 0, j * h, limit=200)[0]
+        assert exact - 1e-9 <= directed[j] <= exact + 1e-3 * h
+    assert directed[80] < 0.8 * box[0, 80]
+    assert np.array_equal(flow.deviation(h, count)[:, 0], flow.deviation(h, count, np.array([[1.0, 0.0]]))[:, 0])

@@ -7,25 +7,24 @@ grid extremum is a value of ``q`` at a real state, so every sound bound of the r
 the side of the requirement contains it; it may miss the true extremum between grid points by
 about the change of ``q`` over one grid step, reported as ``grid_slack``.
 
-A run whose sampled extremum breaks the requirement is a counterexample: it is replayed alone
-(along the same branches where transitions can be enabled together,
-:func:`reach.backends.initial_sampling.branch_plan`) and reported UNSAFE only if the replay
-breaks it too. Otherwise the answer is UNKNOWN with the sampled range of the extremum over the
-runs.
+The run's margin is how far its extremum stays on the right side of the requirement (``v - max
+q`` for ``max q <= v``, ``min q - v`` for ``min q >= v``); a negative margin is a violation. The
+Monte Carlo back-end samples the runs (its initial states, input signals and branches, as for a
+safety property), searches and optimises on the margin, and replays a violating run alone
+(:func:`replay_event`) before it reports UNSAFE; otherwise the answer is UNKNOWN with the sampled
+range of the extremum over the runs (:func:`event_details`).
 """
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass, field
 
 import numpy as np
 import sympy
 
-from reach.backends.initial_sampling import branch_plan
 from reach.model.automaton import HybridAutomaton
 from reach.model.simulate import Branches, Simulator
-from reach.result import Counterexample, Result, Status
+from reach.result import Counterexample
 from reach.spec.properties import BoundEvent
 from reach.stats import clopper_pearson_upper
 
@@ -36,6 +35,7 @@ class EventMonitor:
 
     def __init__(self, model: HybridAutomaton, prop: BoundEvent, n_runs: int):
         names = list(model.modes)
+        self.prop = prop
         self.q = {names.index(m): sympy.lambdify([model.symbols], sympy.sympify(prop.quantity[m]), "numpy")
                   for m in prop.modes}
         self.sign = 1.0 if prop.sense == "max" else -1.0
@@ -86,6 +86,24 @@ class EventMonitor:
         return np.where(self.best == -np.inf, np.nan, out)
 
 
+    def margins(self) -> np.ndarray:
+        """Per run, how far its sampled extremum stays on the right side of the requirement
+        (negative: a violation; ``inf`` for runs that never visited a listed mode)."""
+        values = self.extrema()
+        margin = self.prop.value - values if self.prop.op == "<=" else values - self.prop.value
+        return np.where(np.isnan(values), np.inf, margin)
+
+    @property
+    def min_depth(self) -> np.ndarray:
+        """The margins under the name the falsifier reads (:mod:`reach.backends.falsify`)."""
+        return self.margins()
+
+    def first_violation(self) -> int | None:
+        """The run that breaks the requirement by most, if any."""
+        bad = np.flatnonzero(violates(self.prop, self.extrema()))
+        return None if bad.size == 0 else int(bad[np.argmin(self.margins()[bad])])
+
+
 def violates(prop: BoundEvent, value) -> np.ndarray:
     value = np.asarray(value, dtype=float)
     bad = value > prop.value if prop.op == "<=" else value < prop.value
@@ -121,11 +139,17 @@ def outside_bounds(subdomains, x0: np.ndarray, values: np.ndarray, uncertain, se
 
 
 def sample_extrema(model: HybridAutomaton, prop: BoundEvent, x0: np.ndarray, dt: float | None = None,
-                   record: bool = False, branches: Branches | None = None):
-    """Simulate the runs from ``x0`` (N, n): ``(monitor, trajectories, grid step)``."""
+                   record: bool = False, branches: Branches | None = None, signal=None, general: bool = False):
+    """Simulate the runs from ``x0`` (N, n) under the input ``signal`` (``(step, values, switch)``
+    as :meth:`reach.model.simulate.Simulator.run` takes it, pieces on the grid): ``(monitor,
+    trajectories, grid step)``. ``general``: on the simulator's per-segment path, not its block
+    path (a replay independent of the sampled runs)."""
     sim = Simulator(model, dt)
+    if general:
+        sim.tables = dict.fromkeys(model.modes)
     monitor = EventMonitor(model, prop, len(x0))
-    traj = sim.run(np.asarray(x0, dtype=float), None, record=record, observers=[monitor], branches=branches)
+    traj = sim.run(np.asarray(x0, dtype=float), None, record=record, observers=[monitor], branches=branches,
+                   signal=signal)
     return monitor, traj, sim.dt
 
 
@@ -144,6 +168,7 @@ class EventReplay:
     depth: float
     trajectory: dict = field(default_factory=dict)
     transitions: list = field(default_factory=list)
+    input_signal: dict | None = None
 
     def counterexample(self, model, prop, found_by: str) -> Counterexample:
         return Counterexample(
@@ -151,15 +176,18 @@ class EventReplay:
             initial_state=list(map(float, self.initial_state)), switch_time=None,
             violation_time=float(self.time), violation_mode=self.mode,
             violation_state=list(map(float, self.state)), dt=self.dt, trajectory=self.trajectory,
-            found_by=found_by, transitions=list(self.transitions))
+            found_by=found_by, transitions=list(self.transitions), input_signal=self.input_signal)
 
 
 def replay_event(model: HybridAutomaton, prop: BoundEvent, initial_state, dt: float | None = None,
-                 branches: Branches | None = None) -> EventReplay:
-    """Simulate one run (choosing among transitions enabled together by ``branches``) and
-    evaluate the event property along it; the transitions it took are recorded."""
+                 branches: Branches | None = None, signal=None) -> EventReplay:
+    """Simulate one run (under the input ``signal``, its pieces on the grid of ``dt``; choosing
+    among transitions enabled together by ``branches``) on the simulator's per-segment path and
+    evaluate the event property along it; the transitions it took are recorded (the caller
+    records the signal)."""
     x0 = np.asarray(initial_state, dtype=float).reshape(1, -1)
-    monitor, traj, step = sample_extrema(model, prop, x0, dt, record=True, branches=branches)
+    monitor, traj, step = sample_extrema(model, prop, x0, dt, record=True, branches=branches, signal=signal,
+                                         general=True)
     names = list(model.modes)
     times, modes, states = traj.path[0]
     trajectory = {"t": times.tolist(), "mode": [names[int(m)] for m in modes], "x": states.tolist()}
@@ -170,52 +198,19 @@ def replay_event(model: HybridAutomaton, prop: BoundEvent, initial_state, dt: fl
                        x0[0], step, float(depth), trajectory, traj.transitions[0])
 
 
-def check_events(model: HybridAutomaton, props: list[BoundEvent], samples: int, seed: int,
-                 dt: float | None, structured: np.ndarray) -> list[Result]:
-    """Per property: UNSAFE with a replayed counterexample, or UNKNOWN with the sampled range of
-    the extremum. The properties share one simulation of the structured and i.i.d. runs."""
-    start = time.perf_counter()
-    rng = np.random.default_rng(seed)
-    low, high = model.initial.low, model.initial.high
-    iid = low + (high - low) * rng.random((samples, model.n))
-    x0 = np.vstack([structured, iid])
-    sim = Simulator(model, dt)
-    n_structured, choice = len(structured), None
-    if sim.max_options > 1:
-        x0, _, _, choice, n_structured = branch_plan(sim.max_options, n_structured, x0, None, None, rng)
-    monitors = [EventMonitor(model, prop, len(x0)) for prop in props]
-    sim.run(x0, None, observers=monitors, branches=None if choice is None else Branches(values=choice))
-    shared = (time.perf_counter() - start) / max(len(props), 1)
-    results = []
-    for prop, monitor in zip(props, monitors):
-        begin = time.perf_counter()
-        result = _verdict(model, prop, monitor, x0, choice, n_structured, samples, sim.dt)
-        result.seconds = shared + time.perf_counter() - begin
-        results.append(result)
-    return results
-
-
-def _verdict(model, prop, monitor, x0, choice, n_structured, samples, step) -> Result:
+def event_details(prop: BoundEvent, monitor: EventMonitor, runs: int, n_structured: int, samples: int,
+                  step: float) -> dict:
+    """What the sampled runs (``n_structured`` structured first, then ``samples`` i.i.d.) say of
+    the extremum: its sampled range, the closest margin, the grid slack and a 95 % upper bound
+    of the violation probability over the i.i.d. runs."""
     values = monitor.extrema()
-    visited = np.isfinite(values)
-    details = {"runs": int(len(x0)), "iid_runs": int(samples), "dt": step, "sense": prop.sense,
+    details = {"runs": int(runs), "iid_runs": int(samples), "dt": step, "sense": prop.sense,
                "grid_slack": monitor.slack,
                "semantics": "extremum of the quantity at the simulator's grid points, guard crossings and "
                             "switch instants in the listed modes"}
-    if visited.any():
+    if np.isfinite(values).any():
         details["sampled_range"] = (float(np.nanmin(values)), float(np.nanmax(values)))
-        margin = (prop.value - values) if prop.op == "<=" else (values - prop.value)
-        details["closest_margin"] = float(np.nanmin(margin))
-    bad = np.flatnonzero(violates(prop, values))
-    if bad.size:
-        worst = bad[np.argmax(np.abs(values[bad] - prop.value))]
-        rep = replay_event(model, prop, x0[worst], step,
-                           None if choice is None else Branches(values=choice[worst:worst + 1]))
-        if rep.violated:
-            found = "structured" if worst < n_structured else "random"
-            return Result("montecarlo", model.name, prop.id, Status.UNSAFE,
-                          counterexample=rep.counterexample(model, prop, found), details=details)
-        details["unreplayed"] = "a sampled violation did not replay alone"
-    iid_bad = int(violates(prop, values[n_structured:]).sum())
+        details["closest_margin"] = float(np.min(monitor.margins()))
+    iid_bad = int(violates(prop, values[n_structured:n_structured + samples]).sum())
     details["violation_probability_upper_95"] = clopper_pearson_upper(iid_bad, samples)
-    return Result("montecarlo", model.name, prop.id, Status.UNKNOWN, details=details)
+    return details

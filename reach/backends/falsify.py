@@ -2,7 +2,9 @@
 free parameters, as S-TaLiRo and Breach do.
 
 The robustness of one run is its smallest depth ``rho = min_t depth(x(t))`` into the unsafe set
-(:class:`reach.backends.montecarlo.SafetyMonitor`; positive is a margin, at most 0 a violation).
+(:class:`reach.backends.montecarlo.SafetyMonitor`; positive is a margin, at most 0 a violation),
+or for an event property the margin of the run's extremum from the requirement
+(:class:`reach.backends.event_sampling.EventMonitor`; below 0 a violation).
 A run is fixed by a point ``u`` of the unit cube ``[0, 1]^d``, the concatenation of
 
 * the free initial coordinates, ``x0_i = low_i + u_i (high_i - low_i)`` (a polytopic initial set:
@@ -135,7 +137,8 @@ def falsify(model, prop, window, sim, monitor_factory, elite, budget: Budget, se
             step: float | None = None, pieces: int = 0, switching: bool = False, choices: int = 0) -> Outcome:
     """Minimise the robustness of ``prop`` (see the module docstring).
 
-    ``monitor_factory(count)`` makes a SafetyMonitor for ``count`` runs; ``elite`` is
+    ``monitor_factory(count)`` makes a monitor for ``count`` runs (``min_depth`` per run and
+    ``first_violation()``: a SafetyMonitor or an EventMonitor); ``elite`` is
     ``(X, tau, signal, choice)`` of the runs closest to the unsafe set so far (seeds of the
     population); ``choices`` the number of choice values per run (0: none).
     """

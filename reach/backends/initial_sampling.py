@@ -13,8 +13,9 @@ hull: ``x = x0 + N z`` with ``E x0 = f`` and ``N`` an orthonormal basis of ``nul
   their state after a burn-in of ``30 d + 50`` steps is kept (one chain per sample).
 
 Time-varying inputs ``u(t) in [lo, hi]`` are sampled as piecewise-constant signals with pieces of
-length ``step``: constant at each corner of the input box and bang-bang signals (each piece at a
-random corner) for the structured states, uniform pieces for the random ones.
+length ``step``: constant at each corner of the input box, bang-bang signals (each piece at a
+random corner) and one-switch signals (a corner, then the opposite one from a piece start on)
+for the structured states, uniform pieces for the random ones.
 
 Choices among transitions enabled at one jump (:class:`reach.model.simulate.Branches`): each
 structured run once per branch, taking the same branch at every jump, uniform choices for the
@@ -36,6 +37,7 @@ from reach.model.automaton import HybridAutomaton, LinearSet
 MAX_SUBSETS = 4000
 MAX_PIECES = 100_000
 TOL = 1e-9
+SWITCH_SIGNAL_RUNS = 2000   # one-switch input signals of the structured round, about (structured_signals)
 CHOICE_SLOTS = 8        # choice values per run where transitions may be enabled together (Branches)
 
 
@@ -194,9 +196,14 @@ def input_signals(model: HybridAutomaton, count: int, step: float, rng) -> np.nd
 
 
 def structured_signals(model: HybridAutomaton, states: int, step: float, rng):
-    """Signals for ``states`` structured initial states, each repeated ``C + 1`` times: with each
-    of the ``C`` constant corners of the input box (at most 16), then with a bang-bang signal
-    (every piece at a random corner). Returns ``(values (states (C+1), K, m), C + 1)``."""
+    """Signals for ``states`` structured initial states: each state with each of the ``C``
+    constant corners of the input box (at most 16) and with a bang-bang signal (every piece at a
+    random corner); the first few states also with every one-switch signal, a corner held up to
+    a piece start and the opposite corner from there on (``C (K - 1)`` signals; the worst input
+    of a linear system against a linear bound is bang-bang, and often switches once), as many
+    states as ``SWITCH_SIGNAL_RUNS`` allows, at least one. Returns ``(values (R, K, m), owner
+    (R,), once (R,))``, ``owner`` the state index of each signal, ``once`` whether it is a
+    one-switch signal."""
     lo, hi = _input_box(model)
     K, m = pieces(model, step), lo.size
     corners = np.array(list(itertools.product([0, 1], repeat=m))[:16])
@@ -204,7 +211,19 @@ def structured_signals(model: HybridAutomaton, states: int, step: float, rng):
     pick = np.empty((states, C + 1, K, m), dtype=int)
     pick[:, :C] = corners[None, :, None, :]
     pick[:, C] = rng.integers(0, 2, size=(states, K, m))
-    return np.where(pick == 1, hi, lo).reshape(states * (C + 1), K, m), C + 1
+    picks, owner = [pick.reshape(states * (C + 1), K, m)], [np.repeat(np.arange(states), C + 1)]
+    once_rows = 0
+    if K > 1:
+        after = np.arange(K)[None, :] >= np.arange(1, K)[:, None]            # (K - 1 switch pieces, K)
+        once = np.where(after[None, :, :, None], 1 - corners[:, None, None, :], corners[:, None, None, :])
+        once = once.reshape(C * (K - 1), K, m)
+        switching = min(states, max(1, SWITCH_SIGNAL_RUNS // once.shape[0]))
+        picks.append(np.tile(once, (switching, 1, 1)))
+        owner.append(np.repeat(np.arange(switching), once.shape[0]))
+        once_rows = switching * once.shape[0]
+    owner = np.concatenate(owner)
+    return (np.where(np.concatenate(picks) == 1, hi, lo), owner,
+            np.arange(owner.size) >= owner.size - once_rows)
 
 
 # ---------------------------------------------------------------- branches

@@ -46,8 +46,10 @@ upper bound on the violation probability from the i.i.d. round. Monte Carlo neve
 Reach and reach-avoid properties of stochastic models are estimated from ``samples`` runs
 with Gaussian kicks; the probability is a 95 % Wilson interval.
 
-Event properties (the extremum of a quantity along the run) are sampled from the structured
-and ``samples`` i.i.d. initial states (:mod:`reach.backends.event_sampling`).
+Event properties (the extremum of a quantity along the run) take the same structured and
+i.i.d. runs (initial states, input signals, branches), one simulation shared by all event
+properties of the call, then the same search and optimiser on the run's margin, the distance
+of its extremum from the requirement (:mod:`reach.backends.event_sampling`).
 """
 
 from __future__ import annotations
@@ -56,10 +58,11 @@ import itertools
 import math
 import time
 from dataclasses import dataclass, field
+from functools import partial
 
 import numpy as np
 
-from reach.backends.event_sampling import check_events, replay_event
+from reach.backends.event_sampling import EventMonitor, event_details, replay_event
 from reach.backends.falsify import Budget, falsify
 from reach.backends.initial_sampling import (PolytopeSampler, branch_plan, input_signals, input_step,
                                              structured_signals)
@@ -299,21 +302,29 @@ def replay(model: HybridAutomaton, prop: BoundSafety, initial_state, switch_time
     extremum along the run, :func:`reach.backends.event_sampling.replay_event`). The replay
     records the transitions the run took, so its counterexample replays along the same
     branches."""
-    if isinstance(prop, BoundEvent):
-        return replay_event(model, prop, initial_state, dt, branches)
     with single_threaded():
-        return _replay_safety(model, prop, initial_state, switch_time, dt, input_signal, branches)
+        signal = _signal_of(model, input_signal)
+        sim = _replay_simulator(model, dt, signal)
+        if isinstance(prop, BoundEvent):
+            rep = replay_event(model, prop, initial_state, sim.dt, branches, signal)
+            rep.input_signal = signal_record(model, signal, 0)
+            return rep
+        return _replay_safety(model, prop, initial_state, switch_time, sim, signal, branches)
+
+
+def _replay_simulator(model: HybridAutomaton, dt: float | None, signal) -> Simulator:
+    """The simulator of a replay: step ``dt`` (the model's default if None), refined so that
+    every piece of ``signal`` starts on its grid (a witness's signal replayed at another step,
+    or a file whose dt is missing), on its general per-segment path (not the block path)."""
+    sim = Simulator(model, dt)
+    if signal is not None and not sim.on_grid(signal[0]):
+        sim = Simulator(model, signal[0] / math.ceil(signal[0] / sim.dt - 1e-9))
+    sim.tables = dict.fromkeys(model.modes)
+    return sim
 
 
 def _replay_safety(model: HybridAutomaton, prop: BoundSafety, initial_state, switch_time: float | None,
-                   dt: float | None, input_signal: dict | None, branches: Branches | None) -> Replay:
-    signal = _signal_of(model, input_signal)
-    sim = Simulator(model, dt)
-    if signal is not None and not sim.on_grid(signal[0]):
-        # the grid refined so that every piece of the signal starts on it (a witness's signal
-        # replayed at another step, or a file whose dt is missing)
-        sim = Simulator(model, signal[0] / math.ceil(signal[0] / sim.dt - 1e-9))
-    sim.tables = dict.fromkeys(model.modes)     # the general per-segment path, not the block path
+                   sim: Simulator, signal, branches: Branches | None) -> Replay:
     x0 = np.asarray(initial_state, dtype=float).reshape(1, -1)
     tau = None if switch_time is None else np.array([float(switch_time)])
     monitor = SafetyMonitor(model, prop, 1)
@@ -487,6 +498,47 @@ def random_plan(model: HybridAutomaton, window, count: int, rng):
     return X, tau
 
 
+def run_plan(model: HybridAutomaton, sim: Simulator, window, opts: Options, rng):
+    """The runs of the first round, ``(X, tau, signal, choice, n_structured, seeding)``: the
+    structured initial states (with the structured signals of the time-varying inputs,
+    :func:`.initial_sampling.structured_signals`) and ``opts.samples`` i.i.d. ones (uniform
+    signals); where the model has may-transitions, the random runs switch at random piece
+    starts; where transitions can be enabled together, each structured run once per branch
+    (:func:`branch_plan`). ``seeding`` marks the runs the search and the optimiser may start
+    from: all but those of one-switch signals, a family of neighbours that would fill their
+    populations around one local minimum (they are tried as they are)."""
+    Xs, taus = structured_plan(model, window, rng=rng)
+    Xr, taur = random_plan(model, window, opts.samples, rng)
+    signal = None
+    mays = any(sim.exits.values())      # may-transitions with general guards
+    if model.varying_inputs or mays:
+        step = input_step(model, sim.dt, opts.input_step)
+        if model.varying_inputs:        # structured states with constant extremes, bang-bang, one switch
+            Vs, owner, once = structured_signals(model, Xs.shape[0], step, rng)
+            Xs = Xs[owner]
+            taus = None if taus is None else taus[owner]
+        else:
+            Vs = input_signals(model, Xs.shape[0], step, rng)
+        values = np.concatenate([Vs, input_signals(model, Xr.shape[0], step, rng)])
+        switch = None
+        if mays:                        # structured runs stay as long as they can, random ones
+            switch = np.zeros(values.shape[:2], dtype=bool)           # switch at random piece starts
+            switch[Xs.shape[0]:] = rng.random((Xr.shape[0], values.shape[1])) < SWITCH_PROBABILITY
+        signal = (step, values, switch)
+    X = np.concatenate([Xs, Xr])
+    tau = None if window is None else np.concatenate([taus, taur])
+    n_structured = Xs.shape[0]
+    seeding = np.ones(X.shape[0], dtype=bool)
+    if model.varying_inputs:
+        seeding[:n_structured] = ~once
+    choice = None
+    if sim.max_options > 1:
+        seeding = np.r_[np.repeat(seeding[:n_structured], sim.max_options), seeding[n_structured:]]
+        X, tau, signal, choice, n_structured = branch_plan(sim.max_options, n_structured, X, tau, signal, rng)
+    check_size(model, sim.dt, X.shape[0])      # all the runs' arrays are held at once
+    return X, tau, signal, choice, n_structured, seeding
+
+
 # ------------------------------------------------------------------ the back-end
 
 def sampled_runs(model: HybridAutomaton, sim: Simulator, X, tau, signal, choice, structured: int) -> list:
@@ -520,8 +572,9 @@ class MonteCarloBackend:
             switch_window(model)
         except ValueError as exc:
             return str(exc)
-        if model.varying_inputs and (model.disturbance is not None or not isinstance(prop, BoundSafety)):
-            return "time-varying inputs are sampled for safety properties of models without disturbance"
+        if model.varying_inputs and (model.disturbance is not None or not isinstance(prop, (BoundSafety, BoundEvent))):
+            return ("time-varying inputs are sampled for safety and event properties of models without "
+                    "disturbance")
         if isinstance(prop, BoundEvent) and switch_window(model) is not None:
             return "sampling an event property with an abort window is not implemented"
         if isinstance(prop, (BoundReach, BoundReachAvoid)) and model.disturbance is None:
@@ -547,9 +600,7 @@ class MonteCarloBackend:
                 results[id(prop)] = result
         events = [p for p in props if isinstance(p, BoundEvent)]
         if events:
-            structured, _ = structured_plan(model, None, rng=np.random.default_rng(opts.seed))
-            for prop, result in zip(events, check_events(model, events, opts.samples, opts.seed, opts.dt,
-                                                         structured)):
+            for prop, result in zip(events, self._events(model, events, opts)):
                 results[id(prop)] = result
         for prop in props:
             if not isinstance(prop, (BoundSafety, BoundEvent)):
@@ -567,31 +618,7 @@ class MonteCarloBackend:
         window = switch_window(model)
         sim = Simulator(model, opts.dt)
         kicks = _kicks(model, rng)
-        Xs, taus = structured_plan(model, window, rng=rng)
-        Xr, taur = random_plan(model, window, opts.samples, rng)
-        signal = None
-        mays = any(sim.exits.values())      # may-transitions with general guards
-        if model.varying_inputs or mays:
-            step = input_step(model, sim.dt, opts.input_step)
-            if model.varying_inputs:        # each structured state with every constant extreme, and bang-bang
-                Vs, repeat = structured_signals(model, Xs.shape[0], step, rng)
-                Xs = np.repeat(Xs, repeat, axis=0)
-                taus = None if taus is None else np.repeat(taus, repeat)
-            else:
-                Vs = input_signals(model, Xs.shape[0], step, rng)
-            values = np.concatenate([Vs, input_signals(model, Xr.shape[0], step, rng)])
-            switch = None
-            if mays:                        # structured runs stay as long as they can, random ones
-                switch = np.zeros(values.shape[:2], dtype=bool)           # switch at random piece starts
-                switch[Xs.shape[0]:] = rng.random((Xr.shape[0], values.shape[1])) < SWITCH_PROBABILITY
-            signal = (step, values, switch)
-        X = np.concatenate([Xs, Xr])
-        tau = None if window is None else np.concatenate([taus, taur])
-        n_structured = Xs.shape[0]
-        choice = None
-        if sim.max_options > 1:
-            X, tau, signal, choice, n_structured = branch_plan(sim.max_options, n_structured, X, tau, signal, rng)
-        check_size(model, sim.dt, X.shape[0])      # all the runs' arrays are held at once
+        X, tau, signal, choice, n_structured, seeding = run_plan(model, sim, window, opts, rng)
         parts, kept = _simulate_rounds(model, props, sim, opts, X, tau, signal, choice, n_structured, kicks,
                                        time.time() + (deadline - time.perf_counter()))
         if kept.size < X.shape[0]:          # the time budget left i.i.d. blocks unsimulated
@@ -621,10 +648,13 @@ class MonteCarloBackend:
                                    f"sampling after {sampled} of {opts.samples} random runs")
             found = monitor.first_violation()
             found = None if found is None else (0, found)
+            monitors_of = partial(SafetyMonitor, model, prop)
             if found is None and model.disturbance is None:
-                found = self._search(model, prop, window, sim, rounds, opts, rng, branching, deadline)
+                found = self._search(model, window, sim, rounds, opts, rng, branching, deadline, monitors_of,
+                                     seeding)
             if found is None and model.disturbance is None and opts.optimise and time.perf_counter() <= deadline:
-                found = self._optimise(model, prop, window, sim, rounds, opts, branching, deadline)
+                found = self._optimise(model, prop, window, sim, rounds, opts, branching, deadline, monitors_of,
+                                       seeding)
                 details["optimiser_runs"] = int(rounds[-1][3].runs)
             if found is None and time.perf_counter() > deadline and "note" not in details:
                 details["note"] = (f"time budget of {opts.max_seconds:.3g} s (option max_seconds) "
@@ -653,10 +683,13 @@ class MonteCarloBackend:
             results.append(result)
         return results
 
-    def _search(self, model, prop, window, sim, rounds, opts: Options, rng, branching: bool, deadline: float):
+    def _search(self, model, window, sim, rounds, opts: Options, rng, branching: bool, deadline: float,
+                monitors_of, seeding: np.ndarray):
         """Cross-entropy falsification: resample around the runs closest to the unsafe set
         (their choice values too where a sampled run met several enabled transitions); no
-        generation starts past ``deadline``."""
+        generation starts past ``deadline``. ``monitors_of(count)`` watches ``count`` runs (a
+        SafetyMonitor, or an EventMonitor, whose margin is its depth); the first round's runs
+        resampled are those ``seeding`` marks (:func:`run_plan`)."""
         low, high = model.initial.low, model.initial.high
         span = np.where(high > low, high - low, 0.0)
         sampler = None if model.initial.is_box else PolytopeSampler(model.initial.polytope, low, high)
@@ -667,7 +700,8 @@ class MonteCarloBackend:
                 break
             X_all = np.concatenate([r[1] for r in rounds])
             d_all = np.concatenate([r[3].min_depth for r in rounds])
-            elite = np.argsort(d_all)[:max(5, opts.search_size // 10)]
+            may_seed = np.concatenate([seeding, np.ones(d_all.size - seeding.size, dtype=bool)])
+            elite = np.flatnonzero(may_seed)[np.argsort(d_all[may_seed])][:max(5, opts.search_size // 10)]
             scale = 0.25 * 0.6 ** g
             pick = rng.choice(elite, opts.search_size)
             X = np.clip(X_all[pick] + rng.normal(size=(opts.search_size, model.n)) * span * scale, low, high)
@@ -693,7 +727,7 @@ class MonteCarloBackend:
             if branching:                               # draw some choice values again
                 C = np.concatenate([r[5] for r in rounds])[pick]
                 choice = np.where(rng.random(C.shape) < scale, rng.random(C.shape), C)
-            monitor = SafetyMonitor(model, prop, opts.search_size)
+            monitor = monitors_of(opts.search_size)
             sim.run(X, tau, observers=[monitor], signal=signal,
                     branches=None if choice is None else Branches(values=choice))
             rounds.append((f"search{g + 1}", X, tau, monitor, signal, choice))
@@ -702,13 +736,17 @@ class MonteCarloBackend:
                 return len(rounds) - 1, i
         return None
 
-    def _optimise(self, model, prop, window, sim, rounds, opts: Options, branching: bool, deadline: float):
+    def _optimise(self, model, prop, window, sim, rounds, opts: Options, branching: bool, deadline: float,
+                  monitors_of, seeding: np.ndarray):
         """Differential evolution and a gradient polish on the robustness, seeded with the closest runs
-        (their choice values as parameters where a sampled run met several enabled transitions);
-        appends the best run as the round ``optimiser`` (its monitor carries ``runs``, the cost)."""
+        (their choice values as parameters where a sampled run met several enabled transitions)
+        among those ``seeding`` marks in the first round (:func:`run_plan`) and those of the
+        search rounds. Appends the best run as the round ``optimiser`` (its monitor carries
+        ``runs``, the cost)."""
         X_all = np.concatenate([r[1] for r in rounds])
         d_all = np.concatenate([r[3].min_depth for r in rounds])
-        elite = np.argsort(d_all, kind="stable")[:opts.population // 2]
+        may_seed = np.concatenate([seeding, np.ones(X_all.shape[0] - seeding.size, dtype=bool)])
+        elite = np.flatnonzero(may_seed)[np.argsort(d_all[may_seed], kind="stable")][:opts.population // 2]
         tau_all = None if window is None else np.concatenate([r[2] for r in rounds])
         signal = rounds[0][4]
         elite_signal, step, pieces, switching = None, None, 0, False
@@ -716,13 +754,63 @@ class MonteCarloBackend:
             step, pieces, switching = signal[0], signal[1].shape[1], signal[2] is not None
             elite_signal = (step, np.concatenate([r[4][1] for r in rounds])[elite], None)
         elite_choice = np.concatenate([r[5] for r in rounds])[elite] if branching else None
-        out = falsify(model, prop, window, sim, lambda count: SafetyMonitor(model, prop, count),
+        out = falsify(model, prop, window, sim, monitors_of,
                       (X_all[elite], None if tau_all is None else tau_all[elite], elite_signal, elite_choice),
                       Budget(opts.generations, opts.population, opts.polish, deadline), opts.seed,
                       step, pieces, switching, 0 if elite_choice is None else elite_choice.shape[1])
         out.monitor.runs = out.runs
         rounds.append(("optimiser", out.X, out.tau, out.monitor, out.signal, out.choice))
         return (len(rounds) - 1, 0) if out.violated else None
+
+    # ---------------------------------------------------------- events
+    def _events(self, model, props: list[BoundEvent], opts: Options) -> list[Result]:
+        """The extremum of each property's quantity along the runs of :func:`run_plan` (one
+        simulation shared by all), then, where no run breaks a requirement, the search and the
+        optimiser on the run's margin (:class:`~reach.backends.event_sampling.EventMonitor`); a
+        violating run is replayed alone before it is reported."""
+        start = time.perf_counter()
+        deadline = math.inf if opts.max_seconds is None else start + opts.max_seconds
+        rng = np.random.default_rng(opts.seed)
+        sim = Simulator(model, opts.dt)
+        X, _, signal, choice, n_structured, seeding = run_plan(model, sim, None, opts, rng)
+        monitors = [EventMonitor(model, prop, X.shape[0]) for prop in props]
+        sim.run(X, None, observers=monitors, signal=signal,
+                branches=None if choice is None else Branches(values=choice))
+        shared = (time.perf_counter() - start) / len(props)
+        results = []
+        for prop, monitor in zip(props, monitors):
+            begin = time.perf_counter()
+            details = event_details(prop, monitor, X.shape[0], n_structured, X.shape[0] - n_structured, sim.dt)
+            rounds = [("structured+random", X, None, monitor, signal, choice)]
+            found = monitor.first_violation()
+            found = None if found is None else (0, found)
+            monitors_of = partial(EventMonitor, model, prop)
+            if found is None and model.disturbance is None and time.perf_counter() <= deadline:
+                found = self._search(model, None, sim, rounds, opts, rng, choice is not None, deadline, monitors_of,
+                                     seeding)
+                details["search_runs"] = int(sum(r[1].shape[0] for r in rounds[1:]))
+            if found is None and model.disturbance is None and opts.optimise and time.perf_counter() <= deadline:
+                found = self._optimise(model, prop, None, sim, rounds, opts, choice is not None, deadline,
+                                       monitors_of, seeding)
+                details["optimiser_runs"] = int(rounds[-1][3].runs)
+            if found is None and time.perf_counter() > deadline:
+                details["note"] = f"time budget of {opts.max_seconds:.3g} s (option max_seconds) ended the search"
+            details["closest_margin"] = min(float(np.min(r[3].margins())) for r in rounds)
+            result = Result(NAME, model.name, prop.id, Status.UNKNOWN, details=details)
+            if found is not None:
+                k, i = found
+                label, Xk, _, _, sig, ch = rounds[k]
+                rep = replay(model, prop, Xk[i], None, sim.dt, signal_record(model, sig, i),
+                             None if ch is None else Branches(values=ch[i:i + 1]))
+                if rep.violated:
+                    details["found_in"] = label
+                    result = Result(NAME, model.name, prop.id, Status.UNSAFE, details=details,
+                                    counterexample=rep.counterexample(model, prop, f"montecarlo/{label}"))
+                else:
+                    details["note"] = "a sampled violation did not replay on its own"
+            result.seconds = shared + time.perf_counter() - begin
+            results.append(result)
+        return results
 
     # ---------------------------------------------------------- reach / reach-avoid
     def _probability(self, model, prop, opts: Options) -> Result:

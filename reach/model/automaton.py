@@ -20,6 +20,10 @@ from reach.errors import Where
 from reach.model.constraints import Constraint, affine_coefficients, halfspaces, lambdify_margins
 from reach.model.units import DimensionSystem, UnitSystem
 
+#: states (bounded inputs included) and inputs of a model, at most: the symbolic flows and the
+#: back-ends' matrices grow with the square of the count (20 000 states took 22 GB to load)
+MAX_VARIABLES = 1_000
+
 
 @dataclass
 class Controller:

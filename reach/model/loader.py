@@ -55,7 +55,7 @@ import sympy
 from reach import lp
 from reach.errors import InputError, Where, not_a_mode
 from reach.paths import printable
-from reach.model.automaton import (BoundedInput, Controller, Disturbance, HybridAutomaton, InitialSet,
+from reach.model.automaton import (MAX_VARIABLES, BoundedInput, Controller, Disturbance, HybridAutomaton, InitialSet,
                                    LinearSet, Mode, Transition)
 from reach.model.constraints import affine_coefficients, from_comparisons
 from reach.model.controllers import build_law, build_network_law
@@ -202,6 +202,9 @@ class _Builder:
             raise self.where("inputs").error(f"'{sorted(clash)[0]}' is both a state and an input")
         self.constants = self.read_constants()
         bounded = self.read_bounded_inputs()       # appends the bounded inputs to self.state
+        if len(self.state) + len(self.inputs) > MAX_VARIABLES:
+            raise self.where("state").error(f"{len(self.state) + len(self.inputs)} states and inputs (bounded "
+                                            f"inputs included), more than the {MAX_VARIABLES} a model may have")
         self.symbols = [sympy.Symbol(s, real=True) for s in self.state]
         self.input_symbols = [sympy.Symbol(f"__input_{u}") for u in self.inputs]
         self.names = dict(self.constant_names)

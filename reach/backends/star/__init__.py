@@ -115,7 +115,11 @@ star (grid star plus box, cut by the exact invariant), which holds every run sti
 mode (:meth:`_Explorer._rebase_cells`). The first half of a bisected cell takes the box at its
 own end, so the box shrinks with the cell near a start. The box is exact per component but
 not jointly: a successor that carries it through a jump starts from its corners, which no
-signal reaches together. With ``input_cells = L > 0`` a chain is cut into blocks of ``L``
+signal reaches together. Along the rows of the mode's unsafe pieces and guards that mix
+components (at most 16), the cell's box is cut by ``|c^T d| <= int_0^t |c^T e^{A s} B| u_r ds``
+bounded the same way (Le Guernic and Girard's support functions: the support of a sum is the
+sum of the supports), so a requirement such as ``x - 0.5 v <= 3.17`` reads the input's exact
+support, not the box's ``|x| + 0.5 |v|`` (:func:`.flowpipe._plus_box`). With ``input_cells = L > 0`` a chain is cut into blocks of ``L``
 cells and each completed block's effect enters the grid stars as generators, two per input
 (the block's mean input and its first Legendre moment, coupled by ``|x| + |y| <= 1``), plus a
 residual box of order ``T^3`` (:class:`.flowpipe.ChainInputs`); only the block in progress
@@ -123,7 +127,8 @@ is a box. A polytopic initial set (``initial.polytope``) cuts the initial star. 
 with the inputs held at its initial values and then with the extremal signal of the piece:
 for the piece row ``h x <= g`` the inputs move most, the LP point of the segment deepest
 along ``-h`` (the other rows kept, so an instant ``t == 20`` stays one) gives the initial
-state and the instant ``t``, and the input is the bang-bang signal
+state and the instant ``t`` (the latest instant of that depth: the input's support grows with
+time, the cell's bound is that of its end), and the input is the bang-bang signal
 ``u = u_c + u_r sign(int_piece -h e^{A (t - s)} B)`` on a fine grid
 (:func:`.witnesses.extremal_signal`), which attains the input's exact support at ``t``;
 the simulator replays it on a grid that contains the pieces' starts. UNSAFE only if a

@@ -33,6 +33,10 @@ LOG = logging.getLogger("reach.star")
 #: most this many cells (:meth:`_Explorer._half_spread`)
 HALF_SPREAD_CELLS = 512
 
+#: rows of unsafe pieces and guards per mode along which the input effect is bounded besides its
+#: box (:meth:`_Explorer._input_directions`)
+MAX_INPUT_DIRECTIONS = 16
+
 #: relative size of a grid star's possible rounding (terms that cancel) beyond which a chain ends
 #: UNKNOWN (:meth:`_Explorer._cancellation_guard`): a thousand times the default touch tolerance
 PRECISION_LOST = 1e-6
@@ -176,6 +180,7 @@ class _Explorer:
         self.pieces = self._reachable_pieces(group_pieces(self.pieces, getattr(data, "groups", ())))
         self.relevant = _modes_leading_to(model, set(self.pieces))
         self._guard_rows: dict[str, np.ndarray] = {}       # per mode, see _transient
+        self._directions: dict[str, np.ndarray | None] = {}     # per mode, see _input_directions
         self.stats = _Stats()
         self.unresolved: list[_Witness] = []
         self.replayed: list = []
@@ -394,7 +399,7 @@ class _Explorer:
         self.stats.reached = max(self.stats.reached, t0)
         self._progress()
         Phis, psis = flow.powers(h, count)
-        inputs = ChainInputs(flow, h, count, input_cells) if flow.inputs else None
+        inputs = ChainInputs(flow, h, count, input_cells, self._input_directions(mode)) if flow.inputs else None
         if inputs is not None and inputs.count:                  # the blocks' generators
             star = inputs.extend(star)
             point = np.concatenate([point, np.zeros(inputs.count)])   # input at its centre
@@ -493,7 +498,8 @@ class _Explorer:
                 self._cell(mode, grid_star(j), h, path, 0, point, pending, dev[j])
             else:
                 self._cell(mode, grid_star(j), h, path, 0, point, pending, inputs.cell[j],
-                           inputs.since[j], inputs.carried[j])
+                           inputs.since[j], inputs.carried[j],
+                           None if inputs.directed is None else (inputs.directed[0], inputs.directed[1][j]))
         if collect is None:
             self._aggregate_pending(mode, pending)
         if handoff and ended_inside:
@@ -762,9 +768,10 @@ class _Explorer:
 
     # ---- one cell
 
-    def _segment(self, mode: str, start: Star, h: float, spread=None) -> tuple[Star, np.ndarray]:
+    def _segment(self, mode: str, start: Star, h: float, spread=None, directed=None) -> tuple[Star, np.ndarray]:
         """``(segment, error)`` of the cell of length ``h`` starting at ``start``; ``spread``:
-        the bound of the input effect on the cell (added as a box, then the invariant)."""
+        the bound of the input effect on the cell (added as a box met by the rows ``directed``,
+        :func:`.flowpipe._plus_box`, then the invariant)."""
         Hi, gi = self.invariants[mode]
         if self.opt.discrete_time:
             if spread is None:
@@ -772,12 +779,12 @@ class _Explorer:
             return _plus_box(start, spread).intersect_halfspaces(Hi, gi), np.zeros(self.n)
         seg, _, error = _segment(self.flows[mode], start, h)
         if spread is not None:
-            seg = _plus_box(seg, spread)
+            seg = _plus_box(seg, spread, directed)
         seg = seg.intersect_halfspaces(Hi, gi)
         return (_tightened(seg, len(gi)) or seg) if self.flows[mode].drift else seg, error
 
     def _cell(self, mode: str, start: Star, h: float, path: _Path, depth: int, point, pending=None,
-              spread=None, since: float = 0.0, carried=0.0):
+              spread=None, since: float = 0.0, carried=0.0, directed=None):
         """Check one cell and launch its successors; bisect when a failure is blamed on it.
 
         The segment's own coefficients are the block starting at ``start.nvars``; a failure
@@ -789,11 +796,14 @@ class _Explorer:
         (the remainders of completed input blocks, :class:`.flowpipe.ChainInputs`) plus the
         effect of the block in progress, which started ``since`` before the cell; the second
         half keeps ``spread``, the first takes the bound at its own end (:meth:`_half_spread`).
+        ``directed``: rows and bounds of the input effect on the cell along the unsafe pieces'
+        and guards' directions (:class:`.flowpipe.ChainInputs`), split as ``spread`` is
+        (:meth:`_half_directed`).
         """
         if self._past_cutoff(start, path):
             return
         self._memory_guard()
-        seg, error = self._segment(mode, start, h, spread)
+        seg, error = self._segment(mode, start, h, spread, directed)
         final = depth >= self.opt.max_refinements or self.opt.discrete_time or self.flows[mode].drift
         block = start.nvars
         kept_sets = len(self.sets)
@@ -802,7 +812,9 @@ class _Explorer:
                 raise _Refine(None, block)          # a fast transient: refine before checking
             if self.opt.keep_sets:
                 self._keep(mode, (seg,))
-            self._check_segment(mode, seg, path, block, not final)
+            # the directed rows may cut the input box: its columns are no error an LP cannot remove
+            cut_from = None if directed is None else seg.nvars - int(np.count_nonzero(np.asarray(spread) > 0))
+            self._check_segment(mode, seg, path, block, not final, cut_from)
             self._jump_from(mode, seg, path, block, not final, point, pending, (start, spread))
         except _Refine as failure:
             if final or failure.blame != block:
@@ -812,14 +824,15 @@ class _Explorer:
             self.stats.deepest = max(self.stats.deepest, depth + 1)
             half = h / 2
             first = self._half_spread(mode, spread, since, half, carried)
-            self._cell(mode, start, half, path, depth + 1, point, pending, first, since, carried)
+            self._cell(mode, start, half, path, depth + 1, point, pending, first, since, carried,
+                       self._half_directed(mode, directed, since, half, carried))
             mid = start.affine_map(*self.flows[mode].step(half))
             Hi, gi = self.invariants[mode]       # relaxed by the input effect, as on the grid
             mid = mid.intersect_halfspaces(Hi, gi if first is None else gi + np.abs(Hi) @ first)
             mid, mid_point = self._start(mid, point)
             if mid is not None:
                 self._cell(mode, mid, half, path, depth + 1, mid_point, pending, spread, since + half,
-                           carried)
+                           carried, directed)
 
     def _half_spread(self, mode: str, spread, since: float, half: float, carried=0.0):
         """The input-effect bound ``carried + R(since + half)`` of the first half of a bisected cell
@@ -834,6 +847,33 @@ class _Explorer:
             return spread
         count = 1 << (k - 1).bit_length()          # tables of 2^i cells: each built once
         return np.minimum(spread, carried + self.flows[mode].deviation(half, count)[k])
+
+    def _input_directions(self, mode: str) -> np.ndarray | None:
+        """The rows along which the input effect is bounded besides its box: those of the mode's
+        unsafe pieces and of its relevant guards that mix components (along one component the
+        box is already the exact support), at most :data:`MAX_INPUT_DIRECTIONS` of them."""
+        if mode not in self._directions:
+            rows = [piece.H for piece in self.pieces.get(mode, [])]
+            rows += [j.H for j in self.jumps[mode] if j.target in self.relevant]
+            C = np.vstack([np.zeros((0, self.n))] + rows)
+            C = C[np.count_nonzero(C, axis=1) > 1]
+            C = np.unique(C, axis=0)[:MAX_INPUT_DIRECTIONS]
+            self._directions[mode] = C if C.shape[0] else None
+        return self._directions[mode]
+
+    def _half_directed(self, mode: str, directed, since: float, half: float, carried=0.0):
+        """The directed input-effect bounds of the first half of a bisected cell, as
+        :meth:`_half_spread` takes its box: ``|C| carried + R_C(since + half)``, or the whole
+        cell's ``directed`` (valid for both halves: the bound grows with time)."""
+        if directed is None:
+            return None
+        k = int(round((since + half) / half))
+        if k > HALF_SPREAD_CELLS:
+            return directed
+        C, bounds = directed
+        count = 1 << (k - 1).bit_length()
+        rest = np.abs(C) @ np.broadcast_to(carried, (self.n,))
+        return C, np.minimum(bounds, rest + self.flows[mode].deviation(half, count, C)[k])
 
     def _transient(self, mode: str, seg: Star, error) -> bool:
         """Whether the interpolation error of a segment, along a guard row of the mode's
@@ -851,13 +891,15 @@ class _Explorer:
         magnitude = seg.support_bounds(np.vstack([rows, -rows])).reshape(2, -1).max(axis=0)
         return bool(np.any(np.abs(rows) @ error > ERROR_RATIO * magnitude))
 
-    def _check_segment(self, mode: str, seg: Star, path: _Path, block: int, own_open: bool):
+    def _check_segment(self, mode: str, seg: Star, path: _Path, block: int, own_open: bool,
+                       cut_from: int | None = None):
         """Check every unsafe piece of ``mode`` on a segment.
 
         Cheap support bounds first. When they fail, the interpolation error of each cell
         along the path (its error coefficients' extent along each piece row) is compared with
         the row's deficit: an error larger than the deficit cannot be argued away by an LP,
-        so that cell is refined at once. Otherwise an LP decides; on a hit the open block
+        so that cell is refined at once (the segment's columns from ``cut_from`` on, an input box
+        the LP may cut by directed rows, do not count as error). Otherwise an LP decides; on a hit the open block
         (an ancestor cell or this one) with the largest spread is blamed, and the witness is
         replayed when nothing can be refined or when it lies deeper in the piece than all
         refinable spread together.
@@ -871,7 +913,7 @@ class _Explorer:
             lower = -seg.support_bounds(-piece.H)
             if np.any(lower > piece.g + self._touch(piece.g, lower)):   # missed beyond a touch (_screen)
                 continue
-            spread, error = _block_spreads(seg, piece.H, blocks)     # (blocks, rows) each
+            spread, error = _block_spreads(seg, piece.H, blocks, cut_from)     # (blocks, rows) each
             gain = np.where(np.array(open_)[:, None], error - (piece.g - lower), -np.inf)
             if gain.max(initial=-np.inf) > 0:
                 raise _Refine(None, blocks[int(np.argmax(gain.max(axis=1)))])
@@ -1086,9 +1128,10 @@ class _Explorer:
         The direction is ``c = -h_r`` for the row ``h_r x <= g_r`` of the piece that the
         inputs move most (``|h_r| R`` largest, ``R`` the input's reach bound over the horizon,
         :meth:`.flowpipe.AffineFlow.deviation`); the other rows are kept as constraints (an
-        instant ``t == 20`` stays an instant). One LP: the point of ``seg``
-        (cut by those rows and the horizon) that maximises ``c^T x``; its coefficients give
-        the initial state (as any witness) and its clock ``t`` the instant to aim at. The input
+        instant ``t == 20`` stays an instant). Two LPs: the point of ``seg``
+        (cut by those rows and the horizon) that maximises ``c^T x``, at the latest instant
+        among such points; its coefficients give the initial state (as any witness) and its
+        clock ``t`` the instant to aim at. The input
         signal is :func:`.witnesses.extremal_signal` of the witness mode's flow, which
         attains the input's exact support along ``c`` at ``t`` (exact for a path without
         jumps; a candidate otherwise). Only the replay decides."""
@@ -1104,10 +1147,18 @@ class _Explorer:
         H = np.vstack([piece.H[others], self.clock_row])
         g = np.append(piece.g[others], self.horizon)
         self._lp_budget()
-        res = seg.intersect_halfspaces(H, g).maximize(-piece.H[r])
+        cut = seg.intersect_halfspaces(H, g)
+        res = cut.maximize(-piece.H[r])
         if not res.optimal:
             return None
         alpha = res.x
+        # the latest instant of that maximum: the input's exact support grows with time, while
+        # the bounds of a cell's input effect are those of its end, whatever the instant
+        self._lp_budget()
+        level = res.value - 1e-9 * max(1.0, abs(res.value))
+        late = cut.intersect_halfspaces(piece.H[r][None], np.array([-level])).maximize(self.clock_row)
+        if late.optimal:
+            alpha = late.x
         aimed = _Witness(witness.mode, witness.piece, witness.depth, alpha, seg.point(alpha), witness.path)
         t = float(aimed.state[self.clock])
         if not t > 0:

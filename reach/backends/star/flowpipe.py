@@ -59,16 +59,22 @@ class AffineFlow:
         self._steps: dict[float, tuple[np.ndarray, np.ndarray]] = {}
         self._powers: dict[float, tuple[np.ndarray, np.ndarray]] = {}
         self._curvature: dict[float, tuple] = {}
-        self._deviation: dict[float, np.ndarray] = {}
+        self._deviation: dict = {}
         self._blocks: dict[tuple[float, int], tuple[np.ndarray, np.ndarray]] = {}
         self._growth: dict[float, np.ndarray] = {}
 
-    def deviation(self, h: float, count: int) -> np.ndarray | None:
+    def deviation(self, h: float, count: int, C: np.ndarray | None = None) -> np.ndarray | None:
         """``R_j >= sup_{t <= j h} |d(t)|`` for ``j = 0..count`` (``(count + 1, n)``), or None
-        without inputs (see the class doc)."""
+        without inputs (see the class doc). With rows ``C`` (``(r, n)``), the same bound of
+        ``|C d(t)|`` (``(count + 1, r)``): ``int_0^t |C e^{A tau} B| u_r dtau``, the chord of
+        ``C G`` per sub-cell plus ``|C|`` times the componentwise curvature bound. Along a
+        row that mixes components, this is the exact support of the input effect up to
+        ``O(delta^2)`` (Le Guernic and Girard's support functions), where ``|C| R`` adds up
+        each component's worst signal as if they could all be worst at once."""
         if not self.inputs:
             return None
-        R = self._deviation.get(h)
+        key = h if C is None else (h, C.shape, C.tobytes())
+        R = self._deviation.get(key)
         if R is None or R.shape[0] <= count:
             D, _, F, q = self.curvature(h)
             q = q * INPUT_SUBSTEPS
@@ -80,19 +86,22 @@ class AffineFlow:
                 G.append(Phi_delta @ G[-1])
             Phis, _ = self.powers(h, count)
             G, Y = np.array(G), np.array([self.A2 @ g for g in G])
-            chunk = max(1, DEVIATION_CHUNK // G.size)
+            chunk = max(1, DEVIATION_CHUNK // (G.size * (1 if C is None else max(1, C.shape[0]))))
             steps = []
             for first in range(0, count, chunk):                 # cells first .. first + chunk
                 P = Phis[first:min(count, first + chunk)]
                 Gs = np.einsum("jab,lbp->jlap", P, G)              # (cells, q + 1, n, p)
                 absY = np.abs(np.einsum("jab,lbp->jlap", P, Y))
-                chord = _abs_chord_integral(Gs[:, :-1], Gs[:, 1:], delta).sum(axis=1)  # (cells, n, p)
                 curv = delta ** 3 / 12 * np.einsum("ab,jbp->jap", F,
                                                     np.maximum(absY[:, :-1], absY[:, 1:]).sum(axis=1))
-                steps.append((chord + curv) @ self.u_radius)                          # (cells, n)
+                if C is not None:                                  # along the rows of C
+                    Gs = np.einsum("ra,jlap->jlrp", C, Gs)
+                    curv = np.einsum("ra,jap->jrp", np.abs(C), curv)
+                chord = _abs_chord_integral(Gs[:, :-1], Gs[:, 1:], delta).sum(axis=1)  # (cells, n or r, p)
+                steps.append((chord + curv) @ self.u_radius)
             steps = np.concatenate(steps)
-            R = np.vstack([np.zeros(self.n), np.cumsum(steps, axis=0)])
-            self._deviation[h] = R
+            R = np.vstack([np.zeros(steps.shape[1]), np.cumsum(steps, axis=0)])
+            self._deviation[key] = R
         return R[:count + 1]
 
     def input_block(self, h: float, cells: int):
@@ -218,13 +227,17 @@ class ChainInputs:
     * ``cell[j] = R(j + 1 - s_j) + K E_j`` over cell ``j`` (``K``: :meth:`AffineFlow.cell_growth`,
       the remainders moving with the flow inside the cell; ``R`` non-decreasing);
     * ``since[j] = (j - s_j) h`` and ``carried[j] = K E_j``: for bisected cells, whose first
-      half takes ``carried + R(since + h/2)`` (:meth:`.explorer._Explorer._half_spread`).
+      half takes ``carried + R(since + h/2)`` (:meth:`.explorer._Explorer._half_spread`);
+    * ``directed = (C, bounds)`` for rows ``C`` along which the box is loose (the mode's unsafe
+      pieces and guards): ``bounds[j] = R_C(j + 1 - s_j) + |C| K E_j`` bounds ``|C rest|`` over
+      cell ``j`` (:meth:`AffineFlow.deviation` with ``C``), which the cell's box meets
+      (:func:`_plus_box`).
 
     Every run is ``x_free + sum_b Phi S w_b + rest`` with ``x_free`` the run at the input's
     centre from the same state and ``|rest|`` within the box, so grid stars plus ``grid`` and
     segments (hulls of grid stars, which hold the generators) plus ``cell`` cover it."""
 
-    def __init__(self, flow: AffineFlow, h: float, count: int, cells: int):
+    def __init__(self, flow: AffineFlow, h: float, count: int, cells: int, directions: np.ndarray | None = None):
         n = flow.n
         L = self._cells(count, cells)
         nb, p = count // L, flow.B.shape[1]
@@ -253,6 +266,10 @@ class ChainInputs:
         carried = E[:-1] @ flow.cell_growth(h).T if nb else E[:-1]
         self.cell = R[j[:-1] + 1 - starts[:-1]] + carried
         self.carried, self.since = carried, (j[:-1] - starts[:-1]) * h
+        self.directed = None
+        if directions is not None and directions.shape[0]:
+            R_C = flow.deviation(h, min(L, count), directions)
+            self.directed = (directions, R_C[j[:-1] + 1 - starts[:-1]] + carried @ np.abs(directions).T)
 
     @staticmethod
     def _cells(count: int, cells: int) -> int:
@@ -356,9 +373,11 @@ def _tightened(star: Star, rows: int, rounds: int = 3) -> Star | None:
     return Star(star.center, star.basis, star.predicate, Box(lo, hi))
 
 
-def _plus_box(star: Star, radius) -> Star:
-    """``star + [-radius, radius]`` (Minkowski sum): one new coefficient in ``[-1, 1]`` per
-    positive component of ``radius``."""
+def _plus_box(star: Star, radius, directed=None) -> Star:
+    """``star + [-radius, radius]`` (Minkowski sum): one new coefficient ``a_i`` in ``[-1, 1]``
+    per positive component of ``radius``; with ``directed = (C, bounds)``, ``star + {e :
+    |e| <= radius, |C e| <= bounds}`` (rows ``|C_k diag(radius) a| <= bounds_k`` on the new
+    coefficients, kept where they cut the box)."""
     radius = np.asarray(radius, dtype=float)
     if not np.all(np.isfinite(radius)):   # NaN would read as "no error" below
         raise lp.LPError("a non-finite error radius (the flow overflows)")
@@ -367,8 +386,17 @@ def _plus_box(star: Star, radius) -> Star:
         return star
     E = np.zeros((star.dim, free.size))
     E[free, np.arange(free.size)] = radius[free]
-    A = star.predicate.A
-    predicate = HPolytope(np.hstack([A, np.zeros((A.shape[0], free.size))]), star.predicate.b)
+    A, b = star.predicate.A, star.predicate.b
+    rows = np.hstack([A, np.zeros((A.shape[0], free.size))])
+    if directed is not None:
+        C, bounds = directed
+        M = C[:, free] * radius[free]
+        cut = np.abs(M).sum(axis=1) > bounds * (1 + 1e-9)
+        if cut.any():
+            M, bounds = M[cut], bounds[cut]
+            rows = np.vstack([rows, np.hstack([np.zeros((2 * M.shape[0], star.nvars)), np.vstack([M, -M])])])
+            b = np.concatenate([b, bounds, bounds])
+    predicate = HPolytope(rows, b)
     box = Box(np.append(star.box.low, -np.ones(free.size)), np.append(star.box.high, np.ones(free.size)))
     return Star(star.center, np.hstack([star.basis, E]), predicate, box)
 
@@ -403,17 +431,19 @@ def flowpipe(A, b, initial: Star, step: float, duration: float, B=None, u_low=No
     return segments
 
 
-def _block_spreads(seg: Star, H: np.ndarray, blocks: tuple[int, ...]):
+def _block_spreads(seg: Star, H: np.ndarray, blocks: tuple[int, ...], cut_from: int | None = None):
     """Per block ``b`` (coefficients from ``blocks[b]`` to the next start) and row ``r``:
     the spread ``sum |H_r . V_col| * radius_col`` the block is responsible for, and the
     part of it due to the block's interpolation-error coefficients. A cell block starting
     at ``s`` holds ``s`` hull coefficients, the chord weight, then the error coefficients
-    (see :func:`reach.sets.star.chord_hull`)."""
+    (see :func:`reach.sets.star.chord_hull`); the last block's error ends at ``cut_from``
+    when given (the columns after it are not error)."""
     contribution = np.abs(H @ seg.basis) * seg.box.radius                # (rows, vars)
     ends = blocks[1:] + (seg.nvars,)
+    error_ends = ends[:-1] + (seg.nvars if cut_from is None else cut_from,)
     spread = np.array([contribution[:, a:b].sum(axis=1) for a, b in zip(blocks, ends)])
     error = np.array([contribution[:, 2 * a + 1:b].sum(axis=1) if a else np.zeros(len(H))
-                      for a, b in zip(blocks, ends)])
+                      for a, b in zip(blocks, error_ends)])
     return spread, error
 
 

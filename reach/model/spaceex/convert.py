@@ -39,6 +39,7 @@ import sympy
 
 from reach import lp
 from reach.errors import InputError, Where
+from reach.model.automaton import MAX_VARIABLES
 from reach.model.constraints import affine_coefficients
 from reach.model.expr import CONSTANTS, FUNCTIONS, parse_expr
 from reach.model.spaceex.compose import Flat, Instance, Part, blocked_labels
@@ -46,7 +47,6 @@ from reach.model.spaceex.formula import (Const, FormulaError, Loc, Relation, Tok
                                          is_primed_name, names_in, parse_formula, to_python)
 
 RESERVED = set(FUNCTIONS) | set(CONSTANTS) | {"true", "false", "loc"}
-MAX_VARIABLES = 1_000
 MAX_MATRIX_ENTRIES = 25_000_000
 
 
