@@ -96,7 +96,7 @@ class Options:
     generations: int = ranged(20, 0, 100_000)     # differential evolution generations
     population: int = ranged(40, 5, 1_000_000)    # runs per generation
     polish: int = ranged(1000, 0, 1_000_000)      # polish runs from the best point (reach.backends.falsify)
-    keep_sets: bool = False        # safety: KEPT_RUNS sampled runs in Result.sets (pictures)
+    keep_sets: bool = False        # safety, events: KEPT_RUNS sampled runs in Result.sets (pictures)
     max_seconds: float | None = ranged(None, 0.0, open_low=True)  # safety: no search or optimisation past it
 
     @classmethod
@@ -776,6 +776,7 @@ class MonteCarloBackend:
         monitors = [EventMonitor(model, prop, X.shape[0]) for prop in props]
         sim.run(X, None, observers=monitors, signal=signal,
                 branches=None if choice is None else Branches(values=choice))
+        runs = sampled_runs(model, sim, X, None, signal, choice, n_structured) if opts.keep_sets else []
         shared = (time.perf_counter() - start) / len(props)
         results = []
         for prop, monitor in zip(props, monitors):
@@ -809,6 +810,7 @@ class MonteCarloBackend:
                 else:
                     details["note"] = "a sampled violation did not replay on its own"
             result.seconds = shared + time.perf_counter() - begin
+            result.sets = runs
             results.append(result)
         return results
 

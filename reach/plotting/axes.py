@@ -43,6 +43,12 @@ class Axis:
                              f"'{mode}': it cannot be drawn from sets", field="--vars")
         return self.scale * np.asarray(coeffs[0], float), self.scale * float(coeffs[1])
 
+    def is_time(self, model) -> bool:
+        """Whether the axis shows elapsed time: the time axis, or a state that is the model's
+        global clock (rate 1 in every mode, 0 at the start, never reset: its value is the time)."""
+        return self.kind == "time" or (self.kind == "state" and model.global_clock is not None
+                                       and model.state[model.global_clock] == self.name)
+
     def values(self, model, t, modes, X) -> np.ndarray:
         """The axis along a run: times ``t``, mode names ``modes``, states ``X`` (rows)."""
         X = np.asarray(X, dtype=float)

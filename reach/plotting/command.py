@@ -3,8 +3,11 @@ back-end keeping its sets (option ``keep_sets``), then draw them (:mod:`.reach_s
 
 Options: ``-o KEY=VALUE`` goes to every back-end, ``-o B.KEY=VALUE`` to back-end ``B`` only. A
 taylor check keeps sets only with ``remainder: rigorous`` (its verified step enclosures), which
-the picture asks for unless the user chose a remainder. The exit code is the check's
-(:func:`reach.checking.exit_code` over every back-end's results).
+the picture asks for unless the user chose a remainder. A back-end of which nothing is drawn
+(fsr keeps no sets, a failed taylor sweep keeps none, ...) is named with the reason, in the
+picture and on the console (:func:`reach.plotting.reach_sets.nothing_drawn`). The exit code is
+the check's (:func:`reach.checking.exit_code` over every back-end's results), unless nothing at
+all could be drawn: then an InputError (one line, exit 2) says why, the picture saying it too.
 """
 
 from __future__ import annotations
@@ -55,12 +58,13 @@ def load(model_path: str, properties_path: str | None, only: list[str] | None):
 def plot_files(model_path: str, properties_path: str, backends: list[str], variables: str | None,
                out: Path | None, options: dict, only: list[str] | None = None, exact: bool = True,
                stream=None):
-    """Check and draw; returns ``(exit code, output path, drawing summary, seconds to draw)``."""
+    """Check and draw; returns ``(exit code, output path, drawing summary, seconds to draw)``.
+    InputError when nothing at all could be drawn (the picture, written, says why)."""
     from reach.checking import check_model, check_spaceex, exit_code, resolve_backend
     from reach.backends import validate_options
     from reach.paths import safe_name
     from reach.plotting.axes import parse_vars
-    from reach.plotting.reach_sets import plot_reach_sets
+    from reach.plotting.reach_sets import missing_text, plot_reach_sets
 
     per_backend = split_options(options, backends)
     for b in backends:
@@ -91,4 +95,11 @@ def plot_files(model_path: str, properties_path: str, backends: list[str], varia
     start = time.perf_counter()
     summary = plot_reach_sets(model, results, bound, axes, out, exact=exact)
     seconds = time.perf_counter() - start
+    missing = summary["nothing_drawn"]
+    if not any(summary["sets"].values()) and not summary["counterexamples"]:
+        raise InputError(f"nothing could be drawn: {'; '.join(f'{b} {why}' for b, why in missing.items())} "
+                         f"(the picture {out} says so too)", field="--backend")
+    if stream is not None:
+        for b, why in missing.items():
+            print(missing_text(b, why), file=stream)
     return exit_code([r for rs in results.values() for r in rs]), out, summary, seconds

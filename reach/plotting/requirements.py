@@ -7,6 +7,11 @@ residual): then ``h . x <= g`` reads ``a p_0 + b p_1 <= g + a c_x + b c_y``. A p
 rows can be drawn is the convex polygon cut from the view rectangle by them
 (:func:`reach.sets.projection.clip`); a piece with a row in other variables is not drawn (its
 property is named as such). A time axis that is not a state takes rows that do not involve it.
+
+A mode's invariant is read the same way (:func:`invariant_rows`): the plotter cuts the mode's
+sets by the constraints the plane shows. Against time, a requirement that applies in some modes
+only is shaded over the stretches of time their drawn sets cover (:func:`time_spans`,
+:func:`within_spans`).
 """
 
 from __future__ import annotations
@@ -60,6 +65,22 @@ def functional(model, axis, mode):
             return None
         return np.eye(model.n)[model.state.index(spec)], 0.0
     return spec
+
+
+def invariant_rows(model, axes, mode: str):
+    """``(A, b)``: the constraints of ``mode``'s invariant that can be drawn on ``axes``, read as
+    ``A p <= b`` in the plane (each constraint on its own: one in other variables, or nonlinear,
+    is left out), or None when there is none. Every state a run has in the mode satisfies them,
+    so a set of the mode cut by them still holds every reached state."""
+    fx, fy = functional(model, axes[0], mode), functional(model, axes[1], mode)
+    rows, bounds = [], []
+    for constraint in model.modes[mode].invariant:
+        hs = halfspaces([constraint], model.symbols)
+        plane = None if hs is None else plane_rows(*hs, fx, fy)
+        if plane is not None:
+            rows.append(plane[0])
+            bounds.append(plane[1])
+    return (np.vstack(rows), np.concatenate(bounds)) if rows else None
 
 
 def drawable(model, bound_props, axes, mode: str) -> set[str]:
@@ -133,3 +154,31 @@ def widened(view, row_sets) -> tuple:
     new_lo = np.where(new_lo < lo, new_lo - grow, new_lo)
     new_hi = np.where(new_hi > hi, new_hi + grow, new_hi)
     return float(new_lo[0]), float(new_hi[0]), float(new_lo[1]), float(new_hi[1])
+
+
+def time_spans(arrays, k: int, least: float) -> list[tuple[float, float]]:
+    """The stretches of axis ``k`` that ``arrays`` (polygons or runs: rows of points) cover, as
+    sorted disjoint intervals: the union of their extents along it, each widened to at least
+    ``least`` about its middle (the sets of a mode where no time passes sit at instants, whose
+    stretch would not show)."""
+    extents = []
+    for a in arrays:
+        if len(a):
+            lo, hi = float(np.min(a[:, k])), float(np.max(a[:, k]))
+            grow = max(0.0, least - (hi - lo)) / 2
+            extents.append((lo - grow, hi + grow))
+    out: list[tuple[float, float]] = []
+    for lo, hi in sorted(extents):
+        if out and lo <= out[-1][1]:
+            out[-1] = (out[-1][0], max(out[-1][1], hi))
+        else:
+            out.append((lo, hi))
+    return out
+
+
+def within_spans(polygon: np.ndarray, spans, k: int) -> list[np.ndarray]:
+    """The parts of ``polygon`` over each of the intervals ``spans`` of axis ``k`` (empty ones
+    left out)."""
+    d = np.eye(2)[k]
+    parts = [clip(clip(polygon, d, hi), -d, -lo) for lo, hi in spans]
+    return [p for p in parts if p.shape[0] >= 3]
