@@ -91,7 +91,6 @@ TARGETS = {
 }
 
 # Survivors judged equivalent after reading their diffs (mutant name -> why).
-_SIGN = "sign is +1 or -1: only its sign is used"
 _RESHAPE = "numpy reads any negative size in reshape as the inferred one"
 _TIE = "differs only when a size equals the negligible threshold exactly"
 _DTYPE = "the values are float arrays already"
@@ -102,9 +101,6 @@ _NO_ROWS = "with rows = 0 the slice of A is empty and the star is returned befor
 _WARNINGS = "errstate with the default for one kind: only a floating-point warning differs, never a value"
 _NO_BREAK = "array_equal with None is False: the loop never stops early, and the rounds left repeat the fixed point"
 EQUIVALENT: dict[str, str] = {
-    "reach.backends.taylor.bound.x_contenders__mutmut_4": _SIGN,
-    "reach.backends.taylor.bound.x_contenders__mutmut_9": _SIGN,
-    "reach.backends.taylor.bound.x_contenders__mutmut_21": _SIGN,
     "reach.backends.taylor.bound.x_estimated_remainder__mutmut_7": _RESHAPE,
     "reach.backends.taylor.bound.x_next_order_remainder__mutmut_7": _RESHAPE,
     "reach.backends.taylor.bound.x_next_order_remainder__mutmut_18": _TIE,

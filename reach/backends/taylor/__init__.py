@@ -17,10 +17,14 @@ Bounds, by the ``remainder`` option:
 * ``estimated`` (the paper's eq. 28) and ``next-order``: each candidate is enclosed by eq. (27)
   plus an estimated remainder (:mod:`.bound`). They assume that perturbed runs have no other local
   extremum than the continuations of the nominal ones and switch through the same guard face, and
-  that the remainder estimate holds: the verdict is UNKNOWN with the bound. Where the candidates
-  miss part of the run (more than ``MAX_SWITCHES`` switches before the horizon, a nominal run
-  stationary in ``q``: :class:`.problem.Candidates`) the bound's outer end is open and
-  ``details["note"]`` says why.
+  that the remainder estimate holds: the verdict is UNKNOWN with the bound. Around the horizon
+  the runs of a subdomain may differ in whether they switch before it: the switches are followed
+  past the horizon while some runs may still make them before it, and the candidates that some
+  runs may not reach count for the bound's outer end only (:func:`.bound.extremum_bound`).
+  Where the candidates miss part of the run (more than ``MAX_SWITCHES`` switches before the
+  horizon, runs that may switch where the nominal run does not, a nominal run stationary in
+  ``q``: :class:`.problem.Candidates`) the bound's outer end is open and ``details["note"]``
+  says why.
 * ``rigorous``: a verified enclosure of every run on the subdomain (:mod:`.verified`: Taylor-model
   defect bound, logarithmic-norm Gronwall estimate; where that bound does not close, as on an
   expanding flow, a Taylor-model flowpipe with QR-preconditioned symbolic remainders,
@@ -32,6 +36,9 @@ Safety properties are read as the extremum of each unsafe piece's margin (:mod:`
 required constraint is an event, an ``avoid`` set is excluded step by step by the verified sweep;
 UNSAFE comes only with a subdomain point that the simulator replays. A may-transition window
 makes the switch time one more expansion variable (:mod:`.window`).
+
+Each property has a time budget, ``max_seconds`` (120 s by default, :mod:`.deadline`); under
+``-v`` the ADS levels and each subdomain's rigorous sweep are logged as they end.
 """
 
 
@@ -47,7 +54,8 @@ import numpy as np
 
 from reach.backends.options import option_error, parse_options, ranged
 from reach.backends.taylor.ads import Subdomain, split_domain, truncation_estimate
-from reach.backends.taylor.bound import contenders, enclose, estimated_remainder, next_order_remainder
+from reach.backends.taylor.bound import (contenders, enclose, estimated_remainder, extremum_bound,
+                                         next_order_remainder)
 from reach.backends.taylor.da import DA, algebra, stack
 from reach.backends.taylor.deadline import Deadline, OutOfTime
 from reach.backends.taylor.flow import Unsmooth
@@ -75,6 +83,15 @@ MIN_SHARE = 8
 
 @dataclass
 class Options:
+    """The taylor options (``-o name=value``); each field's comment says what it sets.
+
+    ``max_seconds`` is the time budget of one property (all its margins for a safety
+    property), 120 s by default like star's, ``None`` (``-o max_seconds=null``) for none. Past it
+    no ADS level, refinement level, rigorous sweep branch or flowpipe step starts
+    (:mod:`.deadline`): what was cut short is unbounded and the result is UNKNOWN, its note
+    naming the budget; what was finished stands.
+    """
+
     order: int = ranged(4, 1, 12)                 # Taylor order n
     e_tol: float | None = None      # ADS tolerance on the event value; default 1e-4 (1 + |value|)
     max_splits: int = ranged(6, 0, 30)            # N_max: halvings on the way to one subdomain
@@ -85,7 +102,7 @@ class Options:
     jobs: int = ranged(1, 1, 256)                  # local worker processes for ADS boxes and sweeps
     scheduler: object = None        # or a Dask scheduler address (or Client) to run them on
     keep_sets: bool = False         # rigorous mode: the step enclosures in Result.sets (pictures)
-    max_seconds: float | None = ranged(None, 0.0, open_low=True)  # per property: nothing starts past it (.deadline)
+    max_seconds: float | None = ranged(120.0, 0.0, open_low=True)  # time budget per property (above)
 
     @classmethod
     def from_dict(cls, options: dict | None) -> "Options":
@@ -185,8 +202,11 @@ class TaylorBackend:
 
         def measure(result):
             """The ADS measure of a box: its candidates that can hold the extremum, stacked (zero
-            when the nominal run visits none of the listed modes: nothing to split for)."""
-            held = list(contenders(result[0], prop.sense).values())
+            when the nominal run visits none of the listed modes: nothing to split for). Stretches
+            are left out: each continues an entry or exit map, in one more variable (the time)."""
+            maps = result[0]
+            held = [p for name, p in contenders(maps, prop.sense, maps.partial, maps.alternatives).items()
+                    if name not in maps.stretches]
             return stack(held) if held else DA.const(algebra(opts.order, len(u)), 0.0)
 
         kept_sets: list = []            # step enclosures of the rigorous sweeps (keep_sets)
@@ -195,13 +215,13 @@ class TaylorBackend:
         else:
             subdomains = split_domain(None, problem.low[u], problem.high[u], e_tol, opts.max_splits,
                                       measure=measure, map_boxes=expand_level)
-        pick = max if prop.sense == "max" else min
 
         def evaluate(subs) -> list[dict]:
             """A row per subdomain: candidate bounds, the estimated bound and (rigorous) the sweep."""
             sweeps = [None] * len(subs)
             if rigorous:
                 started = time.perf_counter()
+                log.info("rigorous sweeps of %d subdomains", len(subs))
                 sweeps = run_units(sweep_box, [(model, prop, opts.order, opts.step_tol, opts.integration_tol,
                                                 *full_box(sub.center, sub.half_width), opts.keep_sets, deadline)
                                                for sub in subs])
@@ -221,10 +241,8 @@ class TaylorBackend:
                          else estimated_remainder(p))
                     lo, hi = enclose(p, R)
                     bounds[name] = (float(lo), float(hi), float(R))
-                if bounds:
-                    estimated = (pick(b[0] for b in bounds.values()), pick(b[1] for b in bounds.values()))
-                else:           # the nominal run visits no listed mode: the empty extremum
-                    estimated = (-np.inf, -np.inf) if prop.sense == "max" else (np.inf, np.inf)
+                estimated = extremum_bound({name: b[:2] for name, b in bounds.items()}, prop.sense,
+                                           polys.partial, polys.alternatives)
                 if polys.gap is not None:   # runs may reach beyond every candidate: no outer end
                     estimated = (estimated[0], np.inf) if prop.sense == "max" else (-np.inf, estimated[1])
                 row = {"low": sub.low, "high": sub.high, "splits": sub.splits,
@@ -232,6 +250,8 @@ class TaylorBackend:
                        "bound": sweep["bound"] if rigorous else estimated}
                 if polys.gap is not None:
                     row["gap"] = polys.gap
+                if polys.partial:           # candidates some runs may not reach before the horizon
+                    row["partial"] = sorted(polys.partial)
                 if rigorous:
                     row["estimated_bound"], row["verified"] = estimated, sweep
                 out.append(row)
@@ -335,9 +355,11 @@ class TaylorBackend:
             status = Status.SAFE if verdict == "met" else Status.UNKNOWN
             coverage = meets
             if verdict == "undecided":
-                whys = sorted({r["verified"]["why"] for r in rows if r["verified"].get("why")})
+                # the budget first where it cut a sweep short: the other reasons may not be all
+                whys = sorted({r["verified"]["why"] for r in rows if r["verified"].get("why")},
+                              key=lambda why: (not deadline.cut(why), why))
                 details["note"] = (f"the bound is open on {1 - meets - violates:.0%} of the box"
-                                   + (f" ({whys[0]})" if whys else "")
+                                   + (f" ({'; '.join(whys[:2])})" if whys else "")
                                    + ("" if deadline.passed() else
                                       f"; -o refine={opts.refine + 2} halves the subdomains that hold it open"))
         else:

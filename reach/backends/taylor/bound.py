@@ -94,16 +94,36 @@ def enclose(poly: DA, remainder: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return lo - remainder, hi + remainder
 
 
-def contenders(candidates: dict, sense: str) -> dict:
+def extremum_bound(ends: dict, sense: str, partial=frozenset(), alternatives=()) -> tuple[float, float]:
+    """The range over the box of a run's extremum from its candidates' enclosures ``ends``
+    (``{name: (lo, hi)}``).
+
+    For a maximum, a run's extremum is the largest value among the candidates it reaches. It is
+    at most the largest upper end of all the candidates (the outer end), and at least the
+    largest lower end among those that every run reaches (all but ``partial``) and, for each
+    pair of ``alternatives`` (every run reaches one of the two), the smaller of the two lower
+    ends (the inner end). A minimum is the mirror image. With no candidate, or none on the inner
+    side, the end is the empty extremum's (``-inf`` for a maximum, ``inf`` for a minimum): some
+    runs may reach none."""
+    sign = 1.0 if sense == "max" else -1.0
+    up = {name: (lo, hi) if sign > 0 else (-hi, -lo) for name, (lo, hi) in ends.items()}
+    outer = max((hi for _, hi in up.values()), default=-np.inf)
+    sure = [lo for name, (lo, _) in up.items() if name not in partial]
+    either = [min(up[a][0], up[b][0]) for a, b in alternatives]
+    inner = max(sure + either, default=-np.inf)
+    return (inner, outer) if sign > 0 else (-outer, -inner)
+
+
+def contenders(candidates: dict, sense: str, partial=frozenset(), alternatives=()) -> dict:
     """The candidates that can hold the extremum: for a maximum, those whose enclosure (eq. 27
-    with the eq. 28 remainder) reaches above the largest lower end (below the smallest upper end
-    for a minimum). A dominated candidate changes neither end of the bound, so its truncation
-    error need not drive the splitting."""
+    with the eq. 28 remainder) reaches above the inner end of the bound (:func:`extremum_bound`:
+    the largest lower end among the candidates every run reaches); below it for a minimum. A
+    dominated candidate changes neither end of the bound, so its truncation error need not
+    drive the splitting."""
     if not candidates:
         return {}
-    sign = 1.0 if sense == "max" else -1.0
-    ends = {name: enclose(p, estimated_remainder(p)) for name, p in candidates.items()}
-    ends = {name: (float(lo), float(hi)) if sign > 0 else (-float(hi), -float(lo))
-            for name, (lo, hi) in ends.items()}
-    floor = max(lo for lo, _ in ends.values())
-    return {name: candidates[name] for name, (_, hi) in ends.items() if hi >= floor}
+    ends = {name: tuple(float(v) for v in enclose(p, estimated_remainder(p))) for name, p in candidates.items()}
+    lo, hi = extremum_bound(ends, sense, partial, alternatives)
+    if sense == "max":
+        return {name: candidates[name] for name, (_, top) in ends.items() if top >= lo}
+    return {name: candidates[name] for name, (bottom, _) in ends.items() if bottom <= hi}

@@ -1,6 +1,7 @@
-"""The time budget of one taylor check (option ``max_seconds``): a wall-clock instant, so that
-worker processes keep it too. No ADS level, refinement level, sweep branch or flowpipe step
-starts past it; what was cut short is unbounded (UNKNOWN), what was finished stands."""
+"""The time budget of one taylor check (option ``max_seconds``, 120 s by default, None for none):
+a wall-clock instant, so that worker processes keep it too. No ADS level, refinement level, sweep
+branch or flowpipe step starts past it; what was cut short is unbounded (UNKNOWN, its reason
+naming the budget), what was finished stands."""
 
 from __future__ import annotations
 
@@ -27,6 +28,10 @@ class Deadline:
     @property
     def text(self) -> str:
         return f"time budget of {self.seconds:g} s (option max_seconds) exhausted"
+
+    def cut(self, why: str) -> bool:
+        """Whether the reason ``why`` says that this budget cut the work short."""
+        return self.seconds is not None and self.text in why
 
 
 NONE = Deadline(None)

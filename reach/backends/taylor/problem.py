@@ -11,7 +11,11 @@ takes). In each mode the property lists, the extremum of ``q`` over the run is o
 
 The state after a switch is the crossing map (reset applied), so the next mode's maps are maps of
 the same initial deviations. The chain is followed until the horizon, or until no listed mode can
-be reached any more; where it stops earlier (more than ``MAX_SWITCHES`` switches), or where the
+be reached any more. A switch whose time straddles the horizon (some runs of the box make it
+before, some after) is followed too, and past the horizon while some runs may still switch before
+it; the candidates that some runs may not reach are marked partial
+(:meth:`EventProblem.candidate_steps`). Where the chain stops earlier (more than ``MAX_SWITCHES``
+switches), where runs may switch before the horizon where the nominal run does not, or where the
 nominal run is stationary in ``q`` and perturbed runs are not (their extrema there continue no
 nominal one), the candidates say so (:class:`Candidates`). :meth:`EventProblem.sweep` is the
 rigorous counterpart (:mod:`.verified`).
@@ -25,10 +29,11 @@ from dataclasses import dataclass
 import numpy as np
 import sympy
 
+from reach.backends.taylor.bound import enclose, estimated_remainder
 from reach.backends.taylor.da import DA, algebra
 from reach.backends.taylor.deadline import NONE, Deadline
-from reach.backends.taylor.event import (event_map_steps, fixed_time_map_steps, initial_state, local_extrema,
-                                         refine_time_steps)
+from reach.backends.taylor.event import (Picard, event_map_steps, fixed_time_map_steps, initial_state,
+                                         local_extrema, refine_time_steps)
 from reach.backends.taylor.flow import compile_expressions, compile_numeric
 from reach.backends.taylor.interval import Jet
 from reach.backends.taylor.keys import fingerprint
@@ -128,12 +133,52 @@ class ModeCode:
 
 
 class Candidates(dict):
-    """The candidate maps of one box, by name. ``gap`` says why they may miss the extremum of
-    some runs (None when they follow the run to the horizon): the expansion stopped before the
-    horizon, or the nominal run is stationary in ``q`` where perturbed runs are not. Then they
-    bound only the inner end of the extremum (the runs reach each candidate's value)."""
+    """The candidate maps of one box, by name. Names are unique: a mode entered several times
+    keeps a candidate per visit (each named by its nominal time), and :meth:`add` never replaces
+    one.
+
+    A candidate is *partial* (in ``partial``) when some runs of the box may not reach it before
+    the horizon: an event whose estimated time reaches past the horizon, anything after a
+    switch that some runs may make only after it, the value at the horizon in a mode that some
+    runs may have left, ``q`` over a stretch past an exit or an entry. It holds the extremum of
+    the runs that reach it, so it counts for the bound's outer end only
+    (:func:`.bound.extremum_bound`).
+    ``alternatives`` are pairs of candidates of which every run reaches one: the exit of a mode
+    that runs leave around the horizon and the stretch before it that holds the value at the
+    horizon of the runs that stay. A *stretch* (in ``stretches``) is ``q`` over a stretch of
+    time next to an entry or an exit, a map of one more variable (the time) than the box's.
+
+    ``gap`` says why they may miss the extremum of some runs (None when they follow the run to
+    the horizon): the expansion stopped before the horizon, some runs may switch before it where
+    the nominal run does not, or the nominal run is stationary in ``q`` where perturbed runs are
+    not. Then they bound only the inner end of the extremum."""
 
     gap: str | None = None
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.partial: set[str] = set()
+        self.stretches: set[str] = set()
+        self.alternatives: list[tuple[str, str]] = []
+
+    def add(self, name: str, poly: DA, partial: bool, stretch: bool = False) -> str:
+        """Keep ``poly`` under ``name`` (primed while the name is taken); the name kept."""
+        while name in self:
+            name += "'"
+        self[name] = poly
+        if partial:
+            self.partial.add(name)
+        if stretch:
+            self.stretches.add(name)
+        return name
+
+    def like(self, maps: dict) -> "Candidates":
+        """``maps`` (the same names, e.g. truncated) with this one's gap, partial names,
+        stretches and alternatives."""
+        out = Candidates(maps)
+        out.gap, out.partial, out.stretches = self.gap, set(self.partial), set(self.stretches)
+        out.alternatives = list(self.alternatives)
+        return out
 
 
 class Largest:
@@ -236,64 +281,184 @@ class EventProblem:
         return run_batch([self.candidate_steps(c, h, order, tol) for c, h in boxes])
 
     def candidate_steps(self, center: np.ndarray, half_width: np.ndarray, order: int, tol: float):
-        """:meth:`candidates` as a generator that yields its DA propagations."""
+        """:meth:`candidates` as a generator that yields its DA propagations.
+
+        The nominal run is followed from mode to mode. Around the horizon the runs of a box may
+        differ in whether they switch before it, so the chain is followed on past the horizon
+        while some runs may switch before it (the estimated enclosure of the switch time,
+        eqs. 27-28, reaches below the horizon):
+
+        * where the nominal run stays in a mode to the horizon, it is continued past it to its
+          next crossing (:meth:`_continued`); a switch that every run makes after the horizon
+          ends the chain;
+        * a switch that some runs may make after the horizon (its time reaches past it) makes
+          everything after it partial (:class:`Candidates`). The runs that stay in the mode are
+          there at the horizon, at most ``L`` (the time's upper end minus the horizon) before
+          their exit: ``q`` over the stretch of length ``L`` before the exit
+          (:meth:`_stretch_steps`) holds their value at the horizon, and the exit and that
+          stretch are alternatives;
+        * a mode the nominal run enters after the horizon holds the runs that enter before it,
+          for at most ``L`` (the horizon minus the entry time's lower end): its entry and ``q``
+          over the stretch of length ``L`` after the entry are partial candidates;
+        * where the continued run does not cross but some runs may be inside a guard that
+          matters at the horizon (:meth:`_switch_by_horizon`), they switched before it in a way
+          the nominal run does not show: a gap.
+        """
         T = self.model.horizon
         X = initial_state(algebra(order, len(self.uncertain)), center, half_width, self.uncertain)
         mode, t0, out = self.model.initial.mode, 0.0, Candidates()
         sign = 1.0 if self.prop.sense == "max" else -1.0
+        partial = False             # whether some runs of the box may enter this mode only after the horizon
         for hop in range(MAX_SWITCHES + 1):
             code = self.code(mode)
-            if T - t0 <= 1e-12 * max(1.0, T):              # entered at the horizon: one instant
+            entry = f"{mode}:entry@{t0:.6g}" if hop else "start"
+            if abs(T - t0) <= 1e-12 * max(1.0, T):       # entered at the horizon: one instant
                 if code.q is not None:
-                    out[f"{mode}:entry"] = code.q(X)
+                    out.add(entry, code.q(X), partial)
                 return out
-            x_nominal = np.array([x.cons for x in X])
-            run = yield NominalRun(code.f_numeric, x_nominal, T - t0, tol, code.stop(x_nominal))
-            grid = run.grid()
-            leave = code.exit(grid)
-            if leave is None and run.nodes[-1] < T - t0:     # grazed the guard: run to the horizon
-                run = yield NominalRun(code.f_numeric, x_nominal, T - t0, tol)
+            if t0 > T:                                  # entered after the horizon by the nominal run
+                if code.q is not None:
+                    out.add(entry, code.q(X), True)
+                    stay = T - self._time_range(X[self.clock])[0]
+                    q = yield from self._stretch_steps(code, X, 0.0, stay, order)
+                    out.add(f"{mode}:after-entry@{t0:.6g}", q, True, stretch=True)
+                leave, run = yield from self._continued(code, X, t0, tol)
+                if leave is None:
+                    return out
+            else:
+                x_nominal = np.array([x.cons for x in X])
+                run = yield NominalRun(code.f_numeric, x_nominal, T - t0, tol, code.stop(x_nominal))
                 grid = run.grid()
                 leave = code.exit(grid)
-            last = len(run.nodes) - 1 if leave is None else leave[0]
-            if code.q is not None:
-                out[f"{mode}:entry" if hop else "start"] = code.q(X)
-                values = np.asarray(code.q_numeric(list(grid[: last + 1].T)))
-                for k in local_extrema(values, self.prop.sense):
-                    tk = run.sharpen(k, lambda Y: sign * np.asarray(code.q_numeric(list(Y))))
-                    t_e, _ = yield from refine_time_steps(code.f, code.qdot, run.solution, tk, order)
-                    em = yield from event_map_steps(code.f, code.qdot, X, run.nodes, t_e, order)
-                    out[f"{mode}:extremum@{t0 + t_e:.6g}"] = code.q(em.state)
-                flat = _plateau(values)
-                if flat is not None and out.gap is None:
-                    em = yield from fixed_time_map_steps(code.f, X, run.nodes, float(run.nodes[flat]))
-                    if _varies(code.qdot(em.state)):
-                        out.gap = (f"the nominal run is stationary in the quantity at t = {t0 + run.nodes[flat]:.6g} "
-                                   f"in mode '{mode}' and perturbed runs are not: their extrema there "
-                                   "continue no nominal one")
-            if leave is None:
+                if leave is None and run.nodes[-1] < T - t0:     # grazed the guard: run to the horizon
+                    run = yield NominalRun(code.f_numeric, x_nominal, T - t0, tol)
+                    grid = run.grid()
+                    leave = code.exit(grid)
+                last = len(run.nodes) - 1 if leave is None else leave[0]
                 if code.q is not None:
-                    if hop == 0:
-                        em = yield from fixed_time_map_steps(code.f, X, run.nodes, T)
-                    else:
-                        em = yield from event_map_steps(code.f, self.at_horizon, X, run.nodes, T - t0, order)
-                    out[f"{mode}:horizon"] = code.q(em.state)
-                return out
-            _, ex, face = leave
-            tk = run.sharpen(last, lambda Y: np.where(np.all(ex.margins(Y.T) <= 0, axis=1),
-                                                      -np.arange(Y.shape[1]), -np.inf))
+                    out.add(entry, code.q(X), partial)
+                    values = np.asarray(code.q_numeric(list(grid[: last + 1].T)))
+                    for k in local_extrema(values, self.prop.sense):
+                        tk = run.sharpen(k, lambda Y: sign * np.asarray(code.q_numeric(list(Y))))
+                        t_e, _ = yield from refine_time_steps(code.f, code.qdot, run.solution, tk, order)
+                        em = yield from event_map_steps(code.f, code.qdot, X, run.nodes, t_e, order)
+                        late = self._time_range(self._event_time(em, t0))[1] > T
+                        out.add(f"{mode}:extremum@{t0 + t_e:.6g}", code.q(em.state), partial or late)
+                    flat = _plateau(values)
+                    if flat is not None and out.gap is None:
+                        em = yield from fixed_time_map_steps(code.f, X, run.nodes, float(run.nodes[flat]))
+                        if _varies(code.qdot(em.state)):
+                            out.gap = (f"the nominal run is stationary in the quantity at t = "
+                                       f"{t0 + run.nodes[flat]:.6g} in mode '{mode}' and perturbed runs are not: "
+                                       "their extrema there continue no nominal one")
+                if leave is None:
+                    to_horizon = run
+                    leave, run = yield from self._continued(code, X, t0, tol)
+                    if leave is None:                   # the nominal run does not switch
+                        at_T = yield from self._at_horizon(code, X, to_horizon.nodes, t0, hop, order)
+                        early = self._switch_by_horizon(code, at_T.state)
+                        if early is not None:
+                            out.gap = (f"some runs may be inside the guard to '{early.transition.target}' at the "
+                                       f"horizon in mode '{mode}', where the nominal run continued does not switch")
+                        if code.q is not None:
+                            out.add(f"{mode}:horizon", code.q(at_T.state), partial or early is not None)
+                        return out
+            k, ex, face = leave
+            tk = run.sharpen(k, lambda Y: np.where(np.all(ex.margins(Y.T) <= 0, axis=1),
+                                                   -np.arange(Y.shape[1]), -np.inf))
             t_e, _ = yield from refine_time_steps(code.f, face, run.solution, tk, order)
             em = yield from event_map_steps(code.f, face, X, run.nodes, t_e, order)
+            first, final = self._time_range(self._event_time(em, t0))
+            if first > T:           # every run switches after the horizon (only a continued run does)
+                if code.q is not None and t0 < T:
+                    at_T = yield from self._at_horizon(code, X, to_horizon.nodes, t0, hop, order)
+                    out.add(f"{mode}:horizon", code.q(at_T.state), partial)
+                return out
+            late = final > T                            # some runs may switch after the horizon
             if code.q is not None:
-                out[f"{mode}:exit@{t0 + t_e:.6g}"] = code.q(em.state)
+                leaving = out.add(f"{mode}:exit@{t0 + t_e:.6g}", code.q(em.state), partial or late)
+                if late and t0 < T:                     # those runs are in the mode at the horizon
+                    q = yield from self._stretch_steps(code, em.state, T - final, 0.0, order)
+                    staying = out.add(f"{mode}:before-exit@{t0 + t_e:.6g}", q, True, stretch=True)
+                    if not partial:
+                        out.alternatives.append((leaving, staying))
             if not self._leads_to_property(ex.transition.target):
                 return out
             X = ex.reset(em.state) if ex.reset else em.state
-            t0, mode = t0 + t_e, ex.transition.target
+            t0, mode, partial = t0 + t_e, ex.transition.target, partial or late
             if self.clock is None:
                 raise ValueError("events after a mode switch need a global clock state")
         out.gap = f"the expansion stopped at t = {t0:.6g}: more than {MAX_SWITCHES} mode switches"
         return out
+
+    def _stretch_steps(self, code: ModeCode, x_e: list[DA], start: float, end: float, order: int):
+        """``q`` along the runs through the states ``x_e`` (a map of the box's deviations) over
+        the times ``start`` to ``end`` from there (a generator, :mod:`.lockstep`): the Picard
+        expansion (eq. 6) in the time deviation ``dt``, with ``dt = (start + end)/2 + s (end -
+        start)/2``, a map of the deviations and a last variable ``s`` in ``[-1, 1]``."""
+        m = x_e[0].alg.nvars
+        alg = algebra(order, m + 1)
+        _, q = yield Picard(code.f, code.q, [x.embed(alg) for x in x_e], m, order)
+        times = DA.var(alg, m, 0.5 * (start + end), 0.5 * (end - start))
+        return q.compose([DA.var(alg, j) for j in range(m)] + [times])
+
+    def _continued(self, code: ModeCode, X: list[DA], t0: float, tol: float):
+        """The nominal run of a mode entered at ``t0`` (state ``X``) continued past the horizon
+        to its next crossing into a guard that matters (:meth:`_matters`), a generator:
+        ``(leave, run)`` as from :meth:`ModeCode.exit`, or ``(None, None)`` when it crosses none.
+        It runs until the horizon plus the longest time a run of the box can have spent in the
+        mode before the horizon plus the spread of the entry times (the estimated enclosure of
+        the entry time, eqs. 27-28): time for the runs that enter first to switch again before
+        the horizon, for the nominal one to switch after it."""
+        if not any(self._matters(code, ex) for ex in code.exits):
+            return None, None
+        T = self.model.horizon
+        entered_lo, entered_hi = self._time_range(X[self.clock]) if self.clock is not None else (t0, t0)
+        duration = max(T - t0, 0.0) + (T - entered_lo) + (entered_hi - entered_lo)
+        x_nominal = np.array([x.cons for x in X])
+        run = yield NominalRun(code.f_numeric, x_nominal, duration, tol, code.stop(x_nominal))
+        leave = code.exit(run.grid())
+        if leave is None or not self._matters(code, leave[1]):
+            return None, None
+        return leave, run
+
+    def _matters(self, code: ModeCode, ex: Exit) -> bool:
+        """Whether a switch through ``ex`` changes the candidates: it ends a listed mode's stretch
+        (``q`` at the exit and no value at the horizon), or leads towards a listed mode."""
+        return code.q is not None or self._leads_to_property(ex.transition.target)
+
+    def _at_horizon(self, code: ModeCode, X: list[DA], nodes: np.ndarray, t0: float, hop: int, order: int):
+        """The map of the state at the horizon of a run that stays in ``code``'s mode, entered
+        at the nominal time ``t0`` in the state ``X`` (a generator, :mod:`.lockstep`): the
+        transfer map (eq. 4) in the initial mode, the event ``t = T`` on the global clock after
+        a switch (runs enter at different times). ``nodes``: the nominal run's step nodes."""
+        if hop == 0:
+            return (yield from fixed_time_map_steps(code.f, X, nodes, self.model.horizon))
+        return (yield from event_map_steps(code.f, self.at_horizon, X, nodes, self.model.horizon - t0, order))
+
+    def _event_time(self, em, t0: float) -> DA:
+        """The time of the event of the map ``em``: the global clock's, or, without one (in the
+        initial mode), counted from ``t0``."""
+        return em.state[self.clock] if self.clock is not None else em.time + t0
+
+    @staticmethod
+    def _time_range(time: DA) -> tuple[float, float]:
+        """The estimated enclosure (eqs. 27-28) of a time over the box."""
+        lo, hi = enclose(time, estimated_remainder(time))
+        return float(lo), float(hi)
+
+    def _switch_by_horizon(self, code: ModeCode, X_T: list[DA]) -> Exit | None:
+        """An urgent exit of ``code``'s mode that matters (:meth:`_matters`) whose guard some runs
+        of the box may be inside at the horizon had they stayed in the mode (the state map
+        ``X_T``): the estimated enclosure (eqs. 27-28) of every face of the guard reaches zero.
+        Such runs crossed into the guard, and switched, before the horizon."""
+        for ex in code.exits:
+            if not self._matters(code, ex):
+                continue
+            margins = [face(X_T) for face in ex.faces]
+            if all(float(enclose(g, estimated_remainder(g))[0]) <= 0 for g in margins):
+                return ex
+        return None
 
     # ------------------------------------------------------------ rigorous (verified sweep)
     def _enclosure(self, code: ModeCode, x0: list[DA], error: np.ndarray, duration: float, rel_tol: float,

@@ -11,6 +11,8 @@ loaded machine made them tens of times slower.
 from __future__ import annotations
 
 import ctypes
+import logging
+import time
 from functools import lru_cache
 
 from reach.backends.taylor.bound import truncate
@@ -19,6 +21,7 @@ from reach.backends.taylor.keys import fingerprint
 from reach.backends.taylor.problem import Candidates, EventProblem
 from reach.model.simulate import single_threaded
 
+log = logging.getLogger(__name__)
 _PROBLEMS: dict[str, tuple] = {}
 
 
@@ -66,13 +69,18 @@ def keep_freed_memory() -> None:
 
 
 def _truncated(maps: Candidates, order: int, expand_order: int) -> Candidates:
-    out = Candidates({name: truncate(p, order) if expand_order > order else p for name, p in maps.items()})
-    out.gap = maps.gap
-    return out
+    return maps.like({name: truncate(p, order) if expand_order > order else p for name, p in maps.items()})
 
 
 def sweep_box(model, prop, order: int, rel_tol: float, tol: float, center, half_width,
               keep_sets: bool = False, deadline: Deadline = NONE) -> dict:
-    """The rigorous sweep of one subdomain (:meth:`EventProblem.sweep`)."""
+    """The rigorous sweep of one subdomain (:meth:`EventProblem.sweep`), its outcome logged
+    (progress under ``-v``)."""
+    started = time.perf_counter()
     with single_threaded():
-        return problem(model, prop).sweep(center, half_width, order, rel_tol, tol, keep_sets, deadline)
+        out = problem(model, prop).sweep(center, half_width, order, rel_tol, tol, keep_sets, deadline)
+    lo, hi = out["bound"]
+    log.info("subdomain swept in %.1f s: %s", time.perf_counter() - started,
+             f"unbounded ({out['why']})" if "why" in out else
+             f"bound [{lo:.6g}, {hi:.6g}] ({out['stretches']} stretches, {out['steps']} steps)")
+    return out
