@@ -252,7 +252,7 @@ def cmd_replay(args) -> int:
     if not props:
         raise InputError(f"property '{cex.property}' is not in {cex.property_file}", args.counterexample, "property")
     try:
-        check_run(model, cex.initial_state, cex.switch_time, cex.input_signal, cex.transitions)
+        check_run(model, cex.initial_state, cex.switch_time, cex.input_signal, cex.transitions, cex.dt)
     except InputError as exc:
         raise InputError(exc.message, args.counterexample, exc.field) from None
     prop = bind(props[0], model)

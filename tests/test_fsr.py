@@ -477,3 +477,35 @@ def test_overflowing_moments_are_undecided_never_safe():
         assert result.status is Status.UNKNOWN
         assert result.probability == (0.0, 1.0)
         assert "overflows" in result.details["reason"]
+
+
+DRIVEN_KICKS = """
+name: driven
+state: [x, v]
+bounded_inputs: {p: {range: RANGE}}
+modes:
+  run: {flow: {x: v, v: "-0.1*v + p"}}
+initial: {mode: run, box: {x: 0, v: 0}}
+horizon: 10
+disturbance: {gaussian: {mean: [0], cov: [0.01]}, enters: [v], step: 1}
+"""
+
+
+@pytest.mark.parametrize("low, high", [(0.05, 0.1), (0.1, 0.1)])
+def test_a_bounded_constant_with_a_range_is_not_averaged_over(tmp_path, low, high):
+    """P(|x(10)| <= 1) is 0.25 at p = 0.05 and 0.025 at p = 0.1: averaged over p (as a uniform
+    law) it would meet 0.08 and read SAFE though p = 0.1 breaks it. A ranged bounded input is
+    unsupported (it is any value, not a distribution); fixed to one value, the check runs."""
+    from model_files import load_files
+
+    model, props = load_files(tmp_path, DRIVEN_KICKS.replace("RANGE", f"[{low}, {high}]"), """
+        properties:
+          - {id: near, kind: reach, at: 10, target: {box: {x: [-1, 1]}}, probability: {at_least: 0.08}}
+    """)
+    reason = BACKEND.supports(model, props["near"])
+    if low < high:
+        assert reason is not None and "p may take any value" in reason
+    else:
+        assert reason is None
+        result = BACKEND.check(model, props["near"])
+        assert result.probability[1] < 0.08 and result.details["verdict"] == "violated"

@@ -213,3 +213,23 @@ def test_the_simulator_refuses_pieces_off_its_grid(tmp_path):
     sim = Simulator(load_model(tmp_path / "m.yaml"), 0.03)
     with pytest.raises(ValueError, match="not a multiple"):
         sim.run(np.zeros((1, 2)), None, signal=(0.1, np.ones((1, 11, 1)), None))
+
+
+@pytest.mark.parametrize("dt, step, field", [(1e9, 0.1, "dt"), (1e-12, 0.1, "dt"), (None, 1e-300, "input_signal"),
+                                             (0.1, 0.1, None)])
+def test_a_step_that_does_not_fit_the_horizon_is_refused_naming_its_field(tmp_path, dt, step, field):
+    """A hand-edited counterexample's ``dt`` or signal step beyond the horizon, or cutting it into
+    more grid steps than the simulator takes, is bad input naming the field (a step of 1e9 was an
+    internal ZeroDivisionError, 1e-15 blamed ``options.dt``)."""
+    from reach.backends.montecarlo import check_run
+    from reach.errors import InputError
+
+    (tmp_path / "m.yaml").write_text(INTEGRATOR)
+    model = load_model(tmp_path / "m.yaml")
+    signal = {"step": step, "inputs": ["u"], "values": [[1.0]]}
+    if field is None:
+        check_run(model, [0.0, 0.0], None, signal, None, dt)
+        return
+    with pytest.raises(InputError) as caught:
+        check_run(model, [0.0, 0.0], None, signal, None, dt)
+    assert caught.value.field == field

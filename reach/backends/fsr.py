@@ -55,7 +55,9 @@ boundary layer of the VTXO models (``|s_i| <= phi_i`` decays as ``s_i' = -lam_i 
 
 Non-Gaussian laws go through :mod:`reach.backends.fsr_fourier`; from a model this is the case
 for a reach property when the initial state is a box (uniformly distributed over it, as the
-Monte Carlo back-end samples it), or on request with ``method: fourier``.
+Monte Carlo back-end samples it), or on request with ``method: fourier``. A bounded input with a
+range is nondeterministic (any value, the worst deciding), not distributed: averaging over it
+could call SAFE a requirement that fails for one value, so such a model is unsupported.
 """
 
 from __future__ import annotations
@@ -368,6 +370,11 @@ class FsrBackend:
         if model.disturbance is None:
             return ("deterministic model (no disturbance): there is no distribution to integrate; "
                     "use the star or taylor back-end")
+        ranged = [u.name for u in model.bounded_inputs if u.high > u.low]
+        if ranged:       # any value of its range, not a distribution over it: a worst case, not an average
+            return (f"bounded input{'s' if len(ranged) > 1 else ''} {', '.join(ranged)} may take any value of "
+                    f"{'their ranges' if len(ranged) > 1 else 'its range'}, which fsr would average over; fix "
+                    f"{'them' if len(ranged) > 1 else 'it'} to one value (range [v, v]) per check, or use montecarlo")
         mode = model.modes[model.initial.mode]
         if mode.linear is None:
             return f"the flow of mode '{mode.name}' is nonlinear; fsr needs a linear closed loop"

@@ -70,7 +70,7 @@ from reach.backends.options import parse_options, ranged
 from reach.errors import InputError
 from reach.model.automaton import HybridAutomaton
 from reach.model.constraints import NUMERICAL_TOLERANCE, equality_rows, lambdify_margins
-from reach.model.simulate import Branches, Simulator, check_size, single_threaded
+from reach.model.simulate import MAX_STEPS, Branches, Simulator, check_size, single_threaded
 from reach.result import Counterexample, Result, Status
 from reach.spec.properties import BoundEvent, BoundReach, BoundReachAvoid, BoundSafety
 from reach.stats import clopper_pearson_upper, wilson
@@ -363,6 +363,9 @@ def _signal_of(model: HybridAutomaton, data: dict | None):
     hi = np.array([u.high for u in model.varying_inputs])
     if not (step > 0 and np.isfinite(step)):
         raise InputError("the step must be a positive number", field="input_signal")
+    if model.horizon / step > MAX_STEPS:
+        raise InputError(f"a step of {step:g} cuts the horizon {model.horizon:g} into more than {MAX_STEPS:.0e} "
+                         "pieces", field="input_signal")
     if not np.all(np.isfinite(values)):
         raise InputError("expected finite values", field="input_signal")
     outside = (values < lo - REPLAY_TOLERANCE * (1 + np.abs(lo))) | (values > hi + REPLAY_TOLERANCE * (1 + np.abs(hi)))
@@ -375,12 +378,15 @@ def _signal_of(model: HybridAutomaton, data: dict | None):
 
 
 def check_run(model: HybridAutomaton, initial_state: list, switch_time: float | None, input_signal: dict | None,
-              transitions: list | None) -> None:
+              transitions: list | None, dt: float | None = None) -> None:
     """Refuse (InputError naming the field) a run that is none of ``model``'s: an initial state of
     the wrong length, not finite, outside the initial set or the initial mode's invariant; a
     switch time where the model has no window or outside it; an input signal with values
     outside the inputs' ranges; a transition the model does not have. Bounds are met to
     ``REPLAY_TOLERANCE (1 + |bound|)`` (rounding in a written file)."""
+    if dt and not (model.horizon / MAX_STEPS <= dt <= model.horizon):
+        raise InputError(f"a replay step of {dt:g} is outside [{model.horizon / MAX_STEPS:g}, {model.horizon:g}] "
+                         f"(the horizon {model.horizon:g} in at most {MAX_STEPS:.0e} steps)", field="dt")
     x = np.asarray(initial_state, dtype=float)
     if x.shape != (model.n,):
         raise InputError(f"initial_state has {len(initial_state)} values, the model {model.n}", field="initial_state")
@@ -797,6 +803,9 @@ class MonteCarloBackend:
             if found is None and time.perf_counter() > deadline:
                 details["note"] = f"time budget of {opts.max_seconds:.3g} s (option max_seconds) ended the search"
             details["closest_margin"] = min(float(np.min(r[3].margins())) for r in rounds)
+            extrema = np.concatenate([r[3].extrema() for r in rounds])      # every round's runs
+            if np.isfinite(extrema).any():
+                details["sampled_range"] = (float(np.nanmin(extrema)), float(np.nanmax(extrema)))
             result = Result(NAME, model.name, prop.id, Status.UNKNOWN, details=details)
             if found is not None:
                 k, i = found
