@@ -206,3 +206,19 @@ def test_the_exit_code_stays_the_verdicts_when_another_backend_draws(tmp_path, c
     assert "fsr: nothing to draw: does not check near: " in printed.out
     assert "keeps no sets (it integrates the distribution of the states and computes no set)" in printed.out
     assert printed.err == "" and out.stat().st_size > 10_000
+
+
+def test_sets_cut_short_by_a_violation_are_said_to_be_partial(tmp_path, draw):
+    """x' = -0.5 x from [1, 1.2]: ``x <= 1.1`` is violated at t = 0, so star stops there and its
+    drawn sets are not all that is reachable; the legend says so. ``x <= 2`` holds: no such line."""
+    from reach.plotting.reach_sets import cut_short
+
+    model, props = load_files(tmp_path, DECAY, DECAY_PROPERTIES.replace(
+        '  - {id: peak', '  - {id: early, kind: safety, modes: [run], require: ["x <= 1.1"]}\n  - {id: peak'))
+    star = backend("star")
+    for pid, partial in (("early", True), ("low", False)):
+        results = {"star": [star.check(model, props[pid], {"keep_sets": True})]}
+        assert results["star"][0].status.value == ("UNSAFE" if partial else "SAFE")
+        ax, _ = draw(model, [props[pid]], results, "t", "x")
+        said = [t for t in legend_texts(ax) if "stopped at the violation" in t]
+        assert bool(said) == partial and cut_short(results, {"star": {"run": None}}) == said

@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from reach.plotting.requirements import drawable, invariant_rows, regions
+from reach.result import Status
 
 STYLE = {                    # back-end -> how its sets are drawn
     "star": {"fill": True, "alpha": 0.35, "lw": 0.0},
@@ -419,6 +420,19 @@ def nothing_drawn(model, results_by_backend: dict, drawn: dict, bound_props) -> 
     return out
 
 
+def cut_short(results_by_backend: dict, drawn: dict) -> list[str]:
+    """A legend line per exploring back-end (not Monte Carlo, whose runs are whole) whose drawn
+    sets end where its check stopped at a violation (UNSAFE): what is drawn is not all that is
+    reachable."""
+    out = []
+    for backend, results in results_by_backend.items():
+        stopped = [r.property for r in results if r.status == Status.UNSAFE and r.sets]
+        if backend != "montecarlo" and stopped and drawn.get(backend):
+            out.append(f"{backend}: sets only up to where its check of {', '.join(stopped)} stopped at the "
+                       f"violation (not all that is reachable)")
+    return out
+
+
 def missing_text(backend: str, why: str) -> str:
     """The words for a back-end of which nothing is drawn (:func:`nothing_drawn`)."""
     return f"{backend}: nothing to draw: {why}"
@@ -497,6 +511,8 @@ def plot_reach_sets(model, results_by_backend: dict, bound_props, axes, out: Pat
     anything = any(counts.values()) or bool(cexs)
     if anything:
         handles += [Patch(facecolor="none", edgecolor="none", label=missing_text(b, why)) for b, why in missing.items()]
+        handles += [Patch(facecolor="none", edgecolor="none", label=text)
+                    for text in cut_short(results_by_backend, drawn)]
     ax.set_xlim(view[0], view[1])
     ax.set_ylim(view[2], view[3])
     ax.set_xlabel(axes[0].label)
