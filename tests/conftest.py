@@ -58,3 +58,27 @@ def _in_repo_root(monkeypatch):
     """Model and property paths in the tests are relative to the repository root."""
     monkeypatch.chdir(ROOT)
     os.environ.setdefault("MPLBACKEND", "Agg")
+
+
+@pytest.fixture
+def draw():
+    """Draw back-ends' results on a new figure's axes (the figures closed after the test):
+    ``draw(model, bound, results, x, y, exact=True)`` returns ``(axes, summary)`` of
+    :func:`reach.plotting.reach_sets.plot_reach_sets`, laid out and rendered."""
+    from reach.plotting.axes import make_axis
+    from reach.plotting.reach_sets import plot_reach_sets, pyplot
+
+    plt = pyplot()
+    figures = []
+
+    def drawn(model, bound, results, x: str, y: str, exact: bool = True):
+        fig, ax = plt.subplots(figsize=(8, 6.5), layout="constrained")
+        figures.append(fig)
+        summary = plot_reach_sets(model, results, bound, (make_axis(model, x), make_axis(model, y)), out=None,
+                                  ax=ax, exact=exact)
+        fig.canvas.draw()
+        return ax, summary
+
+    yield drawn
+    for fig in figures:
+        plt.close(fig)

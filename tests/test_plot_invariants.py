@@ -17,8 +17,6 @@ from matplotlib.patches import Polygon
 
 from model_files import load_files
 from reach.checking import check_model, resolve_backend
-from reach.plotting.axes import make_axis
-from reach.plotting.reach_sets import plot_reach_sets, pyplot
 from reach.result import Result, SetPiece, Status
 
 MODEL = """
@@ -58,24 +56,6 @@ def checked(tmp_path_factory):
     return model, bound, results
 
 
-@pytest.fixture
-def draw():
-    """Draw results on a new figure's axes (closed after the test); returns the axes."""
-    plt = pyplot()
-    figures = []
-
-    def drawn(model, bound, results, x: str, y: str, exact: bool = True):
-        fig, ax = plt.subplots(figsize=(8, 6.5), layout="constrained")
-        figures.append(fig)
-        plot_reach_sets(model, results, bound, (make_axis(model, x), make_axis(model, y)), out=None, ax=ax,
-                        exact=exact)
-        return ax
-
-    yield drawn
-    for fig in figures:
-        plt.close(fig)
-
-
 def polygons(ax, gid: str) -> list[np.ndarray]:
     """The vertices of each polygon of the collection with ``gid``."""
     (coll,) = [c for c in ax.collections if c.get_gid() == gid]
@@ -102,7 +82,7 @@ def test_star_sets_stay_in_the_invariant_and_the_horizon_and_hold_the_runs(check
     boxes = [p.polygon("t", "x", exact=False) for p in pieces]
     assert min(b[:, 1].min() for b in boxes if len(b)) < -0.1                  # what a box draws
     assert max(p.t1 for p in pieces) > HORIZON + 0.1
-    ax = draw(model, bound, results, "t", "x", exact)
+    ax, _ = draw(model, bound, results, "t", "x", exact)
     for mode in ("inbound", "rebound"):
         drawn = polygons(ax, f"star:{mode}")
         every = np.vstack(drawn)
@@ -124,7 +104,7 @@ def test_a_clock_that_is_reset_is_not_cut_at_the_horizon(tmp_path, draw):
         box = SetPiece("rebound", 13.0, 15.0, "box", ("x", "v", "t"), low=np.array([0.2, 0.0, 13.0]),
                        high=np.array([0.4, 0.1, 15.0]))
         results = {"taylor": [Result("taylor", model.name, "apex", Status.SAFE, sets=[box])]}
-        ax = draw(model, [props["apex"]], results, "t", "x")
+        ax, _ = draw(model, [props["apex"]], results, "t", "x")
         (rect,) = polygons(ax, "taylor:rebound")
         assert rect[:, 0].max() == pytest.approx(top, abs=ROUNDING)
 
@@ -142,7 +122,7 @@ def test_a_requirement_of_one_mode_is_shaded_only_while_sets_are_in_it(checked, 
     ``rebound`` (the first bounce) to the horizon, not over the start, where every run is
     ``inbound``; its legend entry says it applies in ``rebound`` only."""
     model, bound, results = checked
-    ax = draw(model, bound, results, "t", "x", exact=False)
+    ax, _ = draw(model, bound, results, "t", "x", exact=False)
     shaded = unsafe_patches(ax, "unsafe:rebound")
     assert shaded
     rebound = np.vstack(polygons(ax, "star:rebound") + [run.path("t", "x") for run in results["montecarlo"][0].sets
@@ -163,7 +143,7 @@ def test_a_requirement_of_every_mode_drawn_is_shaded_over_the_whole_time(tmp_pat
     bound = [props["approach"]]
     sets = [SetPiece(m, t0, t0 + 1, "box", ("x", "v", "t"), low=np.array([0.0, -0.2, t0]),
                      high=np.array([1.0, 0.1, t0 + 1])) for m, t0 in (("inbound", 0.0), ("rebound", 6.0))]
-    ax = draw(model, bound, {"taylor": [Result("taylor", model.name, "approach", Status.SAFE, sets=sets)]}, "t", "v")
+    ax, _ = draw(model, bound, {"taylor": [Result("taylor", model.name, "approach", Status.SAFE, sets=sets)]}, "t", "v")
     (band,) = unsafe_patches(ax, "unsafe:inbound,rebound")
     assert (band[:, 0].min(), band[:, 0].max()) == pytest.approx(ax.get_xlim())
     (entry,) = [t for t in legend_texts(ax) if t.startswith("unsafe:")]
@@ -174,7 +154,7 @@ def test_in_the_state_plane_a_requirement_of_one_mode_covers_the_view(checked, d
     """Against ``x`` and ``v``, which do not tell the modes' times apart, ``x > 0.9`` of
     ``rebound`` is shaded over the whole height of the view, its legend naming the mode."""
     model, bound, results = checked
-    ax = draw(model, bound, results, "x", "v", exact=False)
+    ax, _ = draw(model, bound, results, "x", "v", exact=False)
     (band,) = unsafe_patches(ax, "unsafe:rebound")
     assert band[:, 0].min() == pytest.approx(0.9)
     assert (band[:, 1].min(), band[:, 1].max()) == pytest.approx(ax.get_ylim())
@@ -202,7 +182,7 @@ def test_a_star_whose_lps_stop_is_drawn_from_its_box_cut_by_the_invariant(tmp_pa
             def no_verdict(self, direction):
                 raise LPError("LP solver stopped without a verdict: Solve error")
             monkeypatch.setattr(Star, "support", no_verdict)
-        ax = draw(model, [props["apex"]], results, "t", "x")
+        ax, _ = draw(model, [props["apex"]], results, "t", "x")
         (polygon,) = polygons(ax, "star:rebound")
         spans.append((polygon[:, 1].min(), polygon[:, 1].max()))
     assert spans[0] == pytest.approx((0.0, 1.1), abs=1e-9) and spans[1] == pytest.approx(spans[0], abs=1e-9)

@@ -19,9 +19,7 @@ from model_files import load_files
 from reach.backends import BACKENDS, OPTIONS, backend
 from reach.checking import check_model, resolve_backend
 from reach.cli import main
-from reach.plotting.axes import make_axis
 from reach.plotting.missing import KEPT
-from reach.plotting.reach_sets import plot_reach_sets, pyplot
 from reach.result import Result, SetPiece, Status
 
 DECAY = """
@@ -91,24 +89,6 @@ def test_what_the_picture_says_each_backend_keeps_is_what_it_keeps(tmp_path):
     assert not keeps_sets_option("fsr") and "fsr" not in KEPT
     assert {("star", "safety"), ("taylor", "safety"), ("taylor", "event"), ("montecarlo", "safety"),
             ("montecarlo", "event"), ("montecarlo", "reach"), ("fsr", "reach"), ("fsr", "reach_avoid")} <= seen
-
-
-@pytest.fixture
-def draw():
-    """Draw results on a new figure's axes (closed after the test); returns ``(axes, summary)``."""
-    plt = pyplot()
-    figures = []
-
-    def drawn(model, bound, results, x: str, y: str):
-        fig, ax = plt.subplots(figsize=(8, 6.5), layout="constrained")
-        figures.append(fig)
-        summary = plot_reach_sets(model, results, bound, (make_axis(model, x), make_axis(model, y)), out=None, ax=ax)
-        fig.canvas.draw()
-        return ax, summary
-
-    yield drawn
-    for fig in figures:
-        plt.close(fig)
 
 
 def legend_texts(ax) -> list[str]:

@@ -19,8 +19,7 @@ from matplotlib.path import Path
 
 from model_files import load_files
 from reach.checking import check_model, resolve_backend
-from reach.plotting.axes import make_axis
-from reach.plotting.reach_sets import plot_reach_sets, pyplot
+from reach.plotting.reach_sets import pyplot
 from reach.result import Result, SetPiece, Status
 from reach.sets import Box, Star
 
@@ -62,23 +61,6 @@ def checked(tmp_path_factory):
                "montecarlo": check_model(resolve_backend("montecarlo"), model, bound, SAMPLED)}
     assert results["star"][0].status == Status.SAFE
     return model, bound, results
-
-
-@pytest.fixture
-def draw():
-    """Draw results on a new figure's axes (closed after the test); returns the axes."""
-    plt = pyplot()
-    figures = []
-
-    def drawn(model, bound, results, x: str, y: str):
-        fig, ax = plt.subplots(figsize=(8, 6.5), layout="constrained")
-        figures.append(fig)
-        plot_reach_sets(model, results, bound, (make_axis(model, x), make_axis(model, y)), out=None, ax=ax)
-        return ax
-
-    yield drawn
-    for fig in figures:
-        plt.close(fig)
 
 
 def artists(ax) -> dict:
@@ -124,7 +106,7 @@ def test_states_where_no_time_passes_are_drawn_at_the_jump_instants(checked, dra
     sampled ones at the closed form; star's sets hold every sampled state; the legend entries
     look like them."""
     model, bound, results = checked
-    ax = draw(model, bound, results, "t", "y")
+    ax, _ = draw(model, bound, results, "t", "y")
     drawn = artists(ax)
     star, sampled = drawn["star:jump"], drawn["montecarlo:jump"]
     for line in (star, sampled):
@@ -156,7 +138,7 @@ def test_states_where_no_time_passes_in_the_state_plane(checked, draw):
     """Against x: the states in ``jump`` are drawn at x = 2 (the guard), y from 2.11 to 2.24
     (the jump's y + 1 over the three periods), within the view."""
     model, bound, results = checked
-    ax = draw(model, bound, results, "x", "y")
+    ax, _ = draw(model, bound, results, "x", "y")
     drawn = artists(ax)
     x0, x1 = ax.get_xlim()
     for gid in ("star:jump", "montecarlo:jump"):
@@ -183,7 +165,7 @@ def test_star_segments_past_the_horizon_are_cut_there_and_hold_the_runs(checked,
     polygons of its mode (the cut polygons still hold what is reached)."""
     model, bound, results = checked
     assert max(p.t1 for p in results["star"][0].sets) > HORIZON + 0.1        # the segments' clocks
-    ax = draw(model, bound, results, "t", "y")
+    ax, _ = draw(model, bound, results, "t", "y")
     x = drawn_x(ax)
     assert x.min() >= -ROUNDING and x.max() <= HORIZON + ROUNDING
     drawn = artists(ax)
@@ -213,7 +195,7 @@ def test_sets_past_the_horizon_are_cut_to_it_and_keep_every_state_before(tmp_pat
     box = SetPiece("rise", 9.9, 10.4, "box", ("x", "y"), low=np.array([0.0, 0.5]), high=np.array([1.0, 0.8]))
     results = {"star": [Result("star", model.name, "low", Status.SAFE, sets=[segment])],
                "taylor": [Result("taylor", model.name, "low", Status.SAFE, sets=[box])]}
-    ax = draw(model, list(props.values()), results, "t", "y")
+    ax, _ = draw(model, list(props.values()), results, "t", "y")
     drawn = artists(ax)
     (cut,) = [p.vertices for p in drawn["star:fall"].get_paths()]
     (rect,) = [p.vertices for p in drawn["taylor:rise"].get_paths()]

@@ -504,6 +504,24 @@ def random_plan(model: HybridAutomaton, window, count: int, rng):
     return X, tau
 
 
+def _verdict(model: HybridAutomaton, prop, rounds: list, found, sim: Simulator, details: dict) -> Result:
+    """UNSAFE with its counterexample if the run ``found`` (``(round, row)`` of ``rounds``, or
+    None) violates ``prop`` when replayed alone (:func:`replay`), else UNKNOWN with ``details``
+    (noting a sampled violation that did not replay)."""
+    if found is not None:
+        k, i = found
+        label, Xk, tauk, _, sig, ch = rounds[k]
+        t = None if tauk is None or np.isnan(tauk[i]) else float(tauk[i])
+        rep = replay(model, prop, Xk[i], t, sim.dt, signal_record(model, sig, i),
+                     None if ch is None else Branches(values=ch[i:i + 1]))
+        if rep.violated:
+            details["found_in"] = label
+            return Result(NAME, model.name, prop.id, Status.UNSAFE, details=details,
+                          counterexample=rep.counterexample(model, prop, f"montecarlo/{label}"))
+        details["note"] = "a sampled violation did not replay on its own"
+    return Result(NAME, model.name, prop.id, Status.UNKNOWN, details=details)
+
+
 def run_plan(model: HybridAutomaton, sim: Simulator, window, opts: Options, rng):
     """The runs of the first round, ``(X, tau, signal, choice, n_structured, seeding)``: the
     structured initial states (with the structured signals of the time-varying inputs,
@@ -667,23 +685,11 @@ class MonteCarloBackend:
                                    f"ended the search")
             details["search_runs"] = int(sum(r[1].shape[0] for r in rounds[1:] if r[0] != "optimiser"))
             details["closest_depth"] = min(float(np.min(r[3].min_depth)) for r in rounds)
-            result = Result(NAME, model.name, prop.id, Status.UNKNOWN, details=details)
-            if found is not None:
-                k, i = found
-                label, Xk, tauk, _, sig, ch = rounds[k]
-                t = None if tauk is None or np.isnan(tauk[i]) else float(tauk[i])
-                if model.disturbance is None:
-                    branches = None if ch is None else Branches(values=ch[i:i + 1])
-                    rep = replay(model, prop, Xk[i], t, sim.dt, signal_record(model, sig, i), branches)
-                    if rep.violated:
-                        details["found_in"] = label
-                        result = Result(NAME, model.name, prop.id, Status.UNSAFE, details=details,
-                                        counterexample=rep.counterexample(model, prop, f"montecarlo/{label}"))
-                    else:
-                        details["note"] = "a sampled violation did not replay on its own"
-                else:
-                    details["note"] = ("violations were sampled under random disturbance; "
-                                       "a single run is not a replayable counterexample")
+            if found is not None and model.disturbance is not None:
+                details["note"] = ("violations were sampled under random disturbance; "
+                                   "a single run is not a replayable counterexample")
+                found = None
+            result = _verdict(model, prop, rounds, found, sim, details)
             result.seconds = shared + time.perf_counter() - begin
             result.sets = runs
             results.append(result)
@@ -806,18 +812,7 @@ class MonteCarloBackend:
             extrema = np.concatenate([r[3].extrema() for r in rounds])      # every round's runs
             if np.isfinite(extrema).any():
                 details["sampled_range"] = (float(np.nanmin(extrema)), float(np.nanmax(extrema)))
-            result = Result(NAME, model.name, prop.id, Status.UNKNOWN, details=details)
-            if found is not None:
-                k, i = found
-                label, Xk, _, _, sig, ch = rounds[k]
-                rep = replay(model, prop, Xk[i], None, sim.dt, signal_record(model, sig, i),
-                             None if ch is None else Branches(values=ch[i:i + 1]))
-                if rep.violated:
-                    details["found_in"] = label
-                    result = Result(NAME, model.name, prop.id, Status.UNSAFE, details=details,
-                                    counterexample=rep.counterexample(model, prop, f"montecarlo/{label}"))
-                else:
-                    details["note"] = "a sampled violation did not replay on its own"
+            result = _verdict(model, prop, rounds, found, sim, details)
             result.seconds = shared + time.perf_counter() - begin
             result.sets = runs
             results.append(result)
