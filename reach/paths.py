@@ -58,11 +58,16 @@ def read_text(path, suffixes: tuple[str, ...] | None = None, what: str = "file",
     data = read_bytes(path, suffixes, what, max_bytes)
     shown = printable(str(path))
     if b"\x00" in data:
-        raise InputError(f"contains NUL bytes: not a text {what}", shown)
+        raise InputError(f"contains NUL bytes: not a text {what}", shown, line=_line_of(data, data.index(b"\x00")))
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError as exc:
-        raise InputError(f"not UTF-8 text (byte {exc.start})", shown) from None
+        raise InputError(f"not UTF-8 text (byte {exc.start})", shown, line=_line_of(data, exc.start)) from None
+
+
+def _line_of(data: bytes, offset: int) -> int:
+    """The 1-based line holding byte ``offset`` of ``data``."""
+    return data.count(b"\n", 0, offset) + 1
 
 
 _UNSAFE_CHARS = re.compile(r"[^A-Za-z0-9._-]+")

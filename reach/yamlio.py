@@ -39,7 +39,9 @@ def _convert(node, loader, path, lines, file, budget):
         raise InputError(f"YAML tag '{printable(node.tag)}' is not allowed (plain data only)", file,
                          _field(path), node.start_mark.line + 1)
     if budget[0] > MAX_NODES:
-        raise InputError(f"more than {MAX_NODES} YAML nodes (aliases expanding?)", file)
+        top = path[:1]                          # the field the expansion sits under
+        raise InputError(f"more than {MAX_NODES} YAML nodes (aliases expanding?)", file, _field(top),
+                         lines.get(top, (file, node.start_mark.line + 1))[1])
     lines.setdefault(path, (file, node.start_mark.line + 1))
     if isinstance(node, yaml.MappingNode):
         out = {}

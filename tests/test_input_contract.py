@@ -165,3 +165,42 @@ def test_found_by_the_fuzzing_a_missing_template_is_reported_where_it_is_named(t
             load_model(path)
         except InputError as err:
             assert err.line == 2 and err.field == "extends" and err.file == str(path)
+
+
+def _expanding_aliases(levels: int = 9) -> str:
+    """A YAML 'billion laughs': each key lists the previous one nine times."""
+    text = "a: &a [1, 1, 1, 1, 1, 1, 1, 1, 1]\n"
+    for k in range(1, levels):
+        prev, name = chr(96 + k), chr(97 + k)
+        text += f"{name}: &{name} [" + ", ".join(f"*{prev}" for _ in range(9)) + "]\n"
+    return text
+
+
+@given(st.integers(0, 6), st.sampled_from([b"\x00", b"\xff\xfe", b"\xc3"]))
+@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+def test_a_file_that_is_not_text_is_refused_on_the_line_of_its_first_bad_byte(tmp_path, line, bad):
+    lines = [f"key{k}: {k}" for k in range(7)]
+    lines[line] = lines[line][:4] + bad.decode("latin-1") + lines[line][4:]
+    path = tmp_path / "m.yaml"
+    path.write_bytes("\n".join(lines).encode("latin-1") + b"\n")
+    try:
+        load_model(path)
+    except InputError as exc:
+        match = LOCATED.match(str(exc))
+        assert match and int(match["line"]) == line + 1, str(exc)
+    else:
+        raise AssertionError("a file with a NUL or invalid UTF-8 byte loaded")
+
+
+def test_expanding_aliases_are_refused_at_the_field_they_grow_under(tmp_path):
+    path = tmp_path / "m.yaml"
+    path.write_text("name: bomb\n" + _expanding_aliases())
+    try:
+        load_model(path)
+    except InputError as exc:
+        match = LOCATED.match(str(exc))
+        assert match, str(exc)
+        expanding = path.read_text().splitlines()[int(match["line"]) - 1]
+        assert "YAML nodes" in str(exc) and expanding.startswith(str(exc).split(": ")[1] + ":"), str(exc)
+    else:
+        raise AssertionError("an alias bomb loaded")

@@ -121,6 +121,23 @@ def test_gaussian_kicks_give_the_analytic_reach_probability(tmp_path):
     assert hi - lo == pytest.approx(2 * 1.96 * standard_error, rel=0.05)
 
 
+def test_pictured_runs_of_a_kicked_model_carry_its_kicks(tmp_path):
+    """The runs kept for pictures are drawn as the checked ones are, kicks included: a free
+    particle started at 0 and kicked by N(0, 0.25) at t = 0, ..., 9 ends at x ~ N(0, 2.5)."""
+    (tmp_path / "m.yaml").write_text(
+        "name: kicked\nstate: [x]\nmodes: {free: {flow: {x: 0}}}\ninitial: {mode: free, box: {x: 0}}\n"
+        "horizon: 10\ndisturbance: {gaussian: {cov: [[0.25]]}, enters: [x], step: 1}\n")
+    (tmp_path / "p.yaml").write_text(
+        "properties:\n  - id: wide\n    kind: safety\n    modes: [free]\n    require: [\"abs(x) <= 100\"]\n")
+    (r,) = check_files(tmp_path / "m.yaml", tmp_path / "p.yaml", "montecarlo",
+                       {"samples": 200, "keep_sets": True, "search_rounds": 0})
+    ends = np.array([p.points[-1, 0] for p in r.sets if p.kind == "run" and p.t1 >= 9.99])
+    assert ends.size >= 20
+    # the sample variance of n draws of N(0, 2.5): (n - 1) s^2 / 2.5 ~ chi2(n - 1)
+    low, high = stats.chi2.ppf([1e-4, 1 - 1e-4], ends.size - 1) * 2.5 / (ends.size - 1)
+    assert low < ends.var(ddof=1) < high
+
+
 def test_confidence_intervals():
     assert clopper_pearson_upper(0, 1000) == pytest.approx(1 - 0.05 ** (1 / 1000), rel=1e-9)
     lo, hi = wilson(640, 1000)

@@ -565,17 +565,19 @@ def run_plan(model: HybridAutomaton, sim: Simulator, window, opts: Options, rng)
 
 # ------------------------------------------------------------------ the back-end
 
-def sampled_runs(model: HybridAutomaton, sim: Simulator, X, tau, signal, choice, structured: int) -> list:
+def sampled_runs(model: HybridAutomaton, sim: Simulator, X, tau, signal, choice, structured: int,
+                 kicks=None) -> list:
     """``KEPT_RUNS`` of the planned runs (half from the ``structured`` first rows -- corners and
-    faces -- the rest i.i.d.) simulated again with their path recorded (disturbance-free: the
-    kicks of a stochastic model are left out), one :class:`~reach.result.SetPiece` of kind
-    ``run`` per stretch in one mode."""
+    faces -- the rest i.i.d.) simulated again with their path recorded, under disturbance kicks
+    drawn by ``kicks`` (as the checked runs are; fresh draws, so the pictured runs are samples
+    like them, not the same ones), one :class:`~reach.result.SetPiece` of kind ``run`` per
+    stretch in one mode."""
     from reach.result import SetPiece
 
     first = min(KEPT_RUNS // 2, structured)
     rows = np.r_[np.arange(first), np.arange(structured, min(X.shape[0], structured + KEPT_RUNS - first))]
     sub = None if signal is None else (signal[0], signal[1][rows], None if signal[2] is None else signal[2][rows])
-    traj = sim.run(X[rows], None if tau is None else tau[rows], record=True, signal=sub,
+    traj = sim.run(X[rows], None if tau is None else tau[rows], record=True, signal=sub, kicks=kicks,
                    branches=None if choice is None else Branches(values=choice[rows]))
     names, modes = tuple(model.state), list(model.modes)
     pieces = []
@@ -653,7 +655,9 @@ class MonteCarloBackend:
         monitors = [SafetyMonitor.merged(model, p, [q[0][i] for q in parts]) for i, p in enumerate(props)]
         blocked = sum(q[1] for q in parts)
         branching = choice is not None and sum(q[2] for q in parts) > 0    # a choice met, not only possible
-        runs = sampled_runs(model, sim, X, tau, signal, choice, n_structured) if opts.keep_sets else []
+        pictured_kicks = _kicks(model, np.random.default_rng(np.random.SeedSequence(opts.seed, spawn_key=(2 ** 32,))))
+        runs = (sampled_runs(model, sim, X, tau, signal, choice, n_structured, pictured_kicks)
+                if opts.keep_sets else [])
         shared = (time.perf_counter() - start) / len(props)
         results = []
         for prop, monitor in zip(props, monitors):
