@@ -15,7 +15,8 @@ hull: ``x = x0 + N z`` with ``E x0 = f`` and ``N`` an orthonormal basis of ``nul
 Time-varying inputs ``u(t) in [lo, hi]`` are sampled as piecewise-constant signals with pieces of
 length ``step``: constant at each corner of the input box, bang-bang signals (each piece at a
 random corner) and one-switch signals (a corner, then the opposite one from a piece start on)
-for the structured states, uniform pieces for the random ones.
+for the structured states, uniform pieces for the random ones; for a linear initial mode, also
+bang-bang signals aimed into the unsafe set by the maximum principle (:func:`extremal_runs`).
 
 Choices among transitions enabled at one jump (:class:`reach.model.simulate.Branches`): each
 structured run once per branch, taking the same branch at every jump, uniform choices for the
@@ -224,6 +225,124 @@ def structured_signals(model: HybridAutomaton, states: int, step: float, rng):
     owner = np.concatenate(owner)
     return (np.where(np.concatenate(picks) == 1, hi, lo), owner,
             np.arange(owner.size) >= owner.size - once_rows)
+
+
+EXTREMAL_PIECES = 1000    # pieces over the horizon of the extremal signals (extremal_runs)
+EXTREMAL_TARGETS = 48     # target instants per direction, besides the pieces' time windows (extremal_runs)
+EXTREMAL_DIRECTIONS = 8   # unsafe rows followed (extremal_runs)
+MAX_ROWS = 64             # unsafe rows weighed (extremal_runs)
+
+
+def extremal_runs(model: HybridAutomaton, prop, starts: np.ndarray, dt: float):
+    """Runs aimed into ``prop``'s unsafe set by the time-varying inputs (Pontryagin's maximum
+    principle for a linear flow), or None where the initial mode's flow is not linear or
+    ``prop`` has no linear unsafe piece there that the inputs move.
+
+    Write the initial mode's flow as ``x' = A x + b + B u`` (``B`` the columns of the varying
+    inputs, which the model carries as states of flow 0). For a row ``h x <= g`` of an unsafe
+    piece, a run gets deepest along ``c = -h`` at an instant ``T`` by maximising
+    ``c^T x(T) = c^T e^{A T} x0 + int_0^T c^T e^{A (T - s)} (b + B u(s)) ds``: the initial
+    state the corner of the initial box (of a polytope: the start among ``starts``, its
+    structured states, vertices first) with the largest ``c^T e^{A T} x0``, and per input ``u_i`` at its upper end on a piece where the
+    piece's share of the integral, ``int c^T e^{A (T - s)} B_i ds``, is positive, at its lower
+    end elsewhere: the best signal constant on pieces ``[k h, (k + 1) h)``. With ``T = J h +
+    d`` the share of a whole piece ``k < J`` is ``c^T e^{A d} Phi^(J - 1 - k) W_h`` and that of
+    the piece holding ``T`` is ``c^T W_d`` (``Phi = e^{A h}``, ``W_d = int_0^d e^{A r} dr B``,
+    both from one exponential of ``[[A, B], [0, 0]]``). ``h`` cuts the horizon into about
+    ``EXTREMAL_PIECES`` pieces (a multiple of ``dt``); ``T`` runs over ``EXTREMAL_TARGETS``
+    piece ends, the horizon, and the ends of the time window a global clock's rows give the
+    piece (an instant ``t == 20`` is one target); ``c`` runs over the rows (at most
+    ``EXTREMAL_DIRECTIONS``, those the inputs move most over the horizon). After ``T`` the
+    input is held. Jumps are not followed: past one the run is a guess like any sampled one,
+    and only its replay decides.
+
+    Returns ``(owners (R,), states (R, n), step h, values (R, K, m))``, ``owners`` the row of
+    ``starts`` whose switch time and choices a run takes (the start itself for a polytope)."""
+    U = model.varying_inputs
+    linear = model.modes[model.initial.mode].linear
+    pieces_hs = prop.halfspace_pieces(model.initial.mode) if hasattr(prop, "halfspace_pieces") else None
+    if not U or linear is None or not pieces_hs:
+        return None
+    A, _ = linear
+    inputs = [u.index for u in U]
+    B = A[:, inputs].copy()
+    A = A.copy()
+    A[:, inputs] = 0.0
+    n, m = B.shape
+    augmented = np.zeros((n + m, n + m))
+    augmented[:n, :n], augmented[:n, n:] = A, B
+
+    def flow_over(d: float):                    # (e^{A d}, W_d)
+        E = scipy.linalg.expm(augmented * d)
+        return E[:n, :n], E[:n, n:]
+
+    h = dt * max(1, int(round(model.horizon / EXTREMAL_PIECES / dt)))
+    K = pieces(model, h)
+    Phi, W = flow_over(h)
+
+    def backward(c, count: int) -> np.ndarray:  # c^T Phi^j, j < count, inputs' own coordinates dropped
+        out = np.empty((count, n))
+        out[0] = c
+        for j in range(1, count):
+            out[j] = out[j - 1] @ Phi
+        out[:, inputs] = 0.0
+        return out
+
+    directions = []                             # (c, the piece's time window)
+    for H, g in pieces_hs:
+        window = _clock_window(model, H, g)
+        directions += [(-row, window) for row in H]
+    directions = directions[:MAX_ROWS]
+    backs = [backward(c, K) for c, _ in directions]
+    moved = np.array([np.abs(back @ W).sum() for back in backs])    # the inputs' reach along c
+    if not moved.max(initial=0.0) > 0:
+        return None
+    order = np.argsort(-moved, kind="stable")
+    order = order[moved[order] > TOL * moved.max()][:EXTREMAL_DIRECTIONS]
+    lo, hi = _input_box(model)
+    grid = h * np.unique(np.linspace(1, K - 1, EXTREMAL_TARGETS).round())
+    box = (model.initial.low, model.initial.high) if model.initial.is_box else None
+    owners, states, signals = [], [], []
+    for r in order:
+        c, (first, last) = directions[r]
+        instants = np.unique(np.r_[grid, model.horizon, first, last].clip(h * 1e-6, model.horizon))
+        instants = instants[(instants >= first - 1e-9 * h) & (instants <= last + 1e-9 * h)]
+        for T in instants:
+            J = min(int(np.floor(T / h + 1e-9)), K - 1)
+            d = max(T - J * h, 0.0)
+            if d <= 1e-9 * h:                   # a piece end
+                d, back = 0.0, backs[r]
+                share = back[J - 1::-1] @ W if J else np.zeros((0, m))
+                toward = back[J]
+            else:
+                E_d, W_d = flow_over(d)
+                back = backward(c @ E_d, J + 1)
+                share = np.concatenate([back[J - 1::-1] @ W if J else np.zeros((0, m)), [c @ W_d]])
+                toward = back[J]
+            values = np.where(share > 0, hi, lo)
+            signals.append(np.concatenate([values, np.repeat(values[-1:], K - values.shape[0], axis=0)]))
+            owner = int(np.argmax(starts @ toward))               # largest c^T e^{A T} x0
+            owners.append(owner)
+            states.append(starts[owner] if box is None else np.where(toward > 0, box[1], box[0]))
+    return np.array(owners), np.array(states), h, np.stack(signals)
+
+
+def _clock_window(model: HybridAutomaton, H: np.ndarray, g: np.ndarray) -> tuple[float, float]:
+    """``[first, last]``: the instants a piece ``H x <= g`` allows by its rows on the global clock
+    alone (the whole horizon if the model has none)."""
+    first, last = 0.0, float(model.horizon)
+    clock = model.global_clock
+    if clock is None:
+        return first, last
+    for row, bound in zip(H, g):
+        a = row[clock]
+        if a == 0 or np.any(np.delete(row, clock)):
+            continue
+        if a > 0:
+            last = min(last, bound / a)
+        else:
+            first = max(first, bound / a)
+    return first, last
 
 
 # ---------------------------------------------------------------- branches

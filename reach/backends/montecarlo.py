@@ -16,7 +16,10 @@ A polytopic initial set is sampled by its vertices, facet points and centre (str
 uniformly by hit-and-run (random); time-varying bounded inputs are piecewise-constant signals
 with pieces of ``input_step`` (default horizon / 20): constant extremes and bang-bang signals
 in the structured round, uniform pieces in the random one, perturbed by the search
-(:mod:`reach.backends.initial_sampling`). May-transitions with general guards are taken where a
+(:mod:`reach.backends.initial_sampling`); where the sampled runs of a safety property find no
+violation and the initial mode is linear, a round of bang-bang signals on finer pieces aimed
+into the unsafe set by the maximum principle
+(:func:`reach.backends.initial_sampling.extremal_runs`) comes before the search. May-transitions with general guards are taken where a
 run would leave its invariant, and, in the random and search rounds, also at piece starts
 where the run's switching signal says so and a guard holds (each with probability
 ``SWITCH_PROBABILITY``). A counterexample carries its input and switching signal.
@@ -64,8 +67,8 @@ import numpy as np
 
 from reach.backends.event_sampling import EventMonitor, event_details, replay_event
 from reach.backends.falsify import Budget, falsify
-from reach.backends.initial_sampling import (PolytopeSampler, branch_plan, input_signals, input_step,
-                                             structured_signals)
+from reach.backends.initial_sampling import (PolytopeSampler, branch_plan, extremal_runs, input_signals,
+                                             input_step, structured_signals)
 from reach.backends.options import parse_options, ranged
 from reach.errors import InputError
 from reach.model.automaton import HybridAutomaton
@@ -677,6 +680,10 @@ class MonteCarloBackend:
             found = monitor.first_violation()
             found = None if found is None else (0, found)
             monitors_of = partial(SafetyMonitor, model, prop)
+            closest = float(np.min(monitor.min_depth))
+            if found is None and model.disturbance is None:
+                found, depth = self._extremal(model, prop, sim, rounds, n_structured, monitors_of)
+                closest = min(closest, depth)
             if found is None and model.disturbance is None:
                 found = self._search(model, window, sim, rounds, opts, rng, branching, deadline, monitors_of,
                                      seeding)
@@ -687,8 +694,8 @@ class MonteCarloBackend:
             if found is None and time.perf_counter() > deadline and "note" not in details:
                 details["note"] = (f"time budget of {opts.max_seconds:.3g} s (option max_seconds) "
                                    f"ended the search")
-            details["search_runs"] = int(sum(r[1].shape[0] for r in rounds[1:] if r[0] != "optimiser"))
-            details["closest_depth"] = min(float(np.min(r[3].min_depth)) for r in rounds)
+            details["search_runs"] = int(sum(r[1].shape[0] for r in rounds[1:] if r[0].startswith("search")))
+            details["closest_depth"] = min([closest] + [float(np.min(r[3].min_depth)) for r in rounds])
             if found is not None and model.disturbance is not None:
                 details["note"] = ("violations were sampled under random disturbance; "
                                    "a single run is not a replayable counterexample")
@@ -698,6 +705,28 @@ class MonteCarloBackend:
             result.sets = runs
             results.append(result)
         return results
+
+    def _extremal(self, model, prop, sim, rounds, structured: int, monitors_of):
+        """The runs aimed into ``prop``'s unsafe set by the inputs
+        (:func:`.initial_sampling.extremal_runs`) from the first round's structured starts, a
+        round of their own (their pieces are finer than the sampled signals'): ``((round, row),
+        depth)`` with the round appended when one violates, else ``(None, closest depth)``."""
+        _, X, tau, _, signal, choice = rounds[0]
+        plan = extremal_runs(model, prop, X[:structured], sim.dt)
+        if plan is None:
+            return None, math.inf
+        owner, Xe, step, values = plan
+        switch = None if signal[2] is None else np.zeros(values.shape[:2], dtype=bool)
+        taue = None if tau is None else tau[owner]
+        choicee = None if choice is None else choice[owner]
+        monitor = monitors_of(Xe.shape[0])
+        sim.run(Xe, taue, observers=[monitor], signal=(step, values, switch),
+                branches=None if choicee is None else Branches(values=choicee))
+        i = monitor.first_violation()
+        if i is None:
+            return None, float(np.min(monitor.min_depth))
+        rounds.append(("extremal inputs", Xe, taue, monitor, (step, values, switch), choicee))
+        return (len(rounds) - 1, i), float(np.min(monitor.min_depth))
 
     def _search(self, model, window, sim, rounds, opts: Options, rng, branching: bool, deadline: float,
                 monitors_of, seeding: np.ndarray):
