@@ -30,25 +30,30 @@ class Status(str, Enum):
 #: states of a counterexample's trajectory kept for pictures, at most (:func:`thinned`): a run of
 #: 600 s at a step of 0.0026 s wrote a 38 MB file, past what a replay reads
 MAX_TRAJECTORY_POINTS = 4000
+MAX_TRAJECTORY_VALUES = 120_000     # numbers in a trajectory: a file of a few MB, under replay's read limit
 
 
 def thinned(trajectory: dict, violation_time: float) -> dict:
-    """The trajectory ``{"t", "mode", "x"}`` with at most :data:`MAX_TRAJECTORY_POINTS` states:
-    the first and last, those on each side of a mode change, the one nearest the violation
-    and evenly spaced others. It draws the run; the replay simulates it again from the
-    initial state, the signal and the transitions."""
+    """The trajectory ``{"t", "mode", "x"}`` with at most :data:`MAX_TRAJECTORY_POINTS` states,
+    fewer for a wide state (at most :data:`MAX_TRAJECTORY_VALUES` numbers, at least 100
+    states): the first and last, those on each side of a mode change, the one nearest the
+    violation and evenly spaced others. It draws the run; the replay simulates it again from
+    the initial state, the signal and the transitions."""
     t = trajectory.get("t") if isinstance(trajectory, dict) else None
-    if not isinstance(t, list) or len(t) <= MAX_TRAJECTORY_POINTS:
+    x = trajectory.get("x") if isinstance(trajectory, dict) else None
+    width = 2 + (len(x[0]) if isinstance(x, list) and x and isinstance(x[0], list) else 0)
+    limit = min(MAX_TRAJECTORY_POINTS, max(100, MAX_TRAJECTORY_VALUES // width))
+    if not isinstance(t, list) or len(t) <= limit:
         return trajectory
     count = len(t)
     modes = trajectory.get("mode") or [""] * count
     near = min(range(count), key=lambda k: abs(t[k] - violation_time)) if _finite(violation_time) else 0
     changes = np.array(sorted({j for k in range(1, count) if modes[k] != modes[k - 1] for j in (k - 1, k)}), int)
-    half = MAX_TRAJECTORY_POINTS // 2
+    half = limit // 2
     if changes.size > half:                  # many jumps: an even share of them
         changes = changes[np.linspace(0, changes.size - 1, half).round().astype(int)]
     keep = {0, count - 1, near} | set(changes.tolist())
-    spread = np.linspace(0, count - 1, MAX_TRAJECTORY_POINTS - len(keep)).round().astype(int)
+    spread = np.linspace(0, count - 1, max(0, limit - len(keep))).round().astype(int)
     rows = sorted(keep | set(spread.tolist()))
     return {key: [value[k] for k in rows] if isinstance(value, list) and len(value) == count else value
             for key, value in trajectory.items()}

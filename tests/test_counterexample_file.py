@@ -49,3 +49,22 @@ def test_a_long_fine_run_writes_a_file_replay_reads(tmp_path):
     again = Counterexample.load(path)
     assert MAX_TRAJECTORY_POINTS // 2 < len(again.trajectory["t"]) <= MAX_TRAJECTORY_POINTS
     assert again.trajectory["t"][0] == 0.0 and again.trajectory["t"][-1] == 600.0
+
+
+@given(width=st.integers(1, 1000))
+@settings(max_examples=15, deadline=None)
+def test_a_wide_state_is_thinned_to_a_file_replay_reads(tmp_path_factory, width):
+    """A run of 5000 states of ``width`` numbers each with 17 significant digits (as a 270-state
+    ISS run writes them): the file stays under the 5 MB ``reach replay`` reads, with at least
+    100 states kept."""
+    from reach.paths import MAX_BYTES
+    count = 5000
+    rng = np.random.default_rng(width)
+    traj = {"t": np.linspace(0.0, 20.0, count).tolist(), "mode": ["m"] * count,
+            "x": (rng.standard_normal((count, width)) * 1e-4).tolist()}
+    cex = Counterexample("m", "p", "m.yaml", "p.yaml", [0.0] * width, None, 19.0, "m", [0.0] * width, 0.004, traj)
+    path = tmp_path_factory.mktemp("cex") / "cex.json"
+    cex.save(path)
+    assert path.stat().st_size < MAX_BYTES
+    again = Counterexample.load(path)
+    assert 100 <= len(again.trajectory["t"]) <= MAX_TRAJECTORY_POINTS

@@ -102,3 +102,20 @@ def test_signal_pieces_keep_the_replay_grid_bounded():
                       np.array([1.0]))
     step, values = extremal_signal(flow, np.array([1.0, 0.0]), 2 * np.pi, [-1.0], [1.0], pieces)
     assert _run(step, values, 2 * np.pi) > 3.9
+
+
+@pytest.mark.parametrize("bound, status", [(-0.01, Status.SAFE), (0.5, Status.UNSAFE)])
+def test_a_witness_at_the_first_instant_is_no_bad_input(tmp_path, bound, status):
+    """y - 2 x = int_0^t (u - 1) ds >= 0 for u in [1, 2]: a bound below 0 holds, one above 0
+    fails from the start (t = 0 itself). The closest approach of the first is at t = 0, where an
+    extremal signal would aim at an instant of 1e-8 (a 5e9-piece signal); such a candidate is
+    no replay at all, not a bad input, and the answer stands on its own."""
+    from reach.checking import check_files
+    (tmp_path / "m.yaml").write_text(
+        "name: havoc\nstate: [x, y]\nbounded_inputs:\n  u: {range: [1, 2], varying: true}\n"
+        "modes:\n  running: {flow: {x: 1, y: \"1 + u\"}, invariant: [\"x <= 5\"]}\n"
+        "initial: {mode: running, box: {x: 0, y: 0}}\nhorizon: 20\n")
+    (tmp_path / "p.yaml").write_text(
+        f"properties:\n  - {{id: above, kind: safety, require: [\"y - 2*x >= {bound}\"]}}\n")
+    (result,) = check_files(tmp_path / "m.yaml", tmp_path / "p.yaml", "star")
+    assert result.status is status

@@ -183,3 +183,22 @@ def test_sweeps_cut_short_by_the_budget_name_it(tmp_path, monkeypatch):
     assert sum("time budget of 50 s" in why for why in reasons) == 1
     assert result.status is Status.UNKNOWN
     assert "(time budget of 50 s (option max_seconds) exhausted" in result.details["note"]
+
+
+def test_a_clockless_model_that_switches_back_into_the_property_mode_gets_a_clock(tmp_path):
+    """A bouncing ball of one mode (a self-loop with an affine reset) and no clock state: events
+    after the bounce need elapsed time, which taylor adds itself, so the event property and a
+    safety property of that mode are checked (not an internal error). Their apex: h0 + v0^2 / (2 g)
+    = 1.2 + 0.04 / 19.62 at the box's top corner, inside the estimated bound."""
+    from reach.checking import check_files
+    (tmp_path / "m.yaml").write_text(
+        "name: ball\nstate: [h, v]\nmodes:\n  fall: {flow: {h: v, v: -9.81}, invariant: [\"h >= 0\"]}\n"
+        "transitions:\n  - {from: fall, to: fall, guard: [\"h <= 0\", \"v <= 0\"], urgent: true, "
+        "reset: {v: \"-0.8*v + 0.5\"}}\n"
+        "initial: {mode: fall, box: {h: [1, 1.2], v: [0, 0.2]}}\nhorizon: 4\n")
+    (tmp_path / "p.yaml").write_text(
+        "properties:\n  - {id: apex, kind: event, modes: [fall], maximize: h, require: \"<= 1.3\"}\n"
+        "  - {id: low, kind: safety, modes: [fall], require: [\"h <= 1.2015\"]}\n")
+    apex, low = check_files(tmp_path / "m.yaml", tmp_path / "p.yaml", "taylor")
+    assert apex.status is Status.UNKNOWN and apex.bound[0] <= 1.2 + 0.04 / 19.62 <= apex.bound[1] + 1e-6
+    assert low.status is Status.UNSAFE

@@ -36,7 +36,7 @@ from reach.errors import InputError
 from reach.model.automaton import HybridAutomaton, LinearSet
 
 MAX_SUBSETS = 4000
-MAX_PIECES = 100_000
+MAX_PIECES = 10_000     # pieces of a sampled input signal over the horizon (each run holds them all)
 TOL = 1e-9
 SWITCH_SIGNAL_RUNS = 2000   # one-switch input signals of the structured round, about (structured_signals)
 CHOICE_SLOTS = 8        # choice values per run where transitions may be enabled together (Branches)
@@ -173,6 +173,9 @@ def _unique(Z: np.ndarray) -> np.ndarray:
 
 def input_step(model: HybridAutomaton, dt: float, step: float | None) -> float:
     """The signals' piece length: ``step`` (default horizon / 20) as a multiple of ``dt``."""
+    if step is not None and float(step) < dt * (1 - 1e-9):
+        raise InputError(f"input_step {float(step):g} is shorter than the simulation step {dt:g} "
+                         "(a piece lasts at least one step; -o dt sets that)", field="--option input_step")
     step = model.horizon / 20.0 if step is None else float(step)
     step = dt * max(1, int(round(step / dt)))
     if model.horizon / step > MAX_PIECES:
@@ -293,12 +296,18 @@ def extremal_runs(model: HybridAutomaton, prop, starts: np.ndarray, dt: float):
         window = _clock_window(model, H, g)
         directions += [(-row, window) for row in H]
     directions = directions[:MAX_ROWS]
-    backs = [backward(c, K) for c, _ in directions]
-    moved = np.array([np.abs(back @ W).sum() for back in backs])    # the inputs' reach along c
+    moved = np.zeros(len(directions))           # the inputs' reach along each c over the horizon
+    rows = np.array([c for c, _ in directions])
+    W_own = W.copy()
+    W_own[inputs] = 0.0
+    for _ in range(K):                          # all rows at once, nothing kept
+        moved += np.abs(rows @ W_own).sum(axis=1)
+        rows = rows @ Phi
     if not moved.max(initial=0.0) > 0:
         return None
     order = np.argsort(-moved, kind="stable")
     order = order[moved[order] > TOL * moved.max()][:EXTREMAL_DIRECTIONS]
+    backs = {r: backward(directions[r][0], K) for r in order}
     lo, hi = _input_box(model)
     grid = h * np.unique(np.linspace(1, K - 1, EXTREMAL_TARGETS).round())
     box = (model.initial.low, model.initial.high) if model.initial.is_box else None

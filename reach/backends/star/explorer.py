@@ -23,6 +23,7 @@ from reach.backends.star.transitions import (_LinearModel, _modes_leading_to, _P
                                              _unsafe_pieces, kept_rows, misses)
 from reach.backends.star.witnesses import _Witness, extremal_signal, nearest_point, signal_pieces, trace
 from reach.memory import physical_bytes, resident_bytes
+from reach.errors import InputError
 from reach.result import Status
 from reach.sets import Box, Star
 
@@ -156,7 +157,6 @@ class _Explorer:
         self.horizon = float(model.horizon)
         self.h = float(options.step) if options.step else self.horizon / 60.0
         if self.horizon / self.h > MAX_CELLS:
-            from reach.errors import InputError
             raise InputError(f"{model.name}: horizon {self.horizon:g} / step {self.h:g} = {self.horizon / self.h:.3g} "
                              f"cells; at most {MAX_CELLS:.0e} (use a larger step)", field="options.star.step")
         self.flows, self.invariants, self.jumps = dict(data.flows), data.invariants, data.fired
@@ -1111,8 +1111,12 @@ class _Explorer:
         from reach.backends.montecarlo import replay
         from reach.model.simulate import Branches
         self.stats.replays += 1
-        run = replay(self.model, self.prop, x0, switch, dt or self.opt.replay_dt, signal,
-                     Branches(prescribed=[transitions]))
+        try:
+            run = replay(self.model, self.prop, x0, switch, dt or self.opt.replay_dt, signal,
+                         Branches(prescribed=[transitions]))
+        except InputError as exc:       # a candidate the simulator cannot take: no replay, not bad input
+            self.replayed.append({"initial_state": x0.tolist(), "switch_time": switch, "refused": exc.message})
+            return
         self.replayed.append({"initial_state": x0.tolist(), "switch_time": switch,
                               "input_signal": None if signal is None else f"{len(signal['values'])} pieces",
                               "violated": bool(run.violated)})
@@ -1161,10 +1165,10 @@ class _Explorer:
             alpha = late.x
         aimed = _Witness(witness.mode, witness.piece, witness.depth, alpha, seg.point(alpha), witness.path)
         t = float(aimed.state[self.clock])
-        if not t > 0:
+        base = self._replay_step()
+        if not t >= base:               # within the first replay step: the held inputs' replay covers it
             return None
         x0, switch, transitions = self.initial_point(aimed)
-        base = self._replay_step()
         step, values = extremal_signal(flow, -piece.H[r], t, [u.low for u in self.data.varying],
                                        [u.high for u in self.data.varying], signal_pieces(t, base))
         signal = {"step": step, "inputs": [u.name for u in self.data.varying], "values": values.tolist()}

@@ -113,10 +113,11 @@ class Options:
 
 
 def _clocked(model, prop: BoundEvent):
-    """``model`` and ``prop`` with a global clock when an event past the initial mode needs one
-    (the horizon is the event ``t = T`` on it): the model's own, else a state ``_time`` added
-    (rate 1 everywhere, 0 initially, never reset; :meth:`HybridAutomaton.with_global_clock`)."""
-    if prop.modes == [model.initial.mode] or global_clock(model) is not None:
+    """``model`` and ``prop`` with a global clock when an event after a mode switch may need one
+    (the horizon is the event ``t = T`` on it; a switch may lead back into the initial mode):
+    the model's own, else a state ``_time`` added (rate 1 everywhere, 0 initially, never reset;
+    :meth:`HybridAutomaton.with_global_clock`)."""
+    if not model.transitions or global_clock(model) is not None:
         return model, prop
     clocked, _ = model.with_global_clock()
     return clocked, replace(prop, symbols=clocked.symbols)
