@@ -136,6 +136,26 @@ class _Stats:
     instants: int = 0               # jumps taken at one instant (see _at_instant)
 
 
+def _urgent_keeps(model, data) -> dict[str, list]:
+    """Per mode, rows ``a x <= b`` that a run keeps while it flows there because an urgent
+    transition (no window) would otherwise have been taken: for a guard of one row
+    ``h x <= c``, ``-h x <= -c`` (a run that enters with ``h x >= c`` leaves the instant
+    ``h x = c``); for an equality ``h x == c``, each side (a run cannot cross it). A guard of
+    several rows is left out (the states outside it are no convex set)."""
+    urgent = {tr.name for tr in model.transitions if tr.urgent and tr.window is None}
+    out: dict[str, list] = {}
+    for mode, jumps in data.jumps.items():
+        for jump in jumps:
+            if jump is None or jump.name not in urgent:
+                continue
+            H, g = jump.H, jump.g
+            if H.shape[0] == 1:
+                out.setdefault(mode, []).append((-H[0], -g[0]))
+            elif H.shape[0] == 2 and np.allclose(H[0], -H[1]) and abs(g[0] + g[1]) <= 1e-12 * (1 + abs(g[0])):
+                out.setdefault(mode, []).extend([(-H[0], -g[0]), (-H[1], -g[1])])
+    return out
+
+
 class _Explorer:
     """One check of one safety property on one linear hybrid automaton."""
 
@@ -172,6 +192,8 @@ class _Explorer:
         self._leading: dict[str, set[str]] = {}
         self._initial_sampler = None            # a polytopic initial set's (_inside_initial)
         self._may = {tr.name for tr in model.transitions if not tr.urgent and tr.window is None}
+        self._keeps = _urgent_keeps(model, data)  # per mode, see _flow_invariant
+        self._kept: dict[str, list] = {}          # per mode, the keeps of the chains under way
         self.cancel = threading.Event()         # set by the caller that stopped waiting (reach.deep)
         self.deadline = np.inf if options.max_seconds is None else time.perf_counter() + options.max_seconds
         self.pieces = {mode: [_Piece(data.widen(p.H, p.g)[0], p.g, p.strict, p.label) for p in pieces]
@@ -265,6 +287,36 @@ class _Explorer:
         if self.linearise is not None and mode in self.linearise.curved:
             self.linearise.chain(self, mode, star, path, guess, direction)
             return
+        self._kept.setdefault(mode, []).append(self._keeps_of(mode, star))
+        try:
+            self._chain_blocks(mode, star, path, guess, direction)
+        finally:
+            self._kept[mode].pop()
+
+    def _keeps_of(self, mode: str, star: Star):
+        """The rows ``a x <= b`` of :func:`_urgent_keeps` that every state of the entry ``star``
+        meets (its depth into ``a x >= b`` at most 0, a weak-duality bound: no state is
+        strictly inside the urgent guard, so none leaves at once), as ``(H, g)`` or None.
+        Every run from ``star`` then meets them as long as it stays in ``mode``: it leaves the
+        instant it reaches the guard."""
+        rows = [(a, b) for a, b in self._keeps.get(mode, ())
+                if star.box.bounded and star.depth(-a[None], np.array([-b]))[0] <= 0.0]
+        if not rows:
+            return None
+        return np.array([a for a, _ in rows]), np.array([b for _, b in rows])
+
+    def _flow_invariant(self, mode: str):
+        """``(H, g)``: the invariant of ``mode`` and the urgency rows the chain under way keeps
+        (:meth:`_keeps_of`), which cut its grid stars and segments (not its entry star, whose
+        states inside a guard jump at once)."""
+        Hi, gi = self.invariants[mode]
+        kept = self._kept.get(mode)
+        if not kept or kept[-1] is None:
+            return Hi, gi
+        return np.vstack([Hi, kept[-1][0]]), np.concatenate([gi, kept[-1][1]])
+
+    def _chain_blocks(self, mode: str, star: Star, path: _Path, guess=None, direction=None):
+        """:meth:`_chain` of a mode with a linear flow."""
         cells = self._rebase_cells(mode)
         fit = self._cells_in_memory(mode, star)
         if cells is None and fit is None:
@@ -410,7 +462,7 @@ class _Explorer:
         if inputs is not None and inputs.count:
             bases[:, :, -inputs.count:] += inputs.columns
         box = star.box
-        Hi, gi = self.invariants[mode]
+        Hi, gi = self._flow_invariant(mode)
 
         # invariant: the first grid star entirely outside ends the chain; rows that are not
         # implied by the coefficient box join the predicate exactly, step by step. With
@@ -771,8 +823,8 @@ class _Explorer:
     def _segment(self, mode: str, start: Star, h: float, spread=None, directed=None) -> tuple[Star, np.ndarray]:
         """``(segment, error)`` of the cell of length ``h`` starting at ``start``; ``spread``:
         the bound of the input effect on the cell (added as a box met by the rows ``directed``,
-        :func:`.flowpipe._plus_box`, then the invariant)."""
-        Hi, gi = self.invariants[mode]
+        :func:`.flowpipe._plus_box`, then the invariant, :meth:`_flow_invariant`)."""
+        Hi, gi = self._flow_invariant(mode)
         if self.opt.discrete_time:
             if spread is None:
                 return start, np.zeros(self.n)
@@ -827,7 +879,7 @@ class _Explorer:
             self._cell(mode, start, half, path, depth + 1, point, pending, first, since, carried,
                        self._half_directed(mode, directed, since, half, carried))
             mid = start.affine_map(*self.flows[mode].step(half))
-            Hi, gi = self.invariants[mode]       # relaxed by the input effect, as on the grid
+            Hi, gi = self._flow_invariant(mode)  # relaxed by the input effect, as on the grid
             mid = mid.intersect_halfspaces(Hi, gi if first is None else gi + np.abs(Hi) @ first)
             mid, mid_point = self._start(mid, point)
             if mid is not None:
