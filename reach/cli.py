@@ -177,8 +177,10 @@ def cmd_import(args) -> int:
 
 
 def _import_findings(docs) -> list[str]:
-    """What the SpaceEx import noticed about the network (labels that block transitions)."""
-    return [f"{docs.model['notes']['source']}: {line}" for line in docs.model["notes"].get("blocked", [])]
+    """What the SpaceEx import noticed: labels that block transitions, initial constraints it
+    ignored."""
+    notes = docs.model["notes"]
+    return [f"{notes['source']}: {line}" for line in notes.get("blocked", [])] + list(notes.get("ignored", []))
 
 
 def _writable(path: Path, option: str) -> None:

@@ -601,6 +601,7 @@ class DocumentBuilder(Converter):
             data["modes"][m] = spec
         self.transitions_out = self.transitions_doc()
         self.extra_modes: dict = {}
+        self.ignored: list[str] = []
         data["initial"] = self.initial_doc(init_atoms)
         data["modes"].update(self.extra_modes)
         data["transitions"] = self.transitions_out
@@ -616,6 +617,8 @@ class DocumentBuilder(Converter):
         blocked = blocked_labels(self.flat)
         if blocked:
             notes["blocked"] = blocked
+        if self.ignored:
+            notes["ignored"] = list(self.ignored)
         data["notes"] = notes
         props, plines, pid = self.forbidden_doc()
         return Documents(data, lines, props, plines, pid)
@@ -728,6 +731,26 @@ class DocumentBuilder(Converter):
         return self.relation_texts(Relation(parts, rel.ops), key, self.cfg.line(where_key))
 
 
+    def _initial_texts(self, atoms, key) -> list:
+        """The texts of the cfg's initial relations in location ``key``, without those on
+        time-varying inputs alone (``u == 0``: a value at one instant changes no run, since the
+        input is any signal in its range), which are noted (``notes.ignored``)."""
+        varying = {self.yaml[v] for v, (_, _, vary) in self.inputs.items() if vary}
+        texts = []
+        for a in (a for a in atoms if isinstance(a, Relation)):
+            own = self.cfg_relation(a, key, "initially")
+            names = {n for _, t in own for n in re.findall(r"(?<![\w.])[A-Za-z_][\w.]*", t)}
+            if names and names <= varying:
+                note = (f"{self.cfg.file}:{self.cfg.line('initially')}: initially: "
+                        f"'{' and '.join(t for _, t in own)}' ignored: {', '.join(sorted(names))} "
+                        "is a time-varying input, any signal in its range (its value at one instant "
+                        "changes no run)")
+                if note not in self.ignored:
+                    self.ignored.append(note)
+                continue
+            texts += own
+        return texts
+
     def _no_input_in_initially(self, texts) -> None:
         """A time-varying input (a real with no flow, bounded by invariants) takes any value in
         its range at every instant: an initial constraint on it is refused at the cfg's line."""
@@ -757,7 +780,7 @@ class DocumentBuilder(Converter):
         table = {s.name: s for s in symbols}
         choice, feasible_alone = [], False
         for key in candidates:
-            texts = [t for a in atoms if isinstance(a, Relation) for t in self.cfg_relation(a, key, "initially")]
+            texts = self._initial_texts(atoms, key)
             self._no_input_in_initially(texts)
             alone = linear_rows([(k, _difference(t, k)) for k, t in texts], table, symbols)
             feasible_alone = feasible_alone or alone is None or feasible(alone, len(symbols))
@@ -789,9 +812,7 @@ class DocumentBuilder(Converter):
         self.extra_modes[start] = {"flow": False}
         self.lines[("modes", start)] = (self.cfg.file, self.cfg.line("initially"))
         texts = []
-        for a in atoms:
-            if isinstance(a, Relation):
-                texts += self.cfg_relation(a, choice[0][0], "initially")
+        texts += self._initial_texts(atoms, choice[0][0])
         names = Identifiers(self.transitions_out)
         # a simulator takes the first enabled urgent jump: locations where time passes first
         for key, _ in sorted(choice, key=lambda c: c[0] in self.timeless):
