@@ -227,3 +227,24 @@ def test_a_counter_through_a_mode_where_no_time_passes_is_caught_and_replays(tmp
     assert abs(cex.violation_time - 5.0) < 1e-6 and cex.violation_state[0] == 6.0
     prop = bind(load_properties(tmp_path / "p.yaml")[0], load_model(tmp_path / "counter.yaml"))
     assert replay(load_model(tmp_path / "counter.yaml"), prop, cex.initial_state, cex.switch_time, cex.dt).violated
+
+
+def test_the_earliest_may_switch_is_a_structured_run(tmp_path):
+    """x' = 1 from 0, a may-switch anywhere in x in [1, 3] to a mode where y' = 1 + u, u in
+    [-0.5, 0.5]: y(4) is largest, 0.5 + 3 * 1.5 = 5, switching at t = 1 with u = 0.5 throughout.
+    The structured runs that leave at the first piece start a guard holds (t = 1, where x' = 1's
+    exponential gives x = 1 up to rounding) find y <= 4.99 violated; the counterexample replays."""
+    (tmp_path / "m.yaml").write_text(
+        "name: may\nstate: [x, y]\nbounded_inputs:\n  u: {range: [-0.5, 0.5], varying: true}\n"
+        "modes:\n  a: {flow: {x: 1, y: u}, invariant: [\"x <= 3\"]}\n  b: {flow: {x: 0, y: \"1 + u\"}}\n"
+        "transitions:\n  - {from: a, to: b, guard: [\"x >= 1\"]}\n"
+        "initial: {mode: a, box: {x: 0, y: 0}}\nhorizon: 4\n")
+    (tmp_path / "p.yaml").write_text("properties:\n  - {id: y_bad, kind: safety, require: [\"y <= 4.99\"]}\n")
+    (r,) = check_files(tmp_path / "m.yaml", tmp_path / "p.yaml", "montecarlo",
+                       {"samples": 200, "search_rounds": 0, "optimise": False})
+    assert r.status == Status.UNSAFE and r.counterexample.violation_mode == "b"
+    cex = r.counterexample
+    model = load_model(tmp_path / "m.yaml")
+    prop = bind(load_properties(tmp_path / "p.yaml")[0], model)
+    again = replay(model, prop, cex.initial_state, None, cex.dt, cex.input_signal)
+    assert again.violated and 4.99 < again.state[1] <= 5.0 + 1e-9

@@ -529,8 +529,9 @@ def run_plan(model: HybridAutomaton, sim: Simulator, window, opts: Options, rng)
     """The runs of the first round, ``(X, tau, signal, choice, n_structured, seeding)``: the
     structured initial states (with the structured signals of the time-varying inputs,
     :func:`.initial_sampling.structured_signals`) and ``opts.samples`` i.i.d. ones (uniform
-    signals); where the model has may-transitions, the random runs switch at random piece
-    starts; where transitions can be enabled together, each structured run once per branch
+    signals); where the model has may-transitions, each structured run twice, staying in a
+    mode as long as it can and leaving at the first piece start a guard holds, and the random
+    runs switch at random piece starts; where transitions can be enabled together, each structured run once per branch
     (:func:`branch_plan`). ``seeding`` marks the runs the search and the optimiser may start
     from: all but those of one-switch signals, a family of neighbours that would fill their
     populations around one local minimum (they are tried as they are)."""
@@ -546,10 +547,17 @@ def run_plan(model: HybridAutomaton, sim: Simulator, window, opts: Options, rng)
             taus = None if taus is None else taus[owner]
         else:
             Vs = input_signals(model, Xs.shape[0], step, rng)
-        values = np.concatenate([Vs, input_signals(model, Xr.shape[0], step, rng)])
         switch = None
-        if mays:                        # structured runs stay as long as they can, random ones
-            switch = np.zeros(values.shape[:2], dtype=bool)           # switch at random piece starts
+        if mays:                        # structured runs twice: staying as long as they can, and
+            count = Xs.shape[0]         # switching at the first piece start a guard holds; random
+            Xs, Vs = np.concatenate([Xs, Xs]), np.concatenate([Vs, Vs])   # ones at random piece starts
+            taus = None if taus is None else np.concatenate([taus, taus])
+            if model.varying_inputs:
+                once = np.concatenate([once, once])
+        values = np.concatenate([Vs, input_signals(model, Xr.shape[0], step, rng)])
+        if mays:
+            switch = np.zeros(values.shape[:2], dtype=bool)
+            switch[count:Xs.shape[0]] = True
             switch[Xs.shape[0]:] = rng.random((Xr.shape[0], values.shape[1])) < SWITCH_PROBABILITY
         signal = (step, values, switch)
     X = np.concatenate([Xs, Xr])

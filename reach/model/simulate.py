@@ -65,6 +65,7 @@ from reach.model.constraints import lambdify_margins
 
 BISECTION_STEPS = 40
 INVARIANT_TOLERANCE = 1e-11          # invariants and guards hold where margins <= this (1 + |x|_inf)
+SWITCH_TOLERANCE = 1e-14             # a guard asked to switch at a piece start: rounding only (_take_may)
 FIRST_WINDOW = 64                 # grid points of a linear segment's first window of states
 MAX_WINDOW = 256                  # grid points of its longest window
 CHUNK_VALUES = 4_000_000          # states x steps x dims held at once in a linear segment
@@ -671,14 +672,16 @@ class Simulator:
     def _take_may(self, rows: np.ndarray, runs: _Runs) -> None:
         """Each run of ``rows`` (at a piece start) takes an enabled may-transition with a
         general guard, if it has one, and then what it must take at once. The guard must hold
-        exactly (no tolerance): a switch asked for at an instant is no event that located the
-        guard, and a tolerance relative to the state's size would let a run jump where the
-        guard has not yet been met."""
+        up to rounding only, margins at most ``SWITCH_TOLERANCE (1 + |x|_inf)`` (a few units in
+        the last place: ``x' = 1`` from 0 is 1 - 1e-16 at t = 1 by the flow's exponential, and a
+        switch asked for at ``x >= 1`` there is meant), not the looser ``INVARIANT_TOLERANCE``:
+        a switch asked for at an instant is no event that located the guard, so a wider
+        tolerance would let a run jump where the guard has not yet been met."""
         for m_index in np.unique(runs.mode[rows]):
             name = self.mode_names[m_index]
             sel = rows[runs.mode[rows] == m_index]
             if self.exits[name] and sel.size:
-                _, enabled = self._enabled(self.exits[name], runs.X[sel], tolerance=0.0)
+                _, enabled = self._enabled(self.exits[name], runs.X[sel], tolerance=SWITCH_TOLERANCE)
                 before = runs.X[sel].copy()
                 jumped = self._jump(sel, self.exits[name], enabled, runs)
                 self._urgent_now(jumped, runs, m_index, before[np.isin(sel, jumped)])
