@@ -58,8 +58,23 @@ def _in(unit, value: float) -> float:
     return value if unit is None else unit.of(value)
 
 
+MAX_REQUIREMENT_CHARS = 160     # a requirement longer than this is shown by its description
+
+
 def requirement(prop) -> str:
-    """The requirement as written: constraint texts, or the event's quantity and bound."""
+    """The requirement as written: constraint texts, or the event's quantity and bound; a text
+    longer than :data:`MAX_REQUIREMENT_CHARS` (an imported alias written out over hundreds of
+    states) by the property's description, else cut short."""
+    text = _requirement(prop)
+    if len(text) <= MAX_REQUIREMENT_CHARS:
+        return text
+    described = getattr(prop, "description", "") or ""
+    if described and len(described) <= MAX_REQUIREMENT_CHARS:
+        return described
+    return text[:MAX_REQUIREMENT_CHARS - 3] + "..."
+
+
+def _requirement(prop) -> str:
     kind = getattr(prop, "kind", "")
     if kind == "event":
         return f"{prop.sense} {prop.text or 'quantity'} {prop.op} {_bound_value(prop)}"

@@ -237,3 +237,24 @@ def test_a_note_that_explains_a_negative_margin_is_said_once(sra01):
     result = Result("taylor", "SRNA01", event.id, Status.UNKNOWN, bound=(25180.0, 37800.0), details={"note": note})
     text = line(result, event, sra01)
     assert "margin -0.5 N" in text and text.count(note) == 1
+
+
+@pytest.mark.parametrize("description", ["", "y3 stays within 1.7e-4 (ISU02)"])
+def test_a_requirement_written_out_over_many_states_is_shown_short(tmp_path, description):
+    """An imported output (an alias of 270 states, as ISS's y3) writes a requirement of
+    thousands of characters: the line shows the property's description instead, or the text cut
+    at MAX_REQUIREMENT_CHARS."""
+    from reach.report import MAX_REQUIREMENT_CHARS
+    names = [f"x{i}" for i in range(200)]
+    (tmp_path / "m.yaml").write_text(
+        f"name: wide\nstate: [{', '.join(names)}]\nmodes:\n  m: {{flow: {{{', '.join(n + ': 0' for n in names)}}}}}\n"
+        f"initial: {{mode: m, box: {{{', '.join(n + ': 0' for n in names)}}}}}\nhorizon: 1\n")
+    long = " + ".join(f"0.001*{n}" for n in names) + " <= 1"
+    extra = f", description: \"{description}\"" if description else ""
+    (tmp_path / "p.yaml").write_text(f"properties:\n  - {{id: out, kind: safety{extra}, require: [\"{long}\"]}}\n")
+    model = load_model(tmp_path / "m.yaml")
+    prop = bind(load_properties(tmp_path / "p.yaml")[0], model)
+    result = Result("star", model.name, "out", Status.SAFE, details={})
+    shown = line(result, prop, model)
+    assert len(shown) < MAX_REQUIREMENT_CHARS + 80
+    assert (description in shown) if description else "0.001*x0 + 0.001*x1" in shown and "..." in shown

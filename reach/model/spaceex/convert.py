@@ -39,6 +39,7 @@ import sympy
 
 from reach import lp
 from reach.errors import InputError, Where
+from reach.paths import printable
 from reach.model.automaton import MAX_VARIABLES
 from reach.model.constraints import affine_coefficients
 from reach.model.expr import CONSTANTS, FUNCTIONS, parse_expr
@@ -855,7 +856,8 @@ class DocumentBuilder(Converter):
                     avoid += self.as_constraints(texts)
             k = len(props)
             order = [m for m in self.mode_of.values() if m in modes]
-            prop = {"id": pid, "kind": "safety", "modes": order}
+            prop = {"id": pid, "kind": "safety", "modes": order,
+                    "description": f"forbidden = {printable(self.cfg.text('forbidden'))[:200]}"}
             if avoid:
                 prop["avoid"] = avoid
             else:
