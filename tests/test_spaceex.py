@@ -212,7 +212,8 @@ def test_network_synchronises_on_labels_and_keeps_reachable_locations(tmp_path):
     (tr,) = model.transitions
     assert (tr.source, tr.target, tr.urgent, str(tr.reset[0])) == ("off__idle", "on__busy", True, "2*x")
     assert float(model.modes["off__idle"].flow[0]) == 0.5
-    assert props[0].raw == {"id": "m", "kind": "safety", "modes": ["on__busy"], "avoid": ["y >= 3"]}
+    assert props[0].raw == {"id": "m", "kind": "safety", "modes": ["on__busy"], "avoid": ["y >= 3"],
+                            "description": "forbidden = loc(B) == busy & y >= 3"}
 
 
 def test_a_label_no_transition_of_a_declaring_component_takes_blocks_and_is_reported(tmp_path, capsys):
