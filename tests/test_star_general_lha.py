@@ -336,3 +336,19 @@ def test_a_witness_on_a_face_of_the_initial_polytope_replays_from_inside_it(tmp_
     x0 = np.asarray(result.details["witness"]["initial_state"][:3])
     init = model.initial
     assert PolytopeSampler(init.polytope, init.low, init.high).contains(x0[None])[0]
+
+
+@pytest.mark.parametrize("high, low, warned", [(12.1, 11.9, False), (12.0, 12.0, True), (12.1, "[11.9, 12.2]", True)])
+def test_a_zero_dwell_cycle_is_judged_with_the_constants_the_initial_set_gives(tmp_path, high, low, warned):
+    """A hysteresis switch on x >= hi and x <= lo, hi and lo constant states (flow 0, never
+    reset): both guards can hold at one instant only if lo >= hi is possible within their
+    initial ranges. The lint warns of a zero-dwell cycle exactly then (it took them as free)."""
+    from reach.model import load_model
+    (tmp_path / "m.yaml").write_text(
+        "name: buck\nstate: [x, hi, lo]\nmodes:\n"
+        "  up: {flow: {x: 1, hi: 0, lo: 0}}\n  down: {flow: {x: -1, hi: 0, lo: 0}}\n"
+        "transitions:\n  - {from: up, to: down, guard: [\"x >= hi\"]}\n"
+        "  - {from: down, to: up, guard: [\"x <= lo\"]}\n"
+        f"initial: {{mode: up, box: {{x: 11, hi: {high}, lo: {low}}}}}\nhorizon: 5\n")
+    lints = load_model(tmp_path / "m.yaml").lints
+    assert any("zero-dwell" in text for text in lints) == warned, lints

@@ -125,16 +125,38 @@ def linear_jump(model, transition):
     return hs[0], hs[1], R, r
 
 
-def zero_time_witness(n: int, jumps) -> tuple[bool, np.ndarray | None]:
+def fixed_ranges(model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(index, low, high)`` of the states no run changes -- flow 0 in every mode, never reset:
+    constants (SpaceEx ``const`` params, ``tmax == 20`` in a cfg) and bounded inputs -- with the
+    range the initial set gives them (its bounding box), which every reachable state keeps."""
+    reset = {i for tr in model.transitions for i in tr.reset}
+    fixed = [i for i in range(model.n) if i not in reset
+             and all(m.timeless or m.flow[i] == 0 for m in model.modes.values())]
+    index = np.array(fixed, dtype=int)
+    low, high = np.asarray(model.initial.low, float)[index], np.asarray(model.initial.high, float)[index]
+    keep = np.isfinite(low) | np.isfinite(high)
+    return index[keep], low[keep], high[keep]
+
+
+def zero_time_witness(n: int, jumps, fixed=None) -> tuple[bool, np.ndarray | None]:
     """``(possible, state)``: whether a chain of jumps (each a :func:`linear_jump`, or None for
     a nonlinear one) can be taken at one instant (the polyhedron of the module doc is not empty),
-    with a start state where it can. A nonlinear jump counts as possible (no witness)."""
+    with a start state where it can; ``fixed``: :func:`fixed_ranges`, the ranges the start
+    state keeps. A nonlinear jump counts as possible (no witness)."""
     from reach.lp import LPError, feasible_point
 
     if any(j is None for j in jumps):
         return True, None
     k = len(jumps)
     blocks_A, blocks_b, eq_A, eq_b = [], [], [], []
+    if fixed is not None and fixed[0].size:
+        index, low, high = fixed
+        for sign, bound in ((1.0, high), (-1.0, -low)):
+            finite = np.isfinite(bound)
+            row = np.zeros((int(finite.sum()), n * (k + 1)))
+            row[np.arange(row.shape[0]), index[finite]] = sign
+            blocks_A.append(row)
+            blocks_b.append(bound[finite])
     for j, (H, h, R, r) in enumerate(jumps):
         row = np.zeros((H.shape[0], n * (k + 1)))
         row[:, j * n:(j + 1) * n] = H
@@ -174,6 +196,7 @@ def zero_dwell_cycles(model) -> tuple[list, bool]:
     for k, tr in enumerate(transitions):
         leaving.setdefault(tr.source, []).append(k)
     order = {name: i for i, name in enumerate(model.modes)}
+    fixed = fixed_ranges(model)
     found, tried = [], 0
     for first in range(len(transitions)):
         home = transitions[first].source
@@ -194,7 +217,7 @@ def zero_dwell_cycles(model) -> tuple[list, bool]:
             tried += 1
             if tried > MAX_CYCLES:
                 return found, False
-            possible, state = zero_time_witness(model.n, [jumps[j] for j in chain + [k]])
+            possible, state = zero_time_witness(model.n, [jumps[j] for j in chain + [k]], fixed)
             if not possible:
                 continue
             if target == home:
@@ -202,7 +225,7 @@ def zero_dwell_cycles(model) -> tuple[list, bool]:
                 if not cycle_is_safe([signature[j] for j in cycle]):
                     shift = min(range(len(cycle)), key=lambda i: order[transitions[cycle[i]].source])
                     cycle = cycle[shift:] + cycle[:shift]
-                    possible, state = zero_time_witness(model.n, [jumps[j] for j in cycle] * 2)
+                    possible, state = zero_time_witness(model.n, [jumps[j] for j in cycle] * 2, fixed)
                     if not possible:
                         continue
                     modes = [transitions[j].source for j in cycle] + [transitions[cycle[0]].source]
