@@ -441,3 +441,18 @@ def test_a_system_without_continuous_variables_is_bad_input(tmp_path, capsys):
                                      'time-horizon = 1\n')
     assert main(["check", str(xml), str(cfg), "-b", "star"]) == 2
     assert "no continuous variable" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("forbidden, code", [("k >= 7.01", 0), ("k <= 5.01", 1)])
+def test_a_constant_only_the_cfg_reads_takes_its_range_from_initially(tmp_path, capsys, forbidden, code):
+    """A ``const`` param the system never reads, given a range by ``initially`` and named by the
+    forbidden set (hyst's const_range): a constant state in [5, 7], not an unknown name."""
+    body = '''<component id="toy">
+ <param name="k" type="real" local="false" dynamics="const"/>
+ <param name="t" type="real" local="false" dynamics="any"/>
+ <location id="1" name="go"><invariant>t &lt;= 20</invariant><flow>t' == 1</flow></location>
+</component>
+'''
+    xml, cfg = write(tmp_path, body, f'system = toy\ninitially = "k >= 5 & k <= 7 & t == 0"\n'
+                                     f'forbidden = "{forbidden}"\ntime-horizon = 20\n')
+    assert main(["check", str(xml), str(cfg), "-b", "star", "--counterexamples", str(tmp_path / "out")]) == code

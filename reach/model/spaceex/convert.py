@@ -386,9 +386,10 @@ class DocumentBuilder(Converter):
                                      self.file, line=line)
                 for n in names_in(tokens):
                     used_where.setdefault(n, set()).add(tr.source)
-        for var in sorted(set(used_where) - states):
+        for var in sorted((set(used_where) | cfg_names) - states):
             if self.flat.globals.get(var) == "const" and var in cfg_names:
                 # a constant the cfg's initially gives its value (or range): flow 0 everywhere
+                # (also one the system never reads, which only the cfg's forbidden set may)
                 line = self._line_of(var)
                 for key in self.flat.locations:
                     if key not in self.timeless:
