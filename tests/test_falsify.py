@@ -325,3 +325,16 @@ def test_an_instant_the_property_names_is_a_target_of_the_extremal_signals(tmp_p
     assert result.counterexample.violation_time == pytest.approx(T, abs=1e-9)
     assert replay(model, prop, result.counterexample.initial_state, None, result.counterexample.dt,
                   result.counterexample.input_signal).violated
+
+
+def test_an_unsafe_window_past_the_horizon_leaves_no_aimed_run(tmp_path):
+    """Every unsafe row's clock window (t in [30, 40]) lies past the horizon 20: no run is aimed
+    and the check ends UNKNOWN (it was an internal error, stacking no signals)."""
+    (tmp_path / "m.yaml").write_text(
+        "name: late\nstate: [x, t]\nbounded_inputs:\n  u: {range: [-1, 1], varying: true}\n"
+        "modes:\n  a: {flow: {x: u, t: 1}}\ninitial: {mode: a, box: {x: 0, t: 0}}\nhorizon: 20\n")
+    (tmp_path / "p.yaml").write_text(
+        "properties:\n  - {id: late, kind: safety, modes: [a], avoid: {box: {t: [30, 40], x: [5, 10]}}}\n")
+    model = load_model(tmp_path / "m.yaml")
+    prop = bind(load_properties(tmp_path / "p.yaml")[0], model)
+    assert BACKEND.check(model, prop, {"optimise": False, "search_rounds": 0}).status is Status.UNKNOWN

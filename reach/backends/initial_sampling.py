@@ -296,6 +296,8 @@ def extremal_runs(model: HybridAutomaton, prop, starts: np.ndarray, dt: float):
         window = _clock_window(model, H, g)
         directions += [(-row, window) for row in H]
     directions = directions[:MAX_ROWS]
+    if not directions:
+        return None
     moved = np.zeros(len(directions))           # the inputs' reach along each c over the horizon
     rows = np.array([c for c, _ in directions])
     W_own = W.copy()
@@ -333,6 +335,8 @@ def extremal_runs(model: HybridAutomaton, prop, starts: np.ndarray, dt: float):
             owner = int(np.argmax(starts @ toward))               # largest c^T e^{A T} x0
             owners.append(owner)
             states.append(starts[owner] if box is None else np.where(toward > 0, box[1], box[0]))
+    if not signals:                             # every row's time window lies past the horizon
+        return None
     return np.array(owners), np.array(states), h, np.stack(signals)
 
 

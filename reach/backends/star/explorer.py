@@ -136,23 +136,23 @@ class _Stats:
     instants: int = 0               # jumps taken at one instant (see _at_instant)
 
 
-def _urgent_keeps(model, data) -> dict[str, list]:
+def _urgent_keeps(model, data, options) -> dict[str, list]:
     """Per mode, rows ``a x <= b`` that a run keeps while it flows there because an urgent
     transition (no window) would otherwise have been taken: for a guard of one row
     ``h x <= c``, ``-h x <= -c`` (a run that enters with ``h x >= c`` leaves the instant
-    ``h x = c``); for an equality ``h x == c``, each side (a run cannot cross it). A guard of
-    several rows is left out (the states outside it are no convex set)."""
+    ``h x = c``). A guard of several rows is left out (the states outside it are no convex
+    set), an equality too (a run crossing the plane between two grid points is one the
+    simulator, which finds urgent guards at grid points and located crossings, would carry
+    on: the replays could not confirm the cut), and so is discrete time (a run jumps from
+    the first grid state inside the guard, which the cut would remove)."""
+    if options.discrete_time:
+        return {}
     urgent = {tr.name for tr in model.transitions if tr.urgent and tr.window is None}
     out: dict[str, list] = {}
     for mode, jumps in data.jumps.items():
         for jump in jumps:
-            if jump is None or jump.name not in urgent:
-                continue
-            H, g = jump.H, jump.g
-            if H.shape[0] == 1:
-                out.setdefault(mode, []).append((-H[0], -g[0]))
-            elif H.shape[0] == 2 and np.allclose(H[0], -H[1]) and abs(g[0] + g[1]) <= 1e-12 * (1 + abs(g[0])):
-                out.setdefault(mode, []).extend([(-H[0], -g[0]), (-H[1], -g[1])])
+            if jump is not None and jump.name in urgent and jump.H.shape[0] == 1:
+                out.setdefault(mode, []).append((-jump.H[0], -jump.g[0]))
     return out
 
 
@@ -192,7 +192,7 @@ class _Explorer:
         self._leading: dict[str, set[str]] = {}
         self._initial_sampler = None            # a polytopic initial set's (_inside_initial)
         self._may = {tr.name for tr in model.transitions if not tr.urgent and tr.window is None}
-        self._keeps = _urgent_keeps(model, data)  # per mode, see _flow_invariant
+        self._keeps = _urgent_keeps(model, data, options)  # per mode, see _flow_invariant
         self._kept: dict[str, list] = {}          # per mode, the keeps of the chains under way
         self.cancel = threading.Event()         # set by the caller that stopped waiting (reach.deep)
         self.deadline = np.inf if options.max_seconds is None else time.perf_counter() + options.max_seconds
