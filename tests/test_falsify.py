@@ -20,6 +20,7 @@ from reach.backends.montecarlo import BACKEND, replay, switch_window
 from reach.model import load_model
 from reach.result import Status
 from reach.spec import bind, load_properties
+from model_files import load_files
 
 ROOT = Path(__file__).resolve().parent.parent
 DATA = ROOT / "tests" / "data"
@@ -282,11 +283,9 @@ def test_a_resonant_input_is_found_by_the_extremal_signals(tmp_path, fraction, v
     x <= 0.99 of that reach, whose counterexample solve_ivp confirms under its own signal; above
     the reach nothing is found."""
     bound = fraction * _driven_reach()
-    (tmp_path / "m.yaml").write_text(DRIVEN)
-    (tmp_path / "p.yaml").write_text(
-        f"properties:\n  - {{id: x_below, kind: safety, modes: [run], require: [\"x <= {bound:.6f}\"]}}\n")
-    model = load_model(tmp_path / "m.yaml")
-    prop = bind(load_properties(tmp_path / "p.yaml")[0], model)
+    model, props = load_files(tmp_path, DRIVEN, "properties:\n  - {id: x_below, kind: safety, modes: [run], "
+                                                f"require: [\"x <= {bound:.6f}\"]}}\n")
+    (prop,) = props.values()
     result = BACKEND.check(model, prop, {"optimise": False, "search_rounds": 0})
     assert result.status is (Status.UNSAFE if violated else Status.UNKNOWN)
     if not violated:
@@ -312,14 +311,11 @@ def test_an_instant_the_property_names_is_a_target_of_the_extremal_signals(tmp_p
     A, B, T = np.array([[0.0, 1.0], [-1.0, -0.1]]), np.array([0.0, 1.0]), 17.3
     reach_T = 0.1 * abs(scipy.linalg.expm(A * T)[0, 0]) + quad(
         lambda s: abs((scipy.linalg.expm(A * (T - s)) @ B)[0]), 0.0, T, limit=400)[0]
-    (tmp_path / "m.yaml").write_text(DRIVEN.replace("state: [x, v]", "state: [x, v, t]")
-                                     .replace('"-x - 0.1*v + u"}', '"-x - 0.1*v + u", t: 1}')
-                                     .replace("v: 0}", "v: 0, t: 0}"))
-    (tmp_path / "p.yaml").write_text(
-        "properties:\n  - {id: at_instant, kind: safety, modes: [run], "
-        f"avoid: [\"x >= {0.995 * reach_T:.6f}\", \"t >= {T}\", \"t <= {T}\"]}}\n")
-    model = load_model(tmp_path / "m.yaml")
-    prop = bind(load_properties(tmp_path / "p.yaml")[0], model)
+    clocked = (DRIVEN.replace("state: [x, v]", "state: [x, v, t]")
+               .replace('"-x - 0.1*v + u"}', '"-x - 0.1*v + u", t: 1}').replace("v: 0}", "v: 0, t: 0}"))
+    model, props = load_files(tmp_path, clocked, "properties:\n  - {id: at_instant, kind: safety, modes: [run], "
+                              f"avoid: [\"x >= {0.995 * reach_T:.6f}\", \"t >= {T}\", \"t <= {T}\"]}}\n")
+    (prop,) = props.values()
     result = BACKEND.check(model, prop, {"optimise": False, "search_rounds": 0})
     assert result.status is Status.UNSAFE
     assert result.counterexample.violation_time == pytest.approx(T, abs=1e-9)
@@ -330,11 +326,10 @@ def test_an_instant_the_property_names_is_a_target_of_the_extremal_signals(tmp_p
 def test_an_unsafe_window_past_the_horizon_leaves_no_aimed_run(tmp_path):
     """Every unsafe row's clock window (t in [30, 40]) lies past the horizon 20: no run is aimed
     and the check ends UNKNOWN (it was an internal error, stacking no signals)."""
-    (tmp_path / "m.yaml").write_text(
+    model, props = load_files(
+        tmp_path,
         "name: late\nstate: [x, t]\nbounded_inputs:\n  u: {range: [-1, 1], varying: true}\n"
-        "modes:\n  a: {flow: {x: u, t: 1}}\ninitial: {mode: a, box: {x: 0, t: 0}}\nhorizon: 20\n")
-    (tmp_path / "p.yaml").write_text(
+        "modes:\n  a: {flow: {x: u, t: 1}}\ninitial: {mode: a, box: {x: 0, t: 0}}\nhorizon: 20\n",
         "properties:\n  - {id: late, kind: safety, modes: [a], avoid: {box: {t: [30, 40], x: [5, 10]}}}\n")
-    model = load_model(tmp_path / "m.yaml")
-    prop = bind(load_properties(tmp_path / "p.yaml")[0], model)
+    (prop,) = props.values()
     assert BACKEND.check(model, prop, {"optimise": False, "search_rounds": 0}).status is Status.UNKNOWN

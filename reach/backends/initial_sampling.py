@@ -300,10 +300,8 @@ def extremal_runs(model: HybridAutomaton, prop, starts: np.ndarray, dt: float):
         return None
     moved = np.zeros(len(directions))           # the inputs' reach along each c over the horizon
     rows = np.array([c for c, _ in directions])
-    W_own = W.copy()
-    W_own[inputs] = 0.0
-    for _ in range(K):                          # all rows at once, nothing kept
-        moved += np.abs(rows @ W_own).sum(axis=1)
+    for _ in range(K):                          # all rows at once, nothing kept (W's rows of the
+        moved += np.abs(rows @ W).sum(axis=1)   # inputs' own coordinates are 0: they have no flow)
         rows = rows @ Phi
     if not moved.max(initial=0.0) > 0:
         return None
@@ -322,14 +320,12 @@ def extremal_runs(model: HybridAutomaton, prop, starts: np.ndarray, dt: float):
             J = min(int(np.floor(T / h + 1e-9)), K - 1)
             d = max(T - J * h, 0.0)
             if d <= 1e-9 * h:                   # a piece end
-                d, back = 0.0, backs[r]
-                share = back[J - 1::-1] @ W if J else np.zeros((0, m))
-                toward = back[J]
+                back, holding = backs[r], np.zeros((0, m))
             else:
                 E_d, W_d = flow_over(d)
-                back = backward(c @ E_d, J + 1)
-                share = np.concatenate([back[J - 1::-1] @ W if J else np.zeros((0, m)), [c @ W_d]])
-                toward = back[J]
+                back, holding = backward(c @ E_d, J + 1), (c @ W_d)[None]
+            share = np.concatenate([back[J - 1::-1] @ W if J else np.zeros((0, m)), holding])
+            toward = back[J]
             values = np.where(share > 0, hi, lo)
             signals.append(np.concatenate([values, np.repeat(values[-1:], K - values.shape[0], axis=0)]))
             owner = int(np.argmax(starts @ toward))               # largest c^T e^{A T} x0

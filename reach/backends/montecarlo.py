@@ -666,9 +666,10 @@ class MonteCarloBackend:
         monitors = [SafetyMonitor.merged(model, p, [q[0][i] for q in parts]) for i, p in enumerate(props)]
         blocked = sum(q[1] for q in parts)
         branching = choice is not None and sum(q[2] for q in parts) > 0    # a choice met, not only possible
-        pictured_kicks = _kicks(model, np.random.default_rng(np.random.SeedSequence(opts.seed, spawn_key=(2 ** 32,))))
-        runs = (sampled_runs(model, sim, X, tau, signal, choice, n_structured, pictured_kicks)
-                if opts.keep_sets else [])
+        runs = []
+        if opts.keep_sets:
+            pictured_kicks = _kicks(model, np.random.default_rng(np.random.SeedSequence(opts.seed, spawn_key=(2 ** 32,))))
+            runs = sampled_runs(model, sim, X, tau, signal, choice, n_structured, pictured_kicks)
         shared = (time.perf_counter() - start) / len(props)
         results = []
         for prop, monitor in zip(props, monitors):

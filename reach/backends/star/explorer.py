@@ -22,8 +22,8 @@ from reach.backends.star.switching import group_pieces
 from reach.backends.star.transitions import (_LinearModel, _modes_leading_to, _Piece,
                                              _unsafe_pieces, kept_rows, misses)
 from reach.backends.star.witnesses import _Witness, extremal_signal, nearest_point, signal_pieces, trace
-from reach.memory import physical_bytes, resident_bytes
 from reach.errors import InputError
+from reach.memory import physical_bytes, resident_bytes
 from reach.result import Status
 from reach.sets import Box, Star
 
@@ -294,26 +294,24 @@ class _Explorer:
             self._kept[mode].pop()
 
     def _keeps_of(self, mode: str, star: Star):
-        """The rows ``a x <= b`` of :func:`_urgent_keeps` that every state of the entry ``star``
-        meets (its depth into ``a x >= b`` at most 0, a weak-duality bound: no state is
-        strictly inside the urgent guard, so none leaves at once), as ``(H, g)`` or None.
-        Every run from ``star`` then meets them as long as it stays in ``mode``: it leaves the
-        instant it reaches the guard."""
+        """``(H, g)``: the invariant of ``mode`` and the rows ``a x <= b`` of :func:`_urgent_keeps`
+        that every state of the entry ``star`` meets (its depth into ``a x >= b`` at most 0, a
+        weak-duality bound: no state is strictly inside the urgent guard, so none leaves at
+        once). Every run from ``star`` then meets them as long as it stays in ``mode``: it
+        leaves the instant it reaches the guard."""
+        Hi, gi = self.invariants[mode]
         rows = [(a, b) for a, b in self._keeps.get(mode, ())
                 if star.box.bounded and star.depth(-a[None], np.array([-b]))[0] <= 0.0]
         if not rows:
-            return None
-        return np.array([a for a, _ in rows]), np.array([b for _, b in rows])
+            return Hi, gi
+        return np.vstack([Hi] + [a[None] for a, _ in rows]), np.concatenate([gi, [b for _, b in rows]])
 
     def _flow_invariant(self, mode: str):
-        """``(H, g)``: the invariant of ``mode`` and the urgency rows the chain under way keeps
-        (:meth:`_keeps_of`), which cut its grid stars and segments (not its entry star, whose
-        states inside a guard jump at once)."""
-        Hi, gi = self.invariants[mode]
+        """``(H, g)`` that cut the grid stars and segments of the chain under way in ``mode``:
+        :meth:`_keeps_of` its entry star (not the entry star itself, whose states inside a
+        guard jump at once)."""
         kept = self._kept.get(mode)
-        if not kept or kept[-1] is None:
-            return Hi, gi
-        return np.vstack([Hi, kept[-1][0]]), np.concatenate([gi, kept[-1][1]])
+        return kept[-1] if kept else self.invariants[mode]
 
     def _chain_blocks(self, mode: str, star: Star, path: _Path, guess=None, direction=None):
         """:meth:`_chain` of a mode with a linear flow."""

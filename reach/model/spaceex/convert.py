@@ -49,6 +49,7 @@ from reach.model.spaceex.formula import (Const, FormulaError, Loc, Relation, Tok
 
 RESERVED = set(FUNCTIONS) | set(CONSTANTS) | {"true", "false", "loc"}
 MAX_MATRIX_ENTRIES = 25_000_000
+_NAME = re.compile(r"(?<![\w.])[A-Za-z_][\w.]*")     # a (dotted) name in a written relation
 
 
 @dataclass
@@ -733,16 +734,20 @@ class DocumentBuilder(Converter):
         return self.relation_texts(Relation(parts, rel.ops), key, self.cfg.line(where_key))
 
 
+    def _varying(self) -> dict[str, str]:
+        """The time-varying inputs, ``{name in the written model: SpaceEx name}``."""
+        return {self.yaml[v]: v for v, (_, _, vary) in self.inputs.items() if vary}
+
     def _initial_texts(self, atoms, key) -> list:
         """The texts of the cfg's initial relations in location ``key``, without those on
         time-varying inputs alone (``u == 0``: a value at one instant changes no run, since the
         input is any signal in its range), which are noted (``notes.ignored``)."""
-        varying = {self.yaml[v] for v, (_, _, vary) in self.inputs.items() if vary}
+        varying = self._varying()
         texts = []
         for a in (a for a in atoms if isinstance(a, Relation)):
             own = self.cfg_relation(a, key, "initially")
-            names = {n for _, t in own for n in re.findall(r"(?<![\w.])[A-Za-z_][\w.]*", t)}
-            if names and names <= varying:
+            names = {n for _, t in own for n in _NAME.findall(t)}
+            if names and names <= varying.keys():
                 note = (f"{self.cfg.file}:{self.cfg.line('initially')}: initially: "
                         f"'{' and '.join(t for _, t in own)}' ignored: {', '.join(sorted(names))} "
                         "is a time-varying input, any signal in its range (its value at one instant "
@@ -756,13 +761,15 @@ class DocumentBuilder(Converter):
     def _no_input_in_initially(self, texts) -> None:
         """A time-varying input (a real with no flow, bounded by invariants) takes any value in
         its range at every instant: an initial constraint on it is refused at the cfg's line."""
+        varying = self._varying()
         for _, text in texts:
-            for v in (v for v, (_, _, varying) in self.inputs.items() if varying):
-                if re.search(rf"(?<![\w.]){re.escape(self.yaml[v])}(?![\w.])", text):
-                    raise InputError(f"initially: '{v}' is a time-varying input (no flow, bounded by the "
-                                     f"invariants): it takes any value in its range at every instant, so "
-                                     f"the initial set cannot constrain it", self.cfg.file,
-                                     line=self.cfg.line("initially"))
+            names = set(_NAME.findall(text))
+            hit = next((v for name, v in varying.items() if name in names), None)
+            if hit is not None:
+                raise InputError(f"initially: '{hit}' is a time-varying input (no flow, bounded by the "
+                                 f"invariants): it takes any value in its range at every instant, so "
+                                 f"the initial set cannot constrain it", self.cfg.file,
+                                 line=self.cfg.line("initially"))
 
     def initial_doc(self, atoms) -> dict:
         allowed: dict[int, set] = {}
@@ -813,8 +820,7 @@ class DocumentBuilder(Converter):
         start = Identifiers(set(self.mode_of.values()) | set(self.extra_modes))("start")
         self.extra_modes[start] = {"flow": False}
         self.lines[("modes", start)] = (self.cfg.file, self.cfg.line("initially"))
-        texts = []
-        texts += self._initial_texts(atoms, choice[0][0])
+        texts = self._initial_texts(atoms, choice[0][0])
         names = Identifiers(self.transitions_out)
         # a simulator takes the first enabled urgent jump: locations where time passes first
         for key, _ in sorted(choice, key=lambda c: c[0] in self.timeless):
