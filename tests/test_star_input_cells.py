@@ -164,3 +164,18 @@ def test_the_input_box_cut_along_the_requirement_decides_in_the_first_pass(tmp_p
     if status is Status.UNSAFE:
         c = result.counterexample
         assert replay(model, prop, c.initial_state, c.switch_time, input_signal=c.input_signal).violated
+
+
+def test_the_memory_share_follows_an_address_space_limit():
+    """Under ``ulimit -v`` (RLIMIT_AS) of 3 GiB the memory star may take a share of is at most
+    3 GiB, not the machine's (a process killed at its limit is no answer); without one, it is at
+    least that (this machine has more)."""
+    import subprocess
+    import sys
+
+    code = ("import resource; from reach.memory import physical_bytes; free = physical_bytes(); "
+            "resource.setrlimit(resource.RLIMIT_AS, (3 * 2**30, resource.RLIM_INFINITY)); "
+            "print(free, physical_bytes())")
+    free, limited = map(float, subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                                              check=True).stdout.split())
+    assert limited <= 3 * 2**30 and (free > 3 * 2**30 or free == limited)

@@ -352,6 +352,7 @@ def segment_chunk(sim, name, rows, runs, next_kick, horizon, table):
     step_block = min(FIRST_BLOCK, most)                 # doubled each block: short segments stay cheap
     buffer = np.empty(min(most, count) * K * n_rows)    # the block product, reused block after block
     inv_offset, inv_rows = table.invariant
+    crossings = sim.crossings[name]
     k0f = k0.astype(float)
     # linear: Z is the state at step r0, a multiple of J; blocks stay within [r0, r0 + J]
     period = count if table.nonlinear else W.shape[0] - 1
@@ -392,6 +393,11 @@ def segment_chunk(sim, name, rows, runs, next_kick, horizon, table):
                 better = when < event_time[rows_hit]
                 event_time[rows_hit[better]] = when[better]
                 event_tr[rows_hit[better]] = j_tr
+            if crossings:
+                when = crossings.earliest(j_tr - 1, prev_t[act], prev_x[act], gt.T, S.transpose(2, 0, 1), valid.T,
+                                          table.entry, table.propagate)
+                better = when < event_time[act]
+                event_time[act[better]], event_tr[act[better]] = when[better], j_tr
         limit_j = np.full(A, B)
         out_any = np.zeros(A, dtype=bool)
         if inv_rows:

@@ -62,6 +62,7 @@ from reach.model import batch
 from reach.model.automaton import HybridAutomaton
 from reach.model.batch_nonlinear import rk4_step
 from reach.model.constraints import lambdify_margins
+from reach.model.crossing import SlabCrossings
 
 BISECTION_STEPS = 40
 INVARIANT_TOLERANCE = 1e-11          # invariants and guards hold where margins <= this (1 + |x|_inf)
@@ -256,6 +257,7 @@ class Simulator:
                 self.window[tr.source] = tr
             else:
                 self.exits[tr.source].append((tr, lambdify_margins(tr.guard, model.symbols)))
+        self.crossings = {m: SlabCrossings(model, self.urgent[m]) for m in model.modes}
         self.resets = {tr.name: _reset_function(tr, model) for tr in model.transitions if tr.reset}
         self.timeless = {m for m, mode in model.modes.items() if mode.timeless}
         # what a run may take at an instant: urgent transitions; in a timeless mode, every one
@@ -775,6 +777,11 @@ class Simulator:
                 better = when < event_time[hit]
                 event_time[hit[better]] = when[better]
                 event_tr[hit[better]] = j_tr
+            when = self.crossings[name].earliest(j_tr - 1, t0, X[rows], grid_t, Y, valid,
+                                                 lambda Z, h, row: self._first_entry(name, Z, h, row),
+                                                 lambda Z, h: self.propagate(name, Z, h))
+            better = when < event_time
+            event_time[better], event_tr[better] = when[better], j_tr
         # invariant: the first grid point outside it (before the event) ends the run's visits
         outside = ~self.inside(name, flat).reshape(n_rows, count) & valid & (grid_t < event_time[:, None])
         blocked = outside.any(axis=1)
@@ -799,13 +806,25 @@ class Simulator:
         the last instant inside (:meth:`_last_inside`), watched there, and takes an enabled
         transition whose guard holds there, urgent or a may-transition with a general guard, or
         is blocked. (An urgent guard that holds only on the invariant's boundary, SpaceEx's
-        ``x == 2`` out of ``x <= 2``, holds at no grid point: it is met at the exit.) ``propagate(X, h)`` advances states
-        without event."""
+        ``x == 2`` out of ``x <= 2``, holds at no grid point: it is met at the exit.) A slab of
+        an urgent guard crossed between the last grid state and the stop is an event there
+        (:mod:`reach.model.crossing`). ``propagate(X, h)`` advances states without event."""
         horizon = self.model.horizon
         has_event = ~blocked & (event_tr >= 0) & (event_time <= end)
         stop_t = np.where(blocked, block_t, np.where(has_event, event_time, end))
         go = np.flatnonzero(~blocked)
         X_stop = propagate(last_x[go], stop_t[go] - last_t[go])
+        if self.crossings[name] and go.size:      # a slab crossed after the last grid state
+            for j_tr in range(len(self.urgent[name])):
+                when = self.crossings[name].earliest(
+                    j_tr, last_t[go], last_x[go], stop_t[go][:, None], X_stop[:, None, :],
+                    np.ones((go.size, 1), dtype=bool), lambda Z, h, row: self._first_entry(name, Z, h, row),
+                    propagate)
+                c = np.flatnonzero(when < stop_t[go])
+                if c.size:
+                    has_event[go[c]], event_time[go[c]], event_tr[go[c]] = True, when[c], j_tr + 1
+                    stop_t[go[c]] = when[c]
+                    X_stop[c] = propagate(last_x[go[c]], when[c] - last_t[go[c]])
         left = ~self.inside(name, X_stop) & np.isfinite(X_stop).all(axis=1)
         blocked[go[left]] = True
         has_event &= ~blocked

@@ -140,19 +140,27 @@ def _urgent_keeps(model, data, options) -> dict[str, list]:
     """Per mode, rows ``a x <= b`` that a run keeps while it flows there because an urgent
     transition (no window) would otherwise have been taken: for a guard of one row
     ``h x <= c``, ``-h x <= -c`` (a run that enters with ``h x >= c`` leaves the instant
-    ``h x = c``). A guard of several rows is left out (the states outside it are no convex
-    set), an equality too (a run crossing the plane between two grid points is one the
-    simulator, which finds urgent guards at grid points and located crossings, would carry
-    on: the replays could not confirm the cut), and so is discrete time (a run jumps from
-    the first grid state inside the guard, which the cut would remove)."""
+    ``h x = c``); for a slab, two rows ``h x <= c_hi`` and ``-h x <= -c_lo`` with exactly
+    opposite (normalised) normals and ``c_lo <= c_hi`` (an equality when they are equal), both
+    negations (a run that enters with ``h x <= c_lo`` leaves the instant ``h x = c_lo``, which
+    lies in the slab; likewise from above; the simulator finds the slab crossed between grid
+    points, :mod:`reach.model.crossing`, so the replays follow the cut). Other guards of
+    several rows are left out (the states outside them are no convex set; two nearly opposite
+    rows bound a wedge, empty on one side, which a run passes without jumping), and so is
+    discrete time (a run jumps from the first grid state inside the guard, which the cut would
+    remove)."""
     if options.discrete_time:
         return {}
     urgent = {tr.name for tr in model.transitions if tr.urgent and tr.window is None}
     out: dict[str, list] = {}
     for mode, jumps in data.jumps.items():
         for jump in jumps:
-            if jump is not None and jump.name in urgent and jump.H.shape[0] == 1:
-                out.setdefault(mode, []).append((-jump.H[0], -jump.g[0]))
+            if jump is None or jump.name not in urgent:
+                continue
+            slab = (jump.H.shape[0] == 2 and np.array_equal(jump.H[0], -jump.H[1])
+                    and jump.g[0] + jump.g[1] >= 0)
+            if jump.H.shape[0] == 1 or slab:
+                out.setdefault(mode, []).extend((-a, -b) for a, b in zip(jump.H, jump.g))
     return out
 
 
@@ -684,8 +692,9 @@ class _Explorer:
         return None
 
     def _memory_guard(self):
-        """UNKNOWN once the exploration holds more than ``MEMORY_FRACTION`` of the machine's
-        memory beyond what the process held when it started (a bench worker keeps the memory of
+        """UNKNOWN once the exploration holds more than ``MEMORY_FRACTION`` of the memory the
+        process may hold (:func:`reach.memory.physical_bytes`: the machine's, or a cgroup's or
+        address-space limit) beyond what the process held when it started (a bench worker keeps the memory of
         its earlier checks; the stars' predicates grow with jumps and refinement; no
         out-of-memory kill); stops at
         once when the caller has been interrupted (``cancel``) or the time budget is spent."""
@@ -696,8 +705,8 @@ class _Explorer:
         self.memory_read, held = now, resident_bytes() - self.memory_start
         if held > self.memory_limit:
             raise _Stop(Status.UNKNOWN, f"memory: the exploration holds {held / 2**30:.1f} GiB, more than "
-                                        f"{MEMORY_FRACTION:.0%} of this machine's "
-                                        f"{self.memory_limit / MEMORY_FRACTION / 2**30:.0f} GiB "
+                                        f"{MEMORY_FRACTION:.0%} of the "
+                                        f"{self.memory_limit / MEMORY_FRACTION / 2**30:.0f} GiB this process may hold "
                                         f"(coarser step, fewer coefficients or sooner aggregation)")
 
     def _progress(self):
