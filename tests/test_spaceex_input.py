@@ -145,6 +145,23 @@ def test_an_unknown_name_in_the_xml_names_file_line_and_field(tmp_path, capsys, 
                    "(the component's params: T, c)")
 
 
+@pytest.mark.parametrize("flag,value,line", [
+    ("asap", "maybe", 8), ("asap", "1", 8), ("timedriven", "yes", 8), ("local", "ja", 5),
+])
+def test_a_flag_that_is_neither_true_nor_false_is_bad_input(tmp_path, capsys, flag, value, line):
+    """``asap="maybe"`` read as false would drop the urgency and change the verdict: refused at
+    the element's line (``TRUE`` is true, as any case of true)."""
+    where = ('<transition source="1" target="2">' if flag != "local" else
+             '<param name="c" type="real" local="false"')
+    new = where.replace('local="false"', f'local="{value}"') if flag == "local" else \
+        where.replace(">", f' {flag}="{value}">')
+    assert where in THERMOSTAT
+    xml, cfg = write(tmp_path, THERMOSTAT.replace(where, new, 1), CFG)
+    err = bad_input(check(xml, cfg), capsys)
+    assert err.startswith(f"reach: {xml}:{line}: component 'heater': ") and \
+        f'{flag}="{value}": expected true or false' in err, err
+
+
 # ------------------------------------------------------------------ networks too large
 SWITCH = '''<component id="sw">
  <param name="x" type="real" local="false" dynamics="any"/>

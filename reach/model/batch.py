@@ -395,7 +395,7 @@ def segment_chunk(sim, name, rows, runs, next_kick, horizon, table):
                 event_tr[rows_hit[better]] = j_tr
             if crossings:
                 when = crossings.earliest(j_tr - 1, prev_t[act], prev_x[act], gt.T, S.transpose(2, 0, 1), valid.T,
-                                          table.entry, table.propagate)
+                                          event_time[act])
                 better = when < event_time[act]
                 event_time[act[better]], event_tr[act[better]] = when[better], j_tr
         limit_j = np.full(A, B)

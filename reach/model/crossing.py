@@ -1,37 +1,49 @@
-"""Urgent guards a run jumps over between two grid points.
+"""Urgent guards a run meets between two grid points.
 
-The simulator finds an urgent guard where a grid state lies in it. A guard with two opposite
-rows, ``h x <= c_hi`` and ``-h x <= -c_lo`` (a slab ``c_lo <= h x <= c_hi``; an equality such as
-SpaceEx's ``x == 2`` when ``c_lo = c_hi``), can hold at no grid state of a run that crosses it:
-``h x`` above ``c_hi`` at one grid point and below ``c_lo`` at the next (or the other way up).
-By continuity ``h x`` lies in the slab at some instant between them, so the run must jump
-there if the guard's other rows hold too.
+The simulator finds an urgent guard ``G(x) <= 0`` where a grid state lies in it. A run can meet
+it between two grid points without any grid state in it; this module finds three cases:
 
-That instant is located as a guard entry is: by bisection on the row violated at the earlier
-point (it holds at the later one), to the entry search's resolution ``h 2^-40``. The state
-found lies within that resolution of the slab (the row's partner crossed it in the last
-halving); it is the guard's entry where every other row of the guard holds there, to
-``INVARIANT_TOLERANCE (1 + |x|_inf)``. A crossing whose other rows do not hold at that state
-is not an entry (a run that meets them only further inside a wide slab, between grid points,
-is not followed), nor is a brief visit to a guard of one row between grid points.
+* **a slab crossed**: two opposite rows, ``p(x) <= c_hi`` and ``-p(x) <= -c_lo`` (a slab ``c_lo <=
+  p <= c_hi``; an equality such as SpaceEx's ``x == 2`` when ``c_lo = c_hi``; ``p`` linear, or any
+  expression when the rows' sum is a number, as ``x^2 == 1``), with ``p`` above ``c_hi`` at one
+  grid point and below ``c_lo`` at the next (or the other way up). By continuity ``p`` lies in
+  the slab at some instant between them;
+* **a linear row dipped into**: a row's margin ``m = H_i x - g_i`` positive at both grid points,
+  falling at the first (``m' < 0``) and rising at the second, with the two tangents meeting
+  below 0 (``m0 + m0' s = m1 + m1' (s - dt)`` at a value at most 0: where ``m`` is convex
+  between the points, as near a smooth minimum, its least value is at least that, so a dip
+  whose tangents meet above 0 cannot reach the guard). The minimum is located by bisection
+  on the sign of ``m'``; the row holds there only if the dip reaches it;
+* **a grid point in the guard** by the margins computed here, which the caller's own margins
+  (another rounding: a block product) put just outside, as ``t == 2`` at ``t = 2``.
+
+The instant is located as a guard entry is, by bisection on the row the run enters by (the
+whole guard for a grid point in it), which holds at the right end, to the entry search's
+resolution ``dt 2^-40``. The state found is the guard's entry where every other row of the
+guard holds there, to ``INVARIANT_TOLERANCE (1 + |x|_inf)`` (a slab's partner row is met within
+the resolution: it was crossed in the last halving, or, after a dip into one row of a slab, it
+holds where that row is met). Each run's candidates are tried in time order; one that fails
+(a dip whose lowest point misses, other rows that do not hold) is dropped and the next one
+tried. A run that meets the other rows only elsewhere in the slab, a dip whose tangents meet
+above 0 or a nonlinear row dipped into is not followed.
 """
 
 from __future__ import annotations
 
 import numpy as np
+import sympy
 
 PARALLEL = 1e-12        # two rows are opposite where their unit normals sum to at most this
 
 
 class _Row:
-    """One guard row ``H_i x <= g_i`` as a guard of its own: ``X -> X H_i^T - g_i`` (R, 1),
-    with ``rows`` for the closed-form entry of a scalar flow."""
+    """Row ``i`` of a guard's margins ``G(X)`` (R, m) as a guard of its own (R, 1)."""
 
-    def __init__(self, H: np.ndarray, g: np.ndarray, i: int):
-        self.rows = (H[i:i + 1], g[i:i + 1])
+    def __init__(self, margins, i: int):
+        self.margins, self.i = margins, i
 
     def __call__(self, X: np.ndarray) -> np.ndarray:
-        return X @ self.rows[0].T - self.rows[1]
+        return self.margins(X)[:, self.i:self.i + 1]
 
 
 def opposite_rows(H: np.ndarray, g: np.ndarray) -> list:
@@ -45,61 +57,133 @@ def opposite_rows(H: np.ndarray, g: np.ndarray) -> list:
             if not (norms[i] > 0 and norms[j] > 0):
                 continue
             opposite = np.abs(H[i] / norms[i] + H[j] / norms[j]).max() <= PARALLEL
-            width = g[i] / norms[i] + g[j] / norms[j]
-            if opposite and width >= 0:
+            if opposite and g[i] / norms[i] + g[j] / norms[j] >= 0:
                 pairs.append((i, j))
     return pairs
 
 
-class SlabCrossings:
-    """The slabs of one mode's urgent guards (``urgent``, ``(transition, margins)`` pairs) and
-    their crossings between grid points (see the module docstring)."""
+def opposite_constraints(constraints) -> list:
+    """The pairs ``(i, j)``, ``i < j``, of non-strict constraints ``p - c_hi <= 0`` and ``c_lo -
+    p <= 0`` (their sum a number at most 0: a slab of ``p``, nonlinear too, as ``x^2 == 1``)."""
+    pairs = []
+    for i, a in enumerate(constraints):
+        for j in range(i + 1, len(constraints)):
+            b = constraints[j]
+            total = sympy.expand(a.g + b.g)
+            if not (a.strict or b.strict) and total.is_number and float(total) <= 0:
+                pairs.append((i, j))
+    return pairs
 
-    def __init__(self, model, urgent: list):
+
+class Crossings:
+    """The urgent guards of mode ``name`` of the simulator ``sim`` and the instants runs meet
+    them between grid points (see the module docstring)."""
+
+    def __init__(self, sim, name: str):
+        self.sim, self.name = sim, name
+        model = sim.model
         self.guards = []
-        for tr, _ in urgent:
+        for tr, margins in sim.urgent[name]:
             rows = model.guard_halfspaces(tr)
-            pairs = opposite_rows(*rows) if rows is not None else []
-            self.guards.append((rows, pairs, {i: _Row(*rows, i) for pair in pairs for i in pair}) if pairs else None)
+            pairs = opposite_rows(*rows) if rows is not None else opposite_constraints(tr.guard)
+            # the guards an entry is located on: each row alone, then all of them
+            entries = [_Row(margins, i) for i in range(len(tr.guard))] + [margins]
+            self.guards.append((margins, rows, pairs, entries, self._rates(rows)))
+
+    def _rates(self, rows):
+        """``X -> (H f(X))`` (R, m): the rates of change of a linear guard's margins along the
+        mode's flow ``f`` (one product ``X (H A)^T + H b`` for a linear flow), or None."""
+        if rows is None:
+            return None
+        H = rows[0]
+        if self.name in self.sim.generators:
+            M, n = self.sim.generators[self.name], self.sim.n
+            HA, Hb = np.ascontiguousarray((H @ M[:n, :n]).T), H @ M[:n, n]
+            return lambda X: X @ HA + Hb
+        rhs = self.sim.model.modes[self.name].rhs
+        return lambda X: rhs(X) @ H.T
 
     def __bool__(self) -> bool:
-        return any(g is not None for g in self.guards)
+        return bool(self.guards)
 
-    def earliest(self, index: int, start_t, start_x, grid_t, states, valid, entry, propagate) -> np.ndarray:
-        """The instant each run enters urgent guard ``index`` by crossing one of its slabs
-        between two successive points of ``start`` (``start_t`` (R,), ``start_x`` (R, n)) and its
-        grid states (``grid_t`` (R, K), ``states`` (R, K, n); the later point ``valid`` (R, K)),
-        ``inf`` where it does not. ``entry(X, h, row)`` locates the first instant in ``(0, h]``
-        where ``row`` holds (it holds at ``h``), ``propagate(X, h)`` advances states."""
-        from reach.model.simulate import INVARIANT_TOLERANCE
-
+    def earliest(self, index: int, start_t, start_x, grid_t, states, valid, before) -> np.ndarray:
+        """The instant each run meets urgent guard ``index`` between two successive points of
+        ``start`` (``start_t`` (R,), ``start_x`` (R, n)) and its grid states (``grid_t`` (R, K),
+        ``states`` (R, K, n); the later point ``valid`` (R, K)), ``inf`` where it does not or
+        not before its event already known at ``before`` (R,): only the intervals that start
+        before it are searched, and a point in the guard only where it lies before it (the
+        caller found the entry at that point itself)."""
         R = start_t.shape[0]
         when = np.full(R, np.inf)
-        guard = self.guards[index]
-        if guard is None or R == 0:
+        if R == 0:
             return when
-        (H, g), pairs, single = guard
+        guard_margins, _, pairs, entries, rates_of = self.guards[index]
         points = np.concatenate([start_x[:, None, :], states], axis=1)      # (R, K+1, n)
-        margins = points @ H.T - g                                         # (R, K+1, m)
-        K = states.shape[1]
-        first = np.full(R, K)
-        enter = np.zeros(R, dtype=int)
-        partner = np.zeros(R, dtype=int)
-        for i, j in pairs:
-            for a, b in ((i, j), (j, i)):        # above row a's bound, then below row b's
-                jumped = (margins[:, :-1, a] > 0) & (margins[:, 1:, b] > 0) & valid
-                k = np.where(jumped.any(axis=1), jumped.argmax(axis=1), K)
-                better = k < first
-                first[better], enter[better], partner[better] = k[better], a, b
         times = np.concatenate([start_t[:, None], grid_t], axis=1)
-        for a in np.unique(enter[first < K]):
-            sel = np.flatnonzero((first < K) & (enter == a))
-            k = first[sel]
-            x0, t_lo = points[sel, k], times[sel, k]
-            s = entry(x0, times[sel, k + 1] - t_lo, single[a])
-            x_s = propagate(x0, s)
-            m_s = x_s @ H.T - g
-            m_s[np.arange(sel.size), partner[sel]] = -np.inf     # met within the resolution
-            holds = np.all(m_s <= INVARIANT_TOLERANCE * (1.0 + np.abs(x_s).max(axis=1))[:, None], axis=1)
-            when[sel[holds]] = t_lo[holds] + s[holds]
+        margins = guard_margins(points.reshape(-1, points.shape[-1])).reshape(R, points.shape[1], -1)
+        K, m = states.shape[1], margins.shape[-1]
+        # candidates: (intervals (R, K), row entered by (m: the whole guard), its partner met
+        # within the resolution or -1, a dip)
+        valid = valid & (times[:, :-1] < before[:, None])
+        # a grid point in the guard by these margins (the caller's, of other rounding, may
+        # have put it just outside): an entry before it, located on the whole guard
+        candidates = [(np.all(margins[:, 1:] <= 0, axis=2) & valid & (times[:, 1:] < before[:, None]), m, -1, False)]
+        partner_of = {}
+        for i, j in pairs:
+            partner_of.setdefault(i, j)
+            partner_of.setdefault(j, i)
+            for a, b in ((i, j), (j, i)):        # above row a's bound, then below row b's
+                candidates.append(((margins[:, :-1, a] > 0) & (margins[:, 1:, b] > 0) & valid, a, b, False))
+        outside = (margins[:, :-1] > 0) & (margins[:, 1:] > 0) & valid[:, :, None]     # (R, K, m)
+        if rates_of is not None and outside.any():
+            rates = rates_of(points.reshape(-1, points.shape[-1])).reshape(margins.shape)
+            d0, d1, m0, m1 = rates[:, :-1], rates[:, 1:], margins[:, :-1], margins[:, 1:]
+            h = np.diff(times, axis=1)[:, :, None]
+            with np.errstate(divide="ignore", invalid="ignore"):
+                meet = m0 + d0 * (m1 - m0 - d1 * h) / (d0 - d1)          # the tangents' meeting value
+            dipped = outside & (d0 < 0) & (d1 > 0) & (meet <= 0)
+            # a dip into a slab's row meets its partner at the entry too (the slab is not empty)
+            candidates += [(dipped[:, :, a], a, partner_of.get(a, -1), True) for a in range(m)
+                           if dipped[:, :, a].any()]
+        pending = np.ones(R, dtype=bool)
+        while True:             # each run's earliest candidate; one that fails is dropped
+            firsts = np.stack([np.where(c.any(axis=1), c.argmax(axis=1), K) for c, *_ in candidates])
+            which = firsts.argmin(axis=0)
+            first = firsts[which, np.arange(R)]
+            active = pending & (first < K)
+            if not active.any():
+                return when
+            for c_index in np.unique(which[active]):
+                mask, a, b, dip = candidates[c_index]
+                sel = np.flatnonzero(active & (which == c_index))
+                k = first[sel]
+                found = self._locate(guard_margins, entries, rates_of, a, b, dip, points[sel, k], times[sel, k],
+                                     times[sel, k + 1] - times[sel, k])
+                hit = np.isfinite(found)
+                when[sel[hit]], pending[sel[hit]] = found[hit], False
+                mask[sel[~hit], k[~hit]] = False
+
+    def _locate(self, guard_margins, entries, rates_of, a, b, dip, x0, t0, h) -> np.ndarray:
+        """The entry instants (``inf`` where none) of runs at ``x0`` at ``t0`` into the guard in
+        ``(0, h]``, by row ``a`` (``m``: the whole guard), ``b`` its partner met within the
+        resolution (or -1), after a dip of row ``a`` (whose lowest point must reach it)."""
+        from reach.model.simulate import INVARIANT_TOLERANCE
+
+        when = np.full(t0.shape, np.inf)
+        go = np.ones(t0.shape, dtype=bool)
+        if dip:                                 # the row holds at the dip's lowest point, or never
+            _, bottom, _ = self.sim._bisect(self.name, x0, h, lambda Z: rates_of(Z)[:, a] >= 0)
+            go = entries[a](self.sim.propagate(self.name, x0, bottom))[:, 0] <= 0
+            h = bottom
+        if not go.any():
+            return when
+        s = self.sim._first_entry(self.name, x0[go], h[go], entries[a])
+        x_s = self.sim.propagate(self.name, x0[go], s)
+        m_s = guard_margins(x_s)
+        if b >= 0:
+            m_s[:, b] = -np.inf                     # met within the resolution
+        holds = np.all(m_s <= INVARIANT_TOLERANCE * (1.0 + np.abs(x_s).max(axis=1))[:, None], axis=1)
+        found = np.full(int(go.sum()), np.inf)
+        found[holds] = t0[go][holds] + s[holds]
+        when[go] = found
         return when

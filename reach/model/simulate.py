@@ -16,7 +16,9 @@ together:
   of the group has met an event; where their urgent guards and invariant are linear, in
   blocks over all the runs at once (:mod:`reach.model.batch_nonlinear`);
 * an urgent transition is taken at the first instant its guard holds, located by bisection
-  inside the grid interval where it first holds (to ``dt * 2**-40``); the window transition
+  inside the grid interval where it first holds (to ``dt * 2**-40``), also where a linear
+  guard is met between two grid points, a slab of it crossed or a row dipped into
+  (:mod:`reach.model.crossing`); the window transition
   is taken exactly at ``tau``; a may-transition with a general guard is taken when a run would
   leave the source invariant, if its guard holds there (the exit instant, by bisection: one
   of the automaton's runs, the one that stays longest); Gaussian kicks (if asked for) are
@@ -62,7 +64,7 @@ from reach.model import batch
 from reach.model.automaton import HybridAutomaton
 from reach.model.batch_nonlinear import rk4_step
 from reach.model.constraints import lambdify_margins
-from reach.model.crossing import SlabCrossings
+from reach.model.crossing import Crossings
 
 BISECTION_STEPS = 40
 INVARIANT_TOLERANCE = 1e-11          # invariants and guards hold where margins <= this (1 + |x|_inf)
@@ -257,9 +259,9 @@ class Simulator:
                 self.window[tr.source] = tr
             else:
                 self.exits[tr.source].append((tr, lambdify_margins(tr.guard, model.symbols)))
-        self.crossings = {m: SlabCrossings(model, self.urgent[m]) for m in model.modes}
         self.resets = {tr.name: _reset_function(tr, model) for tr in model.transitions if tr.reset}
         self.timeless = {m for m, mode in model.modes.items() if mode.timeless}
+        self.crossings = {m: Crossings(self, m) for m in model.modes}
         # what a run may take at an instant: urgent transitions; in a timeless mode, every one
         self.instant = {m: self.urgent[m] + (self.exits[m] if m in self.timeless else []) for m in model.modes}
         #: the most options one jump can have (several enabled at once need Branches to choose)
@@ -777,9 +779,7 @@ class Simulator:
                 better = when < event_time[hit]
                 event_time[hit[better]] = when[better]
                 event_tr[hit[better]] = j_tr
-            when = self.crossings[name].earliest(j_tr - 1, t0, X[rows], grid_t, Y, valid,
-                                                 lambda Z, h, row: self._first_entry(name, Z, h, row),
-                                                 lambda Z, h: self.propagate(name, Z, h))
+            when = self.crossings[name].earliest(j_tr - 1, t0, X[rows], grid_t, Y, valid, event_time)
             better = when < event_time
             event_time[better], event_tr[better] = when[better], j_tr
         # invariant: the first grid point outside it (before the event) ends the run's visits
@@ -806,20 +806,19 @@ class Simulator:
         the last instant inside (:meth:`_last_inside`), watched there, and takes an enabled
         transition whose guard holds there, urgent or a may-transition with a general guard, or
         is blocked. (An urgent guard that holds only on the invariant's boundary, SpaceEx's
-        ``x == 2`` out of ``x <= 2``, holds at no grid point: it is met at the exit.) A slab of
-        an urgent guard crossed between the last grid state and the stop is an event there
-        (:mod:`reach.model.crossing`). ``propagate(X, h)`` advances states without event."""
+        ``x == 2`` out of ``x <= 2``, holds at no grid point: it is met at the exit.) An urgent
+        guard met between the last grid state and the stop (a slab crossed, a row dipped into:
+        :mod:`reach.model.crossing`) is an event there. ``propagate(X, h)`` advances states without event."""
         horizon = self.model.horizon
         has_event = ~blocked & (event_tr >= 0) & (event_time <= end)
         stop_t = np.where(blocked, block_t, np.where(has_event, event_time, end))
         go = np.flatnonzero(~blocked)
         X_stop = propagate(last_x[go], stop_t[go] - last_t[go])
-        if self.crossings[name] and go.size:      # a slab crossed after the last grid state
+        if self.crossings[name] and go.size:      # a guard met after the last grid state
             for j_tr in range(len(self.urgent[name])):
-                when = self.crossings[name].earliest(
-                    j_tr, last_t[go], last_x[go], stop_t[go][:, None], X_stop[:, None, :],
-                    np.ones((go.size, 1), dtype=bool), lambda Z, h, row: self._first_entry(name, Z, h, row),
-                    propagate)
+                when = self.crossings[name].earliest(j_tr, last_t[go], last_x[go], stop_t[go][:, None],
+                                                     X_stop[:, None, :], np.ones((go.size, 1), dtype=bool),
+                                                     stop_t[go])
                 c = np.flatnonzero(when < stop_t[go])
                 if c.size:
                     has_event[go[c]], event_time[go[c]], event_tr[go[c]] = True, when[c], j_tr + 1

@@ -222,8 +222,14 @@ def unsupported_switch(model) -> str | None:
 
 
 def _equality(guard, symbols):
-    """Two linear constraints of ``guard`` that leave it no interior (``a.x <= c`` and
-    ``a.x >= c``, or a tighter pair), or None."""
+    """Two constraints of ``guard`` that leave it no interior (``a.x <= c`` and ``a.x >= c``, or
+    a tighter pair; ``p <= c`` and ``p >= c`` for any expression ``p``, as ``x^2 == 1``), or
+    None."""
+    for i, c1 in enumerate(guard):
+        for c2 in guard[i + 1:]:
+            total = sympy.expand(c1.g + c2.g)            # c_lo - c_hi for p - c_hi and c_lo - p
+            if total.is_number and float(total) >= -1e-12:
+                return c1, c2
     rows = [(c, affine_coefficients(c.g, symbols)) for c in guard]
     rows = [(c, a, b) for c, coeffs in rows if coeffs is not None for a, b in [coeffs] if np.any(a)]
     for i, (c1, a1, b1) in enumerate(rows):

@@ -129,7 +129,7 @@ def _param(node: Node, file: str, where: str) -> Param:
     dynamics = node.attrs.get("dynamics", "any")
     if ptype == "real" and dynamics not in DYNAMICS:
         raise _error(file, node, f"{where}: param '{name}': construct dynamics=\"{dynamics}\" is not supported")
-    local = node.attrs.get("local", "false") == "true"
+    local = _flag(node, "local", file, f"{where}: param '{name}'")
     return Param(name, ptype, local, "const" if dynamics == "const" else "any", node.line)
 
 
@@ -188,6 +188,15 @@ def _location(node: Node, file: str, where: str) -> Location:
     return Location(lid, name, _text(node.first("invariant")), _text(node.first("flow")), node.line)
 
 
+def _flag(node: Node, name: str, file: str, where: str) -> bool:
+    """A boolean attribute (``asap="true"``): true or false, any case; absent is false; anything
+    else is a bad input at the element's line (a misspelt flag must not change the model)."""
+    text = node.attrs.get(name, "false").strip().lower()
+    if text not in ("true", "false"):
+        raise _error(file, node, f"{where}: {name}=\"{node.attrs[name]}\": expected true or false")
+    return text == "true"
+
+
 def _transition(node: Node, file: str, where: str) -> Transition:
     for child in node.children:
         if child.tag not in LAYOUT | {"label", "guard", "assignment"}:
@@ -197,8 +206,8 @@ def _transition(node: Node, file: str, where: str) -> Transition:
         raise _error(file, node, f"{where}: transition without 'source' or 'target'")
     label = node.first("label")
     label_text = label.text.strip() if label is not None and label.text.strip() else None
-    asap = node.attrs.get("asap", "false") == "true"
-    if node.attrs.get("timedriven", "false") == "true":
+    asap = _flag(node, "asap", file, f"{where}: transition")
+    if _flag(node, "timedriven", file, f"{where}: transition"):
         raise _error(file, node, f"{where}: transition: construct timedriven=\"true\" is not supported")
     return Transition(source, target, label_text, _text(node.first("guard")), _text(node.first("assignment")),
                       asap, node.line)
