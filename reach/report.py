@@ -267,7 +267,8 @@ def line(result, prop, model) -> str:
     if "margin_note" in f:
         parts.append(f["margin_note"])
     if result.status == Status.UNSAFE and "violating_runs" in d:
-        parts.append(f"violating runs: {d['violating_runs']} of {d['random_runs']}")
+        parts.append(f"violating runs: {d['violating_runs']} of {d['random_runs']}"
+                     + (" (the counterexample is a structured, aimed or search run)" if not d["violating_runs"] else ""))
     elif result.status != Status.UNSAFE and "violation_probability_upper_95" in d:
         parts.append(f"P(violation) <= {d['violation_probability_upper_95']:.2g} (95 %)")
     if d.get("blocked_runs"):

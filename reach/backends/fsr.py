@@ -74,7 +74,7 @@ from reach.backends.options import option_error, parse_options, ranged
 from reach.model.ltv import KickedLinearSystem
 from reach.model.constraints import halfspaces
 from reach.result import Result, Status
-from reach.sets.gaussian import (ZERO_VARIANCE, Probability, box_probability, interval_form,
+from reach.sets.gaussian import (ZERO_VARIANCE, Probability, box_probability, fixed_meets, interval_form,
                                  mass_and_draw, normal_mass, polytope_probability, randomized_qmc)
 from reach.spec.properties import BoundReach, BoundReachAvoid, article
 
@@ -176,7 +176,7 @@ def reach_avoid(problem: GaussianProblem, target, safe, abs_error: float = 1e-3,
     scale = max(float(np.max(var, initial=0.0)), np.finfo(float).tiny)
     fixed = var <= ZERO_VARIANCE * scale
     info = {"rows": int(mu.size), "method": method}
-    if np.any(fixed & ((mu < rows.lower) | (mu > rows.upper))) or np.any(rows.lower > rows.upper):
+    if np.any(fixed & ~fixed_meets(mu, rows.lower, rows.upper)) or np.any(rows.lower > rows.upper):
         info.update(kept=0, dropped=int(mu.size), boole=0.0, reason="a deterministic constraint fails")
         return Probability(0.0, 0.0, 0.0), info
     sd = np.sqrt(np.where(fixed, 1.0, var))
@@ -263,7 +263,7 @@ def _sequential(problem: GaussianProblem, means, covs, rows: _Rows, abs_error, s
             delta = delta @ Psi.T
             nu = centre + delta @ h
             if s == 0.0:
-                weight *= (nu >= lo) & (nu <= hi)
+                weight *= fixed_meets(nu, lo, hi)
                 continue
             a, b = (lo - nu) / s, (hi - nu) / s
             if r < D - 1:

@@ -814,16 +814,20 @@ class Simulator:
         stop_t = np.where(blocked, block_t, np.where(has_event, event_time, end))
         go = np.flatnonzero(~blocked)
         X_stop = propagate(last_x[go], stop_t[go] - last_t[go])
-        if self.crossings[name] and go.size:      # a guard met after the last grid state
+        # a guard met after the last grid state (not searched again before an urgent event: the
+        # grid interval holding it was searched)
+        open_end = np.flatnonzero(~(has_event[go] & (event_tr[go] > 0)))
+        if self.crossings[name] and open_end.size:
+            late = go[open_end]
             for j_tr in range(len(self.urgent[name])):
-                when = self.crossings[name].earliest(j_tr, last_t[go], last_x[go], stop_t[go][:, None],
-                                                     X_stop[:, None, :], np.ones((go.size, 1), dtype=bool),
-                                                     stop_t[go])
-                c = np.flatnonzero(when < stop_t[go])
+                when = self.crossings[name].earliest(j_tr, last_t[late], last_x[late], stop_t[late][:, None],
+                                                     X_stop[open_end][:, None, :],
+                                                     np.ones((late.size, 1), dtype=bool), stop_t[late])
+                c = np.flatnonzero(when < stop_t[late])
                 if c.size:
-                    has_event[go[c]], event_time[go[c]], event_tr[go[c]] = True, when[c], j_tr + 1
-                    stop_t[go[c]] = when[c]
-                    X_stop[c] = propagate(last_x[go[c]], when[c] - last_t[go[c]])
+                    has_event[late[c]], event_time[late[c]], event_tr[late[c]] = True, when[c], j_tr + 1
+                    stop_t[late[c]] = when[c]
+                    X_stop[open_end[c]] = propagate(last_x[late[c]], when[c] - last_t[late[c]])
         left = ~self.inside(name, X_stop) & np.isfinite(X_stop).all(axis=1)
         blocked[go[left]] = True
         has_event &= ~blocked

@@ -47,6 +47,18 @@ SOBOL_BITS = 52           # binary digits of the Sobol' points (exact in a doubl
 ROUNDING = 1e-12          # allowance on closed-form values
 PIVOT_TOL = 1e-6          # conditional standard deviation (correlation scale) treated as zero
 ZERO_VARIANCE = 1e-24     # relative variance below which a row is deterministic
+FIXED_TOLERANCE = 1e-9    # a deterministic row meets a bound it misses by at most this (relative)
+
+
+def fixed_meets(value, lower, upper):
+    """Whether a deterministic row's ``value`` lies in ``[lower, upper]`` up to rounding,
+    ``FIXED_TOLERANCE`` times the largest of ``|value|`` and the finite bounds (relative, so
+    the same in any units): a clock at ``0.30000000000000004`` meets ``z <= 0.3``, a value
+    written at ``0.3`` whose computation rounded up."""
+    size = np.maximum(np.abs(value), np.maximum(np.where(np.isfinite(lower), np.abs(lower), 0.0),
+                                                np.where(np.isfinite(upper), np.abs(upper), 0.0)))
+    tol = FIXED_TOLERANCE * size
+    return (value >= lower - tol) & (value <= upper + tol)
 
 
 @dataclass(frozen=True)
@@ -170,7 +182,7 @@ def box_probability(mean, cov, lower, upper, *, abs_error: float = 1e-4,
     var = np.diag(cov).copy()
     scale = max(float(np.max(var, initial=0.0)), np.finfo(float).tiny)
     fixed = var <= ZERO_VARIANCE * scale
-    if np.any(fixed & ((lower > 0) | (upper < 0))):
+    if np.any(fixed & ~fixed_meets(mean, lower + mean, upper + mean)):
         return Probability(0.0, 0.0, 0.0)
     keep = ~fixed & (np.isfinite(lower) | np.isfinite(upper))
     if not np.any(keep):
