@@ -72,6 +72,7 @@ def cmd_check(args) -> int:
     from reach.backends import validate_options
     from reach.checking import check_model, is_spaceex, load_bound, resolve_backend
 
+    _no_file_in_the_way(args.counterexamples)
     if is_spaceex(args.model):
         return cmd_check_spaceex(args)
     _verbose(args)
@@ -181,6 +182,13 @@ def _import_findings(docs) -> list[str]:
     ignored."""
     notes = docs.model["notes"]
     return [f"{notes['source']}: {line}" for line in notes.get("blocked", [])] + list(notes.get("ignored", []))
+
+
+def _no_file_in_the_way(folder) -> None:
+    """``--counterexamples DIR`` naming an existing file is bad input before any check runs
+    (after it, the verdicts would be lost to the error)."""
+    if folder and Path(folder).exists() and not Path(folder).is_dir():
+        raise InputError(f"{printable(folder)} is a file, not a folder", field="--counterexamples")
 
 
 def _writable(path: Path, option: str) -> None:

@@ -209,6 +209,7 @@ class _Explorer:
             else _unsafe_pieces(prop)
         self.pieces = self._reachable_pieces(group_pieces(self.pieces, getattr(data, "groups", ())))
         self.relevant = _modes_leading_to(model, set(self.pieces))
+        self.horizon = min(self.horizon, self._last_unsafe_instant())
         self._guard_rows: dict[str, np.ndarray] = {}       # per mode, see _transient
         self._directions: dict[str, np.ndarray | None] = {}     # per mode, see _input_directions
         self.stats = _Stats()
@@ -217,6 +218,26 @@ class _Explorer:
         self.sets: list = []            # SetPiece of every explored segment (option keep_sets)
         self.root = initial if initial is not None else data.initial_star(model.initial)
         self.root_mode = model.initial.mode
+
+    def _last_unsafe_instant(self) -> float:
+        """The latest clock value any unsafe piece allows: the least upper bound its rows that
+        read the model's clock alone give (``t <= 0.3``), pushed out by a relative 1e-9 against
+        rounding; ``inf`` where a piece has none, or the clock is the check's own (no property
+        reads it). No run violates after it, so the exploration stops there: a property about
+        the first 0.3 s of a 10 s horizon costs 0.3 s of flow, at the step the horizon gives."""
+        if self.data.added_clock:
+            return np.inf
+        latest = -np.inf
+        for pieces in self.pieces.values():
+            for piece in pieces or [None]:
+                if piece is None:
+                    return np.inf
+                only_clock = (piece.H[:, self.clock] > 0) & (np.count_nonzero(piece.H, axis=1) == 1)
+                if not only_clock.any():
+                    return np.inf
+                bound = float(np.min(piece.g[only_clock] / piece.H[only_clock, self.clock]))
+                latest = max(latest, bound + 1e-9 * (1.0 + abs(bound)))
+        return latest
 
     def _reachable_pieces(self, pieces: dict) -> dict:
         """``pieces`` without those that miss their mode's invariant (:func:`.transitions.misses`),
