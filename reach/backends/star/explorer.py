@@ -209,7 +209,7 @@ class _Explorer:
             else _unsafe_pieces(prop)
         self.pieces = self._reachable_pieces(group_pieces(self.pieces, getattr(data, "groups", ())))
         self.relevant = _modes_leading_to(model, set(self.pieces))
-        self.horizon = min(self.horizon, self._last_unsafe_instant())
+        self.horizon = min(self.horizon, max(self._last_unsafe_instant(), 0.0))
         self._guard_rows: dict[str, np.ndarray] = {}       # per mode, see _transient
         self._directions: dict[str, np.ndarray | None] = {}     # per mode, see _input_directions
         self.stats = _Stats()
@@ -237,7 +237,7 @@ class _Explorer:
                     return np.inf
                 bound = float(np.min(piece.g[only_clock] / piece.H[only_clock, self.clock]))
                 latest = max(latest, bound + 1e-9 * (1.0 + abs(bound)))
-        return latest
+        return latest if latest > -np.inf else np.inf      # (no piece: nothing to cut by)
 
     def _reachable_pieces(self, pieces: dict) -> dict:
         """``pieces`` without those that miss their mode's invariant (:func:`.transitions.misses`),
