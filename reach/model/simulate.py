@@ -59,11 +59,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.linalg
+import sympy
 
 from reach.model import batch
 from reach.model.automaton import HybridAutomaton
 from reach.model.batch_nonlinear import rk4_step
-from reach.model.constraints import lambdify_margins
+from reach.model.constraints import affine_coefficients, lambdify_margins
 from reach.model.crossing import Crossings
 
 BISECTION_STEPS = 40
@@ -113,6 +114,37 @@ def check_size(model: HybridAutomaton, dt: float, runs: int = 0) -> None:
         raise InputError(f"{model.name}: about {planned / 2 ** 30:.1f} GiB needed for {runs} runs on {steps:.0f} "
                          f"steps; at most {MEMORY_BUDGET / 2 ** 30:.0f} GiB are planned for (fewer samples or a "
                          "larger dt)", field="options.samples" if runs else "options.dt")
+
+
+def fixed_parameters(model: HybridAutomaton) -> dict:
+    """``{symbol: value}``: the states every run holds at one value: flow 0 in every mode,
+    never reset, kicked or driven by a signal, and a single initial value (SpaceEx's ``k ==
+    0.1`` for a constant ``k``: a state with flow 0). A run always has that value there."""
+    reset = {i for tr in model.transitions for i in tr.reset}
+    moved = set(model.disturbance.enters) if model.disturbance is not None else set()
+    moved |= {u.index for u in model.varying_inputs}
+    out = {}
+    for i, symbol in enumerate(model.symbols):
+        if i in reset or i in moved or model.initial.low[i] != model.initial.high[i]:
+            continue
+        if all(m.timeless or sympy.sympify(m.flow[i]) == 0 for m in model.modes.values()):
+            out[symbol] = float(model.initial.low[i])
+    return out
+
+
+def linear_with(mode, fixed: dict):
+    """``(A, b)`` of ``mode``'s flow once the ``fixed`` parameters take their values (``-k (T - 30)``
+    with ``k = 0.1``: affine), or None. Exact for every run: each holds those values throughout
+    (:func:`fixed_parameters`), so the flow at its states is this affine one; the parameters'
+    own rows stay 0 (flow 0)."""
+    n = len(mode.symbols)
+    A, b = np.zeros((n, n)), np.zeros(n)
+    for i, f in enumerate(mode.flow):
+        coeffs = affine_coefficients(sympy.sympify(f).subs(fixed), mode.symbols)
+        if coeffs is None:
+            return None
+        A[i], b[i] = coeffs
+    return A, b
 
 
 def default_dt(model: HybridAutomaton) -> float:
@@ -242,9 +274,11 @@ class Simulator:
         self.n = model.n
         self.steps = int(np.ceil(model.horizon / self.dt - 1e-9))
         self.generators, self.powers, self.tables, self.exponentials = {}, {}, {}, {}
+        fixed = fixed_parameters(model)
         for name, mode in model.modes.items():
-            if mode.linear is not None:
-                A, b = mode.linear
+            linear = mode.linear if mode.linear is not None or not fixed else linear_with(mode, fixed)
+            if linear is not None:
+                A, b = linear
                 M = np.zeros((self.n + 1, self.n + 1))
                 M[:self.n, :self.n], M[:self.n, self.n] = A, b
                 self.generators[name] = M
