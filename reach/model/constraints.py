@@ -144,16 +144,25 @@ def lambdify_margins(constraints: Sequence[Constraint], symbols: Sequence[sympy.
     return margins
 
 
-def equality_rows(constraints: Sequence[Constraint]) -> list[int]:
-    """Indices of the constraints that pair up into equalities: two non-strict constraints
-    ``g <= 0`` and ``-g <= 0`` (``t == 20`` written as ``t <= 20`` and ``t >= 20``)."""
-    rows = set()
+def opposite_pairs(constraints: Sequence[Constraint]) -> list[tuple[int, int, float, bool]]:
+    """``(i, j, total, strict)`` for each pair ``i < j`` of constraints ``p - c_hi <= 0`` and
+    ``c_lo - p <= 0`` whose sum ``total = c_lo - c_hi`` is a number (a slab of ``p``, any
+    expression: ``x^2 == 1`` too; an equality when ``total`` is 0), ``strict`` if either is."""
+    pairs = []
     for i, a in enumerate(constraints):
         for j in range(i + 1, len(constraints)):
             b = constraints[j]
-            if not (a.strict or b.strict) and sympy.expand(a.g + b.g) == 0:
-                rows.update((i, j))
-    return sorted(rows)
+            total = sympy.expand(a.g + b.g)
+            if total.is_number:
+                pairs.append((i, j, float(total), a.strict or b.strict))
+    return pairs
+
+
+def equality_rows(constraints: Sequence[Constraint]) -> list[int]:
+    """Indices of the constraints that pair up into equalities: two non-strict constraints
+    ``g <= 0`` and ``-g <= 0`` (``t == 20`` written as ``t <= 20`` and ``t >= 20``)."""
+    return sorted({k for i, j, total, strict in opposite_pairs(constraints) if not strict and total == 0
+                   for k in (i, j)})
 
 
 def violation_test(constraints: Sequence[Constraint], symbols: Sequence[sympy.Symbol]):

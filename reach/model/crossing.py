@@ -31,7 +31,8 @@ above 0 or a nonlinear row dipped into is not followed.
 from __future__ import annotations
 
 import numpy as np
-import sympy
+
+from reach.model.constraints import opposite_pairs
 
 PARALLEL = 1e-12        # two rows are opposite where their unit normals sum to at most this
 
@@ -62,19 +63,6 @@ def opposite_rows(H: np.ndarray, g: np.ndarray) -> list:
     return pairs
 
 
-def opposite_constraints(constraints) -> list:
-    """The pairs ``(i, j)``, ``i < j``, of non-strict constraints ``p - c_hi <= 0`` and ``c_lo -
-    p <= 0`` (their sum a number at most 0: a slab of ``p``, nonlinear too, as ``x^2 == 1``)."""
-    pairs = []
-    for i, a in enumerate(constraints):
-        for j in range(i + 1, len(constraints)):
-            b = constraints[j]
-            total = sympy.expand(a.g + b.g)
-            if not (a.strict or b.strict) and total.is_number and float(total) <= 0:
-                pairs.append((i, j))
-    return pairs
-
-
 class Crossings:
     """The urgent guards of mode ``name`` of the simulator ``sim`` and the instants runs meet
     them between grid points (see the module docstring)."""
@@ -85,7 +73,8 @@ class Crossings:
         self.guards = []
         for tr, margins in sim.urgent[name]:
             rows = model.guard_halfspaces(tr)
-            pairs = opposite_rows(*rows) if rows is not None else opposite_constraints(tr.guard)
+            pairs = (opposite_rows(*rows) if rows is not None else      # a nonlinear slab: sum a number <= 0
+                     [(i, j) for i, j, total, strict in opposite_pairs(tr.guard) if not strict and total <= 0])
             # the guards an entry is located on: each row alone, then all of them
             entries = [_Row(margins, i) for i in range(len(tr.guard))] + [margins]
             self.guards.append((margins, rows, pairs, entries, self._rates(rows)))

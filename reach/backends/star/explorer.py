@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from reach import lp
-from reach.backends.star.aggregation import _Aggregate, interval_hull
+from reach.backends.star.aggregation import _Aggregate, interval_hull, one_coordinate
 from reach.backends.star.fixpoint import Covered, applies, enlarged, time_invariant
 from reach.backends.star.flowpipe import (ChainInputs, _block_spreads, _chain_abs_bounds, _chain_bounds, _depth,
                                           _plus_box, _segment, _tightened)
@@ -232,7 +232,7 @@ class _Explorer:
             for piece in pieces or [None]:
                 if piece is None:
                     return np.inf
-                only_clock = (piece.H[:, self.clock] > 0) & (np.count_nonzero(piece.H, axis=1) == 1)
+                only_clock = (piece.H[:, self.clock] > 0) & one_coordinate(piece.H)
                 if not only_clock.any():
                     return np.inf
                 bound = float(np.min(piece.g[only_clock] / piece.H[only_clock, self.clock]))

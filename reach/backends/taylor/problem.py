@@ -42,7 +42,7 @@ from reach.backends.taylor.nominal import NominalRun, nominal
 from reach.backends.taylor.tm import TM
 from reach.backends.taylor.tm_flowpipe import stretch_from_box
 from reach.backends.taylor.verified import at_sigma, crossing, enclose_stretch
-from reach.model.constraints import affine_coefficients, lambdify_margins
+from reach.model.constraints import affine_coefficients, lambdify_margins, opposite_pairs
 from reach.spec.properties import BoundEvent
 
 MAX_SWITCHES = 8
@@ -225,11 +225,9 @@ def _equality(guard, symbols):
     """Two constraints of ``guard`` that leave it no interior (``a.x <= c`` and ``a.x >= c``, or
     a tighter pair; ``p <= c`` and ``p >= c`` for any expression ``p``, as ``x^2 == 1``), or
     None."""
-    for i, c1 in enumerate(guard):
-        for c2 in guard[i + 1:]:
-            total = sympy.expand(c1.g + c2.g)            # c_lo - c_hi for p - c_hi and c_lo - p
-            if total.is_number and float(total) >= -1e-12:
-                return c1, c2
+    for i, j, total, _ in opposite_pairs(guard):        # total = c_lo - c_hi
+        if total >= -1e-12:
+            return guard[i], guard[j]
     rows = [(c, affine_coefficients(c.g, symbols)) for c in guard]
     rows = [(c, a, b) for c, coeffs in rows if coeffs is not None for a, b in [coeffs] if np.any(a)]
     for i, (c1, a1, b1) in enumerate(rows):
