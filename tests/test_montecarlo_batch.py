@@ -269,3 +269,47 @@ def test_block_states_and_margins_follow_solve_ivp():
         np.testing.assert_allclose(X[pick], sol.y.T, rtol=0, atol=1e-7 * scale)
         np.testing.assert_allclose(X[pick], exact, rtol=0, atol=1e-12 * scale)
         np.testing.assert_allclose(margins[pick], exact @ H.T - g, rtol=0, atol=1e-12 * scale * np.abs(H).sum())
+
+
+_SWITCHED = """
+name: switched_pair
+state: [x, y]
+modes:
+  P: {flow: {x: "-0.1*x + y", y: "-10*x - 0.1*y"}}
+  Q: {flow: {x: "-0.1*x + 10*y", y: "-x - 0.1*y"}}
+  R: {flow: {x: "-x", y: "-y"}}
+transitions:
+  - {from: P, to: Q, guard: []}
+  - {from: Q, to: P, guard: []}
+  - {from: Q, to: R, guard: ["x >= 3"], urgent: true}
+initial: {mode: P, box: {x: [0.5, 1], y: [-0.2, 0.2]}}
+horizon: 2
+"""
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2 ** 31), runs=st.integers(2, 6))
+def test_switches_asked_by_a_signal_are_each_runs_own(tmp_path_factory, seed, runs):
+    """Runs asking for may-switches at random piece starts (P <-> Q, always enabled), and an
+    urgent exit from Q, each switch once per piece start asked: a run simulated among others
+    takes the same jumps, at the same instants, to the same final state as alone (a run that
+    had just left P was once switched back at the same piece start when another run of the
+    batch was in Q)."""
+    path = tmp_path_factory.mktemp("switched") / "model.yaml"
+    path.write_text(_SWITCHED)
+    model = load_model(path)
+    rng = np.random.default_rng(seed)
+    X = np.column_stack([rng.uniform(0.5, 1, runs), rng.uniform(-0.2, 0.2, runs)])
+    switch = rng.random((runs, 20)) < 0.4
+    signal = (0.1, np.zeros((runs, 20, 0)), switch)
+    sim = Simulator(model)
+    together = sim.run(X, record=True, signal=signal)
+    for r in range(runs):
+        alone = sim.run(X[r:r + 1], record=True, signal=(0.1, signal[1][r:r + 1], switch[r:r + 1]))
+        t_a, m_a, _ = alone.path[0]
+        t_b, m_b, _ = together.path[r]
+        jumps_a, jumps_b = np.flatnonzero(np.diff(m_a)) + 1, np.flatnonzero(np.diff(m_b)) + 1
+        assert np.array_equal(m_a[jumps_a], m_b[jumps_b])
+        np.testing.assert_allclose(t_a[jumps_a], t_b[jumps_b], rtol=0, atol=1e-12)
+        assert alone.final_mode[0] == together.final_mode[r]
+        np.testing.assert_allclose(alone.final_state[0], together.final_state[r], rtol=1e-12, atol=1e-12)

@@ -682,9 +682,10 @@ class Simulator:
             if not rows.size:
                 return
             moved = []
-            for m_index in np.unique(runs.mode[rows]):
+            modes = runs.mode[rows].copy()         # a run that jumps in this round waits for the next
+            for m_index in np.unique(modes):
                 name = self.mode_names[m_index]
-                sel = rows[runs.mode[rows] == m_index]
+                sel = rows[modes == m_index]
                 options = self.instant[name]
                 guards, enabled = self._enabled(options, runs.X[sel], tolerance=0.0)
                 back = np.zeros_like(enabled)
@@ -715,9 +716,10 @@ class Simulator:
         switch asked for at ``x >= 1`` there is meant), not the looser ``INVARIANT_TOLERANCE``:
         a switch asked for at an instant is no event that located the guard, so a wider
         tolerance would let a run jump where the guard has not yet been met."""
-        for m_index in np.unique(runs.mode[rows]):
+        modes = runs.mode[rows].copy()             # the modes before any of these runs jumps: one
+        for m_index in np.unique(modes):           # switch each, whatever the batch holds
             name = self.mode_names[m_index]
-            sel = rows[runs.mode[rows] == m_index]
+            sel = rows[modes == m_index]
             if self.exits[name] and sel.size:
                 _, enabled = self._enabled(self.exits[name], runs.X[sel], tolerance=SWITCH_TOLERANCE)
                 before = runs.X[sel].copy()
