@@ -66,6 +66,10 @@ def call_deep(fn, cancel: threading.Event):
             raise
         finally:
             sys.setrecursionlimit(limit)
-    if "error" in outcome:
-        raise outcome["error"]
+    error = outcome.pop("error", None)
+    if error is not None:
+        try:
+            raise error
+        finally:        # neither the dict nor this frame keeps the exception: its traceback holds
+            error = None    # the search's frames, which would otherwise wait for the collector
     return outcome.get("value")

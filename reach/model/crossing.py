@@ -30,6 +30,8 @@ above 0 or a nonlinear row dipped into is not followed.
 
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 
 from reach.model.constraints import opposite_pairs
@@ -68,7 +70,7 @@ class Crossings:
     them between grid points (see the module docstring)."""
 
     def __init__(self, sim, name: str):
-        self.sim, self.name = sim, name
+        self.sim, self.name = weakref.proxy(sim), name     # the simulator holds this: no cycle
         model = sim.model
         self.guards = []
         for tr, margins in sim.urgent[name]:

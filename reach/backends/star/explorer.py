@@ -799,20 +799,22 @@ class _Explorer:
             except _Deaggregate as failure:
                 if failure.target is not agg:
                     raise
-                del self.sets[kept_sets:]           # what replaces it has its own segments
-                if self.covered is not None:
-                    self.covered.forget(mark)
-                if k + 1 < len(candidates):
-                    LOG.info("enlarged aggregate entering '%s' replaced by the exact hull (%s)",
-                             mode, failure.witness.piece)
-                    continue
-                agg.refined = True
-                self.stats.deaggregated += 1
-                self.stats.nested = max(self.stats.nested, nested + 1)
-                LOG.info("aggregate of %d stars entering '%s' refined into its members (%s; up to %d "
-                         "coefficients)", len(kept), mode, failure.witness.piece, max(m.nvars for m, _ in kept))
-                for member, path in kept:
-                    self._chain(mode, member, path.closed(refinements=1))
+                piece = failure.witness.piece
+            # what replaces it is explored once the handler has ended (the failure's traceback
+            # holds the frames of the failed exploration: see _cell)
+            del self.sets[kept_sets:]               # what replaces it has its own segments
+            if self.covered is not None:
+                self.covered.forget(mark)
+            if k + 1 < len(candidates):
+                LOG.info("enlarged aggregate entering '%s' replaced by the exact hull (%s)", mode, piece)
+                continue
+            agg.refined = True
+            self.stats.deaggregated += 1
+            self.stats.nested = max(self.stats.nested, nested + 1)
+            LOG.info("aggregate of %d stars entering '%s' refined into its members (%s; up to %d "
+                     "coefficients)", len(kept), mode, piece, max(m.nvars for m, _ in kept))
+            for member, path in kept:
+                self._chain(mode, member, path.closed(refinements=1))
 
     def _clock_from(self, ranges: Box, start: float) -> Box:
         """``ranges`` with the clock at least ``start``.
@@ -896,23 +898,28 @@ class _Explorer:
             cut_from = None if directed is None else seg.nvars - int(np.count_nonzero(np.asarray(spread) > 0))
             self._check_segment(mode, seg, path, block, not final, cut_from)
             self._jump_from(mode, seg, path, block, not final, point, pending, (start, spread))
+            return
         except _Refine as failure:
             if final or failure.blame != block:
                 raise
-            del self.sets[kept_sets:]               # the halves keep their own segments
-            self.stats.refined += 1
-            self.stats.deepest = max(self.stats.deepest, depth + 1)
-            half = h / 2
-            first = self._half_spread(mode, spread, since, half, carried)
-            self._cell(mode, start, half, path, depth + 1, point, pending, first, since, carried,
-                       self._half_directed(mode, directed, since, half, carried))
-            mid = start.affine_map(*self.flows[mode].step(half))
-            Hi, gi = self._flow_invariant(mode)  # relaxed by the input effect, as on the grid
-            mid = mid.intersect_halfspaces(Hi, gi if first is None else gi + np.abs(Hi) @ first)
-            mid, mid_point = self._start(mid, point)
-            if mid is not None:
-                self._cell(mode, mid, half, path, depth + 1, mid_point, pending, spread, since + half,
-                           carried, directed)
+        # the halves are explored once the handler has ended: the failure's traceback holds the
+        # frames it came through (their stars), which would otherwise live as long as the halves
+        # (and, chained as the context of a later exception, past the check)
+        del seg, error
+        del self.sets[kept_sets:]                   # the halves keep their own segments
+        self.stats.refined += 1
+        self.stats.deepest = max(self.stats.deepest, depth + 1)
+        half = h / 2
+        first = self._half_spread(mode, spread, since, half, carried)
+        self._cell(mode, start, half, path, depth + 1, point, pending, first, since, carried,
+                   self._half_directed(mode, directed, since, half, carried))
+        mid = start.affine_map(*self.flows[mode].step(half))
+        Hi, gi = self._flow_invariant(mode)      # relaxed by the input effect, as on the grid
+        mid = mid.intersect_halfspaces(Hi, gi if first is None else gi + np.abs(Hi) @ first)
+        mid, mid_point = self._start(mid, point)
+        if mid is not None:
+            self._cell(mode, mid, half, path, depth + 1, mid_point, pending, spread, since + half,
+                       carried, directed)
 
     def _half_spread(self, mode: str, spread, since: float, half: float, carried=0.0):
         """The input-effect bound ``carried + R(since + half)`` of the first half of a bisected cell
