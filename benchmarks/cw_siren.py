@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from reach.backends.event_sampling import outside_bounds, sample_extrema
+from reach.backends.montecarlo.event_sampling import outside_bounds, sample_extrema
 from reach.backends.taylor import BACKEND
 from reach.backends.taylor.units import sweep_box
 from reach.executors import LocalExecutor

@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 import scipy.linalg
 
-from reach.backends import fsr_fourier as F
+from reach.backends.fsr import fourier as F
 from reach.backends.base import run
 from reach.backends.fsr import BACKEND, GaussianProblem, reach_avoid
 from reach.model.constraints import halfspaces, lambdify_margins

@@ -47,7 +47,8 @@ class Target:
 
     @property
     def module(self) -> str:
-        return self.file[:-3].replace("/", ".")
+        """The dotted name of the file's mutants (mutmut names a package's ``__init__`` by the package)."""
+        return self.file[:-3].replace("/", ".").removesuffix(".__init__")
 
     def patterns(self) -> list[str]:
         out = []
@@ -67,7 +68,8 @@ TARGETS = {
                              ("tests/test_star_tightened.py", "tests/test_star_soundness.py",
                               "tests/test_star_inputs.py", "tests/test_star_aff.py")),
     "chord_hull": Target("reach/sets/star.py", ("chord_hull",), ("tests/test_sets.py", "tests/test_star.py")),
-    "fsr_intervals": Target("reach/backends/fsr.py", ("reach", "reach_avoid", "_sequential", "_verdict", "leave_bound"),
+    "fsr_intervals": Target("reach/backends/fsr/__init__.py",
+                            ("reach", "reach_avoid", "_sequential", "_verdict", "leave_bound"),
                             ("tests/test_fsr.py", "tests/test_fsr_intervals.py")),
     "taylor_remainder": Target("reach/backends/taylor/bound.py",
                                ("polynomial_range", "_parity", "estimated_remainder", "truncate",
@@ -81,7 +83,7 @@ TARGETS = {
                                 "tests/test_vtxo_supervisor.py", "tests/test_montecarlo.py")),
     "crosscheck": Target("reach/bench/crosscheck.py", ("cross_check", "_replays"),
                          ("tests/test_bench.py", "tests/test_crosscheck.py")),
-    "within_bound": Target("reach/backends/event_sampling.py", ("within_bound",),
+    "within_bound": Target("reach/backends/montecarlo/event_sampling.py", ("within_bound",),
                            ("tests/test_within_bound.py", "tests/test_event_sampling.py", "tests/test_crosscheck.py")),
     "constraints": Target("reach/model/constraints.py",
                           ("Constraint.negated", "from_comparisons", "affine_coefficients", "halfspaces",

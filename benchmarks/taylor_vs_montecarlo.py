@@ -22,7 +22,7 @@ import warnings
 
 import numpy as np
 
-from reach.backends.event_sampling import outside_bounds, sample_extrema
+from reach.backends.montecarlo.event_sampling import outside_bounds, sample_extrema
 from reach.backends.taylor import BACKEND
 from reach.model.loader import load_model
 from reach.spec.properties import bind, load_properties

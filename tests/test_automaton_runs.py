@@ -23,7 +23,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from reach.backends.initial_sampling import branch_plan
+from reach.backends.montecarlo.initial_sampling import branch_plan
 from reach.backends.montecarlo import BACKEND as MONTECARLO
 from reach.backends.star import BACKEND as STAR
 from reach.cli import main

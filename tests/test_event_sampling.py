@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from model_files import load_files
-from reach.backends.event_sampling import outside_bounds, replay_event, sample_extrema
+from reach.backends.montecarlo.event_sampling import outside_bounds, replay_event, sample_extrema
 from reach.backends.montecarlo import BACKEND
 from reach.cli import main
 from reach.model.loader import load_model
@@ -173,7 +173,7 @@ def test_structured_signals_hold_corners_and_switch_once_to_the_opposite_corner(
     opposite one from piece k on, 1 <= k < K), and those are the signals marked ``once``."""
     from types import SimpleNamespace
 
-    from reach.backends.initial_sampling import structured_signals
+    from reach.backends.montecarlo.initial_sampling import structured_signals
 
     inputs = [SimpleNamespace(low=-1.0 - j, high=2.0 + j) for j in range(m)]
     model = SimpleNamespace(varying_inputs=inputs, horizon=float(K - 1))

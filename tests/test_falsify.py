@@ -1,4 +1,4 @@
-"""Falsification by optimisation (reach.backends.falsify through the Monte Carlo back-end).
+"""Falsification by optimisation (reach.backends.montecarlo.falsify through the Monte Carlo back-end).
 
 References are independent of the simulator: the SRA08 closed loop is integrated by solve_ivp
 from the ARCH matrices written out here, the Passive drift is the exact CWH map ``expm(A s)``.
@@ -15,7 +15,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 
-from reach.backends.falsify import Parameterisation, latin_hypercube
+from reach.backends.montecarlo.falsify import Parameterisation, latin_hypercube
 from reach.backends.montecarlo import BACKEND, replay, switch_window
 from reach.model import load_model
 from reach.result import Status
@@ -201,7 +201,7 @@ def test_the_latin_hypercube_is_scipys(seed, count, dim):
 
 def _fake_search(objective, violation_below=-np.inf):
     """``(evaluate, best, batches)``: ``evaluate`` records each batch and keeps the best point in
-    ``best`` as :func:`reach.backends.falsify.falsify`'s does (``violated`` below the threshold)."""
+    ``best`` as :func:`reach.backends.montecarlo.falsify.falsify`'s does (``violated`` below the threshold)."""
     best = {"depth": np.inf, "violated": False, "point": None}
     batches = []
 
@@ -221,7 +221,7 @@ def test_the_gradient_polish_reaches_the_projection_of_a_quadratic_minimum(centr
     """``rho(u) = |u - c|^2`` on the unit cube is least at the projection of ``c`` (coordinates
     outside ``[0, 1]`` held by a face, as a bang-bang signal's values are): the polish reaches it
     from a random start, simulating in batches only."""
-    from reach.backends.falsify import Budget, _gradient_polish
+    from reach.backends.montecarlo.falsify import Budget, _gradient_polish
     c = np.array(centre)
     evaluate, best, batches = _fake_search(lambda u: float(np.sum((u - c) ** 2)))
     start = np.random.default_rng(seed).random(c.size)
@@ -232,7 +232,7 @@ def test_the_gradient_polish_reaches_the_projection_of_a_quadratic_minimum(centr
 
 
 def test_the_gradient_polish_stops_at_the_first_violation():
-    from reach.backends.falsify import Budget, _gradient_polish
+    from reach.backends.montecarlo.falsify import Budget, _gradient_polish
     evaluate, best, batches = _fake_search(lambda u: float(u.sum() - 1.0), violation_below=0.0)
     start = np.full(4, 0.9)
     f = evaluate(start[None, :])[0]
@@ -242,7 +242,7 @@ def test_the_gradient_polish_stops_at_the_first_violation():
 
 
 def test_the_polish_starts_are_the_best_distinct_points():
-    from reach.backends.falsify import DISTINCT, _distinct_best
+    from reach.backends.montecarlo.falsify import DISTINCT, _distinct_best
     population = np.array([[0.5, 0.5], [0.51, 0.5], [0.9, 0.1], [0.5 + 2 * DISTINCT, 0.5], [0.0, 0.0]])
     energies = np.array([1.0, 0.5, 3.0, 2.0, 0.1])
     kept = _distinct_best(population, energies, np.array([0.0, 0.02]))

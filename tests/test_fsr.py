@@ -10,7 +10,7 @@ import scipy.linalg
 from scipy.integrate import solve_ivp
 from scipy.special import ndtr
 
-from reach.backends import fsr_fourier as F
+from reach.backends.fsr import fourier as F
 from reach.backends.base import run
 from reach.backends.fsr import BACKEND, GaussianProblem, reach, reach_avoid
 from reach.backends.fsr import leave_bound as fsr_leave_bound

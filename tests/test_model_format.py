@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from reach import lp
-from reach.backends.initial_sampling import PolytopeSampler
+from reach.backends.montecarlo.initial_sampling import PolytopeSampler
 from reach.checking import check_files
 from reach.cli import main
 from reach.errors import InputError

@@ -98,7 +98,7 @@ def test_simulated_runs_agree_with_solve_ivp(xml, cfg):
     model.horizon = min(model.horizon, 0.2)
     x0 = (model.initial.low + model.initial.high) / 2
     if not model.initial.is_box:
-        from reach.backends.initial_sampling import PolytopeSampler
+        from reach.backends.montecarlo.initial_sampling import PolytopeSampler
         x0 = PolytopeSampler(model.initial.polytope, model.initial.low, model.initial.high).structured()[-1]
     signal = None
     if model.varying_inputs:

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from reach.backends.initial_sampling import PolytopeSampler
+from reach.backends.montecarlo.initial_sampling import PolytopeSampler
 from reach.backends.montecarlo import replay
 from reach.backends.star import BACKEND
 from reach.model import load_model

@@ -9,7 +9,7 @@ import scipy.linalg
 import sympy
 from scipy.integrate import solve_ivp
 
-from reach.backends.event_sampling import outside_bounds, sample_extrema
+from reach.backends.montecarlo.event_sampling import outside_bounds, sample_extrema
 from reach.backends.taylor import BACKEND
 from reach.backends.taylor.da import DA, algebra
 from reach.backends.taylor.event import event_map, initial_state, refine_time

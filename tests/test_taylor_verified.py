@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
 
-from reach.backends.event_sampling import outside_bounds, sample_extrema
+from reach.backends.montecarlo.event_sampling import outside_bounds, sample_extrema
 from reach.backends.taylor import BACKEND
 from reach.backends.taylor.da import DA, algebra
 from reach.backends.taylor.event import initial_state

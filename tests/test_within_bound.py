@@ -14,7 +14,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from reach.backends.event_sampling import within_bound
+from reach.backends.montecarlo.event_sampling import within_bound
 
 RELATIVE = 1e-9        # the documented rounding allowance
 

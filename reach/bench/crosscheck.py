@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from collections import defaultdict
 
-from reach.backends.event_sampling import within_bound
+from reach.backends.montecarlo.event_sampling import within_bound
 
 
 def _replays(row) -> bool:

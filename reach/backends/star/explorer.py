@@ -1318,7 +1318,7 @@ class _Explorer:
         init = self.model.initial
         if init.is_box:
             return x0
-        from reach.backends.initial_sampling import PolytopeSampler
+        from reach.backends.montecarlo.initial_sampling import PolytopeSampler
         if self._initial_sampler is None:
             self._initial_sampler = PolytopeSampler(init.polytope, init.low, init.high)
         sampler = self._initial_sampler

@@ -53,7 +53,7 @@ lies in ``[P_M - B, P_M + B]`` where ``P_M`` is the probability computed on ``M`
 "never leaves", the switched runs and the runs of ``M`` coincide. This is the sliding-mode
 boundary layer of the VTXO models (``|s_i| <= phi_i`` decays as ``s_i' = -lam_i s_i`` inside).
 
-Non-Gaussian laws go through :mod:`reach.backends.fsr_fourier`; from a model this is the case
+Non-Gaussian laws go through :mod:`.fourier`; from a model this is the case
 for a reach property when the initial state is a box (uniformly distributed over it, as the
 Monte Carlo back-end samples it), or on request with ``method: fourier``. A bounded input with a
 range is nondeterministic (any value, the worst deciding), not distributed: averaging over it
@@ -68,8 +68,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import ndtr
 
-from reach.backends import fsr_fourier
 from reach.backends.base import unsupported
+from reach.backends.fsr import fourier
 from reach.backends.options import option_error, parse_options, ranged
 from reach.model.ltv import KickedLinearSystem
 from reach.model.constraints import halfspaces
@@ -89,7 +89,7 @@ class Options:
     method: str = "auto"             # auto | genz | markov | fourier
     seed: int = 0
     max_points: int = ranged(2 ** 22, 1, 2 ** 30)       # quasi-Monte Carlo evaluations at most
-    max_frequencies: int = ranged(fsr_fourier.MAX_FREQUENCIES, 1, 10 ** 8)  # Fourier path: frequency vectors at most
+    max_frequencies: int = ranged(fourier.MAX_FREQUENCIES, 1, 10 ** 8)  # Fourier path: frequency vectors at most
     max_rows: int = ranged(1000, 1, 100_000)            # reach-avoid: constraint rows integrated at most (row cap)
 
     @classmethod
@@ -411,13 +411,13 @@ class FsrBackend:
                           probability=(0.0, 1.0), details=details)
         if isinstance(prop, BoundReach):
             if opts.method == "fourier" or not point:
-                initial = (fsr_fourier.point_law(problem.x0) if point
-                           else fsr_fourier.UniformLaw(model.initial.low, model.initial.high))
+                initial = (fourier.point_law(problem.x0) if point
+                           else fourier.UniformLaw(model.initial.low, model.initial.high))
                 T, lower, upper = interval_form(*target)
-                z = fsr_fourier.ProjectedSum.of(problem.system, T, initial,
-                                                fsr_fourier.GaussianLaw(problem.w_mean, problem.w_cov))
-                p = fsr_fourier.box_probability(z, lower, upper, tol=opts.abs_error,
-                                                max_frequencies=opts.max_frequencies)
+                z = fourier.ProjectedSum.of(problem.system, T, initial,
+                                            fourier.GaussianLaw(problem.w_mean, problem.w_cov))
+                p = fourier.box_probability(z, lower, upper, tol=opts.abs_error,
+                                            max_frequencies=opts.max_frequencies)
                 details.update(method="fourier", frequencies=p.points,
                                initial="point" if point else "uniform over the initial box",
                                error="periodisation bound + truncation estimate")

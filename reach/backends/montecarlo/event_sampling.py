@@ -95,7 +95,7 @@ class EventMonitor:
 
     @property
     def min_depth(self) -> np.ndarray:
-        """The margins under the name the falsifier reads (:mod:`reach.backends.falsify`)."""
+        """The margins under the name the falsifier reads (:mod:`reach.backends.montecarlo.falsify`)."""
         return self.margins()
 
     def first_violation(self) -> int | None:

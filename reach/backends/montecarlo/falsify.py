@@ -2,9 +2,9 @@
 free parameters, as S-TaLiRo and Breach do.
 
 The robustness of one run is its smallest depth ``rho = min_t depth(x(t))`` into the unsafe set
-(:class:`reach.backends.montecarlo.SafetyMonitor`; positive is a margin, at most 0 a violation),
+(:class:`reach.backends.montecarlo.monitors.SafetyMonitor`; positive is a margin, at most 0 a violation),
 or for an event property the margin of the run's extremum from the requirement
-(:class:`reach.backends.event_sampling.EventMonitor`; below 0 a violation).
+(:class:`reach.backends.montecarlo.event_sampling.EventMonitor`; below 0 a violation).
 A run is fixed by a point ``u`` of the unit cube ``[0, 1]^d``, the concatenation of
 
 * the free initial coordinates, ``x0_i = low_i + u_i (high_i - low_i)`` (a polytopic initial set:
@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.optimize
 
-from reach.backends.initial_sampling import PolytopeSampler
+from reach.backends.montecarlo.initial_sampling import PolytopeSampler
 from reach.model.simulate import Branches
 
 NO_VISIT = 1e12        # robustness of a run that never enters a mode of the property
