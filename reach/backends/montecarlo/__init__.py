@@ -39,7 +39,7 @@ on local processes or on a Dask scheduler (:mod:`.sampling`): a seed gives the s
 whatever the split and the executor.
 
 Every visited state is checked against every unsafe piece of the property. A violation is
-replayed alone (:func:`replay`, :mod:`.replay`) and returned as UNSAFE with its counterexample.
+replayed alone (:func:`replay`, :mod:`.replays`) and returned as UNSAFE with its counterexample.
 Otherwise the answer is UNKNOWN with the closest approach (depth) found and a one-sided 95 %
 Clopper-Pearson upper bound on the violation probability from the i.i.d. round. Monte Carlo
 never says SAFE.
@@ -66,7 +66,7 @@ from reach.backends.montecarlo.falsify import Budget, falsify
 from reach.backends.montecarlo.initial_sampling import PolytopeSampler, extremal_runs
 from reach.backends.montecarlo.monitors import SafetyMonitor
 from reach.backends.montecarlo.options import NAME, Options
-from reach.backends.montecarlo.replay import check_run, constant_signal, replay, signal_record
+from reach.backends.montecarlo.replays import check_run, constant_signal, replay, signal_record
 from reach.backends.montecarlo.sampling import (SWITCH_PROBABILITY, _kicks, _simulate_rounds, random_plan, run_plan,
                                                 sampled_runs, structured_plan, switch_window)
 from reach.model.automaton import HybridAutomaton
