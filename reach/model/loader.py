@@ -223,8 +223,12 @@ class _Builder:
                                               f"the grid steps' exponentials would overflow")
         clocks = [i for i in range(len(self.state))
                   if all(m.flow[i] == 1 for m in modes.values())]
+        # a window is a span of the run's time: read on a clock that is the time (from 0, never
+        # reset); a guard on another clock (a periodic timer reset at each tick) is a general guard
+        reset = {i for tr in transitions for i in tr.reset}
+        timers = [i for i in clocks if i not in reset and initial.low[i] == 0 == initial.high[i]]
         for tr in transitions:
-            tr.window = self.window_of(tr, modes, clocks)
+            tr.window = self.window_of(tr, modes, timers)
         model = HybridAutomaton(
             name=name.strip(), description=str(self.data.get("description", "")).strip(),
             file=self.file, units=self.units, constants=self.constants, state=self.state,
@@ -427,7 +431,7 @@ class _Builder:
         return out
 
     def window_of(self, tr: Transition, modes, clocks):
-        """``(clock, lo, hi)`` if a may-transition's guard is an interval of one clock."""
+        """``(clock, lo, hi)`` if a may-transition's guard is an interval of one of ``clocks``."""
         if tr.urgent or not tr.guard:
             return None
         lo, hi, clock = -np.inf, np.inf, None
