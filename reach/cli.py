@@ -48,7 +48,10 @@ file:line: field: message); 3 undecided (UNKNOWN or UNSUPPORTED left, nothing vi
 MAX_OPTION_TEXT = 10_000
 
 
-def _parse_options(pairs: list[str]) -> dict:
+def _parse_options(pairs: list[str], backend: str | None = None) -> dict:
+    """``{key: value}`` of ``-o KEY=VALUE`` pairs (values read as YAML); for the one ``backend``
+    a check runs, ``B.KEY`` is its ``KEY`` (as ``reach plot`` reads them) and another ``B`` is
+    bad input."""
     options = {}
     for pair in pairs or []:
         if len(pair) > MAX_OPTION_TEXT:
@@ -65,6 +68,10 @@ def _parse_options(pairs: list[str]) -> dict:
                 options[key.strip()] = float(value)
             except ValueError:
                 pass
+    if backend is not None:
+        from reach.backends.options import split_options
+
+        return split_options(options, [backend])[backend]
     return options
 
 
@@ -77,7 +84,7 @@ def cmd_check(args) -> int:
         return cmd_check_spaceex(args)
     _verbose(args)
     backend = resolve_backend(args.backend)
-    options = _parse_options(args.option)
+    options = _parse_options(args.option, args.backend)
     validate_options(args.backend, options)
     model, props = load_bound(find_model(args.model), args.properties, args.property)
     for finding in model.lints:             # after every input is read: bad input is one line
@@ -133,7 +140,7 @@ def cmd_check_spaceex(args) -> int:
 
     _verbose(args)
     results, model, docs, bound = check_spaceex(args.model, args.properties, args.backend,
-                                                _parse_options(args.option))
+                                                _parse_options(args.option, args.backend))
     for finding in _import_findings(docs) + model.lints:
         print(printable(f"warning: {finding}"), file=sys.stderr)
     saved = {}
@@ -420,7 +427,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("properties", help="property file")
     p.add_argument("--backend", "-b", default="montecarlo")
     p.add_argument("--property", "-p", action="append", help="check only this property (repeatable)")
-    p.add_argument("--option", "-o", action="append", metavar="KEY=VALUE", help="back-end option")
+    p.add_argument("--option", "-o", action="append", metavar="KEY=VALUE",
+                   help="back-end option (B.KEY=VALUE: the same, for back-end B)")
     p.add_argument("--json", action="store_true", help="print results as JSON")
     p.add_argument("--verbose", "-v", action="store_true", help="print the back-end's progress to stderr")
     p.add_argument("--counterexamples", default="counterexamples", metavar="DIR",

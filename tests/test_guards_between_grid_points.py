@@ -11,6 +11,7 @@ import textwrap
 
 import numpy as np
 import pytest
+import sympy
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from scipy.integrate import solve_ivp
@@ -133,11 +134,15 @@ PROPS = """properties:
 """
 
 
-def test_an_equality_ends_the_flow_of_its_mode(tmp_path):
-    """``x' = 1`` from [0, 0.2] and the urgent ``x == 1``: in ``a``, x never exceeds 1 (star:
-    SAFE; Monte Carlo: no violation); in ``b`` it reaches 1 + (3 - t_1) = 3.2 > 2.5 (both: UNSAFE,
-    a counterexample that jumped at x = 1 and carries that path)."""
-    (tmp_path / "m.yaml").write_text(EQUALITY.replace("GUARD", '["x >= 1", "x <= 1"]'))
+@pytest.mark.parametrize("guard", ['["x >= 1", "x <= 1"]', '["x == 1"]', '["2*x - 2 == 0"]'])
+def test_an_equality_ends_the_flow_of_its_mode(tmp_path, guard):
+    """``x' = 1`` from [0, 0.2] and the urgent ``x == 1`` (two rows, or written as an equality:
+    the same two opposite rows): in ``a``, x never exceeds 1 (star: SAFE; Monte Carlo: no
+    violation); in ``b`` it reaches 1 + (3 - t_1) = 3.2 > 2.5 (both: UNSAFE, a counterexample
+    that jumped at x = 1 and carries that path)."""
+    (tmp_path / "m.yaml").write_text(EQUALITY.replace("GUARD", guard))
+    (guard_rows,) = [tr.guard for tr in load_model(tmp_path / "m.yaml").transitions]
+    assert len(guard_rows) == 2 and sympy.expand(guard_rows[0].g + guard_rows[1].g) == 0
     (tmp_path / "p.yaml").write_text(PROPS)
     in_a, in_b = check_files(tmp_path / "m.yaml", tmp_path / "p.yaml", "star")
     assert in_a.status is Status.SAFE and in_b.status is Status.UNSAFE

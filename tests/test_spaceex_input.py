@@ -145,6 +145,34 @@ def test_an_unknown_name_in_the_xml_names_file_line_and_field(tmp_path, capsys, 
                    "(the component's params: T, c)")
 
 
+@pytest.mark.parametrize("declared", ['', '\n <param name="go" type="real" local="false" dynamics="any"/>'])
+def test_a_transition_label_that_is_not_a_declared_label_is_bad_input(tmp_path, capsys, declared):
+    """An undeclared label (or a real param's name) is in no component's alphabet: the
+    transition would move alone, never synchronised, a slip the model's author should hear of."""
+    body = THERMOSTAT.replace('<transition source="2" target="1">',
+                              '<transition source="2" target="1"><label>go</label>', 1)
+    body = body.replace('dynamics="any"/>\n <location', f'dynamics="any"/>{declared}\n <location', 1)
+    xml, cfg = write(tmp_path, body, CFG)
+    err = bad_input(check(xml, cfg), capsys)
+    line = 9 + declared.count("\n")
+    assert err.startswith(f"reach: {xml}:{line}: component 'heater': transition label 'go' is not declared"), err
+
+
+def test_the_line_of_an_input_bounded_differently_per_location_is_the_same_every_run(tmp_path, capsys):
+    """The message names the first location (in one fixed order) whose bounds differ, at its
+    invariant's line, not a line that depends on a set's iteration order."""
+    body = THERMOSTAT.replace('<param name="c" type="real" local="false" dynamics="any"/>',
+                              '<param name="c" type="real" local="false" dynamics="any"/>\n'
+                              ' <param name="w" type="real" local="false" dynamics="any"/>', 1)
+    body = body.replace("<invariant>T &lt;= 22</invariant>", "<invariant>T &lt;= 22 &amp; 0 &lt;= w &lt;= 1</invariant>")
+    body = body.replace("<invariant>T &gt;= 18</invariant>", "<invariant>T &gt;= 18 &amp; -1 &lt;= w &lt;= 0</invariant>")
+    body = body.replace("T' == -0.1*(T - 10) + 3", "T' == -0.1*(T - 10) + 3 + w")
+    xml, cfg = write(tmp_path, body, CFG)
+    errors = {bad_input(check(xml, cfg), capsys) for _ in range(4)}
+    assert errors == {f"reach: {xml}:8: the input 'w' has different bounds in different locations "
+                      "(not supported): in 'off' they differ from 'on'"}, errors
+
+
 @pytest.mark.parametrize("flag,value,line", [
     ("asap", "maybe", 8), ("asap", "1", 8), ("timedriven", "yes", 8), ("local", "ja", 5),
 ])

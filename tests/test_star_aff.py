@@ -104,6 +104,17 @@ def test_cfg_that_forbids_nothing_is_one_line_of_bad_input(tmp_path, capsys):
     assert len(err) == 1 and "forbidden" in err[0] and "nothing" in err[0] and str(cfg) in err[0]
 
 
+@pytest.mark.parametrize("forbidden", ["false", "loc(sys) == go & loc(sys) == error"])
+def test_cfg_whose_forbidden_terms_name_nothing_reachable_is_safe(tmp_path, capsys, forbidden):
+    """A forbidden set that is written but empty (``false``; a location combination the product
+    never has) forbids nothing any run can meet: SAFE, exit 0, as an empty polyhedron is (not
+    the bad input of a cfg without a forbidden set)."""
+    xml, cfg = write(tmp_path, RAMP, f'system = sys\ninitially = "loc(sys) == go & x == 0"\n'
+                                     f'forbidden = "{forbidden}"\ntime-horizon = 1\n')
+    assert main(["check", str(xml), str(cfg), "-b", "star"]) == 0
+    assert "SAFE" in capsys.readouterr().out
+
+
 # ---------------------------------------------------------------- the cfg's hints
 
 BALL = '''<component id="ball">

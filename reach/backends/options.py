@@ -68,3 +68,19 @@ def parse_options(cls, options: dict | None, backend: str) -> dict:
 def option_error(backend: str, name: str, message: str) -> InputError:
     """A bad value of a known option."""
     return InputError(message, field=f"options.{backend}.{name}")
+
+
+def split_options(pairs: dict, backends: list[str]) -> dict[str, dict]:
+    """``{backend: options}`` of the back-ends run, from ``{key or backend.key: value}``: a plain
+    key goes to each, ``B.key`` to back-end ``B`` only (a ``B`` not run is bad input)."""
+    out = {b: {} for b in backends}
+    for key, value in pairs.items():
+        head, dot, rest = key.partition(".")
+        if dot and head in out:
+            out[head][rest] = value
+        elif dot:
+            raise InputError(f"'{head}' is not a back-end run here ({', '.join(backends)})", field="--option")
+        else:
+            for b in backends:
+                out[b][key] = value
+    return out

@@ -41,9 +41,15 @@ class Constraint:
 
 
 def from_comparisons(comparisons: Sequence[Comparison], text: str, where: Where) -> list[Constraint]:
-    """Normalise ``lhs op rhs`` to ``g <= 0`` form; ``abs(e) <= c`` becomes ``e <= c, -e <= c``."""
+    """Normalise ``lhs op rhs`` to ``g <= 0`` form; ``abs(e) <= c`` becomes ``e <= c, -e <= c``
+    and ``a == b`` the two opposite rows ``a - b <= 0, b - a <= 0`` (a slab of width 0)."""
     out = []
     for cmp in comparisons:
+        if cmp.op == "==":
+            g = sympy.expand(cmp.lhs - cmp.rhs)
+            out += [Constraint(g, False, text, where, cmp.dimension, cmp.unit),
+                    Constraint(sympy.expand(-g), False, text, where, cmp.dimension, cmp.unit)]
+            continue
         small, big = (cmp.lhs, cmp.rhs) if cmp.op in ("<=", "<") else (cmp.rhs, cmp.lhs)
         strict = cmp.op in ("<", ">")
         tags = (cmp.dimension, cmp.unit)

@@ -366,7 +366,8 @@ def parse_expr(text, names: Mapping[str, sympy.Expr], where: Where, units: UnitS
 
 def parse_comparison(text, names: Mapping[str, sympy.Expr], where: Where,
                      units: UnitSystem = SI, dims: DimensionContext | None = None) -> list[Comparison]:
-    """Parse ``a <= b`` (or a chain ``a <= b <= c``) to a list of comparisons."""
+    """Parse ``a <= b`` (or a chain ``a <= b <= c``, or one equality ``a == b``) to a list of
+    comparisons."""
     tree = _parse_tree(text, where)
     if not isinstance(tree, ast.Compare):
         raise where.error(f"expected a comparison such as 'x <= 1', got '{text}'")
@@ -381,9 +382,14 @@ def parse_comparison(text, names: Mapping[str, sympy.Expr], where: Where,
     for value, _ in operands:
         _check_numbers(value, text, where)
     result = []
+    if len(tree.ops) == 1 and isinstance(tree.ops[0], ast.Eq):     # an equality: two opposite rows
+        (lhs, lf), (rhs, rf) = operands
+        form = parser.meet(nodes[0], lf, nodes[1], rf, "compared with")
+        dimension, unit = dims.display(form, dims.brackets) if dims is not None else (None, None)
+        return [Comparison(lhs, "==", rhs, dimension, unit)]
     for i, op in enumerate(tree.ops):
         if type(op) not in _COMPARE:
-            raise where.error(f"only <=, <, >=, > are allowed in '{text}'")
+            raise where.error(f"only <=, <, >=, > (or one ==) are allowed in '{text}'")
         (lhs, lf), (rhs, rf) = operands[i], operands[i + 1]
         form = parser.meet(nodes[i], lf, nodes[i + 1], rf, "compared with")
         dimension, unit = dims.display(form, dims.brackets) if dims is not None else (None, None)

@@ -17,23 +17,8 @@ import importlib
 import time
 from pathlib import Path
 
+from reach.backends.options import split_options
 from reach.errors import InputError
-
-
-def split_options(pairs: dict, backends: list[str]) -> dict[str, dict]:
-    """``{backend: options}`` from ``{key or backend.key: value}``."""
-    out = {b: {} for b in backends}
-    for key, value in pairs.items():
-        head, dot, rest = key.partition(".")
-        if dot and head in out:
-            out[head][rest] = value
-        elif dot:
-            raise InputError(f"'{head}' is not one of the back-ends plotted ({', '.join(backends)})",
-                             field="--option")
-        else:
-            for b in backends:
-                out[b][key] = value
-    return out
 
 
 def _knows(backend: str, name: str) -> bool:

@@ -174,6 +174,10 @@ def _component(node: Node, cid: str, file: str) -> Base | Network:
         for end in (tr.source, tr.target):
             if end not in locations:
                 raise InputError(f"{where}: transition to or from unknown location id '{end}'", file, line=tr.line)
+        if tr.label is not None and getattr(params.get(tr.label), "type", None) != "label":
+            # an undeclared label is in no alphabet: the transition would move alone, unsynchronised
+            raise InputError(f"{where}: transition label '{tr.label}' is not declared (a <param "
+                             f"name=\"{tr.label}\" type=\"label\"/> of the component)", file, line=tr.line)
     return Base(cid, params, locations, transitions, node.line)
 
 

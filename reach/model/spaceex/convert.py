@@ -430,6 +430,7 @@ class DocumentBuilder(Converter):
                              self.file, line=self._line_of(var))
         aliased = {}
         bounds = {}
+        where = sorted(where, key=str)      # one order, so that a message names the same line each run
         for key in where:
             for j, (rel, line) in enumerate(self.invariants[key]):
                 e = _alias_of(rel, var)
@@ -448,7 +449,7 @@ class DocumentBuilder(Converter):
             var in names_in(p) and j not in {i for i, _ in bounds.get(key, [])}
             for key in where for j, (rel, _) in enumerate(self.invariants[key]) for p in rel.parts)
         if bounds and not aliased and not uses_outside_flows:
-            intervals = set()
+            intervals = {}
             for key in where:
                 if key not in bounds:
                     raise InputError(f"'{var}' has no flow and is unbounded in location "
@@ -458,10 +459,13 @@ class DocumentBuilder(Converter):
                 for j, (a, b) in bounds[key]:
                     lo, hi = max(lo, a), min(hi, b)
                     self.dropped[key].add(j)
-                intervals.add((lo, hi))
+                intervals.setdefault((lo, hi), key)
             if len(intervals) != 1:
+                other = list(intervals.values())[1]         # the first location that differs
                 raise InputError(f"the input '{var}' has different bounds in different locations "
-                                 "(not supported)", self.file, line=line)
+                                 f"(not supported): in '{self.flat.label(other)}' they differ from "
+                                 f"'{self.flat.label(list(intervals.values())[0])}'", self.file,
+                                 line=self.invariants[other][bounds[other][0][0]][1])
             (lo, hi), = intervals
             if not (np.isfinite(lo) and np.isfinite(hi)) or lo > hi:
                 raise InputError(f"the input '{var}' needs finite bounds low <= {var} <= high", self.file, line=line)
@@ -871,6 +875,13 @@ class DocumentBuilder(Converter):
                 prop["require"] = ["0 <= -1"]         # the whole of these modes is forbidden
             props.append(prop)
             plines[("properties", k)] = (self.cfg.file, line)
+        if not props and terms:             # every term false, or on locations the product never has
+            props.append({"id": pid, "kind": "safety", "modes": list(dict.fromkeys(self.mode_of.values())),
+                          "description": f"forbidden = {printable(self.cfg.text('forbidden'))[:200]} (empty: "
+                                         "no term names a location combination of the product, or each "
+                                         "is false)",
+                          "require": ["0 <= 1"]})     # nothing is forbidden anywhere
+            plines[("properties", 0)] = (self.cfg.file, line)
         if not props:
             return None, {}, pid
         if len(props) > 1:
