@@ -156,6 +156,44 @@ def test_a_violation_that_needs_an_early_may_transition_is_replayed(tmp_path):
     assert results["floor"].status is Status.SAFE, results["floor"].details.get("reason")
 
 
+ROTATE_THEN_GROW = """
+name: rotate_then_grow
+state: [x, y, t]
+modes:
+  A: {flow: {x: "y", y: "-x", t: "1"}, invariant: ["t <= 4"]}
+  B: {flow: {x: "0.2*x", y: "0", t: "1"}}
+transitions:
+  - {from: A, to: B, guard: ["y <= -0.5"], reset: {x: "2*x"}}
+initial: {mode: A, box: {x: 1, y: 0, t: 0}}
+horizon: 8
+"""
+
+
+@pytest.mark.parametrize("fraction,status", [(0.999, Status.UNSAFE), (1.001, Status.SAFE)])
+def test_a_violation_lost_in_the_switch_delay_of_the_replay_grid_is_found_on_a_finer_one(
+        tmp_path, fraction, status):
+    """In ``A`` the run turns, ``x = cos t``, ``y = -sin t``; it may switch once ``y <= -0.5``
+    (``t`` in ``[pi/6, 5 pi/6]``), doubling ``x``, which then grows as ``e^{0.2 t}``: at the
+    horizon ``x = 2 cos(t_s) e^{0.2 (8 - t_s)}``, largest at the earliest switch, ``2 cos(pi/6)
+    e^{0.2 (8 - pi/6)} = 7.7258``. A switch one default replay step (8/2400) late loses more
+    than 0.1 % of that, so the bound 0.1 % below it was UNKNOWN (no witness replayed); the
+    unresolved witnesses are replayed again on grids 10 and 100 times finer: UNSAFE, and the
+    counterexample replays. 0.1 % above it: SAFE."""
+    truth = 2 * np.cos(np.pi / 6) * np.exp(0.2 * (8 - np.pi / 6))
+    (tmp_path / "m.yaml").write_text(ROTATE_THEN_GROW)
+    (tmp_path / "p.yaml").write_text(f"properties:\n  - {{id: p, kind: safety, modes: [B], "
+                                     f"require: ['x <= {float(fraction * truth)!r}']}}\n")
+    model = load_model(tmp_path / "m.yaml")
+    (prop,) = [bind(p, model) for p in load_properties(tmp_path / "p.yaml")]
+    result = BACKEND.check(model, prop, {"finer_retry": False})
+    assert result.status is status, result.details.get("reason")
+    if status is Status.UNSAFE:
+        cex = result.counterexample.to_dict()
+        run = replay(model, prop, cex["initial_state"], cex["switch_time"], cex["dt"], cex["input_signal"],
+                     Branches(prescribed=[cex["transitions"]]))
+        assert run.violated and cex["dt"] < model.horizon / 2400
+
+
 def hottest(t: float) -> float:
     """The highest temperature at time ``t`` of the overlapping thermostat: heating all along
     from 20, ``T = 40 - 20 e^{-0.1 t}`` (switching to cool only lowers it, and ``T`` stays

@@ -398,16 +398,7 @@ class StarBackend:
                 raise _Stop(Status.UNKNOWN, "no violation at the grid points (discrete time: "
                                             "behaviour between grid points is not checked)")
         except _Stop as stop:
-            status, counterexample = stop.status, stop.counterexample
-            details["reason"] = stop.reason
-            if stop.imprecise:
-                details["finer_step_may_decide"] = True
-            if stop.witness is not None:
-                try:
-                    details["witness"] = witness_details(explorer, stop.witness)
-                except (_Stop, lp.LPError):        # tracing it back needs LPs the budget lacks
-                    w = stop.witness
-                    details["witness"] = {"mode": w.mode, "piece": w.piece, "depth": w.depth}
+            status, counterexample = _stopped(explorer, stop, details)
         except lp.LPError as failure:
             status = Status.UNKNOWN
             details["reason"] = explorer.out_of_time() or f"LP solver failure, nothing concluded: {failure}"
@@ -418,12 +409,40 @@ class StarBackend:
             status = Status.UNKNOWN
             details["reason"] = (f"a path of more than {explorer.stats.jumps} jumps is too deep to "
                                  f"follow (set max_jumps to bound it)")
+        if status is Status.UNKNOWN and explorer.unresolved:
+            try:
+                explorer.replay_finer()                 # a witness may violate on a finer grid
+            except _Stop as stop:
+                details.clear()
+                status, counterexample = _stopped(explorer, stop, details)
+            except lp.LPError:
+                pass
+        if status is Status.UNKNOWN and explorer.uncut_urgent:
+            details["reason"] = details.get("reason", "") + (
+                f" (the urgent guards of several rows of {', '.join(explorer.uncut_urgent[:3])} do not end "
+                f"the flow of their mode here: runs are also followed past them, which only adds "
+                f"behaviour; a guard of one row, or an invariant saying where the mode is left, is cut)")
         details.update(_run_details(explorer))
         LOG.info("%s / %s: %s after %d stars, %d cells, %d LPs, %d aggregates", model.name, prop.id,
                  status.value, explorer.stats.chains,
                  explorer.stats.cells, explorer.stats.lps, explorer.stats.aggregated)
         return Result(NAME, model.name, prop.id, status, time.perf_counter() - start,
                       counterexample=counterexample, details=details, sets=explorer.sets)
+
+
+def _stopped(explorer: _Explorer, stop: _Stop, details: dict):
+    """``(status, counterexample)`` of a search ended by ``stop``, its reason and witness put in
+    ``details``."""
+    details["reason"] = stop.reason
+    if stop.imprecise:
+        details["finer_step_may_decide"] = True
+    if stop.witness is not None:
+        try:
+            details["witness"] = witness_details(explorer, stop.witness)
+        except (_Stop, lp.LPError):        # tracing it back needs LPs the budget lacks
+            w = stop.witness
+            details["witness"] = {"mode": w.mode, "piece": w.piece, "depth": w.depth}
+    return stop.status, stop.counterexample
 
 
 def _with_hull(model, prop, opt, result: Result, start: float) -> Result:

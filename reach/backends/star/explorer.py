@@ -136,8 +136,8 @@ class _Stats:
     instants: int = 0               # jumps taken at one instant (see _at_instant)
 
 
-def _urgent_keeps(model, data, options) -> dict[str, list]:
-    """Per mode, rows ``a x <= b`` that a run keeps while it flows there because an urgent
+def _urgent_keeps(model, data, options) -> tuple[dict[str, list], list[str]]:
+    """``(keeps, uncut)``: per mode, rows ``a x <= b`` that a run keeps while it flows there because an urgent
     transition (no window) would otherwise have been taken: for a guard of one row
     ``h x <= c``, ``-h x <= -c`` (a run that enters with ``h x >= c`` leaves the instant
     ``h x = c``); for a slab, two rows ``h x <= c_hi`` and ``-h x <= -c_lo`` with exactly
@@ -148,11 +148,13 @@ def _urgent_keeps(model, data, options) -> dict[str, list]:
     several rows are left out (the states outside them are no convex set; two nearly opposite
     rows bound a wedge, empty on one side, which a run passes without jumping), and so is
     discrete time (a run jumps from the first grid state inside the guard, which the cut would
-    remove)."""
+    remove). ``uncut``: the urgent transitions left out (``name (from mode)``), which an undecided
+    answer names."""
     if options.discrete_time:
-        return {}
+        return {}, []
     urgent = {tr.name for tr in model.transitions if tr.urgent and tr.window is None}
     out: dict[str, list] = {}
+    uncut = []
     for mode, jumps in data.jumps.items():
         for jump in jumps:
             if jump is None or jump.name not in urgent:
@@ -161,7 +163,9 @@ def _urgent_keeps(model, data, options) -> dict[str, list]:
                     and jump.g[0] + jump.g[1] >= 0)
             if jump.H.shape[0] == 1 or slab:
                 out.setdefault(mode, []).extend((-a, -b) for a, b in zip(jump.H, jump.g))
-    return out
+            elif jump.H.shape[0] > 1:
+                uncut.append(f"{jump.name} (from {mode})")
+    return out, uncut
 
 
 class _Explorer:
@@ -200,7 +204,7 @@ class _Explorer:
         self._leading: dict[str, set[str]] = {}
         self._initial_sampler = None            # a polytopic initial set's (_inside_initial)
         self._may = {tr.name for tr in model.transitions if not tr.urgent and tr.window is None}
-        self._keeps = _urgent_keeps(model, data, options)  # per mode, see _flow_invariant
+        self._keeps, self.uncut_urgent = _urgent_keeps(model, data, options)   # see _flow_invariant
         self._kept: dict[str, list] = {}          # per mode, the keeps of the chains under way
         self.cancel = threading.Event()         # set by the caller that stopped waiting (reach.deep)
         self.deadline = np.inf if options.max_seconds is None else time.perf_counter() + options.max_seconds
@@ -214,6 +218,7 @@ class _Explorer:
         self._directions: dict[str, np.ndarray | None] = {}     # per mode, see _input_directions
         self.stats = _Stats()
         self.unresolved: list[_Witness] = []
+        self.finer_replays = 0          # replays allowed beyond max_replays (replay_finer)
         self.replayed: list = []
         self.sets: list = []            # SetPiece of every explored segment (option keep_sets)
         self.root = initial if initial is not None else data.initial_star(model.initial)
@@ -1193,7 +1198,7 @@ class _Explorer:
     def _replay(self, witness: _Witness, x0, switch, signal, transitions, dt=None):
         """One replay of ``witness``'s run: where transitions are enabled together, the run takes
         the next one of its path's ``transitions`` (:class:`reach.model.simulate.Branches`)."""
-        if self.stats.replays >= self.opt.max_replays:
+        if self.stats.replays >= self.opt.max_replays + self.finer_replays:
             return
         from reach.backends.montecarlo import replay
         from reach.model.simulate import Branches
@@ -1288,18 +1293,41 @@ class _Explorer:
         switch = windows[-1][1] if windows else self._latest_abort(witness.mode)
         return x0, switch, transitions, times
 
-    def _switching_signal(self, signal, transitions, times):
+    def replay_finer(self, count: int = 2, factors=(10, 100)):
+        """The first ``count`` unresolved witnesses replayed once more on grids ``factors`` times
+        finer than the replay step, their may-transitions asked at the first instant of that grid
+        after the witness's jump time: on the default grid that delay (up to one step) can cost
+        a violation by less than what the run loses in it (a switch at ``y = -0.5`` that an
+        exponential mode magnifies). Grids of more than a tenth of the simulator's step limit
+        are not tried. These replays come on top of ``max_replays``. UNSAFE (:class:`_Stop`) on
+        the first replay that violates."""
+        from reach.backends.montecarlo import constant_signal
+        from reach.model.simulate import MAX_STEPS
+
+        self.finer_replays = count * len(factors)      # beyond max_replays, which the search may have used
+        for witness in self.unresolved[:count]:
+            x0, switch, transitions, times = self._start_of(witness)
+            signal = constant_signal(self.model, x0)
+            for factor in factors:
+                step = self._replay_step() / factor
+                if self.model.horizon / step > MAX_STEPS / 10 or self.out_of_time():
+                    break
+                timed = self._switching_signal(signal, transitions, times, step)
+                self._replay(witness, x0, switch, timed or signal, transitions, step)
+
+    def _switching_signal(self, signal, transitions, times, step: float | None = None):
         """The counterexample's input signal (``signal``: the inputs held constant, or None
         without time-varying inputs) on the replay grid, asking for a switch where the path
         takes a may-transition (no urgency, no window): at the first grid instant at or after
         its jump time (time 0 itself included). The replay then takes those transitions when
         the witness does (:meth:`reach.model.simulate.Simulator.run`, ``switch``), not only
         where an invariant forces them, as an early switch over a wide guard needs. None if the
-        path takes no may-transition (the first replay already followed it)."""
+        path takes no may-transition (the first replay already followed it). ``step``: the grid
+        (the replay step by default)."""
         may = [t for name, t in zip(transitions, times) if name in self._may]
         if not may:
             return None
-        step = self._replay_step()
+        step = step or self._replay_step()
         starts = sorted({max(0, int(np.ceil(t / step - 1e-9))) for t in may})
         pieces = starts[-1] + 2                    # the last piece asks for no switch
         if pieces > MAX_SIGNAL_PIECES:
