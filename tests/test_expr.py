@@ -159,3 +159,26 @@ def test_parsed_affine_expression_evaluates_like_python(a, b):
     e = parse_expr(f"({a!r})*x + ({b!r})*y - 7", NAMES, W)
     value = float(e.subs({x: 1.5, y: -2.0}))
     assert math.isclose(value, a * 1.5 - b * 2.0 - 7, rel_tol=1e-12, abs_tol=1e-6)
+
+
+@pytest.mark.parametrize("text", ["sqrt(-1)*x", "log(0)*x", "x + asin(2)", "exp(exp(exp(10)))*x",
+                                  "x*(-8)**(1/3)", "acos(1.5) <= x"])
+def test_a_constant_part_that_is_no_finite_real_number_is_bad_input(text):
+    """``sqrt(-1)`` folds to the imaginary unit, ``log(0)`` to complex infinity; ``asin(2)`` is
+    complex and ``exp(exp(exp(10)))`` beyond a float: a model holding one has no real runs (star
+    once proved such a flow SAFE), so the expression is refused where it is written."""
+    with pytest.raises(InputError, match="not a finite real number|out of the floating-point range"):
+        if "<=" in text:
+            parse_comparison(text, NAMES, W)
+        else:
+            parse_expr(text, NAMES, W)
+
+
+@settings(max_examples=60, deadline=None)
+@given(a=st.floats(-50, 50), b=st.floats(0.01, 50))
+def test_real_constant_parts_are_kept(a, b):
+    """Constant parts that are finite reals (``sqrt(b)``, ``exp(a)``, ``atan(a)``, ``pi``) pass
+    and keep their value."""
+    e = parse_expr(f"sqrt({b!r})*x + exp({a!r}) + atan({a!r})*pi", NAMES, W)
+    value = float(e.subs(x, 2.0))
+    assert value == pytest.approx(math.sqrt(b) * 2 + math.exp(a) + math.atan(a) * math.pi, rel=1e-12)

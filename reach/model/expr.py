@@ -348,7 +348,10 @@ def parse_quantity(text, names: Mapping[str, sympy.Expr], where: Where, units: U
 
 def _check_numbers(value: sympy.Expr, text, where: Where) -> None:
     """Every number folded into ``value`` fits a float: ``1e308*1e308`` folds to 1e616, which
-    the back-ends would evaluate as inf (and inf - inf as NaN)."""
+    the back-ends would evaluate as inf (and inf - inf as NaN); and every part of it without a
+    variable is a finite real number: ``sqrt(-1)`` (the imaginary unit), ``log(0)`` (complex
+    infinity), ``asin(2)`` (complex) and ``exp(exp(exp(10)))`` (beyond a float) would make a
+    flow or a bound no real model has, which a back-end could only misread."""
     for number in value.atoms(sympy.Number):
         try:
             finite = math.isfinite(float(number))
@@ -356,6 +359,20 @@ def _check_numbers(value: sympy.Expr, text, where: Where) -> None:
             finite = False
         if not finite:
             raise where.error(f"expression '{text}' holds a number out of the floating-point range")
+    walk = sympy.preorder_traversal(value)
+    for part in walk:
+        if part.free_symbols:
+            continue
+        walk.skip()                     # its parts are parts of this constant
+        if part.is_Number:
+            continue
+        try:
+            z = complex(sympy.N(part, 17))
+            real = math.isfinite(z.real) and z.imag == 0
+        except (TypeError, ValueError, OverflowError, ZeroDivisionError):
+            real = False
+        if not real:
+            raise where.error(f"expression '{text}': '{part}' is not a finite real number")
 
 
 def parse_expr(text, names: Mapping[str, sympy.Expr], where: Where, units: UnitSystem = SI,
