@@ -199,8 +199,11 @@ def _no_file_in_the_way(folder) -> None:
 
 
 def _writable(path: Path, option: str) -> None:
-    """``path`` can be written: its folder exists or is made, and it is not a read-only file."""
+    """``path`` can be written: its folder exists or is made, and it is not a read-only file nor
+    a symbolic link (writing would go through it, to wherever it points)."""
     writable_folder(path.parent, option)
+    if path.is_symlink():
+        raise InputError(f"{printable(path)} is a symbolic link: not written through", field=option)
     if path.exists() and not os.access(path, os.W_OK):
         raise InputError(f"cannot write {printable(path)}", field=option)
 
@@ -326,7 +329,8 @@ def cmd_plot(args) -> int:
     if args.backend or args.vars:
         raise InputError("--backend and --vars need a property file: reach plot MODEL PROPS --backend B",
                          field="properties")
-    _number(args.runs, "--runs", 1, 10_000)
+    _number(args.runs, "--runs", 1, 1000)          # each run is drawn: the figure's cost grows fast
+    _number(args.seed, "--seed", 0, 2 ** 32 - 1)
     model = load_model(find_model(args.model))
     out = _figure_path(args.out, Path("results/plots") / f"{safe_name(model.name)}_runs.png")
     plot_model_runs(model, out, runs=args.runs, seed=args.seed)
@@ -367,7 +371,7 @@ def cmd_sweep(args) -> int:
     from reach.executors import make_executor
     from reach.model import load_model
 
-    _number(args.radius, "--radius", 0.0, open_low=True)
+    _number(args.radius, "--radius", 0.0, 1e9, open_low=True)
     _number(args.cells, "--cells", 1, 1000)
     _number(args.start, "--start", -360.0, 720.0)
     _number(args.end, "--end", -360.0, 720.0)
@@ -380,6 +384,13 @@ def cmd_sweep(args) -> int:
         raise InputError(f"model '{model.name}' has no abort window to sweep", str(model_path))
     window = (min(w[1] for w in windows), max(w[2] for w in windows))
     out = _figure_path(args.out, Path("results/plots") / f"{safe_name(model.name)}_abort_map.png")
+    if args.property:
+        from reach.spec import load_properties
+        known = {p.id for p in load_properties(args.properties)}
+        for pid in args.property:
+            if pid not in known:
+                raise InputError(f"no property '{printable(pid)}' in {printable(args.properties)} "
+                                 f"(known: {', '.join(sorted(known))})", field="--property")
     cells = arc_cells(model, args.radius, args.cells, args.start, args.end)
     start = time.perf_counter()
     times = safe_abort_map(model_path, [args.properties], cells, args.property, {},

@@ -99,3 +99,14 @@ def writable_folder(folder, option: str) -> Path:
     if not os.access(folder, os.W_OK):
         raise InputError(f"cannot write in {printable(folder)}", field=option)
     return folder
+
+
+def within(path, roots) -> bool:
+    """Whether ``path`` (its links resolved) lies in one of the folders ``roots``: files that
+    another file names (a counterexample's model, a suite's instances) are read only there, so a
+    file handed to reach cannot make it read, and quote, a file anywhere else."""
+    try:
+        real = Path(path).resolve()
+        return any(real.is_relative_to(Path(root).resolve()) for root in roots)
+    except (OSError, RuntimeError, ValueError):
+        return False

@@ -155,3 +155,20 @@ def test_models_are_found_by_path_file_name_or_name(tmp_path):
     for hidden in ("_private", "Hidden"):
         with pytest.raises(InputError, match="no model named"):
             find_model(hidden, dirs)
+
+
+def test_a_model_looked_up_by_name_skips_what_is_no_regular_file(tmp_path, monkeypatch):
+    """``reach check NAME`` reads the ``models/*.yaml`` of the working folder for a ``name:``;
+    a FIFO there (which would block the read for ever) and a link to /dev/zero (which would
+    fill the memory) are passed over, and the model that has the name is found."""
+    import os
+
+    from reach.locate import find_model
+
+    models = tmp_path / "models"
+    models.mkdir()
+    os.mkfifo(models / "a_pipe.yaml")
+    (models / "b_zero.yaml").symlink_to("/dev/zero")
+    (models / "c_tank.yaml").write_text("name: wanted\n")
+    monkeypatch.chdir(tmp_path)
+    assert find_model("wanted") == Path("models") / "c_tank.yaml"

@@ -115,8 +115,11 @@ def read_report(path) -> dict:
     except (json.JSONDecodeError, RecursionError, ValueError) as exc:
         raise InputError(f"not a results file: invalid JSON ({exc.__class__.__name__})", str(path)) from None
     if not isinstance(report, dict) or not isinstance(report.get("rows"), list) or not all(
-            isinstance(r, dict) and {"instance", "property", "backend", "status"} <= set(r) for r in report["rows"]):
-        raise InputError("not a results file (expected rows with instance, property, backend, status)", str(path))
+            isinstance(r, dict) and {"instance", "property", "backend", "status"} <= set(r)
+            and all(isinstance(r[k], str) for k in ("instance", "property", "backend", "status"))
+            for r in report["rows"]):
+        raise InputError("not a results file (expected rows with instance, property, backend, status)",
+                         str(path))
     return report
 
 

@@ -20,7 +20,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from reach.backends import BACKENDS, validate_options
 from reach.errors import InputError
+from reach.paths import printable, within
 from reach.yamlio import load
 
 EXPECTATIONS = ("safe", "unsafe")
@@ -61,9 +63,13 @@ def load_suite(path) -> Suite:
     if not isinstance(backends, dict) or not backends:
         raise doc.where("backends").error("expected a mapping back-end: {options}")
     for name, options in backends.items():
+        if name not in BACKENDS:
+            raise doc.where("backends", name).error(f"unknown back-end '{name}' (known: {', '.join(BACKENDS)})")
         if options is not None and not isinstance(options, dict):
             raise doc.where("backends", name).error("expected a mapping of options")
+        _valid_options(doc, name, options, ("backends", name))
     base = Path(doc.file).parent
+    roots = (base, Path.cwd())      # instances' files are read only here (reach.paths.within)
     items = data.get("instances")
     if not isinstance(items, list) or not items:
         raise doc.where("instances").error("expected a non-empty list of instances")
@@ -88,7 +94,25 @@ def load_suite(path) -> Suite:
         if not isinstance(options, dict) or set(options) - set(backends) or \
                 not all(isinstance(v, dict) for v in options.values()):
             raise doc.where("instances", i, "options").error("expected {back-end: {option: value}} for the suite's back-ends")
+        for backend_name, given in options.items():
+            _valid_options(doc, backend_name, {**(backends[backend_name] or {}), **given}, ("instances", i, "options"))
+        for key in ("model", "properties"):
+            path = base / str(item[key])
+            if not path.is_file():
+                raise doc.where("instances", i, key).error(f"no such file: {printable(item[key])}")
+            if not within(path, roots):
+                raise doc.where("instances", i, key).error(
+                    f"{printable(item[key])} lies outside the suite's folder and the working folder: not read")
         instances.append(Instance(str(item["id"]), base / item["model"], base / item["properties"],
                                   dict(expect), str(item.get("source", "")), chosen, options))
     return Suite(str(data.get("description", "")), {k: dict(v or {}) for k, v in backends.items()},
                  instances, doc.file)
+
+
+def _valid_options(doc, backend: str, options, path: tuple) -> None:
+    """The suite's options for ``backend`` checked as ``-o`` options are (names, types, ranges):
+    a bad one is bad input at its line in the suite, before anything runs."""
+    try:
+        validate_options(backend, options)
+    except InputError as exc:
+        raise doc.where(*path).error(exc.message) from None

@@ -13,7 +13,7 @@ NAME = "montecarlo"
 class Options:
     samples: int = ranged(1000, 1, 10_000_000)           # i.i.d. runs (safety) or runs (stochastic reach)
     search_rounds: int = ranged(3, 0, 1000)        # cross-entropy generations after the i.i.d. round
-    search_size: int = ranged(200, 1, 1_000_000)        # runs per generation
+    search_size: int = ranged(200, 1, 100_000)          # runs per generation (one batch: no deadline inside)
     seed: int = 0
     dt: float | None = None        # simulator grid step (model default if None)
     batch: int = ranged(20000, 1, 1_000_000)            # runs per batch (an executor unit; stochastic estimates)
@@ -22,8 +22,8 @@ class Options:
     scheduler: object = None       # or a Dask scheduler address (or Client) to run them on
     optimise: bool = True          # falsification by optimisation after the search (reach.backends.montecarlo.falsify)
     generations: int = ranged(20, 0, 100_000)     # differential evolution generations
-    population: int = ranged(40, 5, 1_000_000)    # runs per generation
-    polish: int = ranged(1000, 0, 1_000_000)      # polish runs from the best point (reach.backends.montecarlo.falsify)
+    population: int = ranged(40, 5, 10_000)       # runs per generation (one batch: no deadline inside)
+    polish: int = ranged(1000, 0, 100_000)        # polish runs from the best point (reach.backends.montecarlo.falsify)
     keep_sets: bool = False        # safety, events: KEPT_RUNS sampled runs in Result.sets (pictures)
     max_seconds: float | None = ranged(None, 0.0, open_low=True)  # safety: no search or optimisation past it
 

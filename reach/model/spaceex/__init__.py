@@ -80,6 +80,9 @@ def write_yaml(docs: Documents, out_dir) -> tuple[Path, Path | None]:
     safe = safe_name(str(docs.model["name"]), "model")
     out = Path(out_dir)
     model_path = out / "models" / f"{safe}.yaml"
+    for path in (model_path, out / "properties" / f"{safe}.yaml"):
+        if path.is_symlink():           # writing would go through it, to wherever it points
+            raise InputError(f"{path} is a symbolic link: not written through", field="--out")
     model_path.parent.mkdir(parents=True, exist_ok=True)
     header = f"# {docs.model['description']}\n"
     model_path.write_text(header + yaml.safe_dump(docs.model, sort_keys=False, width=120))

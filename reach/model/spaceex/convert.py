@@ -441,7 +441,7 @@ class DocumentBuilder(Converter):
                 b = _bound_of(rel, var)
                 if b is not None:
                     bounds.setdefault(key, []).append((j, b))
-        if aliased and set(aliased) == where:
+        if aliased and set(aliased) == set(where):
             for key, e in aliased.items():
                 self.aliases[key][var] = e
             return
