@@ -526,6 +526,9 @@ def main(argv=None) -> int:
     except RecursionError:
         print("reach: input nested too deeply (nothing was decided)", file=sys.stderr)
         return 2
+    except BrokenPipeError:         # the reader of the output went away (reach check ... | head)
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())    # no error at exit either
+        return 3
     except (OverflowError, FloatingPointError) as exc:
         print(printable(f"reach: floating-point overflow ({exc}): a horizon or magnitude too large for "
                         "double precision (nothing was decided)"), file=sys.stderr)

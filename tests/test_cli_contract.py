@@ -278,3 +278,18 @@ def test_a_probability_wholly_below_its_threshold_reads_as_a_violation(tmp_path,
     assert main(["check", *files, "--json"]) == code
     (row,) = json.loads(capsys.readouterr().out)
     assert row["violated"] is violated and row["status"] == ("unknown" if violated else "safe")
+
+
+def test_a_reader_that_goes_away_ends_the_run_quietly(tmp_path):
+    """``reach check ... | head`` whose reader has gone: no "internal error", and exit 3
+    (nothing is claimed that the reader did not see)."""
+    import subprocess
+    import sys
+
+    repo = Path(__file__).resolve().parent.parent
+    proc = subprocess.Popen([sys.executable, "-m", "reach", "check", str(repo / "tests/data/tank.yaml"),
+                             str(repo / "tests/data/tank_level.yaml"), "-b", "star"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=tmp_path)
+    proc.stdout.close()                 # before reach has written anything
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=120) == 3 and "error" not in err, err
