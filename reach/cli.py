@@ -177,6 +177,8 @@ def cmd_import(args) -> int:
     from reach.model.spaceex import documents, write_yaml
 
     docs = documents(args.model, args.config)
+    for folder in ("models", "properties"):         # an --out that is a file: bad input naming it
+        writable_folder(Path(args.out) / folder, "--out")
     model_file, prop_file = write_yaml(docs, args.out)
     for finding in _import_findings(docs):
         print(printable(f"warning: {finding}"), file=sys.stderr)

@@ -3,6 +3,7 @@
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -248,3 +249,18 @@ def test_the_earliest_may_switch_is_a_structured_run(tmp_path):
     prop = bind(load_properties(tmp_path / "p.yaml")[0], model)
     again = replay(model, prop, cex.initial_state, None, cex.dt, cex.input_signal)
     assert again.violated and 4.99 < again.state[1] <= 5.0 + 1e-9
+
+
+def test_a_model_whose_own_step_is_too_fine_names_its_field(tmp_path):
+    """A disturbance step of 1e-12 s cuts the 500 s horizon into 5e14 grid steps: bad input
+    naming the model file and ``disturbance.step``, not an option the user never gave."""
+    import re
+
+    from reach.errors import InputError
+
+    text = re.sub(r"(\n  step: )[^\n]*", r"\g<1>1e-12", Path("models/fsr_burn.yaml").read_text(), count=1)
+    (tmp_path / "m.yaml").write_text(text)
+    with pytest.raises(InputError) as info:
+        check_files(tmp_path / "m.yaml", "properties/fsr_burn.yaml", "montecarlo")
+    assert info.value.field == "disturbance.step" and info.value.file == str(tmp_path / "m.yaml")
+    assert "a longer step" in info.value.message

@@ -96,24 +96,33 @@ def _blas_controller():
     return ThreadpoolController()
 
 
-def check_size(model: HybridAutomaton, dt: float, runs: int = 0) -> None:
+def check_size(model: HybridAutomaton, dt: float, runs: int = 0, given: bool = True) -> None:
     """Refuse (InputError) a grid or a batch of runs that would not fit: more than
     :data:`MAX_STEPS` steps, or an estimate of the one-step matrix powers of the linear modes
-    plus ``runs`` runs' arrays above :data:`MEMORY_BUDGET`."""
+    plus ``runs`` runs' arrays above :data:`MEMORY_BUDGET`. ``given``: ``dt`` is the option's
+    (else the model's default, and the message names the model's field that set it)."""
     from reach.errors import InputError
 
+    if given:
+        file, step_field = None, "options.dt"
+    else:                               # the model's own grid: its disturbance step, or its horizon
+        file, step_field = model.file, "disturbance.step" if model.disturbance is not None else "horizon"
     if not np.isfinite(dt) or dt <= 0:
-        raise InputError(f"the simulator step must be a positive number, got {dt}", field="options.dt")
+        raise InputError(f"the simulator step must be a positive number, got {dt}", file, step_field)
     steps = model.horizon / dt
     if steps > MAX_STEPS:
         raise InputError(f"{model.name}: horizon {model.horizon:g} / step {dt:g} = {steps:.3g} grid steps; at "
-                         f"most {MAX_STEPS:.0e} (use a larger dt)", field="options.dt")
+                         f"most {MAX_STEPS:.0e} (" + ("use a larger dt)" if given else "a longer step)"),
+                         file, step_field)
     linear = sum(1 for m in model.modes.values() if m.linear is not None)
-    planned = linear * (steps + 2) * (model.n + 1) ** 2 * 8 + runs * (model.n + 4) * RUN_BYTES_PER_VALUE
+    matrices = linear * (steps + 2) * (model.n + 1) ** 2 * 8
+    planned = matrices + runs * (model.n + 4) * RUN_BYTES_PER_VALUE
     if planned > MEMORY_BUDGET:
-        raise InputError(f"{model.name}: about {planned / 2 ** 30:.1f} GiB needed for {runs} runs on {steps:.0f} "
+        what = (f"{runs} runs" if runs else
+                f"the step matrices of {linear} linear modes of {model.n} states")
+        raise InputError(f"{model.name}: about {planned / 2 ** 30:.1f} GiB needed for {what} on {steps:.0f} "
                          f"steps; at most {MEMORY_BUDGET / 2 ** 30:.0f} GiB are planned for (fewer samples or a "
-                         "larger dt)", field="options.samples" if runs else "options.dt")
+                         "larger dt)", *((None, "options.samples") if runs else (file, step_field)))
 
 
 def fixed_parameters(model: HybridAutomaton) -> dict:
@@ -268,7 +277,7 @@ class Simulator:
     def __init__(self, model: HybridAutomaton, dt: float | None = None, substeps: int = 2):
         self.model = model
         self.dt = float(dt) if dt else default_dt(model)
-        check_size(model, self.dt)
+        check_size(model, self.dt, given=bool(dt))
         self.substeps = substeps
         self.mode_names = list(model.modes)
         self.n = model.n
