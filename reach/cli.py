@@ -40,7 +40,7 @@ import yaml
 
 from reach.errors import InputError
 from reach.locate import find_model
-from reach.paths import printable, safe_name, writable_folder
+from reach.paths import printable, safe_name, writable_file
 
 EXIT_CODES = """exit codes: 0 every property SAFE; 1 a violation (UNSAFE with a replayed counterexample, a
 probability below its threshold; bench: a failed cross-check); 2 bad input or options (one line
@@ -97,7 +97,7 @@ def cmd_check(args) -> int:
         for r in results:
             if r.counterexample is not None:
                 path = out / (safe_name(f"{r.model}_{r.property}_{r.backend}") + ".json")
-                _writable(path, "--counterexamples")
+                writable_file(path, "--counterexamples")
                 r.counterexample.save(path)
                 saved[r.property] = str(path)
     return _report(args, results, bound, model, saved, results[0].model if results else args.model)
@@ -177,8 +177,6 @@ def cmd_import(args) -> int:
     from reach.model.spaceex import documents, write_yaml
 
     docs = documents(args.model, args.config)
-    for folder in ("models", "properties"):         # an --out that is a file: bad input naming it
-        writable_folder(Path(args.out) / folder, "--out")
     model_file, prop_file = write_yaml(docs, args.out)
     for finding in _import_findings(docs):
         print(printable(f"warning: {finding}"), file=sys.stderr)
@@ -198,16 +196,6 @@ def _no_file_in_the_way(folder) -> None:
     (after it, the verdicts would be lost to the error)."""
     if folder and Path(folder).exists() and not Path(folder).is_dir():
         raise InputError(f"{printable(folder)} is a file, not a folder", field="--counterexamples")
-
-
-def _writable(path: Path, option: str) -> None:
-    """``path`` can be written: its folder exists or is made, and it is not a read-only file nor
-    a symbolic link (writing would go through it, to wherever it points)."""
-    writable_folder(path.parent, option)
-    if path.is_symlink():
-        raise InputError(f"{printable(path)} is a symbolic link: not written through", field=option)
-    if path.exists() and not os.access(path, os.W_OK):
-        raise InputError(f"cannot write {printable(path)}", field=option)
 
 
 def summary(result, prop, model) -> str:
@@ -311,7 +299,7 @@ def _figure_path(out: str | None, default: Path) -> Path:
     if path.suffix.lstrip(".").lower() not in formats:
         raise InputError(f"unknown picture format '{path.suffix or '(none)'}'; use one of "
                          f"{', '.join('.' + f for f in sorted(formats))}", field="--out")
-    _writable(path, "--out")
+    writable_file(path, "--out")
     return path
 
 

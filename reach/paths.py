@@ -101,10 +101,23 @@ def writable_folder(folder, option: str) -> Path:
     return folder
 
 
+def writable_file(path, option: str) -> Path:
+    """``path`` can be written: its folder exists or is made (:func:`writable_folder`), and it is
+    not a read-only file nor a symbolic link (writing would go through it, to wherever it
+    points)."""
+    path = Path(path)
+    writable_folder(path.parent, option)
+    if path.is_symlink():
+        raise InputError(f"{printable(path)} is a symbolic link: not written through", field=option)
+    if path.exists() and not os.access(path, os.W_OK):
+        raise InputError(f"cannot write {printable(path)}", field=option)
+    return path
+
+
 def within(path, roots) -> bool:
     """Whether ``path`` (its links resolved) lies in one of the folders ``roots``: files that
-    another file names (a counterexample's model, a suite's instances) are read only there, so a
-    file handed to reach cannot make it read, and quote, a file anywhere else."""
+    another file names (a suite's instances) are read only there, so a file handed to reach
+    cannot make it read, and quote, a file anywhere else."""
     try:
         real = Path(path).resolve()
         return any(real.is_relative_to(Path(root).resolve()) for root in roots)

@@ -75,21 +75,15 @@ def write_yaml(docs: Documents, out_dir) -> tuple[Path, Path | None]:
     forbids anything); NAME is the cfg's file name, sanitised."""
     import yaml
 
-    from reach.paths import safe_name
+    from reach.paths import safe_name, writable_file
 
     safe = safe_name(str(docs.model["name"]), "model")
     out = Path(out_dir)
-    model_path = out / "models" / f"{safe}.yaml"
-    for path in (model_path, out / "properties" / f"{safe}.yaml"):
-        if path.is_symlink():           # writing would go through it, to wherever it points
-            raise InputError(f"{path} is a symbolic link: not written through", field="--out")
-    model_path.parent.mkdir(parents=True, exist_ok=True)
+    model_path = writable_file(out / "models" / f"{safe}.yaml", "--out")     # both checked before
+    prop_path = None if docs.properties is None else writable_file(out / "properties" / f"{safe}.yaml", "--out")
     header = f"# {docs.model['description']}\n"
     model_path.write_text(header + yaml.safe_dump(docs.model, sort_keys=False, width=120))
-    prop_path = None
-    if docs.properties is not None:
-        prop_path = out / "properties" / f"{safe}.yaml"
-        prop_path.parent.mkdir(parents=True, exist_ok=True)
+    if prop_path is not None:
         prop_path.write_text(f"# the forbidden set of {docs.model['notes']['config']}\n"
                              + yaml.safe_dump(docs.properties, sort_keys=False, width=120))
     return model_path, prop_path
