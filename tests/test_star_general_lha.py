@@ -390,3 +390,50 @@ def test_a_zero_dwell_cycle_is_judged_with_the_constants_the_initial_set_gives(t
         f"initial: {{mode: up, box: {{x: 11, hi: {high}, lo: {low}}}}}\nhorizon: 5\n")
     lints = load_model(tmp_path / "m.yaml").lints
     assert any("zero-dwell" in text for text in lints) == warned, lints
+
+
+DEADBAND = """
+name: deadband
+state: [th, w]
+modes:
+  coast: {flow: {th: "w", w: "0"}}
+  neg: {flow: {th: "w", w: "-ACC"}}
+  pos: {flow: {th: "w", w: "ACC"}}
+transitions:
+  - {from: coast, to: neg, guard: ["th >= 1", "w >= 0"], urgent: true}
+  - {from: neg, to: coast, guard: ["w <= -0.2"], urgent: true}
+  - {from: coast, to: pos, guard: ["th <= -1", "w <= 0"], urgent: true}
+  - {from: pos, to: coast, guard: ["w >= 0.2"], urgent: true}
+initial: {mode: coast, box: {th: [0, 0.5], w: [0.1, W0]}}
+horizon: 40
+"""
+
+
+@pytest.mark.parametrize("acc, w0", [(1.0, 0.3), (0.5, 0.25)])
+def test_urgent_guards_of_two_rows_end_the_flow_of_their_mode(tmp_path, acc, w0):
+    """A deadband with no invariants: coasting at ``w`` until ``th >= 1 & w >= 0`` (or its
+    mirror), then firing at ``-acc`` until ``w = -0.2``. The angle overshoots the band by
+    ``w^2 / (2 acc)``: at most ``1 + w0^2 / (2 acc)`` (the first firing), and at least
+    ``-1 - 0.2^2 / (2 acc)`` (every later one; solve_ivp agrees below). Runs followed past the
+    two-row guard would coast on without bound, so every bound was UNKNOWN; each segment is now
+    checked as its parts in ``th <= 1`` and in ``w <= 0``: 0.05 % outside each extreme is SAFE,
+    0.05 % inside is UNSAFE and the counterexample replays."""
+    high, low = 1 + w0 ** 2 / (2 * acc), -1 - 0.2 ** 2 / (2 * acc)
+
+    def firing(t, y):
+        return [y[1], -acc]
+    overshoot = solve_ivp(firing, (0, 2 * w0 / acc), [1.0, w0], max_step=1e-3, rtol=1e-10, atol=1e-12)
+    assert overshoot.y[0].max() == pytest.approx(high, abs=1e-9)
+    model_text = DEADBAND.replace("ACC", repr(acc)).replace("W0", repr(w0))
+    results, model = checked(tmp_path, model_text, {
+        "high_ok": f"th <= {high * 1.0005!r}", "high_bad": f"th <= {high * 0.9995!r}",
+        "low_ok": f"th >= {low * 1.0005!r}", "low_bad": f"th >= {low * 0.9995!r}"})
+    assert results["high_ok"].status is Status.SAFE, results["high_ok"].details.get("reason")
+    assert results["low_ok"].status is Status.SAFE, results["low_ok"].details.get("reason")
+    for name in ("high_bad", "low_bad"):
+        assert results[name].status is Status.UNSAFE, results[name].details.get("reason")
+        cex = results[name].counterexample.to_dict()
+        (prop,) = [bind(p, model) for p in load_properties(tmp_path / "p.yaml") if p.id == name]
+        run = replay(model, prop, cex["initial_state"], cex["switch_time"], cex["dt"], cex["input_signal"],
+                     Branches(prescribed=[cex["transitions"]]))
+        assert run.violated

@@ -419,9 +419,10 @@ class StarBackend:
                 pass
         if status is Status.UNKNOWN and explorer.uncut_urgent:
             details["reason"] = details.get("reason", "") + (
-                f" (the urgent guards of several rows of {', '.join(explorer.uncut_urgent[:3])} do not end "
-                f"the flow of their mode here: runs are also followed past them, which only adds "
-                f"behaviour; a guard of one row, or an invariant saying where the mode is left, is cut)")
+                f" (the urgent guards of several rows of {', '.join(explorer.uncut_urgent[:3])} did not end "
+                f"the flow of their mode on a chain whose entry set reaches inside them: its runs are also "
+                f"followed past them, which only adds behaviour; an invariant saying where the mode is "
+                f"left is always cut)")
         details.update(_run_details(explorer))
         LOG.info("%s / %s: %s after %d stars, %d cells, %d LPs, %d aggregates", model.name, prop.id,
                  status.value, explorer.stats.chains,

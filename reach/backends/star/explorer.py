@@ -37,6 +37,8 @@ HALF_SPREAD_CELLS = 512
 #: rows of unsafe pieces and guards per mode along which the input effect is bounded besides its
 #: box (:meth:`_Explorer._input_directions`)
 MAX_INPUT_DIRECTIONS = 16
+#: the most parts a segment is split into by urgent guards of several rows (:meth:`_Explorer._split`)
+MAX_SPLIT_PARTS = 8
 
 #: relative size of a grid star's possible rounding (terms that cancel) beyond which a chain ends
 #: UNKNOWN (:meth:`_Explorer._cancellation_guard`): a thousand times the default touch tolerance
@@ -136,25 +138,29 @@ class _Stats:
     instants: int = 0               # jumps taken at one instant (see _at_instant)
 
 
-def _urgent_keeps(model, data, options) -> tuple[dict[str, list], list[str]]:
-    """``(keeps, uncut)``: per mode, rows ``a x <= b`` that a run keeps while it flows there because an urgent
-    transition (no window) would otherwise have been taken: for a guard of one row
-    ``h x <= c``, ``-h x <= -c`` (a run that enters with ``h x >= c`` leaves the instant
-    ``h x = c``); for a slab, two rows ``h x <= c_hi`` and ``-h x <= -c_lo`` with exactly
-    opposite (normalised) normals and ``c_lo <= c_hi`` (an equality when they are equal), both
-    negations (a run that enters with ``h x <= c_lo`` leaves the instant ``h x = c_lo``, which
-    lies in the slab; likewise from above; the simulator finds the slab crossed between grid
-    points, :mod:`reach.model.crossing`, so the replays follow the cut). Other guards of
-    several rows are left out (the states outside them are no convex set; two nearly opposite
-    rows bound a wedge, empty on one side, which a run passes without jumping), and so is
-    discrete time (a run jumps from the first grid state inside the guard, which the cut would
-    remove). ``uncut``: the urgent transitions left out (``name (from mode)``), which an undecided
-    answer names."""
+def _urgent_keeps(model, data, options) -> tuple[dict[str, list], dict[str, list]]:
+    """``(keeps, splits)``: per mode, what a run keeps while it flows there because an urgent
+    transition (no window) would otherwise have been taken.
+
+    ``keeps``: rows ``a x <= b``. For a guard of one row ``h x <= c``, ``-h x <= -c`` (a run
+    that enters with ``h x >= c`` leaves the instant ``h x = c``); for a slab, two rows
+    ``h x <= c_hi`` and ``-h x <= -c_lo`` with exactly opposite (normalised) normals and
+    ``c_lo <= c_hi`` (an equality when they are equal), both negations (a run that enters with
+    ``h x <= c_lo`` leaves the instant ``h x = c_lo``, which lies in the slab; likewise from
+    above; the simulator finds the slab crossed between grid points, :mod:`reach.model.crossing`,
+    so the replays follow the cut).
+
+    ``splits``: the other guards of several rows, ``(name, H, g)``. The states outside such a
+    guard ``G = {H x <= g}`` are no convex set but a union of half-spaces ``h_i x >= g_i``; a
+    run that flows in the mode is, at every instant, in the closure of one of them (it leaves
+    the instant it reaches ``G``), so each segment is checked as the union of its parts in those
+    half-spaces (:meth:`_Explorer._split`). Discrete time keeps neither (a run jumps from the
+    first grid state inside the guard, which the cut would remove)."""
     if options.discrete_time:
-        return {}, []
+        return {}, {}
     urgent = {tr.name for tr in model.transitions if tr.urgent and tr.window is None}
-    out: dict[str, list] = {}
-    uncut = []
+    keeps: dict[str, list] = {}
+    splits: dict[str, list] = {}
     for mode, jumps in data.jumps.items():
         for jump in jumps:
             if jump is None or jump.name not in urgent:
@@ -162,10 +168,10 @@ def _urgent_keeps(model, data, options) -> tuple[dict[str, list], list[str]]:
             slab = (jump.H.shape[0] == 2 and np.array_equal(jump.H[0], -jump.H[1])
                     and jump.g[0] + jump.g[1] >= 0)
             if jump.H.shape[0] == 1 or slab:
-                out.setdefault(mode, []).extend((-a, -b) for a, b in zip(jump.H, jump.g))
+                keeps.setdefault(mode, []).extend((-a, -b) for a, b in zip(jump.H, jump.g))
             elif jump.H.shape[0] > 1:
-                uncut.append(f"{jump.name} (from {mode})")
-    return out, uncut
+                splits.setdefault(mode, []).append((jump.name, jump.H, jump.g))
+    return keeps, splits
 
 
 class _Explorer:
@@ -204,8 +210,10 @@ class _Explorer:
         self._leading: dict[str, set[str]] = {}
         self._initial_sampler = None            # a polytopic initial set's (_inside_initial)
         self._may = {tr.name for tr in model.transitions if not tr.urgent and tr.window is None}
-        self._keeps, self.uncut_urgent = _urgent_keeps(model, data, options)   # see _flow_invariant
+        self._keeps, self._splits = _urgent_keeps(model, data, options)   # see _flow_invariant, _split
         self._kept: dict[str, list] = {}          # per mode, the keeps of the chains under way
+        self._split_by: dict[str, list] = {}      # per mode, the splitting guards of the chains under way
+        self.uncut_urgent: list[str] = []       # urgent guards an entry star reaches inside (_splits_of)
         self.cancel = threading.Event()         # set by the caller that stopped waiting (reach.deep)
         self.deadline = np.inf if options.max_seconds is None else time.perf_counter() + options.max_seconds
         self.pieces = {mode: [_Piece(data.widen(p.H, p.g)[0], p.g, p.strict, p.label) for p in pieces]
@@ -322,10 +330,12 @@ class _Explorer:
             self.linearise.chain(self, mode, star, path, guess, direction)
             return
         self._kept.setdefault(mode, []).append(self._keeps_of(mode, star))
+        self._split_by.setdefault(mode, []).append(self._splits_of(mode, star))
         try:
             self._chain_blocks(mode, star, path, guess, direction)
         finally:
             self._kept[mode].pop()
+            self._split_by[mode].pop()
 
     def _keeps_of(self, mode: str, star: Star):
         """``(H, g)``: the invariant of ``mode`` and the rows ``a x <= b`` of :func:`_urgent_keeps`
@@ -339,6 +349,44 @@ class _Explorer:
         if not rows:
             return Hi, gi
         return np.vstack([Hi] + [a[None] for a, _ in rows]), np.concatenate([gi, [b for _, b in rows]])
+
+    def _splits_of(self, mode: str, star: Star) -> list:
+        """The guards of :func:`_urgent_keeps`'s ``splits`` whose interior the entry ``star``
+        does not reach (its depth into ``G`` at most 0, a weak-duality bound), as lists of the
+        rows ``-h_i x <= -g_i`` one of which each run meets while it stays in ``mode``. A
+        guard the entry reaches inside (those runs leave at once) is not used for the chain;
+        an undecided answer names it."""
+        out = []
+        for name, H, g in self._splits.get(mode, ()):
+            if star.box.bounded and star.depth(H, g)[0] <= 0.0:
+                out.append([(-a, -b) for a, b in zip(H, g)])
+            elif f"{name} (from {mode})" not in self.uncut_urgent:
+                self.uncut_urgent.append(f"{name} (from {mode})")
+        return out
+
+    def _split(self, mode: str, seg: Star) -> list[Star]:
+        """The parts of a segment that hold the runs still flowing in ``mode``: for each guard of
+        :meth:`_splits_of` the segment meets one of its half-spaces ``h_i x >= g_i``, so the
+        segment's runs lie in the union of the parts cut by one half-space per guard (at most
+        :data:`MAX_SPLIT_PARTS` combinations; the guards beyond are left out, which only adds
+        states). A half-space the segment lies in whole makes its guard no cut; one the
+        segment misses (its support bound) is dropped; a part bound propagation proves
+        empty is dropped. The parts overlap; each is checked and jumps on its own."""
+        splits = self._split_by.get(mode)
+        if not splits or not splits[-1]:
+            return [seg]
+        parts = [seg]
+        for rows in splits[-1]:
+            A = np.array([a for a, _ in rows])
+            b = np.array([c for _, c in rows])
+            if np.any(seg.support_bounds(A) <= b):           # the segment lies in one whole
+                continue
+            met = -seg.support_bounds(-A) <= b               # half-spaces the segment may meet
+            if len(parts) * int(np.count_nonzero(met)) > MAX_SPLIT_PARTS:
+                continue
+            parts = [cut for part in parts for i in np.flatnonzero(met)
+                     if (cut := _tightened(part.intersect_halfspaces(A[i][None], b[i:i + 1]), 1)) is not None]
+        return parts
 
     def _flow_invariant(self, mode: str):
         """``(H, g)`` that cut the grid stars and segments of the chain under way in ``mode``:
@@ -894,15 +942,19 @@ class _Explorer:
         final = depth >= self.opt.max_refinements or self.opt.discrete_time or self.flows[mode].drift
         block = start.nvars
         kept_sets = len(self.sets)
+        parts = ()
         try:
             if not final and self._transient(mode, seg, error):
                 raise _Refine(None, block)          # a fast transient: refine before checking
+            parts = self._split(mode, seg)
             if self.opt.keep_sets:
-                self._keep(mode, (seg,))
+                self._keep(mode, parts)
             # the directed rows may cut the input box: its columns are no error an LP cannot remove
             cut_from = None if directed is None else seg.nvars - int(np.count_nonzero(np.asarray(spread) > 0))
-            self._check_segment(mode, seg, path, block, not final, cut_from)
-            self._jump_from(mode, seg, path, block, not final, point, pending, (start, spread))
+            for part in parts:
+                self._check_segment(mode, part, path, block, not final, cut_from)
+            for part in parts:
+                self._jump_from(mode, part, path, block, not final, point, pending, (start, spread))
             return
         except _Refine as failure:
             if final or failure.blame != block:
@@ -910,7 +962,7 @@ class _Explorer:
         # the halves are explored once the handler has ended: the failure's traceback holds the
         # frames it came through (their stars), which would otherwise live as long as the halves
         # (and, chained as the context of a later exception, past the check)
-        del seg, error
+        del seg, error, parts
         del self.sets[kept_sets:]                   # the halves keep their own segments
         self.stats.refined += 1
         self.stats.deepest = max(self.stats.deepest, depth + 1)
