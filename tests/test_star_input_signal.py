@@ -119,3 +119,67 @@ def test_a_witness_at_the_first_instant_is_no_bad_input(tmp_path, bound, status)
         f"properties:\n  - {{id: above, kind: safety, require: [\"y - 2*x >= {bound}\"]}}\n")
     (result,) = check_files(tmp_path / "m.yaml", tmp_path / "p.yaml", "star")
     assert result.status is status
+
+
+def test_extremal_signal_follows_the_path_through_jumps_and_resets():
+    """A path ``A, B, A, B`` switching at 1, 2, 3 (``y' = u - 0.1 y`` in A, ``y' = -u - 0.1 y``
+    in B) and a reset ``y+ = 2 y`` at the last jump: ``y(4) = int_0^4 e^{-0.1 (4 - s)} k(s)
+    sigma(s) u(s) ds`` with ``sigma = +1, -1, +1, -1`` and ``k = 2`` before 3, 1 after, so the
+    maximum takes ``u = sigma`` (the signal flips at each jump, which the last mode's flow alone
+    would never ask for) and is ``2 * 10 (e^{-0.1} - e^{-0.4}) + 10 (1 - e^{-0.1})``."""
+    A = np.array([[-0.1]])
+    up = AffineFlow(A, np.zeros(1), np.array([[1.0]]), np.array([1.0]))
+    down = AffineFlow(A, np.zeros(1), np.array([[-1.0]]), np.array([1.0]))
+    one, two = np.eye(1), 2 * np.eye(1)
+    earlier = [(up, 1.0, one), (down, 2.0, one), (up, 3.0, two)]
+    step, values = extremal_signal(down, np.array([1.0]), 4.0, [-1.0], [1.0], pieces=400, earlier=earlier)
+    sigma = np.array([1.0, -1.0, 1.0, -1.0])[np.minimum((np.arange(400) * step / 1.0).astype(int), 3)]
+    assert np.array_equal(values[:, 0], sigma)
+    y = 0.0
+    for k, (flow, u) in enumerate(zip([up, down, up, down], sigma[::100])):     # exact, piece by piece
+        Phi, psi = AffineFlow(A, flow.B[:, 0] * u).step(1.0)
+        y = (Phi @ [y] + psi)[0] * (2.0 if k == 2 else 1.0)
+    truth = 2 * 10 * (np.exp(-0.1) - np.exp(-0.4)) + 10 * (1 - np.exp(-0.1))
+    assert y == pytest.approx(truth, rel=1e-12)
+    held = extremal_signal(down, np.array([1.0]), 4.0, [-1.0], [1.0], pieces=400)[1]
+    assert np.all(held[:, 0] == -1.0)                       # the last mode alone: no flip
+
+
+FLIP = """
+name: flip
+state: [y, c]
+bounded_inputs:
+  u: {range: [-1, 1], varying: true}
+modes:
+  A: {flow: {y: "u - 0.1*y", c: "1"}, invariant: ["c <= 1"]}
+  B: {flow: {y: "-u - 0.1*y", c: "1"}, invariant: ["c <= 1"]}
+transitions:
+  - {from: A, to: B, guard: ["c >= 1"], reset: {c: "0"}, urgent: true}
+  - {from: B, to: A, guard: ["c >= 1"], reset: {c: "0"}, urgent: true}
+initial: {mode: A, box: {y: [0, 0], c: [0, 0]}}
+horizon: 4
+"""
+
+
+def test_a_witness_whose_input_flips_at_each_jump_replays(tmp_path):
+    """In the flip model the largest ``y(4) = 10 (1 - e^{-0.4})`` needs ``u = +1`` in A and
+    ``-1`` in B: the input held constant, or the bang-bang signal of the witness mode's flow
+    alone (``u = -1`` throughout), reaches about 0. A bound 0.05 % below the maximum was
+    UNKNOWN; the signal of the witness's path (adjoint through the jumps) replays it."""
+    from reach.backends.montecarlo import replay
+    from reach.backends.star import BACKEND
+    from reach.model import load_model
+    from reach.model.simulate import Branches
+    from reach.spec import bind, load_properties
+
+    truth = 10 * (1 - np.exp(-0.4))
+    (tmp_path / "m.yaml").write_text(FLIP)
+    (tmp_path / "p.yaml").write_text(f"properties:\n  - {{id: p, kind: safety, require: ['y <= {float(truth * 0.9995)!r}']}}\n")
+    model = load_model(tmp_path / "m.yaml")
+    (prop,) = [bind(p, model) for p in load_properties(tmp_path / "p.yaml")]
+    result = BACKEND.check(model, prop, {"finer_retry": False})
+    assert result.status is Status.UNSAFE, result.details.get("reason")
+    cex = result.counterexample.to_dict()
+    run = replay(model, prop, cex["initial_state"], cex["switch_time"], cex["dt"], cex["input_signal"],
+                 Branches(prescribed=[cex["transitions"]]))
+    assert run.violated

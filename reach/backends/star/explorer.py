@@ -154,7 +154,8 @@ def _urgent_keeps(model, data, options) -> tuple[dict[str, list], dict[str, list
     guard ``G = {H x <= g}`` are no convex set but a union of half-spaces ``h_i x >= g_i``; a
     run that flows in the mode is, at every instant, in the closure of one of them (it leaves
     the instant it reaches ``G``), so each segment is checked as the union of its parts in those
-    half-spaces (:meth:`_Explorer._split`). Discrete time keeps neither (a run jumps from the
+    half-spaces (:meth:`_Explorer._split`), except where the mode's invariant already keeps
+    one of them (:func:`_invariant_keeps`). Discrete time keeps neither (a run jumps from the
     first grid state inside the guard, which the cut would remove)."""
     if options.discrete_time:
         return {}, {}
@@ -169,9 +170,20 @@ def _urgent_keeps(model, data, options) -> tuple[dict[str, list], dict[str, list
                     and jump.g[0] + jump.g[1] >= 0)
             if jump.H.shape[0] == 1 or slab:
                 keeps.setdefault(mode, []).extend((-a, -b) for a, b in zip(jump.H, jump.g))
-            elif jump.H.shape[0] > 1:
+            elif jump.H.shape[0] > 1 and not _invariant_keeps(data.invariants[mode], jump):
                 splits.setdefault(mode, []).append((jump.name, jump.H, jump.g))
     return keeps, splits
+
+
+def _invariant_keeps(invariant, jump) -> bool:
+    """Whether a row of the mode's invariant (rows normalised, as the guard's) already keeps one
+    of the half-spaces outside the guard: ``h x <= c`` with ``-h`` a guard row ``-h x <= -g``
+    and ``c <= g`` (coast's ``th <= 0.02`` under the guard ``th >= 0.02 & w >= 0``). Every
+    state of the mode's flow then lies in that half-space, and splitting by the guard would
+    only repeat it."""
+    H, g = invariant
+    return any(np.allclose(H[i], -a, rtol=0.0, atol=1e-12) and g[i] <= -b
+               for a, b in zip(jump.H, jump.g) for i in range(H.shape[0]))
 
 
 class _Explorer:
@@ -1274,19 +1286,23 @@ class _Explorer:
         deepest into ``piece`` by the time-varying inputs, or None.
 
         The direction is ``c = -h_r`` for the row ``h_r x <= g_r`` of the piece that the
-        inputs move most (``|h_r| R`` largest, ``R`` the input's reach bound over the horizon,
+        inputs move most (``|h_r| R`` largest, ``R`` the largest input reach bound over the
+        horizon of the path's modes,
         :meth:`.flowpipe.AffineFlow.deviation`); the other rows are kept as constraints (an
         instant ``t == 20`` stays an instant). Two LPs: the point of ``seg``
         (cut by those rows and the horizon) that maximises ``c^T x``, at the latest instant
         among such points; its coefficients give the initial state (as any witness) and its
         clock ``t`` the instant to aim at. The input
-        signal is :func:`.witnesses.extremal_signal` of the witness mode's flow, which
-        attains the input's exact support along ``c`` at ``t`` (exact for a path without
-        jumps; a candidate otherwise). Only the replay decides."""
-        flow = self.data.flows[witness.mode]     # the mode's own inputs (a block may add more)
-        if not flow.inputs:
+        signal is :func:`.witnesses.extremal_signal` along the witness's path (its modes, jump
+        instants and resets, :meth:`_earlier_flows`), which attains the input's exact support
+        along ``c`` at ``t`` for that path (exact without jumps; a candidate otherwise, since
+        the signal may move the jumps). Only the replay decides."""
+        flow = self.data.flows[witness.mode]     # the modes' own inputs (a block may add more)
+        moving = [f for f in [flow] + [f for f, _, _ in self._earlier_flows(witness)] if f.inputs]
+        if not moving:
             return None
-        reach = flow.deviation(self.h, max(1, int(np.ceil(self.horizon / self.h - 1e-9))))[-1]
+        cells = max(1, int(np.ceil(self.horizon / self.h - 1e-9)))
+        reach = np.max([f.deviation(self.h, cells)[-1] for f in moving], axis=0)
         moved = np.abs(piece.H) @ reach
         if not np.any(moved > 0):
             return None
@@ -1314,9 +1330,25 @@ class _Explorer:
             return None
         x0, switch, transitions = self.initial_point(aimed)
         step, values = extremal_signal(flow, -piece.H[r], t, [u.low for u in self.data.varying],
-                                       [u.high for u in self.data.varying], signal_pieces(t, base))
+                                       [u.high for u in self.data.varying], signal_pieces(t, base),
+                                       self._earlier_flows(aimed))
         signal = {"step": step, "inputs": [u.name for u in self.data.varying], "values": values.tolist()}
         return aimed, x0, switch, signal, transitions, step / max(1, int(np.ceil(step / base - 1e-9)))
+
+    def _earlier_flows(self, witness: _Witness) -> list:
+        """The path of ``witness`` before its mode, as :func:`.witnesses.extremal_signal` takes it:
+        ``(flow, jump time, reset matrix)`` per jump, in time order (the times read off the
+        witness's coefficients, :meth:`_start_of`). Empty where a transition of the path is not
+        an outgoing linear jump of the mode it leaves (the witness mode's flow alone then)."""
+        _, _, transitions, times = self._start_of(witness)
+        mode, out = self.root_mode, []
+        for name, tau in zip(transitions, times):
+            jump = next((j for j in self.data.jumps.get(mode, ()) if j is not None and j.name == name), None)
+            if jump is None or mode not in self.data.flows:
+                return []
+            out.append((self.data.flows[mode], tau, jump.R))
+            mode = jump.target
+        return out if mode == witness.mode else []
 
     def _replay_step(self) -> float:
         """The replay step asked for, or the simulator's default. A signal's replay uses the

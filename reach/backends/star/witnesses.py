@@ -106,30 +106,46 @@ def signal_pieces(t: float, replay_step: float) -> int:
     return int(min(SIGNAL_PIECES, max(1, np.floor(t * SIGNAL_GRID_FACTOR / replay_step))))
 
 
-def extremal_signal(flow, c, t: float, u_low, u_high, pieces: int = SIGNAL_PIECES):
+def extremal_signal(flow, c, t: float, u_low, u_high, pieces: int = SIGNAL_PIECES, earlier=()):
     """``(step, values (pieces, p))``: the piecewise-constant input on ``pieces`` equal pieces
     of ``[0, t]`` that maximises ``c^T x(t)`` for the flow ``x' = A x + b + B (u - u_c)``
-    (:class:`.flowpipe.AffineFlow`), any initial state.
+    (:class:`.flowpipe.AffineFlow`), any initial state; ``earlier``: the path before, as
+    ``(flow_k, tau_k, R_k)`` in time order (the run flows by ``flow_k`` up to ``tau_k``, where
+    a reset ``x+ = R_k x + r_k`` takes it to the next flow, ``flow`` after the last).
 
-    ``c^T x(t) = c^T x_free(t) + int_0^t g(s) (u(s) - u_c) ds`` with
-    ``g(s) = c^T e^{A (t - s)} B``, so over inputs constant on each piece ``P_k`` the maximum
-    takes, per input ``i``, ``u_i = u_c,i + u_r,i sign(int_{P_k} g_i)`` -- the bang-bang
-    signal that attains the input's exact support ``int_0^t |g| u_r``
-    (:meth:`.flowpipe.AffineFlow.deviation`) as the pieces shrink; it switches where
-    ``g_i`` changes sign. The integrals are composite Simpson sums of ``SIGNAL_SUBSAMPLES``
-    sub-intervals per piece (``g`` sampled as ``c^T e^{A l delta} B``, one matrix-vector product
-    per sample)."""
+    ``c^T x(t) = c^T x_free(t) + int_0^t g(s) (u(s) - u_c) ds`` with ``g(s) = lambda(s)^T B(s)``,
+    the adjoint ``lambda(t) = c``, ``lambda' = -A^T lambda`` along each flow and
+    ``lambda(tau-) = R^T lambda(tau+)`` at a jump (the maximum principle for the path's modes
+    and jump instants held fixed; without jumps ``g(s) = c^T e^{A (t - s)} B``). Over inputs
+    constant on each piece ``P_k`` the maximum takes, per input ``i``,
+    ``u_i = u_c,i + u_r,i sign(int_{P_k} g_i)`` -- the bang-bang signal that attains the
+    input's exact support ``int_0^t |g| u_r`` (:meth:`.flowpipe.AffineFlow.deviation`) as the
+    pieces shrink; it switches where ``g_i`` changes sign. The integrals are composite Simpson
+    sums of ``SIGNAL_SUBSAMPLES`` sub-intervals per piece (``lambda`` carried back one
+    sub-interval at a time, one matrix-vector product per sample). The jump instants of the
+    run the signal drives may differ from the path's: a candidate, which only a replay decides."""
     u_low, u_high = np.asarray(u_low, float), np.asarray(u_high, float)
     centre, radius = (u_low + u_high) / 2, (u_high - u_low) / 2
     step = t / pieces
     sub = SIGNAL_SUBSAMPLES
     delta = step / sub
-    Phi_delta = flow.step(delta)[0]
-    row = np.asarray(c, dtype=float)
+    flows = [f for f, _, _ in earlier] + [flow]
+    jumps = [(tau, R) for _, tau, R in earlier]
+    k = len(flows) - 1                                      # the segment of the current sample
+    row, s = np.asarray(c, dtype=float), t
     samples = np.empty((pieces * sub + 1, flow.B.shape[1]))
-    for l in range(samples.shape[0]):                       # g at s = t - l delta
-        samples[l] = row @ flow.B
-        row = row @ Phi_delta
+    for l in range(samples.shape[0]):                       # g at t - l delta
+        target = t - l * delta
+        if l and not (k > 0 and jumps[k - 1][0] > target):
+            row = row @ flows[k].step(delta)[0]             # no jump since the last sample
+        elif l:
+            while k > 0 and jumps[k - 1][0] > target:       # back through a jump in (target, s]
+                tau, R = jumps[k - 1]
+                row = row @ flows[k].step(max(s - tau, 0.0))[0] @ R
+                s, k = tau, k - 1
+            row = row @ flows[k].step(max(s - target, 0.0))[0]
+        s = target
+        samples[l] = row @ flows[k].B
     samples = samples[::-1]                                 # g at s = l delta
     weights = np.ones(sub + 1)
     weights[1:-1:2], weights[2:-1:2] = 4.0, 2.0
