@@ -209,7 +209,7 @@ def test_a_check_leaves_no_cyclic_garbage_behind(tmp_path):
     from reach.sets import Star
 
     model, props = load_files(tmp_path, ROTATING_EXIT,
-                              "properties:\n  - {id: p, kind: safety, modes: [B], require: ['y >= -0.6318']}\n")
+                              "properties:\n  - {id: p, kind: safety, modes: [B], require: ['y >= -0.633']}\n")
     options = {"finer_retry": False, "max_refinements": 3, "max_unresolved": 1}   # stops in the search
     BACKEND.check(model, props["p"], options)           # compiled flows and caches in place
     gc.collect()

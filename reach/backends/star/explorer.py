@@ -369,8 +369,11 @@ class _Explorer:
         guard the entry reaches inside (those runs leave at once) is not used for the chain;
         an undecided answer names it."""
         out = []
+        if mode in self.data.timeless:          # one instant: no flow to split
+            return out
         for name, H, g in self._splits.get(mode, ()):
-            if star.box.bounded and star.depth(H, g)[0] <= 0.0:
+            outside = np.any(-star.support_bounds(-H) >= g)        # wholly on one row's far side
+            if star.box.bounded and (outside or star.depth(H, g)[0] <= 0.0):
                 out.append([(-a, -b) for a, b in zip(H, g)])
             elif f"{name} (from {mode})" not in self.uncut_urgent:
                 self.uncut_urgent.append(f"{name} (from {mode})")
