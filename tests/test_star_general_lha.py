@@ -437,3 +437,51 @@ def test_urgent_guards_of_two_rows_end_the_flow_of_their_mode(tmp_path, acc, w0)
         run = replay(model, prop, cex["initial_state"], cex["switch_time"], cex["dt"], cex["input_signal"],
                      Branches(prescribed=[cex["transitions"]]))
         assert run.violated
+
+
+SAMPLED_PD = """
+name: sampled_pd
+state: [th, w, u, c]
+modes:
+  fly:
+    flow: {th: "w", w: "u", u: "0", c: "1"}
+    invariant: ["c <= 0.5"]
+transitions:
+  - {from: fly, to: fly, guard: ["c >= 0.5"], reset: {u: "-th - 1.5*w", c: "0"}, urgent: true}
+initial: {mode: fly, box: {th: [0.9, 1], w: [0, 0], u: [0, 0], c: [0, 0]}}
+horizon: 7
+"""
+
+
+def lowest_sampled_angle(th0: float, period=0.5, horizon=7.0, k=(1.0, 1.5)) -> float:
+    """The least angle of the sampled PD loop from ``(th0, 0)``: between ticks the held control
+    ``u`` moves the double integrator in closed form, ``th(s) = th + w s + u s^2 / 2`` (least at
+    an end of the period or at ``s = -w / u``), and each tick sets ``u = -k1 th - k2 w``."""
+    th, w, u, t, low = th0, 0.0, 0.0, 0.0, th0
+    while t < horizon - 1e-12:
+        span = min(period, horizon - t)
+        inside = [s for s in ([-w / u] if u else []) if 0 < s < span]
+        low = min([low] + [th + w * s + u * s * s / 2 for s in inside + [span]])
+        th, w, t = th + w * span + u * span * span / 2, w + u * span, t + span
+        u = -k[0] * th - k[1] * w
+    return low
+
+
+def test_a_sampled_controller_keeps_its_shape_through_the_ticks(tmp_path):
+    """A PD loop sampled every 0.5 s by a local timer (reset at each tick, no global clock):
+    each tick is taken at its instant and the lone successor keeps its shape (the held control
+    tied to the state it was computed from), its tiny spread folded into a box; as an interval
+    hull every tick lost that tie, and the loop was UNKNOWN even at ``th <= -2`` over 7 s. The
+    least angle over the initial interval (linear in ``th0``: an end) against 0.2 % either side."""
+    truth = min(lowest_sampled_angle(0.9), lowest_sampled_angle(1.0))
+    assert -0.0228 < truth < -0.0226
+    results, model = checked(tmp_path, SAMPLED_PD, {
+        "far": "th >= -2", "ok": f"th >= {truth * 1.002!r}", "bad": f"th >= {truth * 0.998!r}"})
+    assert results["far"].status is Status.SAFE, results["far"].details.get("reason")
+    assert results["ok"].status is Status.SAFE, results["ok"].details.get("reason")
+    assert results["bad"].status is Status.UNSAFE, results["bad"].details.get("reason")
+    cex = results["bad"].counterexample.to_dict()
+    (prop,) = [bind(p, model) for p in load_properties(tmp_path / "p.yaml") if p.id == "bad"]
+    run = replay(model, prop, cex["initial_state"], cex["switch_time"], cex["dt"], cex["input_signal"],
+                 Branches(prescribed=[cex["transitions"]]))
+    assert run.violated

@@ -14,10 +14,10 @@ from reach import lp
 from reach.backends.star.aggregation import _Aggregate, interval_hull, one_coordinate
 from reach.backends.star.fixpoint import Covered, applies, enlarged, time_invariant
 from reach.backends.star.flowpipe import (ChainInputs, _block_spreads, _chain_abs_bounds, _chain_bounds, _depth,
-                                          _plus_box, _segment, _tightened)
-from reach.backends.star.options import (CHATTER_JUMPS, ERROR_RATIO, INSTANT_WIDTH, MAX_CELLS, MAX_CHAIN_BYTES,
-                                         MEMORY_FRACTION, MEMORY_PERIOD, NAME, PROGRESS_SECONDS, STALL_JUMPS,
-                                         TIGHT_RATIO, StarOptions)
+                                          _plus_box, _segment, _tightened, folded)
+from reach.backends.star.options import (CHATTER_JUMPS, ERROR_RATIO, INSTANT_STEP_FRACTION, INSTANT_WIDTH,
+                                         MAX_CELLS, MAX_CHAIN_BYTES, MEMORY_FRACTION, MEMORY_PERIOD, NAME,
+                                         PROGRESS_SECONDS, STALL_JUMPS, TIGHT_RATIO, StarOptions)
 from reach.backends.star.switching import group_pieces
 from reach.backends.star.transitions import (_LinearModel, _modes_leading_to, _Piece,
                                              _unsafe_pieces, kept_rows, misses)
@@ -235,6 +235,7 @@ class _Explorer:
         self.relevant = _modes_leading_to(model, set(self.pieces))
         self.horizon = min(self.horizon, max(self._last_unsafe_instant(), 0.0))
         self._guard_rows: dict[str, np.ndarray] = {}       # per mode, see _transient
+        self._timer_rows: dict[str, list] = {}              # per mode, see _timers
         self._directions: dict[str, np.ndarray | None] = {}     # per mode, see _input_directions
         self.stats = _Stats()
         self.unresolved: list[_Witness] = []
@@ -815,7 +816,8 @@ class _Explorer:
                      s.reached, self.horizon, s.aggregated, s.members, s.deaggregated)
 
     def _aggregate(self, mode: str, members: list[tuple[Star, _Path]], rows):
-        """Explore the successor stars ``members`` entering ``mode`` as one star.
+        """Explore the successor stars ``members`` entering ``mode`` as one star (a lone member
+        that stays small: as it is, :meth:`_single`).
 
         ``rows``: constraints every member satisfies besides the invariant of ``mode``
         (:func:`.transitions.kept_rows`). The aggregate (:func:`.aggregation.interval_hull`,
@@ -827,6 +829,8 @@ class _Explorer:
         slightly enlarged (:func:`.fixpoint.enlarged`, so that later ones equal to it up to
         rounding fall inside); a failure under the enlarged hull falls back to the exact one.
         """
+        if len(members) == 1 and self._single(mode, *members[0]):
+            return
         H, g = self.invariants[mode]
         ranges = self.data.ranges
         if self.covered is not None and not self.covered.shift:
@@ -883,6 +887,38 @@ class _Explorer:
                      "coefficients)", len(kept), mode, piece, max(m.nvars for m, _ in kept))
             for member, path in kept:
                 self._chain(mode, member, path.closed(refinements=1))
+
+    def _single(self, mode: str, member: Star, path: _Path) -> bool:
+        """Explore a lone successor without its interval hull, where that keeps it small: with
+        its tiny coefficients folded into a box (:func:`.flowpipe.folded`; an instant jump's
+        spread) it has at most ``n`` more than the initial star (a sampled controller's tick
+        taken at its instant keeps the start's shape, the held control tied to the state it was
+        computed from, which a hull would lose at every tick). The folded star stands for the
+        member as an aggregate does: a failure under it that no replay confirms is checked
+        again under the member itself. Not recorded for the fixpoint check (that records boxes),
+        but not explored where an earlier aggregate covers it. False where it does not apply."""
+        star = folded(member, self.root.nvars)
+        if star.nvars > self.root.nvars + self.n:
+            return False
+        if self.covered is not None and self.covered.covers(mode, star, self._lp_count):
+            return True
+        if star is member:
+            self._chain(mode, member, path)
+            return True
+        agg = _Aggregate(mode, star, [(member, path)])
+        kept_sets = len(self.sets)
+        try:
+            self._chain(mode, star, _Path(jumps=path.jumps, stalled=path.stalled, origin=agg, since=path.since,
+                                          nested=path.nested))
+            return True
+        except _Deaggregate as failure:
+            if failure.target is not agg:
+                raise
+        del self.sets[kept_sets:]               # the member explores its own (see _cell)
+        agg.refined = True
+        self.stats.deaggregated += 1
+        self._chain(mode, member, path.closed(refinements=1))
+        return True
 
     def _clock_from(self, ranges: Box, start: float) -> Box:
         """``ranges`` with the clock at least ``start``.
@@ -1202,12 +1238,14 @@ class _Explorer:
         """The runs that take a time-triggered jump out of a cell, as an image of the cell's start
         star, or None where that does not apply.
 
-        It applies when the runs of ``start`` have their clocks in ``[first, last]`` and the
-        guard leaves the clock of ``entered`` (the segment cut by the guard, bound-propagated)
-        in ``[lo, hi]``, with ``hi - first`` at rounding level past ``lo - last`` (a switch at
-        ``t == 5`` by guard and invariant). A run from clock ``s`` that jumps at ``t*`` has
-        flowed ``d = t* - s`` in ``[tau, tau + w]``, ``tau = max(0, lo - last)``,
-        ``w = hi - first - tau``. At ``s + tau`` its
+        It applies when, for a timer of the mode (:meth:`_timers`: the global clock, or a local
+        one such as a sampled controller's, ``c' = r`` with ``r > 0``), the runs of ``start``
+        have it in ``[first, last]`` and the guard leaves the timer of ``entered`` (the segment
+        cut by the guard, bound-propagated) in ``[lo, hi]``, with ``hi - first`` at rounding
+        level past ``lo - last`` (a switch at ``c == 5`` by guard and invariant). A run from
+        ``first <= c <= last`` that jumps at ``c*`` has flowed ``d = (c* - c) / r`` in
+        ``[tau, tau + w]``, ``tau = max(0, (lo - last) / r)``, ``w = (hi - first) / r - tau``.
+        At ``s + tau`` (``s`` the run's time at the cell start) its
         state is ``x_free + dev``: the input-free run ``Phi(tau) x0 + psi(tau)`` from its point
         ``x0`` of ``start`` plus the input's effect, within ``spread`` as on the segment. From
         ``s + tau`` to ``t*`` it stays in the mode and the cell, so in the segment, where
@@ -1219,15 +1257,18 @@ class _Explorer:
         and tight."""
         if self.opt.discrete_time:
             return None
-        clock = self.clock_row[None]
-        first, last = -float(start.support_bounds(-clock)[0]), float(start.support_bounds(clock)[0])
         tightened = _tightened(entered, len(g))
         if tightened is None:
             return None
-        lo, hi = -float(tightened.support_bounds(-clock)[0]), float(tightened.support_bounds(clock)[0])
-        tau = max(0.0, lo - last)            # a run jumps no earlier than its cell start
-        w = max(0.0, (hi - first) - tau)
-        if not (w <= INSTANT_WIDTH * max(1.0, abs(hi))):
+        for k, rate in self._timers(mode):
+            clock = np.eye(self.n)[k][None]
+            first, last = -float(start.support_bounds(-clock)[0]), float(start.support_bounds(clock)[0])
+            lo, hi = -float(tightened.support_bounds(-clock)[0]), float(tightened.support_bounds(clock)[0])
+            tau = max(0.0, (lo - last) / rate)      # a run jumps no earlier than its cell start
+            w = max(0.0, (hi - first) / rate - tau)
+            if w <= max(INSTANT_WIDTH * max(1.0, abs(hi) / rate), INSTANT_STEP_FRACTION * self.h):
+                break
+        else:
             return None
         flow = self.flows[mode]
         size = np.abs(seg.support_bounds(np.vstack([np.eye(self.n), -np.eye(self.n)]))).reshape(2, -1).max(axis=0)
@@ -1237,6 +1278,18 @@ class _Explorer:
         bloat = w * speed + (0.0 if spread is None else spread)
         image = _plus_box(start.affine_map(*flow.step(tau)), bloat)
         return image.intersect_halfspaces(*self.invariants[mode]).intersect_halfspaces(H, g)
+
+    def _timers(self, mode: str) -> list[tuple[int, float]]:
+        """``(coordinate, rate)`` of the timers of ``mode``, the explored clock first: states
+        whose flow there is a positive constant that no input moves (``c' = r``)."""
+        if mode not in self._timer_rows:
+            flow = self.flows[mode]
+            still = ~np.any(flow.A != 0, axis=1) & (flow.b > 0)
+            if flow.B is not None and flow.B.size:
+                still &= ~np.any(flow.B != 0, axis=1)
+            order = [self.clock] + [k for k in range(self.n) if k != self.clock]
+            self._timer_rows[mode] = [(k, float(flow.b[k])) for k in order if still[k]]
+        return self._timer_rows[mode]
 
     # ---- witnesses
 

@@ -12,6 +12,9 @@ from reach.backends.star.options import DEPTH_LP_TOLERANCE, HIGHS_DEFAULT_TOLERA
 from reach.sets import Box, Star, chord_hull
 from reach.sets.hpolytope import HPolytope
 
+#: coefficients whose extent is at most this fraction of the largest one's are folded into a
+#: box (:func:`folded`)
+FOLD_RATIO = 1e-6
 MAX_SUBSAMPLES = 4096        # sub-samples of one cell for its curvature bound (the suite needs at most 56)
 
 
@@ -399,6 +402,46 @@ def _plus_box(star: Star, radius, directed=None) -> Star:
     predicate = HPolytope(rows, b)
     box = Box(np.append(star.box.low, -np.ones(free.size)), np.append(star.box.high, np.ones(free.size)))
     return Star(star.center, np.hstack([star.basis, E]), predicate, box)
+
+
+def folded(star: Star, keep: int, ratio: float = FOLD_RATIO) -> Star:
+    """``star`` with its small coefficients folded into a box: the columns past the first
+    ``keep`` whose extent ``|V_j| r_j`` is at most ``ratio`` of the largest column's (the
+    spread boxes an instant jump adds at each tick, :meth:`.explorer._Explorer._at_instant`)
+    are replaced by at most ``n`` axis columns, so a run of such jumps keeps a bounded number
+    of coefficients. It contains ``star``: with ``F`` the folded columns (box midpoints
+    ``a_F0``, radii ``r_F``), ``V_F a_F`` lies in ``V_F a_F0 + [-|V_F| r_F, |V_F| r_F]`` and
+    each predicate row ``A_K a_K + A_F a_F <= b`` implies ``A_K a_K <= b - A_F a_F0 +
+    |A_F| r_F``; the new radius is padded against the rounding of those sums. Returns
+    ``star`` itself where that would not reduce the count."""
+    lo, hi = star.box.low, star.box.high
+    finite = np.isfinite(lo) & np.isfinite(hi)
+    extent = np.abs(star.basis).sum(axis=0) * np.where(finite, (hi - lo) / 2, np.inf)
+    if star.nvars <= keep or not np.any(np.isfinite(extent)):
+        return star
+    small = np.zeros(star.nvars, dtype=bool)
+    small[keep:] = finite[keep:] & (extent[keep:] <= ratio * extent[np.isfinite(extent)].max())
+    V_F = star.basis[:, small]
+    radius = np.abs(V_F) @ ((hi - lo)[small] / 2)
+    if np.count_nonzero(small) <= np.count_nonzero(radius > 0):
+        return star
+    mid = (hi + lo)[small] / 2
+    shift = V_F @ mid
+    center = star.center + shift
+    eps = np.finfo(float).eps
+    radius = radius * (1 + 1e-12) + 4 * eps * (np.abs(center) + np.abs(V_F) @ np.abs(mid) + radius)
+    A, b = star.predicate.A, star.predicate.b
+    A_F = A[:, small]
+    relaxed = b - A_F @ mid + np.abs(A_F) @ ((hi - lo)[small] / 2)
+    relaxed = relaxed + 4 * eps * (np.abs(b) + np.abs(A_F) @ (np.abs(mid) + (hi - lo)[small] / 2))
+    A_K = A[:, ~small]
+    rows = np.any(A_K != 0, axis=1) | (relaxed < 0)
+    free = np.flatnonzero(radius > 0)
+    E = np.zeros((star.dim, free.size))
+    E[free, np.arange(free.size)] = radius[free]
+    predicate = HPolytope(np.hstack([A_K[rows], np.zeros((int(rows.sum()), free.size))]), relaxed[rows])
+    box = Box(np.append(lo[~small], -np.ones(free.size)), np.append(hi[~small], np.ones(free.size)))
+    return Star(center, np.hstack([star.basis[:, ~small], E]), predicate, box)
 
 
 def _drift_segment(start: Star, b: np.ndarray, h: float) -> Star:

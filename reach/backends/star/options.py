@@ -35,9 +35,12 @@ CHATTER_JUMPS = 100
 MAX_CELLS = 1_000_000             # grid cells over the horizon (horizon / step) a check may start with
 
 
-#: a jump whose guard leaves its clock within this relative width is taken at one instant
-#: (:meth:`.explorer._Explorer._at_instant`)
+#: a jump whose guard leaves its clock within this relative width, or within
+#: :data:`INSTANT_STEP_FRACTION` of the step (an aggregate's clock, rounded outward), is taken
+#: at one instant (:meth:`.explorer._Explorer._at_instant`; the spread ``w`` costs a box of
+#: ``w |x'|``, far below the segment's sweep of a step)
 INSTANT_WIDTH = 1e-9
+INSTANT_STEP_FRACTION = 1e-6
 
 #: the grid stacks of one chain may take at most this many bytes (memory guard)
 MAX_CHAIN_BYTES = 1 << 30
