@@ -373,6 +373,10 @@ def cmd_sweep(args) -> int:
     if not windows:
         raise InputError(f"model '{model.name}' has no abort window to sweep", str(model_path))
     window = (min(w[1] for w in windows), max(w[2] for w in windows))
+    missing = [name for name in ("x", "y") if name not in model.state]
+    if missing:
+        raise InputError(f"model '{model.name}' has no state named {' or '.join(missing)}: sweep draws its "
+                         f"initial cells on an arc in the (x, y) plane", str(model_path), field="state")
     out = _figure_path(args.out, Path("results/plots") / f"{safe_name(model.name)}_abort_map.png")
     if args.property:
         from reach.spec import load_properties
@@ -382,6 +386,7 @@ def cmd_sweep(args) -> int:
                 raise InputError(f"no property '{printable(pid)}' in {printable(args.properties)} "
                                  f"(known: {', '.join(sorted(known))})", field="--property")
     cells = arc_cells(model, args.radius, args.cells, args.start, args.end)
+    _cells_start_runs(model, model_path, cells)
     start = time.perf_counter()
     times = safe_abort_map(model_path, [args.properties], cells, args.property, {},
                            make_executor(args.jobs, args.scheduler))
@@ -400,6 +405,25 @@ def cmd_sweep(args) -> int:
         print(f"| {angle:.1f} | [{low[0]:.0f}, {high[0]:.0f}] | [{low[1]:.0f}, {high[1]:.0f}] | {t:.2f} |")
     print(printable(f"{len(cells)} cells in {seconds:.1f} s; wrote {out}"))
     return 0
+
+
+def _cells_start_runs(model, model_path, cells) -> None:
+    """Bad input where a sweep cell lies wholly outside the initial mode's invariant (no run
+    starts there, so its "latest safe abort" would say nothing): the arc is the user's to place
+    (``--radius``, ``--start``, ``--end``) where the model's runs begin."""
+    from reach.sets import Box, Star
+
+    halfspaces = model.modes[model.initial.mode].invariant_halfspaces
+    if halfspaces is None:
+        return
+    H, g = halfspaces
+    outside = [angle for low, high, angle in cells
+               if Star.from_box(Box(low, high)).intersect_halfspaces(H, g).is_empty()]
+    if outside:
+        raise InputError(f"{len(outside)} of {len(cells)} cells (arc angles {', '.join(f'{a:.1f}' for a in outside[:4])}"
+                         f"{', ...' if len(outside) > 4 else ''} deg) lie outside the invariant of the initial mode "
+                         f"'{model.initial.mode}': no run starts there; place the arc inside it (--radius, "
+                         f"--start, --end)", str(model_path), field="modes")
 
 
 def cmd_compare(args) -> int:

@@ -2,6 +2,8 @@
 
 import json
 
+import pytest
+
 from reach.bench.crosscheck import cross_check
 from reach.bench.runner import run_suite
 from reach.bench.tables import compare_runs
@@ -71,3 +73,38 @@ def test_sweep_writes_the_abort_map(tmp_path):
     rows = [line for line in run.stdout.splitlines() if line.startswith("| 2")]
     assert len(rows) == 2 and all(row.endswith("| 125.00 |") for row in rows)   # window end: all safe
     assert out.stat().st_size > 10_000
+
+
+
+ABORT_LINE = """
+name: abort_line
+state: [x, y, v, t]
+modes:
+  approach: {flow: {x: "v", y: "0", v: "0", t: "1"}, invariant: ["x >= 20", "t <= 100"]}
+  passive: {flow: {x: "v", y: "0", v: "0", t: "1"}}
+transitions:
+  - {from: approach, to: passive, guard: ["t >= 50", "t <= 100"]}
+initial: {mode: approach, box: {x: [100, 110], y: [0, 0], v: [-0.5, -0.5], t: [0, 0]}}
+horizon: 200
+"""
+
+WITHOUT_Y = ABORT_LINE.replace("[x, y, v, t]", "[x, v, t]").replace('y: "0", ', "").replace("y: [0, 0], ", "")
+
+
+@pytest.mark.parametrize("model, message", [(ABORT_LINE, "lie outside the invariant of the initial mode"),
+                                            (WITHOUT_Y, "no state named y")])
+def test_a_sweep_that_would_say_nothing_is_bad_input(tmp_path, model, message):
+    """A sweep draws its initial cells on an arc in (x, y): a model without those states was an
+    internal error (exit 3), and cells wholly outside the initial mode's invariant (the default
+    arc, radius 1000 from 180 to 270 degrees, has x < 0 < 20: no run starts there) all read
+    "latest safe abort at the window's end", exit 0, though runs of the model's own initial set
+    violate. Both are bad input now, one line naming the model file."""
+    import subprocess
+    import sys
+    (tmp_path / "m.yaml").write_text(model)
+    (tmp_path / "p.yaml").write_text("properties:\n  - {id: low, kind: safety, require: ['x >= 0']}\n")
+    run = subprocess.run([sys.executable, "-m", "reach", "sweep", str(tmp_path / "m.yaml"), str(tmp_path / "p.yaml"),
+                          "--cells", "2", "-j", "1", "--out", str(tmp_path / "map.png")],
+                         capture_output=True, text=True, cwd=tmp_path)
+    assert run.returncode == 2, run.stdout + run.stderr
+    assert message in run.stderr and "m.yaml" in run.stderr and len(run.stderr.strip().splitlines()) == 1

@@ -187,7 +187,7 @@ from reach.backends.star.hull import check_hull
 from reach.backends.star.linearise import LinearisedModel, check_linearised
 from reach.backends.star.options import (CLOCKLESS_FIRST_STARS, DEPTH_LP_TOLERANCE, FINER_FACTOR,
                                          FINER_MAX_SECONDS, FINER_PASSES, FINER_SECONDS, NAME, StarOptions,
-                                         clockless_retry, finer_retry, inputs_retry)
+                                         clockless_retry, finer_retry, first_share, inputs_retry)
 from reach.backends.star.switching import SwitchingModel, check_switching
 from reach.backends.star.transitions import _LinearModel, _unsafe_pieces
 from reach.backends.star.witnesses import witness_details
@@ -301,16 +301,18 @@ class StarBackend:
         if reason is not None:
             return Result(NAME, model.name, prop.id, Status.UNSUPPORTED, details={"reason": reason})
         opt = StarOptions.from_dict(options)
-        first = self._check_aggregating(model, prop, options, opt, start)
+        shared = first_share(model, options, opt)
+        first = self._check_aggregating(model, prop, options, shared, start)
         spent = time.perf_counter() - start
         share = min(max(FINER_FACTOR * spent, FINER_SECONDS), FINER_MAX_SECONDS)
         left = math.inf if opt.max_seconds is None else opt.max_seconds - spent
         budget = min(share, left)
         deadline, finer, result, tried = time.perf_counter() + budget, opt, first, []
         latest = first                                  # the last pass run
-        correlated = inputs_retry(model, options, first, opt, budget)
+        spent_share = shared is not opt and OUT_OF_TIME in first.details.get("reason", "")
+        correlated = inputs_retry(model, options, first, opt, left if spent_share else budget, spent_share)
         if correlated is not None:
-            latest = self._check(model, prop, correlated, start)
+            latest = self._check_aggregating(model, prop, options, correlated, start)
             tried.append(f"{first.details['step']:.3g} with the input effect as generators")
             if latest.status is not Status.UNKNOWN:
                 latest.details["semantics"] += (f"; with the input effect carried as generators (blocks of "

@@ -10,6 +10,7 @@ import numpy as np
 
 from reach import lp
 from reach.sets import Box, Star
+from reach.sets.hpolytope import HPolytope
 
 if TYPE_CHECKING:
     from reach.backends.star.explorer import _Path
@@ -118,3 +119,54 @@ def _supports(star: Star, W, bound, need, count_lps):
         return None
     values[need] = np.where(np.isnan(exact), bound[need], exact)
     return values
+
+
+def shared_shape_hull(members, keep: int, count_lps) -> Star | None:
+    """A hull of member stars of one shape -- the same first ``keep`` coefficients, their
+    centres and those columns of their bases equal up to rounding (the successors of one jump
+    taken at its instant from two cells that share that instant) -- that keeps the shape:
+    ``c_0 + V_0 a + e``, ``a`` in the interval hull of the members' ranges of those coefficients
+    (LPs reported to ``count_lps``) and in every predicate row on them alone that all members
+    share, ``|e| <= r`` with ``r`` the largest ``|c_i - c_0| + |V_i - V_0| |a|_max`` plus the
+    reach of member ``i``'s other columns (tiny spreads), padded against rounding. Every point
+    of member ``i`` is ``c_0 + V_0 a`` plus such an ``e``, so the hull holds every member. None
+    where the members differ in shape (``r`` above 1e-6 of the set's size) or one is
+    unbounded."""
+    stars = [star for star, _ in members]
+    first = stars[0]
+    k = keep
+    if any(s.nvars < k for s in stars) or not all(np.all(np.isfinite(s.box.low)) and np.all(np.isfinite(s.box.high))
+                                                 for s in stars):
+        return None
+    reach = np.max([np.maximum(np.abs(s.box.low[:k]), np.abs(s.box.high[:k])) for s in stars], axis=0)
+    size = np.abs(first.basis[:, :k]) @ reach + np.abs(first.center)
+    gap = np.max([np.abs(s.center - first.center) + np.abs(s.basis[:, :k] - first.basis[:, :k]) @ reach
+                  + np.abs(s.basis[:, k:]) @ np.maximum(np.abs(s.box.low[k:]), np.abs(s.box.high[k:]))
+                  for s in stars], axis=0)
+    if np.any(gap > 1e-6 * (1.0 + size.max())):
+        return None
+    low, high = np.full(k, np.inf), np.full(k, -np.inf)
+    W = np.hstack([np.vstack([np.eye(k), -np.eye(k)]), np.zeros((2 * k, 0))])
+    for s in stars:
+        count_lps(2 * k)
+        C = np.hstack([W, np.zeros((2 * k, s.nvars - k))])
+        values = lp.maximize_many(C, s.predicate.A, s.predicate.b, (s.box.low, s.box.high))
+        if np.all(values == -np.inf):                 # an empty member
+            continue
+        values = np.where(np.isnan(values), np.concatenate([s.box.high[:k], -s.box.low[:k]]), values)
+        high, low = np.maximum(high, values[:k]), np.minimum(low, -values[k:])
+    if not np.all(low <= high):
+        return None
+    low, high = _outward(low, high)
+    eps = np.finfo(float).eps
+    radius = gap * (1 + 1e-9) + 8 * eps * size
+    own = [i for i, row in enumerate(first.predicate.A) if not np.any(row[k:])]
+    shared = [i for i in own
+              if all(any(np.array_equal(first.predicate.A[i], r) and first.predicate.b[i] >= b
+                         for r, b in zip(s.predicate.A, s.predicate.b)) for s in stars[1:])]
+    free = np.flatnonzero(radius > 0)
+    E = np.zeros((first.dim, free.size))
+    E[free, np.arange(free.size)] = radius[free]
+    rows = np.hstack([first.predicate.A[shared][:, :k], np.zeros((len(shared), free.size))])
+    box = Box(np.append(low, -np.ones(free.size)), np.append(high, np.ones(free.size)))
+    return Star(first.center, np.hstack([first.basis[:, :k], E]), HPolytope(rows, first.predicate.b[shared]), box)

@@ -6,12 +6,12 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from reach import lp
-from reach.backends.star.aggregation import _Aggregate, interval_hull, one_coordinate
+from reach.backends.star.aggregation import _Aggregate, interval_hull, one_coordinate, shared_shape_hull
 from reach.backends.star.fixpoint import Covered, applies, enlarged, time_invariant
 from reach.backends.star.flowpipe import (ChainInputs, _block_spreads, _chain_abs_bounds, _chain_bounds, _depth,
                                           _plus_box, _segment, _tightened, folded)
@@ -89,6 +89,7 @@ class _Path:
     origin: _Aggregate | None = None
     since: float = 0.0             # earliest clock when ``stalled`` was last reset
     nested: int = 0                # aggregates refined into their members along the history
+    instant: bool = False          # the last jump was taken at its instant (_at_instant)
 
     def descend(self, entry: _Entry, block: int, can_refine: bool, clock: float,
                 step: float) -> "_Path":
@@ -816,8 +817,8 @@ class _Explorer:
                      s.reached, self.horizon, s.aggregated, s.members, s.deaggregated)
 
     def _aggregate(self, mode: str, members: list[tuple[Star, _Path]], rows):
-        """Explore the successor stars ``members`` entering ``mode`` as one star (a lone member
-        that stays small: as it is, :meth:`_single`).
+        """Explore the successor stars ``members`` entering ``mode`` as one star (successors of a
+        jump at its instant that stay small: in their own shape, :meth:`_shaped`).
 
         ``rows``: constraints every member satisfies besides the invariant of ``mode``
         (:func:`.transitions.kept_rows`). The aggregate (:func:`.aggregation.interval_hull`,
@@ -829,7 +830,7 @@ class _Explorer:
         slightly enlarged (:func:`.fixpoint.enlarged`, so that later ones equal to it up to
         rounding fall inside); a failure under the enlarged hull falls back to the exact one.
         """
-        if len(members) == 1 and self._single(mode, *members[0]):
+        if all(path.instant for _, path in members) and self._shaped(mode, members):
             return
         H, g = self.invariants[mode]
         ranges = self.data.ranges
@@ -888,36 +889,43 @@ class _Explorer:
             for member, path in kept:
                 self._chain(mode, member, path.closed(refinements=1))
 
-    def _single(self, mode: str, member: Star, path: _Path) -> bool:
-        """Explore a lone successor without its interval hull, where that keeps it small: with
-        its tiny coefficients folded into a box (:func:`.flowpipe.folded`; an instant jump's
-        spread) it has at most ``n`` more than the initial star (a sampled controller's tick
-        taken at its instant keeps the start's shape, the held control tied to the state it was
-        computed from, which a hull would lose at every tick). The folded star stands for the
-        member as an aggregate does: a failure under it that no replay confirms is checked
-        again under the member itself. Not recorded for the fixpoint check (that records boxes),
-        but not explored where an earlier aggregate covers it. False where it does not apply."""
-        star = folded(member, self.root.nvars)
+    def _shaped(self, mode: str, members) -> bool:
+        """Explore the successors of a jump taken at its instant without their interval hull,
+        where that keeps them small: a lone member, or members of one shape
+        (:func:`.aggregation.shared_shape_hull`: one instant met by two cells), with tiny
+        coefficients folded into a box (:func:`.flowpipe.folded`; an instant jump's spread),
+        at most ``n`` more than the initial star. A sampled controller's tick keeps the start's
+        shape so, the held control tied to the state it was computed from, which an interval
+        hull would lose at every tick. The star stands for the members as an aggregate does:
+        a failure under it that no replay confirms is checked again under the members. Not
+        recorded for the fixpoint check (that records boxes), but not explored where an
+        earlier aggregate covers it. False where it does not apply."""
+        star = members[0][0] if len(members) == 1 else shared_shape_hull(members, self.root.nvars, self._lp_count)
+        if star is None:
+            return False
+        star = folded(star, self.root.nvars)
         if star.nvars > self.root.nvars + self.n:
             return False
         if self.covered is not None and self.covered.covers(mode, star, self._lp_count):
             return True
-        if star is member:
-            self._chain(mode, member, path)
+        if len(members) == 1 and star is members[0][0]:
+            self._chain(mode, star, members[0][1])
             return True
-        agg = _Aggregate(mode, star, [(member, path)])
+        agg = _Aggregate(mode, star, members)
         kept_sets = len(self.sets)
+        start = min(path.since for _, path in members)
         try:
-            self._chain(mode, star, _Path(jumps=path.jumps, stalled=path.stalled, origin=agg, since=path.since,
-                                          nested=path.nested))
+            self._chain(mode, star, _Path(jumps=max(p.jumps for _, p in members), stalled=max(p.stalled for _, p in members),
+                                          origin=agg, since=start, nested=max(p.nested for _, p in members)))
             return True
         except _Deaggregate as failure:
             if failure.target is not agg:
                 raise
-        del self.sets[kept_sets:]               # the member explores its own (see _cell)
+        del self.sets[kept_sets:]               # the members explore their own (see _cell)
         agg.refined = True
         self.stats.deaggregated += 1
-        self._chain(mode, member, path.closed(refinements=1))
+        for member, path in members:
+            self._chain(mode, member, path.closed(refinements=1))
         return True
 
     def _clock_from(self, ranges: Box, start: float) -> Box:
@@ -1216,6 +1224,8 @@ class _Explorer:
                 if successor is None:
                     continue
             descended = path.descend(clock, block, own_open, earliest, self.h)
+            if instant is not None:
+                descended = replace(descended, instant=True)
             if pending is not None:             # bound propagation drops a member proved empty
                 member = _tightened(successor, len(g) + len(self.invariants[jump.target][1]))
                 if member is not None:

@@ -242,13 +242,29 @@ def clockless_retry(model, options: dict | None, opt: StarOptions) -> StarOption
 #: cells per input block of the pass that keeps the input effect's correlation (:func:`inputs_retry`)
 INPUT_RETRY_CELLS = 4
 
+#: the share of ``max_seconds`` the default pass may take where :func:`inputs_retry` may follow
+#: it: the rest is left for that pass (a box that misses the correlation can keep refining cells
+#: the generators decide at once)
+INPUT_FIRST_SHARE = 1 / 4
+
+
+def first_share(model, options, opt: StarOptions) -> StarOptions:
+    """The options of the default pass: with time-varying inputs, no ``input_cells`` chosen and a
+    time budget, at most :data:`INPUT_FIRST_SHARE` of it (:func:`inputs_retry` may follow)."""
+    chosen = set(options) if isinstance(options, dict) else set()
+    if (not model.varying_inputs or isinstance(options, StarOptions) or opt.input_cells
+            or {"input_cells", "rebase_generators"} & chosen or opt.max_seconds is None):
+        return opt
+    return replace(opt, max_seconds=opt.max_seconds * INPUT_FIRST_SHARE)
+
 
 def inputs_retry(model, options: dict | StarOptions | None, result, opt: StarOptions,
-                 budget: float) -> StarOptions | None:
+                 budget: float, spent_share: bool = False) -> StarOptions | None:
     """The options of a pass that carries the effect of time-varying inputs as generators
     (``input_cells = INPUT_RETRY_CELLS``), after a pass with the default box (``input_cells =
     0``: the effect since the chain's start, exact per state but not jointly) that ended
-    UNKNOWN for want of precision, with ``budget`` seconds left; None where none applies (no
+    UNKNOWN for want of precision or with its share of the time spent (``spent_share``,
+    :func:`first_share`), with ``budget`` seconds left; None where none applies (no
     time-varying input, the user chose ``input_cells`` or ``rebase_generators``, another
     outcome, no time left). The box's corners combine extremes no one signal reaches together
     (a double integrator's ``x - v``: the largest x and the smallest v need opposite inputs),
@@ -260,7 +276,7 @@ def inputs_retry(model, options: dict | StarOptions | None, result, opt: StarOpt
     chosen = set(options) if isinstance(options, dict) else set()
     if (not model.varying_inputs or isinstance(options, StarOptions) or opt.input_cells
             or {"input_cells", "rebase_generators"} & chosen or result.status is not Status.UNKNOWN
-            or not result.details.get("finer_step_may_decide") or budget <= 0):
+            or not (result.details.get("finer_step_may_decide") or spent_share) or budget <= 0):
         return None
     return replace(opt, input_cells=INPUT_RETRY_CELLS, max_seconds=budget)
 
