@@ -70,3 +70,40 @@ def test_nothing_is_folded_where_it_would_not_reduce_the_count():
     star = Star(np.zeros(2), np.array([[1.0, 1e-9], [0.0, 1e-9]]), box=Box(-np.ones(2), np.ones(2)))
     assert folded(star, 1) is star            # one small column for two new ones
     assert folded(star, 2) is star            # nothing past the kept ones
+
+
+@settings(max_examples=40, deadline=None)
+@given(stars_with_small_columns(), st.integers(0, 2 ** 31 - 1))
+def test_the_shared_shape_hull_contains_each_member(case, seed):
+    """Two members of one shape (the same first columns, centres 1e-9 apart, other tiny columns):
+    every sampled point ``c_i + V_i a`` of either is ``c_0 + V_0 a_K + E e`` with ``a_K`` in the
+    hull's coefficient box and its shared rows, and ``|e| <= 1`` (the containment argument,
+    checked directly)."""
+    from reach.backends.star.aggregation import shared_shape_hull
+
+    star, big = case
+    rng = np.random.default_rng(seed)
+    other = Star(star.center + 1e-9 * rng.normal(size=star.dim),
+                 np.hstack([star.basis[:, :big], 1e-8 * rng.normal(size=(star.dim, star.nvars - big))]),
+                 star.predicate, star.box)
+    hull = shared_shape_hull([(star, "a"), (other, "b")], big, lambda count: None)
+    assert hull is not None and np.array_equal(hull.basis[:, :big], star.basis[:, :big])
+    E = hull.basis[:, big:]
+    rows = np.flatnonzero(np.abs(E).sum(axis=1) > 0)
+    samples = 0
+    for member in (star, other):
+        lo, hi = member.box.low, member.box.high
+        for _ in range(200):
+            a = lo + (hi - lo) * rng.uniform(size=member.nvars)
+            if np.any(member.predicate.A @ a > member.predicate.b):
+                continue
+            samples += 1
+            x = member.center + member.basis @ a
+            rest = x - hull.center - hull.basis[:, :big] @ a[:big]
+            assert np.all(np.abs(rest[np.abs(E).sum(axis=1) == 0]) <= 1e-15)
+            e = rest[rows] / E[rows, np.arange(rows.size)]
+            assert np.all(np.abs(e) <= 1.0)
+            b = np.concatenate([a[:big], e])
+            assert np.all(hull.box.low <= b) and np.all(b <= hull.box.high)
+            assert np.all(hull.predicate.A @ b <= hull.predicate.b)
+    assert samples > 0

@@ -439,53 +439,68 @@ def test_urgent_guards_of_two_rows_end_the_flow_of_their_mode(tmp_path, acc, w0)
         assert run.violated
 
 
-SAMPLED_PD = """
-name: sampled_pd
+
+SAMPLED = """
+name: sampled
 state: [th, w, u, c]
 modes:
   fly:
     flow: {th: "w", w: "u", u: "0", c: "1"}
-    invariant: ["c <= 0.5"]
+    invariant: ["c <= PERIOD"]
 transitions:
-  - {from: fly, to: fly, guard: ["c >= 0.5"], reset: {u: "-th - 1.5*w", c: "0"}, urgent: true}
-initial: {mode: fly, box: {th: [0.9, 1], w: [0, 0], u: [0, 0], c: [0, 0]}}
-horizon: 7
+  - {from: fly, to: fly, guard: ["c >= PERIOD"], reset: {u: "-K1*th - K2*w", c: "0"}, urgent: true}
+initial:
+  mode: fly
+  box: {th: [0.9, 1.1], w: [W0, W1], c: [0, 0]}
+  constraints: ["u == -K1*th - K2*w"]
+horizon: HORIZON
 """
 
 
-def lowest_sampled_angle(th0: float, period=0.5, horizon=7.0, k=(1.0, 1.5)) -> float:
-    """The least angle of the sampled PD loop from ``(th0, 0)``: between ticks the held control
-    ``u`` moves the double integrator in closed form, ``th(s) = th + w s + u s^2 / 2`` (least at
-    an end of the period or at ``s = -w / u``), and each tick sets ``u = -k1 th - k2 w``."""
-    th, w, u, t, low = th0, 0.0, 0.0, 0.0, th0
+def sampled_extremes(th0, w0, period, horizon, k) -> tuple[float, float]:
+    """The least and largest angle of the sampled PD loop from ``(th0, w0)`` with ``u = -k1 th0 -
+    k2 w0``: between ticks the held control moves the double integrator in closed form,
+    ``th(s) = th + w s + u s^2 / 2`` (extreme at an end of the period or at ``s = -w / u``), and
+    each tick sets ``u = -k1 th - k2 w``."""
+    th, w, t = th0, w0, 0.0
+    u = -k[0] * th - k[1] * w
+    low = high = th0
     while t < horizon - 1e-12:
         span = min(period, horizon - t)
         inside = [s for s in ([-w / u] if u else []) if 0 < s < span]
-        low = min([low] + [th + w * s + u * s * s / 2 for s in inside + [span]])
+        values = [th + w * s + u * s * s / 2 for s in inside + [span]]
+        low, high = min([low] + values), max([high] + values)
         th, w, t = th + w * span + u * span * span / 2, w + u * span, t + span
         u = -k[0] * th - k[1] * w
-    return low
+    return low, high
 
 
-def test_a_sampled_controller_keeps_its_shape_through_the_ticks(tmp_path):
-    """A PD loop sampled every 0.5 s by a local timer (reset at each tick, no global clock):
-    each tick is taken at its instant and the lone successor keeps its shape (the held control
-    tied to the state it was computed from), its tiny spread folded into a box; as an interval
-    hull every tick lost that tie, and the loop was UNKNOWN even at ``th <= -2`` over 7 s. The
-    least angle over the initial interval (linear in ``th0``: an end) against 0.2 % either side."""
-    truth = min(lowest_sampled_angle(0.9), lowest_sampled_angle(1.0))
-    assert -0.0228 < truth < -0.0226
-    results, model = checked(tmp_path, SAMPLED_PD, {
-        "far": "th >= -2", "ok": f"th >= {truth * 1.002!r}", "bad": f"th >= {truth * 0.998!r}"})
-    assert results["far"].status is Status.SAFE, results["far"].details.get("reason")
-    assert results["ok"].status is Status.SAFE, results["ok"].details.get("reason")
+@pytest.mark.parametrize("period, horizon, k, w_range", [(0.5, 7.0, (1.0, 1.5), (0.0, 0.0)),
+                                                         (1.0, 30.0, (0.3, 0.8), (-0.1, 0.1))])
+def test_a_sampled_controller_keeps_its_shape_through_the_ticks(tmp_path, period, horizon, k, w_range):
+    """A PD loop sampled by a local timer (reset at each tick, no global clock): each tick is
+    taken at its instant and its successors keep their shape (the held control tied to the state
+    it was computed from), tiny spreads folded into a box; two cells that share a tick on a grid
+    point (period 1, step 0.5) give one successor of that shape. As interval hulls every tick
+    lost that tie, and both loops were UNKNOWN even at ``|th| <= 5``. The extremes over the
+    initial box (the run is linear in its start: a vertex) against 0.2 % of the range."""
+    starts = [(th, w) for th in (0.9, 1.1) for w in w_range]
+    low = min(sampled_extremes(th, w, period, horizon, k)[0] for th, w in starts)
+    high = max(sampled_extremes(th, w, period, horizon, k)[1] for th, w in starts)
+    pad = 0.002 * (high - low)
+    text = SAMPLED.replace("PERIOD", repr(period)).replace("HORIZON", repr(horizon)).replace(
+        "K1", repr(k[0])).replace("K2", repr(k[1])).replace("W0", repr(w_range[0])).replace("W1", repr(w_range[1]))
+    results, model = checked(tmp_path, text, {
+        "far": "th >= -5", "ok": f"th >= {low - pad!r}", "bad": f"th >= {low + pad!r}",
+        "high_ok": f"th <= {high + pad!r}"})
+    for name in ("far", "ok", "high_ok"):
+        assert results[name].status is Status.SAFE, (name, results[name].details.get("reason"))
     assert results["bad"].status is Status.UNSAFE, results["bad"].details.get("reason")
     cex = results["bad"].counterexample.to_dict()
     (prop,) = [bind(p, model) for p in load_properties(tmp_path / "p.yaml") if p.id == "bad"]
     run = replay(model, prop, cex["initial_state"], cex["switch_time"], cex["dt"], cex["input_signal"],
                  Branches(prescribed=[cex["transitions"]]))
     assert run.violated
-
 
 LANDER = """
 name: lander

@@ -214,8 +214,6 @@ class _Explorer:
         self.max_jumps = np.inf if options.max_jumps is None else options.max_jumps
         self.stall_limit = STALL_JUMPS if data.zero_dwell else CHATTER_JUMPS
         self.aggregate_after = None if self.sweep else options.aggregate_after
-        self.covered = Covered(self.clock, time_invariant(model)) if applies(model) and not options.keep_sets \
-            else None
         self.last_progress = self.started = time.perf_counter()
         self.hinted = False                     # the quiet run's one hint (_progress)
         self.memory_limit, self.memory_read = MEMORY_FRACTION * physical_bytes(), -np.inf
@@ -233,6 +231,8 @@ class _Explorer:
                        for mode, pieces in _unsafe_pieces(prop).items()} if data.added_clock \
             else _unsafe_pieces(prop)
         self.pieces = self._reachable_pieces(group_pieces(self.pieces, getattr(data, "groups", ())))
+        self.covered = Covered(self.clock, time_invariant(model, self.pieces)) \
+            if applies(model) and not options.keep_sets else None
         self.relevant = _modes_leading_to(model, set(self.pieces))
         self.horizon = min(self.horizon, max(self._last_unsafe_instant(), 0.0))
         self._guard_rows: dict[str, np.ndarray] = {}       # per mode, see _transient
