@@ -105,8 +105,9 @@ def _where(prop, model, shown: int = 4) -> str:
 
 
 def _piece_text(piece) -> str:
-    """An unsafe piece (a conjunction of constraints) as written."""
-    return " and ".join(con.text for con in piece)
+    """An unsafe piece (a conjunction of constraints) as written, each text once (an equality is
+    two constraints of one text)."""
+    return " and ".join(dict.fromkeys(con.text for con in piece))
 
 
 def _avoid_text(pieces_by_mode) -> str:

@@ -525,3 +525,41 @@ def test_the_input_generators_pass_gets_its_share_of_the_time_budget(tmp_path):
     never ran; the default pass now gets a quarter of the budget."""
     results, _ = checked(tmp_path, LANDER, {"ok": "h >= -3.2"}, {"max_seconds": 20})
     assert results["ok"].status is Status.SAFE, results["ok"].details.get("reason")
+
+
+SPIN_THEN_DAMP = """
+name: spin_then_damp
+state: [x, y, t]
+modes:
+  spin: {flow: {x: "y", y: "-x", t: "1"}, invariant: ["t <= pi"]}
+  damp: {flow: {x: "-x", y: "-y", t: "1"}}
+transitions:
+  - {from: spin, to: damp, guard: ["t >= pi"], urgent: true}
+initial:
+  mode: spin
+  box: {t: 0}
+  constraints: ["x >= 0", "y >= 0", "x + y <= 1"]
+horizon: 6
+"""
+
+
+@pytest.mark.parametrize("fraction, status", [(0.999, Status.UNSAFE), (1.001, Status.SAFE)])
+def test_a_forbidden_instant_is_entered_as_deep_as_its_other_rows_allow(tmp_path, fraction, status):
+    """``avoid t == 4.15 and y <= b``: half a turn maps the start ``(x0, y0)`` of the triangle to
+    ``(-x0, -y0)`` at ``pi``, then ``y`` decays, ``y(4.15) = -y0 e^{-(4.15 - pi)}``, least at the
+    vertex ``(0, 1)``. The equality capped the depth at 0, so the witness was the shallowest point
+    of the slice (``y = b`` exactly), whose replay does not violate: UNKNOWN however far ``b`` lay
+    inside. The equality is now a hard limit and the depth is taken in ``y``."""
+    least = -np.exp(-(4.15 - np.pi))
+    (tmp_path / "m.yaml").write_text(SPIN_THEN_DAMP)
+    (tmp_path / "p.yaml").write_text(f"properties:\n  - {{id: p, kind: safety, "
+                                     f"avoid: ['t == 4.15', 'y <= {float(least * fraction)!r}']}}\n")
+    model = load_model(tmp_path / "m.yaml")
+    (prop,) = [bind(p, model) for p in load_properties(tmp_path / "p.yaml")]
+    result = BACKEND.check(model, prop, {"finer_retry": False})
+    assert result.status is status, result.details.get("reason")
+    if status is Status.UNSAFE:
+        cex = result.counterexample.to_dict()
+        run = replay(model, prop, cex["initial_state"], cex["switch_time"], cex["dt"], cex["input_signal"],
+                     Branches(prescribed=[cex["transitions"]]))
+        assert run.violated

@@ -118,7 +118,7 @@ def regions(model, bound_props, axes, modes, view) -> tuple[list[Region], list[s
                 missed = True
                 continue
             drew = True
-            drawable.append((prop.id, mode, " and ".join(c.text for c in piece), rows, kind))
+            drawable.append((prop.id, mode, " and ".join(dict.fromkeys(c.text for c in piece)), rows, kind))
         if missed:
             hidden.append(f"{prop.id} (in part)" if drew else prop.id)
     view = widened(view, [rows for *_, rows, _ in drawable])

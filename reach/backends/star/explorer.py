@@ -1123,7 +1123,7 @@ class _Explorer:
             self._lp_budget()
             H = np.vstack([piece.H, horizon_row])
             g = np.append(piece.g, self.horizon)
-            depth, alpha, lp_tol = _depth(seg, H, g, len(piece.g))
+            depth, alpha, lp_tol = _depth(seg, H, g, len(piece.g), self.opt.touch_tolerance)
             tol = max(self.opt.touch_tolerance, 10 * lp_tol) * max(
                 1.0, np.abs(piece.g).max(initial=0.0), np.abs(piece.H @ seg.center).max(initial=0.0))
             self.stats.tolerance = max(self.stats.tolerance, tol)

@@ -404,6 +404,22 @@ def _plus_box(star: Star, radius, directed=None) -> Star:
     return Star(star.center, np.hstack([star.basis, E]), predicate, box)
 
 
+def _equalities(H, g) -> list[tuple[int, int]]:
+    """Pairs ``(i, j)`` of rows of ``H x <= g`` that are opposite (unit normals summing to at
+    most 1e-12) and bound a slab of zero width (up to 1e-12 of the bound): an equality."""
+    norms = np.linalg.norm(H, axis=1)
+    pairs, used = [], set()
+    for i in range(H.shape[0]):
+        for j in range(i + 1, H.shape[0]):
+            if i in used or j in used or not (norms[i] > 0 and norms[j] > 0):
+                continue
+            if np.abs(H[i] / norms[i] + H[j] / norms[j]).max() <= 1e-12 and \
+                    abs(g[i] / norms[i] + g[j] / norms[j]) <= 1e-12 * (1.0 + abs(g[i] / norms[i])):
+                pairs.append((i, j))
+                used |= {i, j}
+    return pairs
+
+
 def folded(star: Star, keep: int, ratio: float = FOLD_RATIO) -> Star:
     """``star`` with its small coefficients folded into a box: the columns past the first
     ``keep`` whose extent ``|V_j| r_j`` is at most ``ratio`` of the largest column's (the
@@ -490,12 +506,30 @@ def _block_spreads(seg: Star, H: np.ndarray, blocks: tuple[int, ...], cut_from: 
     return spread, error
 
 
-def _depth(seg: Star, H, g, piece_rows: int):
+def _depth(seg: Star, H, g, piece_rows: int, touch: float = 0.0):
     """``Star.depth`` on the piece rows, with further rows (the horizon) as hard limits:
     ``(depth, coefficients, tolerance)``, ``tolerance`` the primal feasibility tolerance the LP
     was solved to -- ``DEPTH_LP_TOLERANCE``, or where HiGHS fails at it 100 times that, then
-    its default (about 1e-7); an :class:`reach.lp.LPError` if all fail."""
-    hard = H[piece_rows:], g[piece_rows:]
+    its default (about 1e-7); an :class:`reach.lp.LPError` if all fail.
+
+    An equality of the piece (two opposite rows of zero width, ``t == 4.15``) caps every depth at
+    0, so the deepest point would be any point of the slice, however shallow in the other rows:
+    such pairs are hard limits too, each relaxed by ``touch (1 + |g|)`` (as a depth of
+    ``-touch`` still meets the piece), and the depth is taken over the other rows. A star farther
+    than that from the equality misses the piece, as its depth would say; one within it is as
+    deep as its points on the slice reach into the other rows."""
+    pairs = _equalities(H[:piece_rows], g[:piece_rows])
+    if pairs and len(pairs) * 2 < piece_rows:
+        rows = sorted(i for pair in pairs for i in pair)
+        norms = np.linalg.norm(H[rows], axis=1)
+        slack = touch * (1.0 + np.abs(g[rows]) / norms) * norms
+        hard = np.vstack([H[rows], H[piece_rows:]]), np.concatenate([g[rows] + slack, g[piece_rows:]])
+        keep = [i for i in range(piece_rows) if i not in rows]
+        H = np.vstack([H[keep], H[piece_rows:]])
+        g = np.concatenate([g[keep], g[piece_rows:]])
+        piece_rows = len(keep)
+    else:
+        hard = H[piece_rows:], g[piece_rows:]
     star = seg.intersect_halfspaces(*hard)
     for tolerance in (DEPTH_LP_TOLERANCE, 100 * DEPTH_LP_TOLERANCE, None):
         try:

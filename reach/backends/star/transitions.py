@@ -72,7 +72,7 @@ def _unsafe_pieces(prop) -> dict[str, list[_Piece] | None]:
                 continue
             out[mode] = []
             for k, ((H, g), constraints) in enumerate(zip(halfspaces, prop.pieces[mode])):
-                label = " and ".join(c.text for c in constraints) or f"piece {k}"
+                label = " and ".join(dict.fromkeys(c.text for c in constraints)) or f"piece {k}"
                 out[mode].append(_Piece(*_normalised(H, g), all(c.strict for c in constraints), label))
         return out
     return _cached(prop, build)
