@@ -173,6 +173,23 @@ def test_the_line_of_an_input_bounded_differently_per_location_is_the_same_every
                       "(not supported): in 'off' they differ from 'on'"}, errors
 
 
+def test_an_input_also_read_by_another_invariant_names_that_invariant(tmp_path, capsys):
+    """``0 <= w <= 1 & w <= T - 18``: ``w`` is bounded by numbers, but also read by a row that
+    mixes in a state, which an input may not be: the message names that row, not "neither
+    bounded by numbers"."""
+    body = THERMOSTAT.replace('<param name="c" type="real" local="false" dynamics="any"/>',
+                              '<param name="c" type="real" local="false" dynamics="any"/>\n'
+                              ' <param name="w" type="real" local="false" dynamics="any"/>', 1)
+    body = body.replace("<invariant>T &lt;= 22</invariant>",
+                        "<invariant>T &lt;= 22 &amp; 0 &lt;= w &lt;= 1 &amp; w &lt;= T - 18</invariant>")
+    body = body.replace("<invariant>T &gt;= 18</invariant>", "<invariant>T &gt;= 18 &amp; 0 &lt;= w &lt;= 1</invariant>")
+    body = body.replace("T' == -0.1*(T - 10) + 3", "T' == -0.1*(T - 10) + 3 + w")
+    xml, cfg = write(tmp_path, body, CFG)
+    err = bad_input(check(xml, cfg), capsys)
+    assert err == (f"reach: {xml}:7: the input 'w' (no flow, bounded by numbers) also appears in the invariant "
+                   "'w <= T-18' of location 'on' (an input may only be bounded by numbers: not supported)"), err
+
+
 @pytest.mark.parametrize("flag,value,line", [
     ("asap", "maybe", 8), ("asap", "1", 8), ("timedriven", "yes", 8), ("local", "ja", 5),
 ])

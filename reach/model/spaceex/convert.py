@@ -471,6 +471,14 @@ class DocumentBuilder(Converter):
                 raise InputError(f"the input '{var}' needs finite bounds low <= {var} <= high", self.file, line=line)
             self.inputs[var] = (lo, hi, True)
             return
+        if bounds and uses_outside_flows:           # bounded, but also read by another invariant
+            key, j, line = next((key, j, ln) for key in where for j, (rel, ln) in enumerate(self.invariants[key])
+                                if j not in {i for i, _ in bounds.get(key, [])}
+                                and any(var in names_in(p) for p in rel.parts))
+            raise InputError(f"the input '{var}' (no flow, bounded by numbers) also appears in the invariant "
+                             f"'{printable(_written(self.invariants[key][j][0]))[:80]}' of location "
+                             f"'{self.flat.label(key)}' (an input may only be bounded by numbers: not "
+                             "supported)", self.file, line=line)
         raise InputError(f"'{var}' has no flow and is neither bounded by numbers in the invariants nor "
                          f"defined by an equality (construct not supported)", self.file,
                          line=line or self._line_of(var))
@@ -888,6 +896,13 @@ class DocumentBuilder(Converter):
             for k, p in enumerate(props, start=1):
                 p["id"] = f"{pid}-{k}"
         return {"properties": props}, plines, pid
+
+
+def _written(rel) -> str:
+    """A relation as its tokens read (``w <= x + 1``)."""
+    parts = ["".join(tok.text for tok in part) for part in rel.parts]
+    return " ".join(p + (f" {op}" if i < len(rel.ops) else "") for i, (p, op) in
+                    enumerate(zip(parts, rel.ops + [""])))
 
 
 def _difference(text: str, kind: str) -> str:
