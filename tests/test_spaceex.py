@@ -540,6 +540,9 @@ def test_cfg_values_comments_quotes_and_lines():
         parse_cfg("a = 1\na = 2\n", "b.cfg")
     with pytest.raises(InputError, match="unterminated"):
         parse_cfg('a = "1\n', "c.cfg")
+    with pytest.raises(InputError, match="closing quote missing on this line") as info:
+        parse_cfg('system = "s"\nforbidden = "x >= 2\nscenario = "supp"\n', "e.cfg")
+    assert info.value.line == 2
     with pytest.raises(InputError, match="expected a number") as info:
         parse_cfg("time-horizon = soon\n", "d.cfg").number("time-horizon")
     assert info.value.line == 1

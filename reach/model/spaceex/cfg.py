@@ -84,6 +84,9 @@ def parse_cfg(text: str, file: str) -> Config:
             rest_end = text.find("\n", close)
             rest_end = n if rest_end < 0 else rest_end
             rest = text[close + 1:rest_end].split("#", 1)[0].strip()
+            if rest and line > start_line:              # the closing quote of another line's value
+                raise InputError(f"{key}: the quoted value opened here is closed on line {line}, followed by "
+                                 f"'{rest[:30]}' (a closing quote missing on this line?)", file, line=start_line)
             if rest:
                 raise InputError(f"{key}: unexpected text after the quoted value", file, line=line)
             i = rest_end + 1
