@@ -340,6 +340,11 @@ class StarBackend:
             return first
         first.seconds = latest.seconds
         reason = latest.details.get("reason", "")
+        if spent_share and OUT_OF_TIME in reason:        # the two passes shared the user's budget
+            first.details["reason"] = (f"{budget_text(opt.max_seconds)} (option max_seconds): a quarter of it "
+                                       f"with the input effect as a box, the rest with it as generators "
+                                       f"(step {first.details['step']:.3g})")
+            return first
         if OUT_OF_TIME in reason:                       # whose budget (:meth:`_Explorer.out_of_time`)
             reason += (" (option max_seconds)" if left <= share else
                        f" (the finer passes share {FINER_FACTOR:g} times the first pass's time, "

@@ -1276,7 +1276,8 @@ class _Explorer:
             lo, hi = -float(tightened.support_bounds(-clock)[0]), float(tightened.support_bounds(clock)[0])
             tau = max(0.0, (lo - last) / rate)      # a run jumps no earlier than its cell start
             w = max(0.0, (hi - first) / rate - tau)
-            if w <= max(INSTANT_WIDTH * max(1.0, abs(hi) / rate), INSTANT_STEP_FRACTION * self.h):
+            local = INSTANT_STEP_FRACTION * self.h if k != self.clock else 0.0     # (see the options)
+            if w <= max(INSTANT_WIDTH * max(1.0, abs(hi) / rate), local):
                 break
         else:
             return None

@@ -35,10 +35,12 @@ CHATTER_JUMPS = 100
 MAX_CELLS = 1_000_000             # grid cells over the horizon (horizon / step) a check may start with
 
 
-#: a jump whose guard leaves its clock within this relative width, or within
-#: :data:`INSTANT_STEP_FRACTION` of the step (an aggregate's clock, rounded outward), is taken
+#: a jump whose guard leaves its clock within this relative width, or a local timer within
+#: :data:`INSTANT_STEP_FRACTION` of the step (an aggregate's timer, rounded outward), is taken
 #: at one instant (:meth:`.explorer._Explorer._at_instant`; the spread ``w`` costs a box of
-#: ``w |x'|``, far below the segment's sweep of a step)
+#: ``w |x'|``, far below the segment's sweep of a step). The global clock keeps the relative
+#: width alone: a guard on the states that a set crosses in a sliver of time is no schedule,
+#: and its successors are better joined by the hull the fixpoint check compares
 INSTANT_WIDTH = 1e-9
 INSTANT_STEP_FRACTION = 1e-6
 
