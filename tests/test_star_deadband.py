@@ -166,30 +166,3 @@ def test_the_clockless_second_pass_carries_rebased_inputs_as_generators(deadband
     assert not clockless_retry(model, {"input_cells": 0}, StarOptions()).rebase_generators
     assert clockless_retry(model, {"aggregate_after": 2}, StarOptions()) is None
 
-
-CLOCKED = DEADBAND.replace("state: [th, w]", "state: [th, w, t]").replace('w: "d"}', 'w: "d", t: "1"}').replace(
-    'w: "-0.01 + d"}', 'w: "-0.01 + d", t: "1"}').replace('w: "0.01 + d"}', 'w: "0.01 + d", t: "1"}').replace(
-    "w: [-0.001, 0.001]}", "w: [-0.001, 0.001], t: [0, 0]}")
-
-
-def test_a_clock_nothing_reads_leaves_the_model_time_invariant(tmp_path):
-    """The deadband with a clock ``t`` declared for the record (``t' = 1``, never reset, in no
-    guard, invariant or flow): its runs are still time-shifted runs of each other, so the fixpoint
-    check may shift them and closes the limit cycle; with the clock compared as a state it did
-    not, and the check ran out of its 120 s budget. A property that reads ``t`` keeps it a
-    state."""
-    from reach.backends.star.fixpoint import time_invariant
-    from reach.backends.star.transitions import _unsafe_pieces
-
-    (tmp_path / "m.yaml").write_text(CLOCKED)
-    (tmp_path / "p.yaml").write_text("properties:\n"
-                                     "  - {id: pointing, kind: safety, require: ['th <= 0.05', 'th >= -0.05']}\n"
-                                     "  - {id: late, kind: safety, require: ['th <= 0.05 + 0.001 * t']}\n")
-    model = load_model(tmp_path / "m.yaml")
-    props = {p.id: bind(p, model) for p in load_properties(tmp_path / "p.yaml")}
-    assert model.global_clock is not None
-    assert time_invariant(model, _unsafe_pieces(props["pointing"]))
-    assert not time_invariant(model, _unsafe_pieces(props["late"]))
-    result = BACKEND.check(model, props["pointing"], {"max_seconds": 60})
-    assert result.status is Status.SAFE, result.details.get("reason")
-    assert result.details["covered_aggregates"] > 0

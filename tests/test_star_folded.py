@@ -22,7 +22,8 @@ def stars_with_small_columns(draw):
     small = draw(st.integers(n + 1, n + 6))
     rng = np.random.default_rng(draw(st.integers(0, 2 ** 31 - 1)))
     m = big + small
-    V = np.hstack([rng.normal(size=(n, big)), 1e-8 * rng.normal(size=(n, small))])
+    signs = rng.choice([-1.0, 1.0], size=(n, big))
+    V = np.hstack([signs * rng.uniform(0.5, 2.0, size=(n, big)), 1e-8 * rng.normal(size=(n, small))])
     box = Box(-rng.uniform(0.5, 2, m), rng.uniform(0.5, 2, m))
     rows = rng.normal(size=(draw(st.integers(0, 3)), m))
     b = rows @ box.center + rng.uniform(0.1, 1.0, rows.shape[0])

@@ -231,8 +231,8 @@ class _Explorer:
                        for mode, pieces in _unsafe_pieces(prop).items()} if data.added_clock \
             else _unsafe_pieces(prop)
         self.pieces = self._reachable_pieces(group_pieces(self.pieces, getattr(data, "groups", ())))
-        self.covered = Covered(self.clock, time_invariant(model, self.pieces)) \
-            if applies(model) and not options.keep_sets else None
+        self.covered = Covered(self.clock, time_invariant(model)) if applies(model) and not options.keep_sets \
+            else None
         self.relevant = _modes_leading_to(model, set(self.pieces))
         self.horizon = min(self.horizon, max(self._last_unsafe_instant(), 0.0))
         self._guard_rows: dict[str, np.ndarray] = {}       # per mode, see _transient

@@ -49,39 +49,10 @@ def applies(model) -> bool:
     return not any(t.window is not None for t in model.transitions)
 
 
-def time_invariant(model, pieces=None) -> bool:
+def time_invariant(model) -> bool:
     """Whether the check may also shift runs in time (``shift``, module docstring): it applies
-    and the model has no global clock (the explorer adds its own, which nothing reads), or one
-    that nothing reads (:func:`unread_clock`; the unsafe ``pieces`` of the property checked,
-    per mode, if given, included)."""
-    if not applies(model):
-        return False
-    if model.global_clock is None:
-        return True
-    from reach.backends.star.transitions import _LinearModel
-    return unread_clock(_LinearModel.of(model), pieces or {})
-
-
-def unread_clock(data, pieces) -> bool:
-    """Whether the model's own clock ``t`` (``data.clock``) is read by nothing: no flow's rate,
-    invariant, guard or reset of another state, and no unsafe piece, has a ``t`` term, and every
-    reset leaves ``t`` as it is. Its runs are then time-shifted runs of each other, as a model
-    without a clock (a deadband with a clock declared for the record)."""
-    if not data.linear:
-        return False
-    k = data.clock
-    if any(np.any(flow.A[:, k] != 0) for flow in data.flows.values()):
-        return False
-    if any(np.any(H[:, k] != 0) for H, _ in data.invariants.values()):
-        return False
-    for jumps in data.jumps.values():
-        for jump in jumps:
-            if jump is None or np.any(jump.H[:, k] != 0) or jump.r[k] != 0:
-                return False
-            if np.any(np.delete(jump.R[:, k], k) != 0) or np.any(jump.R[k] != np.eye(data.n)[k]):
-                return False
-    return not any(np.any(np.asarray(piece.H)[:, k] != 0) for ps in pieces.values() for piece in ps
-                   if np.asarray(piece.H).size)
+    and the model has no global clock (the explorer adds its own, which nothing reads)."""
+    return applies(model) and model.global_clock is None
 
 
 #: relative margin by which a recorded aggregate is enlarged (box and jump rows): a later
