@@ -346,3 +346,15 @@ def test_arbitrary_switching_is_sampled_and_replayed(tmp_path):
     data["input_signal"]["switch"] = [0] * len(switch)
     file.write_text(json.dumps(data))
     assert main(["replay", str(file)]) == 3                # never switching, x only grows
+
+
+def test_a_property_file_given_as_the_model_says_so(tmp_path, capsys):
+    """``reach check PROPERTIES MODEL``, the two files the wrong way round: one line saying the
+    first is a property file, not "unknown field 'properties'"."""
+    from cli_input import bad_input
+    (tmp_path / "p.yaml").write_text("properties:\n  - {id: hot, kind: safety, require: ['T <= 22']}\n")
+    (tmp_path / "m.yaml").write_text("name: m\nstate: [T]\nmodes:\n  on: {flow: {T: '1'}}\n"
+                                     "initial: {mode: on, box: {T: [0, 1]}}\nhorizon: 1\n")
+    err = bad_input(["check", str(tmp_path / "p.yaml"), str(tmp_path / "m.yaml"), "-b", "star"], capsys)
+    assert err == f"reach: {tmp_path / 'p.yaml'}:1: properties: this is a property file, not a model " \
+                  "(give the model first, then the property file)", err

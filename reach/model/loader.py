@@ -187,6 +187,9 @@ class _Builder:
 
     def build(self) -> HybridAutomaton:
         extra = set(self.data) - TOP_FIELDS
+        if "properties" in extra:                # a property file given where the model goes
+            raise self.where("properties").error("this is a property file, not a model (give the model "
+                                                 "first, then the property file)")
         if extra:
             key = sorted(extra)[0]
             raise self.where(key).error(f"unknown field '{key}'")
