@@ -30,6 +30,16 @@ def stars_with_small_columns(draw):
     return Star(rng.normal(size=n), V, HPolytope(rows, b), box), big
 
 
+def coefficients_inside(star, rng, tries: int):
+    """Coefficient vectors of ``star``'s predicate, drawn uniformly in its box (those outside
+    its rows dropped)."""
+    lo, hi = star.box.low, star.box.high
+    for _ in range(tries):
+        a = lo + (hi - lo) * rng.uniform(size=star.nvars)
+        if np.all(star.predicate.A @ a <= star.predicate.b):
+            yield a
+
+
 @settings(max_examples=60, deadline=None)
 @given(stars_with_small_columns(), st.integers(0, 2 ** 31 - 1))
 def test_the_folded_star_contains_the_star(case, seed):
@@ -46,13 +56,8 @@ def test_the_folded_star_contains_the_star(case, seed):
     small &= np.abs(star.basis).sum(axis=0) * star.box.radius <= 1e-6 * (np.abs(star.basis).sum(axis=0)
                                                                         * star.box.radius).max()
     kept = ~small
-    rng = np.random.default_rng(seed)
-    lo, hi = star.box.low, star.box.high
     samples = 0
-    for _ in range(400):
-        a = lo + (hi - lo) * rng.uniform(size=star.nvars)
-        if np.any(star.predicate.A @ a > star.predicate.b):
-            continue
+    for a in coefficients_inside(star, np.random.default_rng(seed), 400):
         samples += 1
         x = star.center + star.basis @ a
         radius = out.basis[:, kept.sum():]
@@ -93,11 +98,7 @@ def test_the_shared_shape_hull_contains_each_member(case, seed):
     rows = np.flatnonzero(np.abs(E).sum(axis=1) > 0)
     samples = 0
     for member in (star, other):
-        lo, hi = member.box.low, member.box.high
-        for _ in range(200):
-            a = lo + (hi - lo) * rng.uniform(size=member.nvars)
-            if np.any(member.predicate.A @ a > member.predicate.b):
-                continue
+        for a in coefficients_inside(member, rng, 200):
             samples += 1
             x = member.center + member.basis @ a
             rest = x - hull.center - hull.basis[:, :big] @ a[:big]

@@ -86,6 +86,20 @@ def checked(tmp_path, model_text, requirements: dict, options=None) -> dict:
             for p in load_properties(tmp_path / "p.yaml")}, model
 
 
+def replayed(model, prop, result):
+    """The simulator's run of ``result``'s counterexample, on its own (independent of star)."""
+    cex = result.counterexample.to_dict()
+    return replay(model, prop, cex["initial_state"], cex["switch_time"], cex["dt"], cex["input_signal"],
+                  Branches(prescribed=[cex["transitions"]])), cex
+
+
+def bound_property(tmp_path, name: str = "p"):
+    """The property ``name`` of ``tmp_path/p.yaml`` bound to the model ``tmp_path/m.yaml``."""
+    model = load_model(tmp_path / "m.yaml")
+    (prop,) = [bind(p, model) for p in load_properties(tmp_path / "p.yaml") if p.id == name]
+    return model, prop
+
+
 def test_a_clocked_tank_of_constant_rates_is_decided_with_few_stars(tmp_path):
     """The level stays in [2, 10] and reaches both ends (fill from 4..6 to 10 in at most 3 s,
     drain to 2 in 8/3 s). Each guard is crossed over two or three cells; one successor per
@@ -183,14 +197,11 @@ def test_a_violation_lost_in_the_switch_delay_of_the_replay_grid_is_found_on_a_f
     (tmp_path / "m.yaml").write_text(ROTATE_THEN_GROW)
     (tmp_path / "p.yaml").write_text(f"properties:\n  - {{id: p, kind: safety, modes: [B], "
                                      f"require: ['x <= {float(fraction * truth)!r}']}}\n")
-    model = load_model(tmp_path / "m.yaml")
-    (prop,) = [bind(p, model) for p in load_properties(tmp_path / "p.yaml")]
+    model, prop = bound_property(tmp_path)
     result = BACKEND.check(model, prop, {"finer_retry": False})
     assert result.status is status, result.details.get("reason")
     if status is Status.UNSAFE:
-        cex = result.counterexample.to_dict()
-        run = replay(model, prop, cex["initial_state"], cex["switch_time"], cex["dt"], cex["input_signal"],
-                     Branches(prescribed=[cex["transitions"]]))
+        run, cex = replayed(model, prop, result)
         assert run.violated and cex["dt"] < model.horizon / 2400
 
 
@@ -432,11 +443,8 @@ def test_urgent_guards_of_two_rows_end_the_flow_of_their_mode(tmp_path, acc, w0)
     assert results["low_ok"].status is Status.SAFE, results["low_ok"].details.get("reason")
     for name in ("high_bad", "low_bad"):
         assert results[name].status is Status.UNSAFE, results[name].details.get("reason")
-        cex = results[name].counterexample.to_dict()
-        (prop,) = [bind(p, model) for p in load_properties(tmp_path / "p.yaml") if p.id == name]
-        run = replay(model, prop, cex["initial_state"], cex["switch_time"], cex["dt"], cex["input_signal"],
-                     Branches(prescribed=[cex["transitions"]]))
-        assert run.violated
+        _, prop = bound_property(tmp_path, name)
+        assert replayed(model, prop, results[name])[0].violated
 
 
 
@@ -496,11 +504,8 @@ def test_a_sampled_controller_keeps_its_shape_through_the_ticks(tmp_path, period
     for name in ("far", "ok", "high_ok"):
         assert results[name].status is Status.SAFE, (name, results[name].details.get("reason"))
     assert results["bad"].status is Status.UNSAFE, results["bad"].details.get("reason")
-    cex = results["bad"].counterexample.to_dict()
-    (prop,) = [bind(p, model) for p in load_properties(tmp_path / "p.yaml") if p.id == "bad"]
-    run = replay(model, prop, cex["initial_state"], cex["switch_time"], cex["dt"], cex["input_signal"],
-                 Branches(prescribed=[cex["transitions"]]))
-    assert run.violated
+    _, prop = bound_property(tmp_path, "bad")
+    assert replayed(model, prop, results["bad"])[0].violated
 
 LANDER = """
 name: lander
@@ -554,12 +559,8 @@ def test_a_forbidden_instant_is_entered_as_deep_as_its_other_rows_allow(tmp_path
     (tmp_path / "m.yaml").write_text(SPIN_THEN_DAMP)
     (tmp_path / "p.yaml").write_text(f"properties:\n  - {{id: p, kind: safety, "
                                      f"avoid: ['t == 4.15', 'y <= {float(least * fraction)!r}']}}\n")
-    model = load_model(tmp_path / "m.yaml")
-    (prop,) = [bind(p, model) for p in load_properties(tmp_path / "p.yaml")]
+    model, prop = bound_property(tmp_path)
     result = BACKEND.check(model, prop, {"finer_retry": False})
     assert result.status is status, result.details.get("reason")
     if status is Status.UNSAFE:
-        cex = result.counterexample.to_dict()
-        run = replay(model, prop, cex["initial_state"], cex["switch_time"], cex["dt"], cex["input_signal"],
-                     Branches(prescribed=[cex["transitions"]]))
-        assert run.violated
+        assert replayed(model, prop, result)[0].violated

@@ -16,6 +16,7 @@ from reach.model.constraints import Constraint, violation_test
 from reach.result import Status
 
 from tests.test_star_aff import write
+from tests.test_star_general_lha import bound_property, replayed
 
 
 def _run(step, values, t):
@@ -166,20 +167,12 @@ def test_a_witness_whose_input_flips_at_each_jump_replays(tmp_path):
     ``-1`` in B: the input held constant, or the bang-bang signal of the witness mode's flow
     alone (``u = -1`` throughout), reaches about 0. A bound 0.05 % below the maximum was
     UNKNOWN; the signal of the witness's path (adjoint through the jumps) replays it."""
-    from reach.backends.montecarlo import replay
     from reach.backends.star import BACKEND
-    from reach.model import load_model
-    from reach.model.simulate import Branches
-    from reach.spec import bind, load_properties
 
     truth = 10 * (1 - np.exp(-0.4))
     (tmp_path / "m.yaml").write_text(FLIP)
     (tmp_path / "p.yaml").write_text(f"properties:\n  - {{id: p, kind: safety, require: ['y <= {float(truth * 0.9995)!r}']}}\n")
-    model = load_model(tmp_path / "m.yaml")
-    (prop,) = [bind(p, model) for p in load_properties(tmp_path / "p.yaml")]
+    model, prop = bound_property(tmp_path)
     result = BACKEND.check(model, prop, {"finer_retry": False})
     assert result.status is Status.UNSAFE, result.details.get("reason")
-    cex = result.counterexample.to_dict()
-    run = replay(model, prop, cex["initial_state"], cex["switch_time"], cex["dt"], cex["input_signal"],
-                 Branches(prescribed=[cex["transitions"]]))
-    assert run.violated
+    assert replayed(model, prop, result)[0].violated

@@ -855,19 +855,28 @@ class _Explorer:
             candidates.insert(0, enlarged(hull, (H, g), rows, ranges))
         self.stats.aggregated += 1
         self.stats.members += len(kept)
-        start = min(path.since for _, path in kept)
-        jumps = max(path.jumps for _, path in kept)
-        stalled = max(path.stalled for _, path in kept if path.since == start)   # as from ``start``
-        nested = max(path.nested for _, path in kept)
+        self._explore_joined(mode, kept, candidates)
+
+    def _explore_joined(self, mode: str, members: list[tuple[Star, _Path]], candidates, record: bool = True):
+        """Explore ``members`` entering ``mode`` as one star: under each of ``candidates``
+        (``(star, rows)``, each containing every member) in turn while a check under the one
+        before fails without a replayed witness, then as the members themselves, each with its
+        own history. ``record``: the candidates are boxes the fixpoint check records
+        (:mod:`.fixpoint`; forgotten again with what followed when one fails)."""
+        start = min(path.since for _, path in members)
+        jumps = max(path.jumps for _, path in members)
+        stalled = max(path.stalled for _, path in members if path.since == start)   # as from ``start``
+        nested = max(path.nested for _, path in members)
         kept_sets = len(self.sets)
+        recording = record and self.covered is not None
         for k, (star, star_rows) in enumerate(candidates):
-            agg = _Aggregate(mode, star, kept)
-            if self.covered is not None:
+            agg = _Aggregate(mode, star, members)
+            if recording:
                 mark = self.covered.mark()
                 self.covered.record(mode, star, star_rows)
             try:
                 self._chain(mode, star, _Path(jumps=jumps, stalled=stalled, origin=agg, since=start,
-                                              nested=nested), star.box.center)
+                                              nested=nested), star.box.center if record else None)
                 return
             except _Deaggregate as failure:
                 if failure.target is not agg:
@@ -876,7 +885,7 @@ class _Explorer:
             # what replaces it is explored once the handler has ended (the failure's traceback
             # holds the frames of the failed exploration: see _cell)
             del self.sets[kept_sets:]               # what replaces it has its own segments
-            if self.covered is not None:
+            if recording:
                 self.covered.forget(mark)
             if k + 1 < len(candidates):
                 LOG.info("enlarged aggregate entering '%s' replaced by the exact hull (%s)", mode, piece)
@@ -885,8 +894,8 @@ class _Explorer:
             self.stats.deaggregated += 1
             self.stats.nested = max(self.stats.nested, nested + 1)
             LOG.info("aggregate of %d stars entering '%s' refined into its members (%s; up to %d "
-                     "coefficients)", len(kept), mode, piece, max(m.nvars for m, _ in kept))
-            for member, path in kept:
+                     "coefficients)", len(members), mode, piece, max(m.nvars for m, _ in members))
+            for member, path in members:
                 self._chain(mode, member, path.closed(refinements=1))
 
     def _shaped(self, mode: str, members) -> bool:
@@ -911,21 +920,7 @@ class _Explorer:
         if len(members) == 1 and star is members[0][0]:
             self._chain(mode, star, members[0][1])
             return True
-        agg = _Aggregate(mode, star, members)
-        kept_sets = len(self.sets)
-        start = min(path.since for _, path in members)
-        try:
-            self._chain(mode, star, _Path(jumps=max(p.jumps for _, p in members), stalled=max(p.stalled for _, p in members),
-                                          origin=agg, since=start, nested=max(p.nested for _, p in members)))
-            return True
-        except _Deaggregate as failure:
-            if failure.target is not agg:
-                raise
-        del self.sets[kept_sets:]               # the members explore their own (see _cell)
-        agg.refined = True
-        self.stats.deaggregated += 1
-        for member, path in members:
-            self._chain(mode, member, path.closed(refinements=1))
+        self._explore_joined(mode, members, [(star, None)], record=False)
         return True
 
     def _clock_from(self, ranges: Box, start: float) -> Box:
