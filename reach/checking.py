@@ -95,7 +95,13 @@ def exit_code(results: list[Result]) -> int:
 
 
 def check_model(backend, model, bound: list, options: dict | None = None) -> list[Result]:
-    """Check bound properties; back-ends with ``check_many`` share work across properties."""
+    """Check bound properties; back-ends with ``check_many`` share work across properties. For
+    star, a SpaceEx cfg's hints that the model keeps (``sampling-time``, ``iter-max``) become
+    option defaults (:func:`reach.backends.star.options.cfg_hints`), so an imported model is
+    checked as its SpaceEx files are."""
+    if backend.name == "star" and model.hints:
+        from reach.backends.star.options import cfg_hints
+        options = cfg_hints(model.hints, model.horizon, options)
     results: dict[int, Result] = {}
     todo = []
     for prop in bound:
@@ -131,7 +137,7 @@ def check_spaceex(xml_path, cfg_path, backend_name: str, options: dict | None = 
     file name and whose unsafe set is the union of the forbidden terms. Returns
     ``(results, model, documents, {id: bound property})``. A cfg that forbids nothing is bad
     input (a run would prove nothing). For star the cfg's ``sampling-time`` and ``iter-max``
-    become option defaults (:func:`reach.backends.star.options.cfg_hints`)."""
+    become option defaults, as for the imported model (:func:`check_model`)."""
     from reach.model.spaceex import load_spaceex
     from reach.spec.properties import BoundSafety
 
@@ -142,14 +148,9 @@ def check_spaceex(xml_path, cfg_path, backend_name: str, options: dict | None = 
         from reach.errors import InputError
         from reach.model.spaceex import read_cfg
         cfg = read_cfg(cfg_path)
-        if cfg.text("forbidden") is None and cfg.near("forbidden"):
-            raise cfg.missing("forbidden")
         raise InputError("the cfg forbids nothing: there is no property to check (add a forbidden "
                          "set; 'reach import' converts the model alone)", str(cfg_path),
                          "forbidden", cfg.line("forbidden") or 1)
-    if backend_name == "star":
-        from reach.backends.star.options import cfg_hints
-        options = cfg_hints(docs.model.get("notes", {}), model.horizon, options)
     bound = [bind(p, model) for p in props]
     modes = [m for m in model.modes if any(m in b.modes for b in bound)]
     pieces = {m: [piece for b in bound for piece in b.pieces.get(m, [])] for m in modes}

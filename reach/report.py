@@ -79,6 +79,9 @@ def _requirement(prop) -> str:
     if kind == "event":
         return f"{prop.sense} {prop.text or 'quantity'} {prop.op} {_bound_value(prop)}"
     if kind == "safety":
+        whole = _whole_modes(prop)
+        if whole:
+            return f"never in {_names(whole)}"
         # a required constraint c is stored as its negation, the unsafe piece "not (c)"
         texts = list(dict.fromkeys(con.text for pieces in prop.pieces.values()
                                    for piece in pieces for con in piece))
@@ -98,10 +101,28 @@ def _where(prop, model, shown: int = 4) -> str:
     modes = list(getattr(prop, "pieces", {}) or [])
     if getattr(prop, "kind", "") != "safety" or model is None or not modes or len(modes) >= len(model.modes):
         return ""
-    if len({tuple(map(_piece_text, pieces)) for pieces in prop.pieces.values()}) > 1:
+    if len({tuple(map(_piece_text, pieces)) for pieces in prop.pieces.values()}) > 1 or _whole_modes(prop):
         return ""
-    names = ", ".join(modes[:shown]) + (f" and {len(modes) - shown} more" if len(modes) > shown else "")
-    return f" (in {names})"
+    return f" (in {_names(modes, shown)})"
+
+
+def _names(modes, shown: int = 4) -> str:
+    """The first ``shown`` mode names, then a count."""
+    return ", ".join(modes[:shown]) + (f" and {len(modes) - shown} more" if len(modes) > shown else "")
+
+
+def _whole_mode(piece) -> bool:
+    """Whether an unsafe piece holds everywhere (its constraints are true constants: a SpaceEx
+    ``forbidden = "loc(b) == hit"`` forbids the mode itself, stored as ``require 0 <= -1``)."""
+    return all(con.g.is_number and (con.g < 0 or (con.g == 0 and not con.strict)) for con in piece)
+
+
+def _whole_modes(prop) -> list[str] | None:
+    """The modes of a safety property that forbids being in them at all, if that is all it says."""
+    pieces = getattr(prop, "pieces", None) or {}
+    if pieces and all(ps and all(map(_whole_mode, ps)) for ps in pieces.values()):
+        return list(pieces)
+    return None
 
 
 def _piece_text(piece) -> str:
@@ -242,19 +263,20 @@ def line(result, prop, model) -> str:
             parts.append(f"{quantity} {required}")
     elif kind == "safety":
         text = f["requirement"]
-        if "margin_bound" in f:
+        m = {} if _whole_modes(prop) else f     # being in the mode is the violation: no margin
+        if "margin_bound" in m:
             unit = prop.margin_unit()
-            text += f": smallest margin in {_with_unit(interval(*f['margin_bound']), unit)}"
+            text += f": smallest margin in {_with_unit(interval(*m['margin_bound']), unit)}"
             if unit is None:
                 text += " (model units)"
-        if "closest_margin" in f and "violation_margin" not in f:
+        if "closest_margin" in m and "violation_margin" not in f:
             unit = prop.margin_unit()
-            text += f": closest margin {_with_unit(number(f['closest_margin']), unit)}"
+            text += f": closest margin {_with_unit(number(m['closest_margin']), unit)}"
             if unit is None:
                 text += " (model units)"
-        if "violation_margin" in f:
+        if "violation_margin" in m:
             unit = prop.margin_unit()
-            text += f": margin {_with_unit(number(f['violation_margin']), unit)} at the violation"
+            text += f": margin {_with_unit(number(m['violation_margin']), unit)} at the violation"
             if unit is None:
                 text += " (model units)"
         parts.append(text)

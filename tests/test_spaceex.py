@@ -13,6 +13,7 @@ from reach.errors import InputError
 from reach.model import load_model
 from reach.model.simulate import Simulator
 from reach.model.spaceex import documents, load_spaceex, write_yaml
+from reach.model.spaceex.cfg import parse_cfg
 
 ROOT = Path(__file__).resolve().parents[1] / "models" / "spaceex"
 
@@ -289,19 +290,29 @@ def test_a_misspelt_required_cfg_key_is_named_at_its_line(tmp_path, capsys):
             'initially = "loc(A)==off & loc(B)==idle & x == 0 & y == 0"\nforbidden = "x >= 5"\n')
     xml, cfg = write(tmp_path, NETWORK, text)
     assert main(["check", str(xml), str(cfg), "-b", "montecarlo"]) == 2
-    assert capsys.readouterr().err.strip() == (f"reach: {cfg}:3: no 'time-horizon' "
-                                               f"(is 'time-horizn' a misspelling of it?)")
+    assert capsys.readouterr().err.strip() == (f"reach: {cfg}:3: unknown key 'time-horizn' (a misspelling "
+                                               "of 'time-horizon'? as written it would be ignored)")
 
 
-def test_a_misspelt_forbidden_key_is_named_at_its_line(tmp_path, capsys):
-    """``forbidden`` may be absent (``reach import`` converts the model alone), but ``reach
-    check`` needs it: a key spelt like it is named where it stands."""
+@pytest.mark.parametrize("command", ["check", "import"])
+@pytest.mark.parametrize("right_one_too", [False, True])
+def test_a_misspelt_forbidden_key_is_named_at_its_line(tmp_path, capsys, command, right_one_too):
+    """``forbidden`` may be absent (``reach import`` converts the model alone): a key spelt like
+    it is refused where it stands, also beside a correct ``forbidden`` (its set would be lost)."""
     text = ('system = sys\ntime-horizon = 1\n'
-            'initially = "loc(A)==off & loc(B)==idle & x == 0 & y == 0"\nforbiden = "x >= 5"\n')
+            'initially = "loc(A)==off & loc(B)==idle & x == 0 & y == 0"\nforbiden = "x >= 5"\n'
+            + ('forbidden = "y >= 5"\n' if right_one_too else ''))
     xml, cfg = write(tmp_path, NETWORK, text)
-    assert main(["check", str(xml), str(cfg), "-b", "montecarlo"]) == 2
-    assert capsys.readouterr().err.strip() == (f"reach: {cfg}:4: no 'forbidden' "
-                                               f"(is 'forbiden' a misspelling of it?)")
+    args = ["-b", "montecarlo"] if command == "check" else ["--out", str(tmp_path / "out")]
+    assert main([command, str(xml), str(cfg)] + args) == 2
+    assert capsys.readouterr().err.strip() == (f"reach: {cfg}:4: unknown key 'forbiden' (a misspelling "
+                                               "of 'forbidden'? as written it would be ignored)")
+
+
+def test_spacex_options_spelt_like_read_keys_are_kept(tmp_path):
+    """SpaceEx's own ``local-time-horizon`` is close to ``time-horizon`` but is no misspelling."""
+    cfg = parse_cfg("system = s\nlocal-time-horizon = 2\ntime-horizon = 1\n", "m.cfg")
+    assert cfg.number("time-horizon") == 1 and cfg.text("local-time-horizon") == "2"
 
 
 def test_missing_cfg_is_bad_input(tmp_path):
@@ -530,7 +541,6 @@ def test_nested_binds_rename_locals_per_instance_and_map_dotted_names(tmp_path):
 
 
 def test_cfg_values_comments_quotes_and_lines():
-    from reach.model.spaceex.cfg import parse_cfg
     cfg = parse_cfg('# analysis\nsystem = "sys"\ninitially = "x >= 1 &\n  y == 2"  # two lines\n'
                     '\nforbidden = x >= 3 # a comment\ntime-horizon = 2.5\n', "a.cfg")
     assert cfg.text("system") == "sys" and cfg.text("initially") == "x >= 1 &\n  y == 2"
@@ -557,3 +567,52 @@ def test_cfg_reads_back_what_was_written(values, quoted):
     text = "".join(f'{k} = "{v}"\n' if quoted else f"{k} = {v}\n" for k, v in values.items())
     cfg = parse_cfg(text, "e.cfg")
     assert {k: cfg.text(k) for k in values} == {k: (v if quoted else v.strip()) for k, v in values.items()}
+
+
+BALL = '''<component id="ball">
+  <param name="x" type="real" local="false" d1="1" d2="1" dynamics="any"/>
+  <param name="v" type="real" local="false" d1="1" d2="1" dynamics="any"/>
+  <location id="1" name="air"><invariant>x &gt;= 0</invariant><flow>x' == v &amp; v' == -9.81</flow></location>
+  <location id="2" name="hit"><flow>x' == 0 &amp; v' == 0</flow></location>
+  <transition source="1" target="2"><guard>x &lt;= 0</guard></transition>
+</component>
+'''
+
+
+@pytest.mark.parametrize("horizon, code", [(0.44, 0), (0.46, 1)])
+def test_a_forbidden_location_reads_as_never_in_it(tmp_path, capsys, horizon, code):
+    """``forbidden = "loc(ball) == hit"`` forbids the mode itself; the ball reaches it at
+    sqrt(2 / 9.81) = 0.4515. The report says so, without the stored ``0 <= -1`` or a margin."""
+    xml, cfg = write(tmp_path, BALL, f'system = ball\ninitially = "loc(ball)==air & x == 1 & v == 0"\n'
+                                     f'forbidden = "loc(ball)==hit"\ntime-horizon = {horizon}\n')
+    assert main(["check", str(xml), str(cfg), "-b", "star", "--counterexamples", str(tmp_path)]) == code
+    out = capsys.readouterr().out
+    assert "never in hit" in out and "0 <= -1" not in out and "margin" not in out
+    if code:
+        assert "violated at t=0.4515 in hit" in out
+
+
+def test_imported_model_keeps_the_cfg_hints_for_star(tmp_path):
+    """The cfg's ``sampling-time`` bounds star's step and ``iter-max`` its jumps: on the SpaceEx
+    files and on their import alike (the notes carry them), so both give the same verdicts."""
+    from reach.checking import check_files, check_spaceex
+    xml, cfg = write(tmp_path, BALL, 'system = ball\ninitially = "loc(ball)==air & x == 1 & v == 0"\n'
+                                     'forbidden = "loc(ball)==hit"\ntime-horizon = 0.44\n'
+                                     'sampling-time = 0.001\niter-max = 0\n')
+    direct = check_spaceex(xml, cfg, "star")[0][0]
+    assert main(["import", str(xml), str(cfg), "--out", str(tmp_path / "out")]) == 0
+    imported = check_files(tmp_path / "out/models/m.yaml", tmp_path / "out/properties/m.yaml", "star")[0]
+    for result in (direct, imported):
+        assert result.status.value == "SAFE" and result.details["step"] == 0.001
+    assert check_files(tmp_path / "out/models/m.yaml", tmp_path / "out/properties/m.yaml", "star",
+                       {"step": 0.002})[0].details["step"] == 0.002          # an explicit option wins
+
+
+@pytest.mark.parametrize("notes, message", [("{sampling-time: -1}", "expected a positive time"),
+                                            ("{iter-max: 2.5}", "expected a whole number"),
+                                            ("{sampling-time: fast}", "expected a number")])
+def test_bad_hints_in_notes_are_bad_input(tmp_path, notes, message):
+    (tmp_path / "m.yaml").write_text("name: m\nstate: [x]\nmodes: {a: {flow: {x: -x}}}\ninitial: {mode: a, box: {x: 1}}\n"
+                                     f"horizon: 1\nnotes: {notes}\n")
+    with pytest.raises(InputError, match=f"notes.*{message}"):
+        load_model(tmp_path / "m.yaml")

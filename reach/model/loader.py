@@ -237,7 +237,7 @@ class _Builder:
             file=self.file, units=self.units, constants=self.constants, state=self.state,
             inputs=self.inputs, modes=modes, transitions=transitions, initial=initial,
             horizon=horizon, disturbance=self.read_disturbance(), clocks=clocks, bounded_inputs=bounded,
-            dimensions=None if self.dims is None else self.dims.system)
+            dimensions=None if self.dims is None else self.dims.system, hints=self.read_hints())
         self.check_bounded_inputs(model)
         return model
 
@@ -488,6 +488,28 @@ class _Builder:
             else:
                 low[i] = high[i] = self.number(value, w, dimension=Form.name(var), what=var)
         return InitialSet(raw["mode"], low, high)
+
+    def read_hints(self) -> dict:
+        """A SpaceEx cfg's ``sampling-time`` (a positive time) and ``iter-max`` (an integer; negative:
+        no bound) kept in ``notes`` by the import: analysis hints, so that the imported model is
+        checked as the SpaceEx files are (:func:`reach.backends.star.options.cfg_hints`). Notes in
+        prose, or other keys, are the reader's only."""
+        notes = self.data.get("notes")
+        if not isinstance(notes, dict):
+            return {}
+        hints = {}
+        for key in ("sampling-time", "iter-max"):
+            if key not in notes:
+                continue
+            value, where = notes[key], self.where("notes", key)
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+                raise where.error("expected a number")
+            if key == "sampling-time" and value <= 0:
+                raise where.error("expected a positive time")
+            if key == "iter-max" and value != int(value):
+                raise where.error("expected a whole number")
+            hints[key] = float(value) if key == "sampling-time" else int(value)
+        return hints
 
     def read_disturbance(self) -> Disturbance | None:
         raw = self.data.get("disturbance")

@@ -3,6 +3,8 @@
 Read: ``system`` (the component to analyse), ``initially`` and ``forbidden`` (formulas),
 ``time-horizon``, ``iter-max`` and ``sampling-time`` (a step hint). The other keys are options of
 SpaceEx's own algorithms (scenario, directions, tolerances, output) and are kept but unused.
+A key that is none of SpaceEx's and is spelt like one that is read (``forbiden``) is bad input:
+what it was meant to say would otherwise be dropped without a word.
 """
 
 from __future__ import annotations
@@ -14,6 +16,14 @@ from reach.errors import InputError
 from reach.paths import read_text
 
 MAX_BYTES = 1_000_000
+
+#: the keys this reader uses
+READ_KEYS = ("system", "initially", "forbidden", "time-horizon", "iter-max", "sampling-time")
+#: SpaceEx's other options (its analysis core's command line and web interface)
+OTHER_KEYS = ("scenario", "directions", "set-aggregation", "clustering", "flowpipe-tolerance",
+              "flowpipe-tolerance-rel", "local-time-horizon", "rel-err", "abs-err", "output-error",
+              "output-format", "output-variables", "output-file", "verbosity",
+              "simu-init-sampling-points", "fixpoint-check", "time-step")
 
 
 @dataclass
@@ -27,17 +37,8 @@ class Config:
     def line(self, key: str) -> int | None:
         return self.values[key][1] if key in self.values else None
 
-    def near(self, key: str) -> str | None:
-        """A key of the file spelt like ``key`` (and not it), if there is one."""
-        near = difflib.get_close_matches(key, [k for k in self.values if k != key], n=1, cutoff=0.75)
-        return near[0] if near else None
-
     def missing(self, key: str) -> InputError:
-        """The error for a required key the file lacks, at a key spelt like it if there is one."""
-        near = self.near(key)
-        if near:
-            return InputError(f"no '{key}' (is '{near}' a misspelling of it?)", self.file,
-                              line=self.values[near][1])
+        """The error for a required key the file lacks (a key spelt like it is refused on reading)."""
         return InputError(f"no '{key}'", self.file, line=1)
 
     def number(self, key: str) -> float | None:
@@ -99,7 +100,18 @@ def parse_cfg(text: str, file: str) -> Config:
         if key in cfg.values:
             raise InputError(f"duplicate key '{key}'", file, line=start_line)
         cfg.values[key] = (value, start_line)
+    _refuse_misspelt_keys(cfg)
     return cfg
+
+
+def _refuse_misspelt_keys(cfg: Config) -> None:
+    for key, (_, line) in cfg.values.items():
+        if key in READ_KEYS or key in OTHER_KEYS:
+            continue
+        near = difflib.get_close_matches(key, READ_KEYS, n=1, cutoff=0.75)
+        if near:
+            raise InputError(f"unknown key '{key}' (a misspelling of '{near[0]}'? as written it would be "
+                             "ignored)", cfg.file, line=line)
 
 
 def read_cfg(path) -> Config:
