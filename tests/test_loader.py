@@ -172,3 +172,15 @@ def test_a_model_looked_up_by_name_skips_what_is_no_regular_file(tmp_path, monke
     (models / "c_tank.yaml").write_text("name: wanted\n")
     monkeypatch.chdir(tmp_path)
     assert find_model("wanted") == Path("models") / "c_tank.yaml"
+
+
+@pytest.mark.parametrize("section, other", [("state: [x, ｘ]", "x"), ("state: [x, ﬁ]", "fi"),
+                                            ("state: [x]\nconstants: {ｋ: 2}", "k"),
+                                            ("state: [x]\nbounded_inputs: {ｕ: {range: [0, 1]}}", "u")])
+def test_a_name_expressions_would_read_as_another_is_refused(tmp_path, section, other):
+    """Python's parser reads identifiers in NFKC form: ``x' = ｘ`` would be ``x' = x`` (a SAFE
+    of the wrong model), so a declared name not in that form is bad input, naming the form."""
+    (tmp_path / "m.yaml").write_text(f"name: m\n{section}\nmodes: {{a: {{flow: {{x: '1'}}}}}}\n"
+                                     "initial: {mode: a, box: {x: 0}}\nhorizon: 1\n")
+    with pytest.raises(InputError, match=f"expressions read it as '{other}'"):
+        load_model(tmp_path / "m.yaml")

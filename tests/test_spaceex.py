@@ -616,3 +616,44 @@ def test_bad_hints_in_notes_are_bad_input(tmp_path, notes, message):
                                      f"horizon: 1\nnotes: {notes}\n")
     with pytest.raises(InputError, match=f"notes.*{message}"):
         load_model(tmp_path / "m.yaml")
+
+
+DRIVEN = '''<component id="plant">
+  <param name="x" type="real" local="false" d1="1" d2="1" dynamics="any"/>
+  <param name="u" type="real" local="false" d1="1" d2="1" dynamics="any" controlled="false"/>
+  <location id="1" name="run"><flow>x' == -x + u</flow></location>
+</component>
+<component id="sys">
+  <param name="x" type="real" local="false" d1="1" d2="1" dynamics="any"/>
+  <bind component="plant" as="p"><map key="x">x</map><map key="u">U</map></bind>
+</component>
+'''
+
+
+@pytest.mark.parametrize("u, code", [("2", 1), ("0.5", 0)])
+def test_an_input_mapped_to_a_number_is_that_number(tmp_path, u, code):
+    """``<map key="u">2</map>`` fixes the input u (no flow sets it) in the instance: x' = -x + u
+    from x = 0 reaches u (1 - e^-3) at t = 3, 1.90 for u = 2 and 0.475 for u = 0.5."""
+    xml, cfg = write(tmp_path, DRIVEN.replace("U", u), 'system = sys\ninitially = "x == 0"\n'
+                     'forbidden = "x >= 1"\ntime-horizon = 3\n')
+    assert main(["check", str(xml), str(cfg), "-b", "star", "--counterexamples", str(tmp_path)]) == code
+
+
+def test_a_variable_a_flow_sets_cannot_be_mapped_to_a_number(tmp_path, capsys):
+    xml, cfg = write(tmp_path, DRIVEN.replace("<map key=\"x\">x</map>", "<map key=\"x\">1</map>")
+                     .replace("U", "0"), 'system = sys\ninitially = "x == 0"\nforbidden = "x >= 1"\n'
+                     'time-horizon = 3\n')
+    assert main(["check", str(xml), str(cfg), "-b", "star"]) == 2
+    assert capsys.readouterr().err.strip() == (
+        f"reach: {xml}:6: the variable 'x' of component 'plant' is mapped to the number 1 (at instance 'p'), "
+        "but its flow in location 'run' sets it (only a variable that no flow or assignment sets, an input, "
+        "may be fixed to a number)")
+
+
+def test_a_sampling_time_too_fine_for_star_is_capped():
+    """SpaceEx's own time step (1e-5 over 20 s) would be two million cells: star's step stops at
+    horizon / MAX_HINT_CELLS; a coarser hint is taken as it is, one above horizon / 60 not at all."""
+    from reach.backends.star.options import MAX_HINT_CELLS, cfg_hints
+    assert cfg_hints({"sampling-time": 1e-5}, 20.0, {})["step"] == 20.0 / MAX_HINT_CELLS
+    assert cfg_hints({"sampling-time": 0.05}, 20.0, {})["step"] == 0.05
+    assert "step" not in cfg_hints({"sampling-time": 1.0}, 20.0, {})

@@ -14,7 +14,7 @@ from scipy.integrate import solve_ivp
 from reach.backends.star import BACKEND, StarOptions
 from reach.backends.star.aggregation import interval_hull
 from reach.backends.star.fixpoint import Covered, enlarged
-from reach.backends.star.options import clockless_retry
+from reach.backends.star.options import CLOCKED_FIRST_STARS, CLOCKLESS_FIRST_STARS, aggregating_retry
 from reach.backends.star.transitions import _Piece, misses
 from reach.model import load_model
 from reach.result import Status
@@ -82,14 +82,16 @@ def first_peak(th0: float, w0: float, d: float) -> float:
     return float(peak.y_events[0][0][0])
 
 
+PROPERTIES = ("properties:\n"
+              "  - {id: pointing, kind: safety, require: ['th <= 0.05', 'th >= -0.05']}\n"
+              "  - {id: tight, kind: safety, require: ['th <= 0.021']}\n")
+
+
 @pytest.fixture(scope="module")
 def deadband(tmp_path_factory):
     folder = tmp_path_factory.mktemp("deadband")
     (folder / "m.yaml").write_text(DEADBAND)
-    (folder / "p.yaml").write_text(
-        "properties:\n"
-        "  - {id: pointing, kind: safety, require: ['th <= 0.05', 'th >= -0.05']}\n"
-        "  - {id: tight, kind: safety, require: ['th <= 0.021']}\n")
+    (folder / "p.yaml").write_text(PROPERTIES)
     model = load_model(folder / "m.yaml")
     return model, {p.id: bind(p, model) for p in load_properties(folder / "p.yaml")}
 
@@ -162,7 +164,40 @@ def test_a_piece_beyond_an_opposite_invariant_row_is_missed():
 
 def test_the_clockless_second_pass_carries_rebased_inputs_as_generators(deadband):
     model, _ = deadband
-    assert clockless_retry(model, {}, StarOptions()).rebase_generators
-    assert not clockless_retry(model, {"input_cells": 0}, StarOptions()).rebase_generators
-    assert clockless_retry(model, {"aggregate_after": 2}, StarOptions()) is None
+    retry, stars = aggregating_retry(model, {}, StarOptions())
+    assert retry.rebase_generators and retry.aggregate_after == 0 and stars == CLOCKLESS_FIRST_STARS
+    assert not aggregating_retry(model, {"input_cells": 0}, StarOptions())[0].rebase_generators
+    assert aggregating_retry(model, {"aggregate_after": 2}, StarOptions()) is None
 
+
+
+def with_clock(text: str) -> str:
+    """The deadband with a declared global clock ``t`` that nothing reads (as SpaceEx files
+    often declare one for the horizon): the model now depends on time for star."""
+    text = text.replace("state: [th, w]", "state: [th, w, t]")
+    for flow in ('"d"}', '"-0.01 + d"}', '"0.01 + d"}'):
+        text = text.replace(flow, flow[:-1] + ', t: "1"}')
+    return text.replace("w: [-0.001, 0.001]}", "w: [-0.001, 0.001], t: 0}")
+
+
+@pytest.fixture(scope="module")
+def clocked(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("clocked")
+    (folder / "m.yaml").write_text(with_clock(DEADBAND))
+    (folder / "p.yaml").write_text(PROPERTIES)
+    model = load_model(folder / "m.yaml")
+    assert model.global_clock == 2
+    return model, {p.id: bind(p, model) for p in load_properties(folder / "p.yaml")}
+
+
+def test_a_clocked_deadband_is_decided_aggregating_from_the_first_jump(clocked):
+    """With the clock, per-cell successors multiply at every firing over 300 s; past
+    CLOCKED_FIRST_STARS the check starts over aggregating from the first jump and decides both
+    as the clockless model: SAFE within the closed-form bound, UNSAFE replayed."""
+    model, props = clocked
+    safe = BACKEND.check(model, props["pointing"])
+    assert safe.status is Status.SAFE, safe.details.get("reason")
+    assert f"more than {CLOCKED_FIRST_STARS} stars" in safe.details["semantics"]
+    unsafe = BACKEND.check(model, props["tight"])
+    assert unsafe.status is Status.UNSAFE, unsafe.details.get("reason")
+    assert unsafe.counterexample is not None

@@ -47,6 +47,7 @@ from __future__ import annotations
 
 import ast
 import copy
+import unicodedata
 from pathlib import Path
 
 import numpy as np
@@ -70,6 +71,19 @@ MODE_FIELDS = {"flow", "control", "invariant", "description"}
 TRANSITION_FIELDS = {"from", "to", "guard", "urgent", "reset", "description"}
 RESERVED = set(FUNCTIONS) | set(CONSTANTS)
 MAX_EXTENDS = 8
+
+
+def bad_name(name) -> str | None:
+    """Why ``name`` cannot name a state, input or constant, or None. Expressions are read by
+    Python's parser, which brings every identifier to Unicode normal form NFKC (fullwidth ``ｘ``
+    reads as ``x``, the ligature ``ﬁ`` as ``fi``): a name not in that form would be a second
+    name for another one."""
+    if not isinstance(name, str) or not name.isidentifier() or name.startswith("_"):
+        return f"'{name}' is not a valid name"
+    normal = unicodedata.normalize("NFKC", name)
+    if normal != name:
+        return f"'{name}' is not a valid name (expressions read it as '{normal}': write that)"
+    return None
 MAX_HORIZON = 1e12             # model time units: beyond, grid steps of horizon / 60 overflow exp(A h)
 
 
@@ -140,8 +154,8 @@ class _Builder:
         seen = set()
         for i, name in enumerate(names):
             w = self.where(key, name if mapping else i)
-            if not isinstance(name, str) or not name.isidentifier() or name.startswith("_"):
-                raise w.error(f"'{name}' is not a valid name")
+            if bad_name(name):
+                raise w.error(bad_name(name))
             if name in RESERVED:
                 raise w.error(f"'{name}' is a reserved function or constant name")
             if name in seen:
@@ -260,8 +274,8 @@ class _Builder:
             raise self.where("constants").error("expected a mapping name: value")
         self.constant_names: dict[str, sympy.Expr] = {}
         for key in raw:
-            if not isinstance(key, str) or not key.isidentifier() or key.startswith("_"):
-                raise self.where("constants", key).error(f"'{key}' is not a valid name")
+            if bad_name(key):
+                raise self.where("constants", key).error(bad_name(key))
             if key in RESERVED or key in self.state or key in self.inputs:
                 raise self.where("constants", key).error(
                     f"constant '{key}' clashes with a reserved, state or input name")
@@ -569,8 +583,8 @@ class _Builder:
             self.dims.names = self.dims.names | {k for k in raw if isinstance(k, str)}
         for name, spec in raw.items():
             w = self.where("bounded_inputs", name)
-            if not isinstance(name, str) or not name.isidentifier() or name.startswith("_") or name in RESERVED:
-                raise w.error(f"'{name}' is not a valid name")
+            if bad_name(name) or name in RESERVED:
+                raise w.error(bad_name(name) or f"'{name}' is a reserved function or constant name")
             if name in self.state or name in self.inputs or name in self.constants:
                 raise w.error(f"bounded input '{name}' clashes with a state, input or constant")
             if not isinstance(spec, dict) or "range" not in spec or set(spec) - {"range", "varying", "description"}:

@@ -185,9 +185,9 @@ from reach.backends.star.explorer import LOG, OUT_OF_TIME, _Explorer, _Stop, bud
 from reach.backends.star.flowpipe import AffineFlow, flowpipe
 from reach.backends.star.hull import check_hull
 from reach.backends.star.linearise import LinearisedModel, check_linearised
-from reach.backends.star.options import (CLOCKLESS_FIRST_STARS, DEPTH_LP_TOLERANCE, FINER_FACTOR,
+from reach.backends.star.options import (DEFAULT_PASS_SHARE, DEPTH_LP_TOLERANCE, FINER_FACTOR,
                                          FINER_MAX_SECONDS, FINER_PASSES, FINER_SECONDS, NAME, StarOptions,
-                                         clockless_retry, finer_retry, first_share, inputs_retry)
+                                         aggregating_retry, finer_retry, first_share, inputs_retry)
 from reach.backends.star.switching import SwitchingModel, check_switching
 from reach.backends.star.transitions import _LinearModel, _unsafe_pieces
 from reach.backends.star.witnesses import witness_details
@@ -353,16 +353,20 @@ class StarBackend:
         return first
 
     def _check_aggregating(self, model, prop, options, opt, start) -> Result:
-        """One check with ``opt``; on a clockless model first with the default aggregation, then
-        aggregating from the first jump (:func:`.options.clockless_retry`), both within one time
-        budget ``opt.max_seconds``."""
+        """One check with ``opt``: first with the default aggregation, then, past a number of
+        stars or half the time budget ``opt.max_seconds``, aggregating from the first jump
+        (:func:`.options.aggregating_retry`) with what the first pass left of the budget."""
         began = time.perf_counter()
-        retry = None if isinstance(options, StarOptions) else clockless_retry(model, options, opt)
+        retry = None if isinstance(options, StarOptions) else aggregating_retry(model, options, opt)
         if retry is None:
             return self._check(model, prop, opt, start)
-        budget = min(opt.max_stars, CLOCKLESS_FIRST_STARS)
-        first = self._check(model, prop, replace(opt, max_stars=budget), start)
-        if first.status is not Status.UNKNOWN or first.details.get("stars", 0) <= budget:
+        retry, stars = retry
+        budget = min(opt.max_stars, stars)
+        halved = None if opt.max_seconds is None else opt.max_seconds * DEFAULT_PASS_SHARE
+        first = self._check(model, prop, replace(opt, max_stars=budget, max_seconds=halved), start)
+        many = first.details.get("stars", 0) > budget
+        slow = OUT_OF_TIME in first.details.get("reason", "")
+        if first.status is not Status.UNKNOWN or not (many or slow):
             return first
         if opt.max_seconds is not None:         # the second pass has what the first left of the budget
             left = opt.max_seconds - (time.perf_counter() - began)
@@ -373,8 +377,9 @@ class StarBackend:
         if opt.max_seconds is not None and "reason" in result.details:     # name the whole budget
             result.details["reason"] = result.details["reason"].replace(budget_text(retry.max_seconds),
                                                                         budget_text(opt.max_seconds))
-        result.details["semantics"] += (f"; the default aggregation took more than {budget} stars, so "
-                                        f"the check started over aggregating from the first jump")
+        why = f"took more than {budget} stars" if many else "ran out of half the time budget"
+        result.details["semantics"] += (f"; the default aggregation {why}, so the check started over "
+                                        f"aggregating from the first jump")
         return result
 
     def _check(self, model, prop, opt, start) -> Result:

@@ -227,6 +227,7 @@ class _Explorer:
         self.uncut_urgent: list[str] = []       # urgent guards an entry star reaches inside (_splits_of)
         self.cancel = threading.Event()         # set by the caller that stopped waiting (reach.deep)
         self.deadline = np.inf if options.max_seconds is None else time.perf_counter() + options.max_seconds
+        self.replay_seconds: float | None = None        # the last replay's (a finer one's cost scales with it)
         self.pieces = {mode: [_Piece(data.widen(p.H, p.g)[0], p.g, p.strict, p.label) for p in pieces]
                        for mode, pieces in _unsafe_pieces(prop).items()} if data.added_clock \
             else _unsafe_pieces(prop)
@@ -1329,12 +1330,15 @@ class _Explorer:
         from reach.backends.montecarlo import replay
         from reach.model.simulate import Branches
         self.stats.replays += 1
+        began = time.perf_counter()
         try:
             run = replay(self.model, self.prop, x0, switch, dt or self.opt.replay_dt, signal,
                          Branches(prescribed=[transitions]))
         except InputError as exc:       # a candidate the simulator cannot take: no replay, not bad input
             self.replayed.append({"initial_state": x0.tolist(), "switch_time": switch, "refused": exc.message})
             return
+        finally:
+            self.replay_seconds = time.perf_counter() - began
         self.replayed.append({"initial_state": x0.tolist(), "switch_time": switch,
                               "input_signal": None if signal is None else f"{len(signal['values'])} pieces",
                               "violated": bool(run.violated)})
@@ -1445,7 +1449,9 @@ class _Explorer:
         after the witness's jump time: on the default grid that delay (up to one step) can cost
         a violation by less than what the run loses in it (a switch at ``y = -0.5`` that an
         exponential mode magnifies). Grids of more than a tenth of the simulator's step limit
-        are not tried. These replays come on top of ``max_replays``. UNSAFE (:class:`_Stop`) on
+        are not tried, nor one whose replay would overrun the time budget (its cost taken as the
+        last replay's times the ratio of their grids). These replays come on top of
+        ``max_replays``. UNSAFE (:class:`_Stop`) on
         the first replay that violates."""
         from reach.backends.montecarlo import constant_signal
         from reach.model.simulate import MAX_STEPS
@@ -1454,12 +1460,16 @@ class _Explorer:
         for witness in self.unresolved[:count]:
             x0, switch, transitions, times = self._start_of(witness)
             signal = constant_signal(self.model, x0)
+            cost, before = self.replay_seconds, 1
             for factor in factors:
                 step = self._replay_step() / factor
                 if self.model.horizon / step > MAX_STEPS / 10 or self.out_of_time():
                     break
+                if cost is not None and time.perf_counter() + cost * factor / before > self.deadline:
+                    break                   # a finer grid costs in proportion: it would overrun the budget
                 timed = self._switching_signal(signal, transitions, times, step)
                 self._replay(witness, x0, switch, timed or signal, transitions, step)
+                cost, before = self.replay_seconds, factor
 
     def _switching_signal(self, signal, transitions, times, step: float | None = None):
         """The counterexample's input signal (``signal``: the inputs held constant, or None

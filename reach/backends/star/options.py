@@ -153,7 +153,7 @@ class StarOptions:
         time carries each completed cell's input effect as generators, as ``input_cells = 1``
         would (at most ``2 rebase_cells`` coefficients per input and block, as many as the
         block's end box adds); other chains keep the box. Off by default; the second pass of
-        a clockless model turns it on (:func:`clockless_retry`).
+        the aggregating pass turns it on (:func:`aggregating_retry`).
     """
 
     step: float | None = None
@@ -193,52 +193,73 @@ class StarOptions:
         return cls(**parse_options(cls, options, "star"))
 
 
+#: the most grid cells a cfg's sampling time may ask of star (100 times the default 60)
+MAX_HINT_CELLS = 6000
+
+
 def cfg_hints(notes: dict, horizon: float, options: dict | None) -> dict:
     """Star options from a SpaceEx cfg (``notes`` of the imported model) where the user set
     none: ``sampling-time`` bounds the step from above (``step = min(sampling-time,
-    horizon / 60)``: a finer step costs time, never soundness), and ``iter-max`` (when not
+    horizon / 60)``: a finer step costs time, never soundness), though never below
+    ``horizon / MAX_HINT_CELLS`` (SpaceEx's time step for its own discrete-time scheme, 1e-5
+    over 20 s, would be two million cells for star, which covers the time between grid points
+    anyway), and ``iter-max`` (when not
     negative: SpaceEx's "no bound") becomes ``max_jumps``, so a path with more jumps ends the
     check in UNKNOWN, never in SAFE."""
     options = dict(options or {})
     sampling = notes.get("sampling-time")
     if "step" not in options and sampling is not None and 0 < sampling < horizon / 60.0:
-        options["step"] = float(sampling)
+        options["step"] = max(float(sampling), horizon / MAX_HINT_CELLS)
     iterations = notes.get("iter-max")
     if "max_jumps" not in options and iterations is not None and iterations >= 0:
         options["max_jumps"] = int(iterations)
     return options
 
 
-#: stars the default aggregation may take on a clockless model before the check starts over
-#: aggregating from the first jump (:func:`clockless_retry`)
-CLOCKLESS_FIRST_STARS = 100
+#: stars the default aggregation may take before the check starts over aggregating from the
+#: first jump (:func:`aggregating_retry`): on a model that does not depend on time, and on one
+#: that does (a declared clock read by nothing but the horizon, a window)
+CLOCKLESS_FIRST_STARS, CLOCKED_FIRST_STARS = 100, 500
+#: the share of the time budget the default aggregation may take before that second pass
+DEFAULT_PASS_SHARE = 1 / 2
 
 
-def clockless_retry(model, options: dict | None, opt: StarOptions) -> StarOptions | None:
-    """The options of a second pass for a model without a global clock where the user set no
-    ``aggregate_after``: successors aggregated from the first jump, taken when the default
-    pass runs past :data:`CLOCKLESS_FIRST_STARS` stars. Such a model does not depend on time
-    (:mod:`.fixpoint`): runs that cycle through the same modes then collapse into aggregates
-    that the fixpoint check closes, instead of one family of stars per cell of the first
-    chains. The default comes first since an aggregate refined into its members leaves the
-    cells before it unrefined.
+def aggregating_retry(model, options: dict | None, opt: StarOptions) -> tuple[StarOptions, int] | None:
+    """The options of a second pass where the user set no ``aggregate_after``: successors
+    aggregated from the first jump, taken when the default pass runs past the returned number
+    of stars or past :data:`DEFAULT_PASS_SHARE` of the time budget; None when the user chose
+    the aggregation. Aggregation is sound whatever the model
+    (a hull holds its members; a failed check refines it into them); it costs precision, which
+    is why the default pass comes first.
 
-    For the same reason the second pass carries time-varying inputs as generators in the
-    chains explored a few cells at a time (``rebase_generators``) where the user set neither
-    that nor ``input_cells``: the first chain's successors are aggregated at once, and a box of
-    the input effect, exact per state but not jointly, would hand them corners no signal
-    reaches together (a deadband whose disturbance both speeds the attitude rate up and moves
-    the angle) that no refinement behind the aggregate can remove; a witness through the
-    aggregate then points to an initial state and signal that do not violate. Such chains
-    add a few coefficients per block either way; a chain to the horizon would gain two per
-    cell, so it keeps the box. None when no second pass applies."""
+    On a model that does not depend on time (:mod:`.fixpoint`), runs that cycle through the same
+    modes then collapse into aggregates that the fixpoint check closes, instead of one family of
+    stars per cell of the first chains: the second pass comes after
+    :data:`CLOCKLESS_FIRST_STARS`. On one that does (a declared global clock, even one read by
+    nothing), successors per cell still multiply at each urgent jump of a cycle (a deadband
+    limit cycle over a long horizon: thousands of stars), while the aggregates they would have
+    formed stay a handful per jump: the second pass comes after :data:`CLOCKED_FIRST_STARS`,
+    beyond the stars the suite's time-dependent models take (at most a few hundred).
+    The default comes first since an aggregate refined into its members leaves the cells
+    before it unrefined.
+
+    The second pass carries time-varying inputs as generators in the chains explored a few
+    cells at a time (``rebase_generators``) where the user set neither that nor
+    ``input_cells``: the first chain's successors are aggregated at once, and a box of the
+    input effect, exact per state but not jointly, would hand them corners no signal reaches
+    together (a deadband whose disturbance both speeds the attitude rate up and moves the
+    angle) that no refinement behind the aggregate can remove; a witness through the aggregate
+    then points to an initial state and signal that do not violate. Such chains add a few
+    coefficients per block either way; a chain to the horizon would gain two per cell, so it
+    keeps the box."""
     from reach.backends.star.fixpoint import time_invariant
 
     options = options or {}
-    if "aggregate_after" in options or not time_invariant(model):
+    if "aggregate_after" in options:
         return None
     generators = not ({"input_cells", "rebase_generators"} & set(options))
-    return replace(opt, aggregate_after=0, rebase_generators=generators or opt.rebase_generators)
+    stars = CLOCKLESS_FIRST_STARS if time_invariant(model) else CLOCKED_FIRST_STARS
+    return replace(opt, aggregate_after=0, rebase_generators=generators or opt.rebase_generators), stars
 
 
 #: cells per input block of the pass that keeps the input effect's correlation (:func:`inputs_retry`)

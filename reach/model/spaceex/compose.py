@@ -4,6 +4,8 @@ Instantiation. A component bound as ``as`` inside an instance at path ``P`` gets
 ``P.as``. Each of its params is bound by the ``map`` of its bind (to a number, to a name of the
 parent's scope, or to a dotted name ``inst.x`` of a sub-instance), or, if unmapped, is local to
 the instance and named ``P.as.param``. Params of the analysed system itself keep their names.
+A constant, or a variable that no flow or assignment of its component sets (an input), may be
+mapped to a number: it is that number in the instance.
 
 Composition. The product of the instances' locations, built from the initial location
 combinations and kept to the combinations reachable through the discrete graph (guards
@@ -152,6 +154,13 @@ def _walk(doc: Document, comp, path: str, binding: dict[str, Binding], flat: Fla
     if isinstance(comp, Base):
         if len(flat.instances) >= MAX_INSTANCES:
             raise InputError(f"more than {MAX_INSTANCES} component instances", doc.file, line=comp.line)
+        for name, b in binding.items():
+            written = b.number is not None and _written(comp, name)
+            if written:
+                raise InputError(f"the variable '{name}' of component '{comp.id}' is mapped to the number {b.number} "
+                                 f"(at instance '{path}'), but its {written[0]} sets it (only a variable that no "
+                                 "flow or assignment sets, an input, may be fixed to a number)",
+                                 doc.file, line=written[1])
         flat.instances.append(Instance(path, comp, binding))
         return
     for bind in comp.binds:
@@ -168,10 +177,20 @@ def _walk(doc: Document, comp, path: str, binding: dict[str, Binding], flat: Fla
                 raise InputError(f"bind '{bind.name}': param '{m.key}' mapped twice", doc.file, line=m.line)
             child_binding[m.key] = _resolve_map(m, binding, path, child.params[m.key].type, doc.file)
         _walk(doc, child, child_path, child_binding, flat, depth + 1)
-        for key, b in child_binding.items():
-            if b.number is not None and child.params[key].dynamics != "const":
-                raise InputError(f"bind '{bind.name}': the variable '{key}' is mapped to a number "
-                                 "(only constants may be)", doc.file, line=bind.line)
+
+
+def _written(comp: Base, name: str) -> tuple[str, int] | None:
+    """Where a flow (``name' == ...``) or an assignment (``name := ...``, ``name' == ...``,
+    ``name = ...``) of ``comp`` sets the variable ``name``: ``(what, line)``, or None."""
+    derivative = re.compile(rf"(?<![\w.]){re.escape(name)}\s*'")
+    target = re.compile(rf"^\s*{re.escape(name)}\s*(:=|'|=(?!=))")
+    for loc in comp.locations.values():
+        if loc.flow is not None and derivative.search(loc.flow.text):
+            return f"flow in location '{loc.name}'", loc.flow.line
+    for tr in comp.transitions:
+        if tr.assignment is not None and any(target.match(part) for part in _AND.split(tr.assignment.text)):
+            return "assignment", tr.assignment.line
+    return None
 
 
 def _resolve_map(m, binding, path, ptype, file) -> Binding:
