@@ -399,12 +399,18 @@ def cmd_sweep(args) -> int:
     margins, margin_unit = passive_margins(model, bound, cells, abort_times)
     plot_abort_map(cells, times, window, out, f"{model.name}: latest safe abort ({seconds:.1f} s)",
                    model.units.time, margins, abort_times, margin_unit)
-    print(f"| angle [deg] | x [m] | y [m] | latest safe abort [{model.units.time}] |")
+    length = f" [{model.units.length}]" if model.dimensions is not None else ""
+    print(f"| angle [deg] | x{length} | y{length} | latest safe abort{_in_unit(model.time_unit)} |")
     print("|---|---|---|---|")
     for (low, high, angle), t in zip(cells, times):
-        print(f"| {angle:.1f} | [{low[0]:.0f}, {high[0]:.0f}] | [{low[1]:.0f}, {high[1]:.0f}] | {t:.2f} |")
+        shown = f"{t:.2f}" if np.isfinite(t) else "none proven"
+        print(f"| {angle:.1f} | [{low[0]:.0f}, {high[0]:.0f}] | [{low[1]:.0f}, {high[1]:.0f}] | {shown} |")
     print(printable(f"{len(cells)} cells in {seconds:.1f} s; wrote {out}"))
     return 0
+
+
+def _in_unit(unit: str) -> str:
+    return f" [{unit}]" if unit else ""
 
 
 def _cells_start_runs(model, model_path, cells) -> None:

@@ -657,3 +657,14 @@ def test_a_sampling_time_too_fine_for_star_is_capped():
     assert cfg_hints({"sampling-time": 1e-5}, 20.0, {})["step"] == 20.0 / MAX_HINT_CELLS
     assert cfg_hints({"sampling-time": 0.05}, 20.0, {})["step"] == 0.05
     assert "step" not in cfg_hints({"sampling-time": 1.0}, 20.0, {})
+
+
+@pytest.mark.parametrize("line, message", [("sampling-time = -1", "sampling-time: expected a positive time, got '-1'"),
+                                           ("iter-max = 2.5", "iter-max: expected a whole number, got '2.5'")])
+@pytest.mark.parametrize("command", ["check", "import"])
+def test_bad_cfg_hints_are_bad_input_at_their_cfg_line(tmp_path, capsys, line, message, command):
+    xml, cfg = write(tmp_path, BALL, 'system = ball\ninitially = "loc(ball)==air & x == 1 & v == 0"\n'
+                                     f'forbidden = "loc(ball)==hit"\ntime-horizon = 1\n{line}\n')
+    args = ["-b", "star"] if command == "check" else ["--out", str(tmp_path / "out")]
+    assert main([command, str(xml), str(cfg)] + args) == 2
+    assert capsys.readouterr().err.strip() == f"reach: {cfg}:5: {message}"

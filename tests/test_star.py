@@ -180,6 +180,16 @@ def test_safe_abort_time_brackets_the_closed_form():
     assert exact - 0.15 <= proven <= exact
 
 
+def test_no_safe_abort_is_nan_not_the_window_start():
+    """With the window [1, 2] the earliest abort already reaches x_max(1) = 0.1 + 1/2 + (1 - e^-4)
+    = 1.58: a bound below it proves no abort safe, which is NaN, not the window's start 1."""
+    model = automaton(window=(1.0, 2.0))
+    assert np.isnan(safe_abort_time(model, [x_at_most(farthest(window=(1.0, 1.0)) - 0.1)],
+                                    model.initial.low, model.initial.high))
+    assert safe_abort_time(model, [x_at_most(farthest(window=(1.0, 2.0)) + 0.1)],
+                           model.initial.low, model.initial.high) == 2.0
+
+
 # ---------------------------------------------------------------------- the rendezvous family
 
 @pytest.fixture(scope="module")

@@ -84,6 +84,7 @@ def bad_name(name) -> str | None:
     if normal != name:
         return f"'{name}' is not a valid name (expressions read it as '{normal}': write that)"
     return None
+MIN_HORIZON = 1e-12            # model time units: below, horizon / 60 and its products underflow
 MAX_HORIZON = 1e12             # model time units: beyond, grid steps of horizon / 60 overflow exp(A h)
 
 
@@ -235,6 +236,9 @@ class _Builder:
         horizon = self.number(self.need("horizon"), self.where("horizon"), dimension=TIME, what="the horizon")
         if horizon <= 0:
             raise self.where("horizon").error("horizon must be positive")
+        if horizon < MIN_HORIZON:
+            raise self.where("horizon").error(f"horizon {horizon:g} is below {MIN_HORIZON:g} time units: its grid "
+                                              "steps would underflow (give the model a smaller time unit)")
         if horizon > MAX_HORIZON:
             raise self.where("horizon").error(f"horizon {horizon:g} is beyond {MAX_HORIZON:g} time units: "
                                               f"the grid steps' exponentials would overflow")

@@ -563,7 +563,8 @@ BACKEND = StarBackend()
 def safe_abort_time(model, props, low, high, options=None) -> float:
     """The latest ``T`` such that, from every initial state in the box ``[low, high]``, every
     run that aborts in ``[lo, T]`` (``lo, hi`` the model's abort window) is proven to satisfy
-    every property of ``props`` (bound safety properties); ``hi`` if all aborts are safe.
+    every property of ``props`` (bound safety properties); ``hi`` if all aborts are safe; NaN
+    if no abort is proven safe (not even one at ``lo``).
 
     One exploration per property with the whole window: the first segment that cannot be
     cleared after refinement bounds ``T`` by its earliest abort time (or, before any abort,
@@ -577,7 +578,8 @@ def safe_abort_time(model, props, low, high, options=None) -> float:
         raise ValueError(f"model '{model.name}': the safe-abort sweep needs affine flows")
     opt = StarOptions.from_dict({"max_seconds": None, **dict(options or {}), "replay": False})
     initial = Star.from_box(_LinearModel.of(model).initial_box(low, high))
-    latest = max(w[2] for w in windows)
+    earliest, latest = min(w[1] for w in windows), max(w[2] for w in windows)
+    whole = latest
     for prop in props:
         reason = BACKEND.supports(model, prop)
         if reason is not None:
@@ -585,6 +587,8 @@ def safe_abort_time(model, props, low, high, options=None) -> float:
         explorer = _Explorer(model, prop, opt, initial=initial, cutoff=latest)
         explorer.run()
         latest = min(latest, explorer.cutoff)
+    if latest < whole and latest <= earliest:   # cut at the window's start: no abort is proven safe
+        return float("nan")
     return float(latest)
 
 

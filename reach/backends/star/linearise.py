@@ -77,7 +77,14 @@ class LinearisedModel(_LinearModel):
                       for name, mode in model.modes.items() if mode.linear is not None}
         centre = (model.initial.low + model.initial.high) / 2
         for name, lin in self.curved.items():
-            rem = lin.over(centre, centre)
+            try:
+                rem = lin.over(centre, centre)
+            except (ArithmeticError, ValueError):       # mpmath: a real function at a point outside its domain
+                rem = None
+            if rem is None or not (np.all(np.isfinite(rem.A)) and np.all(np.isfinite(rem.b))):
+                self.reason = (f"mode '{name}': the flow or its derivative is not finite and real at the centre of the "
+                               f"initial set, where the linearisation starts")
+                return
             self.flows[name] = AffineFlow(*self._with_clock(rem.A, rem.b))
 
     def _reason(self, model) -> str | None:

@@ -39,6 +39,10 @@ def unsupported(flow, symbols) -> str | None:
     one of :data:`SMOOTH` (twice continuously differentiable where finite, so the Lagrange form
     holds; a pole or a root of zero inside a box shows up as an unbounded interval)."""
     for i, f in enumerate(flow):
+        kinks = f.atoms(sympy.Min, sympy.Max, sympy.Piecewise, sympy.Heaviside)
+        if kinks:
+            return (f"the flow of {symbols[i]} uses {type(next(iter(kinks))).__name__} (not differentiable: "
+                    f"no interval Hessian for it)")
         bad = [a.func.__name__ for a in f.atoms(sympy.Function) if a.func not in SMOOTH]
         if bad:
             return f"the flow of {symbols[i]} uses {bad[0]} (no interval Hessian for it)"

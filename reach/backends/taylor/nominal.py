@@ -180,6 +180,8 @@ def dop853(fun, t0: np.ndarray, y0: np.ndarray, t_end: np.ndarray, rtol: float, 
     runs = [_Run(float(t), y.copy()) for t, y in zip(t0, y0)]
     t, y, t_end = t0.astype(float).copy(), y0.astype(float).copy(), np.asarray(t_end, dtype=float)
     f = fun(y)
+    if not np.all(np.isfinite(f)):
+        raise NominalFailure("the nominal run failed: the flow is not finite (or not real) at its start")
     h_abs = first_step.astype(float).copy() if first_step is not None else _initial_step(fun, t, y, t_end, f, rtol, atol)
     stops = stops or [None] * n_runs
     g = _margins(stops, y, np.arange(n_runs))
@@ -190,7 +192,7 @@ def dop853(fun, t0: np.ndarray, y0: np.ndarray, t_end: np.ndarray, rtol: float, 
         idx = np.flatnonzero(active)
         ti, yi, ha = t[idx], y[idx], h_abs[idx]
         min_step = 10 * np.abs(np.nextafter(ti, np.inf) - ti)
-        if np.any(retry[idx] & (ha < min_step)):
+        if np.any(retry[idx] & ~(ha >= min_step)):         # a NaN step fails too, never loops
             raise NominalFailure("the nominal run failed: the step size it needs is below the spacing of "
                                  "the numbers (a stiff or overflowing flow)")
         ha = np.where(~retry[idx] & (ha < min_step), min_step, ha)

@@ -628,7 +628,13 @@ class DocumentBuilder(Converter):
         notes = {"source": self.file, "config": cfg.file}
         for key in ("sampling-time", "iter-max"):
             if cfg.text(key) is not None:
-                notes[key] = cfg.number(key)
+                notes[key] = value = cfg.number(key)
+                if key == "sampling-time" and value <= 0:
+                    raise InputError(f"{key}: expected a positive time, got '{cfg.text(key)}'", cfg.file,
+                                     line=cfg.line(key))
+                if key == "iter-max" and value != int(value):
+                    raise InputError(f"{key}: expected a whole number, got '{cfg.text(key)}'", cfg.file,
+                                     line=cfg.line(key))
         blocked = blocked_labels(self.flat)
         if blocked:
             notes["blocked"] = blocked
