@@ -270,8 +270,8 @@ def cmd_replay(args) -> int:
     rep = replay(model, prop, cex.initial_state, cex.switch_time, cex.dt or None, cex.input_signal, branches)
     state = ", ".join(f"{n}={v:.6g}" for n, v in zip(model.state, rep.state))
     if cex.transitions is not None and rep.transitions[:len(cex.transitions)] != cex.transitions:
-        print(printable(f"note: the run took the transitions {', '.join(rep.transitions) or '(none)'}; "
-                        f"the file names {', '.join(cex.transitions) or '(none)'}"))
+        print(printable(f"note: the run took the transitions {_few(rep.transitions)}; "
+                        f"the file names {_few(cex.transitions)}"))
     if isinstance(prop, BoundEvent):        # the extremum along the run against the requirement
         verdict = "replayed" if rep.violated else "NOT replayed"
         print(printable(f"{verdict}: {model.name} {'violates' if rep.violated else 'satisfies'} '{prop.id}': "
@@ -407,6 +407,13 @@ def cmd_sweep(args) -> int:
         print(f"| {angle:.1f} | [{low[0]:.0f}, {high[0]:.0f}] | [{low[1]:.0f}, {high[1]:.0f}] | {shown} |")
     print(printable(f"{len(cells)} cells in {seconds:.1f} s; wrote {out}"))
     return 0
+
+
+def _few(names, shown: int = 8) -> str:
+    """``a, b, c`` (the first ``shown`` names, then how many in all), or ``(none)``."""
+    if not names:
+        return "(none)"
+    return ", ".join(names[:shown]) + (f", ... ({len(names)} in all)" if len(names) > shown else "")
 
 
 def _in_unit(unit: str) -> str:

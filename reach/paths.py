@@ -89,8 +89,15 @@ def printable(text) -> str:
 
 def writable_folder(folder, option: str) -> Path:
     """``folder``, created if needed; one that cannot be made or written is bad input (``option``
-    names the command-line option it came from)."""
+    names the command-line option it came from). A relative folder reached through a symbolic
+    link (a default ``counterexamples/`` linked elsewhere) is bad input too: what is written
+    below the working folder stays there; an absolute folder is the user's to name."""
     folder = Path(folder)
+    if not folder.is_absolute():
+        for depth in range(1, len(folder.parts) + 1):
+            prefix = Path(*folder.parts[:depth])
+            if prefix.is_symlink():
+                raise InputError(f"{printable(prefix)} is a symbolic link: not written through", field=option)
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:

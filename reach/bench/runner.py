@@ -28,6 +28,15 @@ def run_unit(model_path: str, property_path: str, backend: str, options: dict) -
                  "details": {"error": str(exc)}}]
 
 
+def _read_inputs(instances) -> None:
+    """Load every chosen instance's model and bind its property file, before any unit runs: a
+    malformed one is bad input (exit 2, its file, line and field), not a unit error that the
+    cross-checks would count as a failure (exit 1)."""
+    from reach.checking import load_bound
+    for model, properties in dict.fromkeys((str(i.model), str(i.properties)) for i in instances):
+        load_bound(model, properties)
+
+
 def plot_models(instances, folder: Path, stream, executor) -> list[str]:
     """Sample runs of every model of the suite, coloured by mode, with the requirements of the
     property files it is checked against (one PNG per model), drawn by ``executor``'s
@@ -125,7 +134,8 @@ def read_report(path) -> dict:
 
 def run_suite(suite_path, backends=None, instances=None, out="results", jobs=None, scheduler=None,
               time_limit=None, stream=sys.stdout) -> int:
-    """Run (a filtered part of) a suite; exit code 1 if a cross-check fails, else 0.
+    """Run (a filtered part of) a suite; exit code 1 if a cross-check fails, else 0 (bad input,
+    a malformed suite, model or property file, raises InputError before any unit runs).
 
     A filtered run (``backends`` or ``instances``) replaces only its own rows of an existing
     ``results.json`` of the same suite and keeps the others; every row says which run it came
@@ -149,6 +159,7 @@ def run_suite(suite_path, backends=None, instances=None, out="results", jobs=Non
         chosen = [i for i in chosen if i.id in instances]
     units = [(inst, b) for inst in chosen for b in names
              if b not in missing and (inst.backends is None or b in inst.backends)]
+    _read_inputs(chosen)
     executor = make_executor(jobs, scheduler)
     run_id = datetime.now(timezone.utc).isoformat(timespec="seconds")
     flags = [f"--backend {b}" for b in backends or []] + [f"--instance {i}" for i in instances or []]

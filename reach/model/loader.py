@@ -254,7 +254,7 @@ class _Builder:
             name=name.strip(), description=str(self.data.get("description", "")).strip(),
             file=self.file, units=self.units, constants=self.constants, state=self.state,
             inputs=self.inputs, modes=modes, transitions=transitions, initial=initial,
-            horizon=horizon, disturbance=self.read_disturbance(), clocks=clocks, bounded_inputs=bounded,
+            horizon=horizon, disturbance=self.read_disturbance(horizon), clocks=clocks, bounded_inputs=bounded,
             dimensions=None if self.dims is None else self.dims.system, hints=self.read_hints())
         self.check_bounded_inputs(model)
         return model
@@ -529,7 +529,7 @@ class _Builder:
             hints[key] = float(value) if key == "sampling-time" else int(value)
         return hints
 
-    def read_disturbance(self) -> Disturbance | None:
+    def read_disturbance(self, horizon: float) -> Disturbance | None:
         raw = self.data.get("disturbance")
         if raw is None:
             return None
@@ -570,6 +570,10 @@ class _Builder:
         step = self.number(raw["step"], self.where("disturbance", "step"), dimension=TIME, what="the kick step")
         if step <= 0:
             raise self.where("disturbance", "step").error("step must be positive")
+        from reach.model.simulate import MAX_STEPS
+        if horizon / step > MAX_STEPS:
+            raise self.where("disturbance", "step").error(f"horizon {horizon:g} / step {step:g} = {horizon / step:.3g} "
+                                                          f"kicks; at most {MAX_STEPS:.0e}")
         return Disturbance(mean, cov, [self.state.index(e) for e in enters], step)
 
     # ------------------------------------------- polytopic initial sets, bounded inputs, timeless modes

@@ -151,8 +151,9 @@ def model_display(units: UnitSystem, dim: Dimension) -> DisplayUnit:
 def bracket_display(units: UnitSystem, dim: Dimension, text: str, si: float,
                     unit_dim: Dimension) -> DisplayUnit | None:
     """``dim`` expressed in powers of a bracketed unit ``[text]``, if ``dim = k * unit_dim``."""
-    if dim == DIMENSIONLESS:
-        return DisplayUnit("", dim, 1.0)
+    if dim == DIMENSIONLESS:          # an angle in [deg] reads in degrees; a pure number as it is
+        named = unit_dim == DIMENSIONLESS and text not in ("", "1")
+        return DisplayUnit(text if named else "", dim, si if named else 1.0)
     ratios = {d / u for d, u in zip(dim, unit_dim) if u != 0}
     if len(ratios) != 1 or any(d != 0 for d, u in zip(dim, unit_dim) if u == 0):
         return None
