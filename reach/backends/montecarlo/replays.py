@@ -109,8 +109,9 @@ def _signal_of(model: HybridAutomaton, data: dict | None):
     names = [u.name for u in model.varying_inputs]
     if data is None and not names:
         return None
-    if not names:
-        raise InputError("the model has no time-varying inputs: expected null", field="input_signal")
+    if (not isinstance(data, dict) or data.get("inputs") != names) and not names:
+        raise InputError("the model has no time-varying inputs: expected null, or a switching signal "
+                         "{step, inputs: [], values, switch}", field="input_signal")
     if not isinstance(data, dict) or data.get("inputs") != names:
         raise InputError(f"the model has time-varying inputs ({', '.join(names)}): the counterexample "
                          "needs their input_signal", field="input_signal")

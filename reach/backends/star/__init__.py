@@ -417,6 +417,9 @@ class StarBackend:
         except ArithmeticError as failure:         # overflow, or a cell far too long for the flow
             status = Status.UNKNOWN
             details["reason"] = f"nothing concluded: {failure}"
+            if linearise is not None:               # the flow is the linearisation over a box of states
+                details["reason"] += (" (of the linearisation over the box of states explored: a wide box of "
+                                      "a strongly nonlinear flow makes that time scale short, whatever the step)")
         except RecursionError:
             status = Status.UNKNOWN
             details["reason"] = (f"a path of more than {explorer.stats.jumps} jumps is too deep to "

@@ -135,6 +135,11 @@ class Converter:
         return Relation(parts, rel.ops)
 
 
+def _joined(tokens) -> str:
+    """Tokens as written, a prime on its name (``y'``), others apart by a space."""
+    return "".join(("" if t.text == "'" or k == 0 else " ") + t.text for k, t in enumerate(tokens))
+
+
 def yaml_names(used: list[str]) -> dict[str, str]:
     """Identifiers for global names: the last dotted part if unique, else the path with ``_``."""
     last = {}
@@ -357,7 +362,7 @@ class DocumentBuilder(Converter):
                 self.suffixes.setdefault(".".join(parts[k:]), []).append(g)
 
     def _show(self, rel: Relation) -> str:
-        text = " ".join(" ".join(t.text for t in p) + (f" {rel.ops[i]}" if i < len(rel.ops) else "")
+        text = " ".join(_joined(p) + (f" {rel.ops[i]}" if i < len(rel.ops) else "")
                         for i, p in enumerate(rel.parts))
         return text if len(text) <= 60 else text[:57] + "..."
 
