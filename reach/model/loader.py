@@ -573,7 +573,7 @@ class _Builder:
         from reach.model.simulate import MAX_STEPS
         if horizon / step > MAX_STEPS:
             raise self.where("disturbance", "step").error(f"horizon {horizon:g} / step {step:g} = {horizon / step:.3g} "
-                                                          f"kicks; at most {MAX_STEPS:.0e}")
+                                                          f"kicks; at most {MAX_STEPS:.0e} (a longer step)")
         return Disturbance(mean, cov, [self.state.index(e) for e in enters], step)
 
     # ------------------------------------------- polytopic initial sets, bounded inputs, timeless modes

@@ -354,8 +354,10 @@ class StarBackend:
 
     def _check_aggregating(self, model, prop, options, opt, start) -> Result:
         """One check with ``opt``: first with the default aggregation, then, past a number of
-        stars or half the time budget ``opt.max_seconds``, aggregating from the first jump
-        (:func:`.options.aggregating_retry`) with what the first pass left of the budget."""
+        stars or half the time budget ``opt.max_seconds``, or undecided for want of precision,
+        aggregating from the first jump (:func:`.options.aggregating_retry`) with what the first
+        pass left of the budget. A witness through an aggregate of a whole jump's successors may
+        replay where the per-cell successors left only cells no replay confirmed."""
         began = time.perf_counter()
         retry = None if isinstance(options, StarOptions) else aggregating_retry(model, options, opt)
         if retry is None:
@@ -366,18 +368,17 @@ class StarBackend:
         first = self._check(model, prop, replace(opt, max_stars=budget, max_seconds=halved), start)
         many = first.details.get("stars", 0) > budget
         slow = OUT_OF_TIME in first.details.get("reason", "")
-        if first.status is not Status.UNKNOWN or not (many or slow):
+        vague = bool(first.details.get("finer_step_may_decide"))
+        if first.status is not Status.UNKNOWN or not (many or slow or vague):
             return first
         if opt.max_seconds is not None:         # the second pass has what the first left of the budget
             left = opt.max_seconds - (time.perf_counter() - began)
             if left <= 0:
-                return first
+                return _whole_budget(first, halved, opt.max_seconds)
             retry = replace(retry, max_seconds=left)
-        result = self._check(model, prop, retry, start)
-        if opt.max_seconds is not None and "reason" in result.details:     # name the whole budget
-            result.details["reason"] = result.details["reason"].replace(budget_text(retry.max_seconds),
-                                                                        budget_text(opt.max_seconds))
-        why = f"took more than {budget} stars" if many else "ran out of half the time budget"
+        result = _whole_budget(self._check(model, prop, retry, start), retry.max_seconds, opt.max_seconds)
+        why = (f"took more than {budget} stars" if many else "ran out of half the time budget" if slow
+               else "left cells undecided")
         result.details["semantics"] += (f"; the default aggregation {why}, so the check started over "
                                         f"aggregating from the first jump")
         return result
@@ -561,6 +562,14 @@ def _run_details(explorer: _Explorer) -> dict:
 
 
 BACKEND = StarBackend()
+
+
+def _whole_budget(result: Result, part: float | None, whole: float | None) -> Result:
+    """``result`` of a pass that had ``part`` of the time budget ``whole``, its reason naming the
+    whole budget (the user's option, not the share of it)."""
+    if part is not None and whole is not None and "reason" in result.details:
+        result.details["reason"] = result.details["reason"].replace(budget_text(part), budget_text(whole))
+    return result
 
 
 def safe_abort_time(model, props, low, high, options=None) -> float:

@@ -227,8 +227,8 @@ DEFAULT_PASS_SHARE = 1 / 2
 def aggregating_retry(model, options: dict | None, opt: StarOptions) -> tuple[StarOptions, int] | None:
     """The options of a second pass where the user set no ``aggregate_after``: successors
     aggregated from the first jump, taken when the default pass runs past the returned number
-    of stars or past :data:`DEFAULT_PASS_SHARE` of the time budget; None when the user chose
-    the aggregation. Aggregation is sound whatever the model
+    of stars or past :data:`DEFAULT_PASS_SHARE` of the time budget, or ends undecided for want
+    of precision; None when the user chose the aggregation. Aggregation is sound whatever the model
     (a hull holds its members; a failed check refines it into them); it costs precision, which
     is why the default pass comes first.
 
@@ -243,9 +243,10 @@ def aggregating_retry(model, options: dict | None, opt: StarOptions) -> tuple[St
     The default comes first since an aggregate refined into its members leaves the cells
     before it unrefined.
 
-    The second pass carries time-varying inputs as generators in the chains explored a few
-    cells at a time (``rebase_generators``) where the user set neither that nor
-    ``input_cells``: the first chain's successors are aggregated at once, and a box of the
+    On a model that does not depend on time, the second pass carries time-varying inputs as
+    generators in the chains explored a few cells at a time (``rebase_generators``) where the
+    user set neither that nor ``input_cells`` (where time matters, the box does, at a third of
+    the cost: a clocked deadband's aggregates close without the fixpoint check): the first chain's successors are aggregated at once, and a box of the
     input effect, exact per state but not jointly, would hand them corners no signal reaches
     together (a deadband whose disturbance both speeds the attitude rate up and moves the
     angle) that no refinement behind the aggregate can remove; a witness through the aggregate
@@ -257,8 +258,9 @@ def aggregating_retry(model, options: dict | None, opt: StarOptions) -> tuple[St
     options = options or {}
     if "aggregate_after" in options:
         return None
-    generators = not ({"input_cells", "rebase_generators"} & set(options))
-    stars = CLOCKLESS_FIRST_STARS if time_invariant(model) else CLOCKED_FIRST_STARS
+    invariant = time_invariant(model)
+    generators = invariant and not ({"input_cells", "rebase_generators"} & set(options))
+    stars = CLOCKLESS_FIRST_STARS if invariant else CLOCKED_FIRST_STARS
     return replace(opt, aggregate_after=0, rebase_generators=generators or opt.rebase_generators), stars
 
 
