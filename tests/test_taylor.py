@@ -181,3 +181,28 @@ def test_monte_carlo_events_lie_in_their_subdomain_bounds(srna):
                         results["next-order"].details["subdomains"]):
         for name, (lo, hi, R) in est["candidates"].items():
             assert np.isfinite(nxt["candidates"][name][2])
+
+
+POINT = """name: point
+state: [th, w]
+modes:
+  swing: {flow: {th: w, w: "-sin(th)"}}
+initial: {mode: swing, box: {th: 1, w: 0}}
+horizon: 6
+"""
+
+
+@pytest.mark.parametrize("options", [{"remainder": "rigorous"}, {"remainder": "rigorous", "refine": 2}])
+def test_a_point_initial_set_with_non_polynomial_terms(tmp_path, options):
+    """A pendulum from the point (1 rad, 0): no expansion variable, so every power of the
+    deviation is zero (``sin`` and a quotient must not build an empty product), and nothing is
+    halved by ``refine``. Energy: |w| <= sqrt(2 (1 - cos 1)) = 0.9589 (reached at th = 0)."""
+    from reach.checking import check_files
+    (tmp_path / "m.yaml").write_text(POINT)
+    (tmp_path / "p.yaml").write_text(
+        "properties:\n  - {id: speed, kind: event, maximize: 'w / (1 + th**2)', require: '<= 0.97'}\n"
+        "  - {id: low, kind: safety, require: ['w >= -0.97']}\n")
+    results = check_files(tmp_path / "m.yaml", tmp_path / "p.yaml", "taylor", options)
+    assert [r.status.value for r in results] == ["SAFE", "SAFE"]
+    truth = np.sqrt(2 * (1 - np.cos(1)))
+    assert results[0].bound[0] <= truth <= results[0].bound[1] < truth + 0.01

@@ -290,7 +290,7 @@ class TaylorBackend:
         # ones whose halving can narrow the bound); stop when a level neither narrows the bound
         # nor decides more of the box (on SRNA01 the width left after one level is error radius,
         # which halving does not reduce: refine=2 gave the bounds of refine=1 at twice the time)
-        for _ in range(opts.refine):
+        for _ in range(opts.refine if len(u) else 0):     # a point initial set has nothing to halve
             if deadline.passed():
                 log.info("refinement stopped: %s", deadline.text)
                 break
@@ -361,7 +361,7 @@ class TaylorBackend:
                               key=lambda why: (not deadline.cut(why), why))
                 details["note"] = (f"the bound is open on {1 - meets - violates:.0%} of the box"
                                    + (f" ({'; '.join(whys[:2])})" if whys else "")
-                                   + ("" if deadline.passed() else
+                                   + ("" if deadline.passed() or not len(u) else
                                       f"; -o refine={opts.refine + 2} halves the subdomains that hold it open"))
         else:
             details["assumptions"] = [

@@ -436,6 +436,8 @@ def series_leading(alg: Algebra, c: np.ndarray, coefficient) -> np.ndarray:
     d[0] = 0.0
     out = coefficient(a0, 1) * d
     out[0] += coefficient(a0, 0)
+    if alg.size == 1:                   # no variables (a point): da is 0, so are its powers
+        return out
     power = d
     for k in range(2, alg.order + 1):
         power = alg.multiply_leading(d, d, 1, 1) if k == 2 else alg.multiply_leading(power, d, k - 1, 1)
