@@ -354,25 +354,28 @@ class StarBackend:
 
     def _check_aggregating(self, model, prop, options, opt, start) -> Result:
         """One check with ``opt``: first with the default aggregation, then, past a number of
-        stars or half the time budget ``opt.max_seconds``, or undecided for want of precision,
-        aggregating from the first jump (:func:`.options.aggregating_retry`) with what the first
-        pass left of the budget. A witness through an aggregate of a whole jump's successors may
-        replay where the per-cell successors left only cells no replay confirmed."""
+        stars (on a clocked model also past half the time budget ``opt.max_seconds``, or
+        undecided for want of precision), aggregating from the first jump
+        (:func:`.options.aggregating_retry`) with what the first pass left of the budget (after
+        an undecided pass, at most as much as a finer pass would have)."""
         began = time.perf_counter()
         retry = None if isinstance(options, StarOptions) else aggregating_retry(model, options, opt)
         if retry is None:
             return self._check(model, prop, opt, start)
-        retry, stars = retry
+        retry, stars, clocked = retry
         budget = min(opt.max_stars, stars)
-        halved = None if opt.max_seconds is None else opt.max_seconds * DEFAULT_PASS_SHARE
+        halved = opt.max_seconds * DEFAULT_PASS_SHARE if clocked and opt.max_seconds is not None else opt.max_seconds
         first = self._check(model, prop, replace(opt, max_stars=budget, max_seconds=halved), start)
         many = first.details.get("stars", 0) > budget
-        slow = OUT_OF_TIME in first.details.get("reason", "")
-        vague = bool(first.details.get("finer_step_may_decide"))
+        slow = clocked and OUT_OF_TIME in first.details.get("reason", "")
+        vague = clocked and bool(first.details.get("finer_step_may_decide"))
         if first.status is not Status.UNKNOWN or not (many or slow or vague):
             return first
         if opt.max_seconds is not None:         # the second pass has what the first left of the budget
-            left = opt.max_seconds - (time.perf_counter() - began)
+            spent = time.perf_counter() - began
+            left = opt.max_seconds - spent
+            if vague and not (many or slow):    # a try, not the rest of the budget (as a finer pass)
+                left = min(left, max(FINER_FACTOR * spent, FINER_SECONDS))
             if left <= 0:
                 return _whole_budget(first, halved, opt.max_seconds)
             retry = replace(retry, max_seconds=left)

@@ -220,15 +220,18 @@ def cfg_hints(notes: dict, horizon: float, options: dict | None) -> dict:
 #: first jump (:func:`aggregating_retry`): on a model that does not depend on time, and on one
 #: that does (a declared clock read by nothing but the horizon, a window)
 CLOCKLESS_FIRST_STARS, CLOCKED_FIRST_STARS = 100, 500
-#: the share of the time budget the default aggregation may take before that second pass
+#: the share of the time budget the default aggregation may take on a model that depends on
+#: time before that second pass (a clockless one has the whole: the platoon PLAN01's default
+#: pass needs it, and its stars end it soon enough)
 DEFAULT_PASS_SHARE = 1 / 2
 
 
-def aggregating_retry(model, options: dict | None, opt: StarOptions) -> tuple[StarOptions, int] | None:
+def aggregating_retry(model, options: dict | None, opt: StarOptions) -> tuple[StarOptions, int, bool] | None:
     """The options of a second pass where the user set no ``aggregate_after``: successors
     aggregated from the first jump, taken when the default pass runs past the returned number
-    of stars or past :data:`DEFAULT_PASS_SHARE` of the time budget, or ends undecided for want
-    of precision; None when the user chose the aggregation. Aggregation is sound whatever the model
+    of stars or, on a model that depends on time (the returned flag), past
+    :data:`DEFAULT_PASS_SHARE` of the time budget or undecided for want of precision; None
+    when the user chose the aggregation. Aggregation is sound whatever the model
     (a hull holds its members; a failed check refines it into them); it costs precision, which
     is why the default pass comes first.
 
@@ -239,7 +242,11 @@ def aggregating_retry(model, options: dict | None, opt: StarOptions) -> tuple[St
     nothing), successors per cell still multiply at each urgent jump of a cycle (a deadband
     limit cycle over a long horizon: thousands of stars), while the aggregates they would have
     formed stay a handful per jump: the second pass comes after :data:`CLOCKED_FIRST_STARS`,
-    beyond the stars the suite's time-dependent models take (at most a few hundred).
+    beyond the stars the suite's time-dependent models take (at most a few hundred), and also
+    after a default pass that ended undecided for want of precision (a witness through an
+    aggregate of a whole jump's successors may replay where the per-cell successors left only
+    cells no replay confirmed; a clockless model goes on to its input-generators pass instead,
+    which decides the platoon PLAN01 in seconds).
     The default comes first since an aggregate refined into its members leaves the cells
     before it unrefined.
 
@@ -261,7 +268,7 @@ def aggregating_retry(model, options: dict | None, opt: StarOptions) -> tuple[St
     invariant = time_invariant(model)
     generators = invariant and not ({"input_cells", "rebase_generators"} & set(options))
     stars = CLOCKLESS_FIRST_STARS if invariant else CLOCKED_FIRST_STARS
-    return replace(opt, aggregate_after=0, rebase_generators=generators or opt.rebase_generators), stars
+    return replace(opt, aggregate_after=0, rebase_generators=generators or opt.rebase_generators), stars, not invariant
 
 
 #: cells per input block of the pass that keeps the input effect's correlation (:func:`inputs_retry`)
