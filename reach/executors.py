@@ -69,6 +69,13 @@ class LocalExecutor:
                     yield futures[f], f.result()
 
 
+def check_address(scheduler, field: str) -> None:
+    """A Dask scheduler address (``tcp://host:8786``; no path, so no ``file://``), else InputError."""
+    from reach.errors import InputError
+    if not isinstance(scheduler, str) or not re.fullmatch(r"(tcp|tls|inproc|ws|wss)://[^\s/]+", scheduler):
+        raise InputError(f"expected an address such as tcp://host:8786, got {scheduler!r}", field=field)
+
+
 class DaskExecutor:
     """Units as tasks on a Dask cluster (``--scheduler tcp://host:8786``; the ``dist`` extra)."""
 
@@ -83,9 +90,8 @@ class DaskExecutor:
         if hasattr(scheduler, "submit"):
             self.client = scheduler
             return
+        check_address(scheduler, "--scheduler")
         from reach.errors import InputError
-        if not isinstance(scheduler, str) or not re.fullmatch(r"(tcp|tls|inproc|ws|wss)://[^\s/]+", scheduler):
-            raise InputError(f"expected an address such as tcp://host:8786, got {scheduler!r}", field="--scheduler")
         try:
             self.client = Client(scheduler, timeout=CONNECT_SECONDS)
         except (OSError, TimeoutError, ValueError) as exc:

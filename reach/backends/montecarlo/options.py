@@ -29,4 +29,8 @@ class Options:
 
     @classmethod
     def from_dict(cls, options: dict | None) -> "Options":
-        return cls(**parse_options(cls, options, "montecarlo"))
+        opts = cls(**parse_options(cls, options, "montecarlo"))
+        if opts.scheduler is not None and not hasattr(opts.scheduler, "submit"):   # a Client passes as it is
+            from reach.executors import check_address
+            check_address(opts.scheduler, "options.montecarlo.scheduler")
+        return opts
