@@ -537,3 +537,11 @@ def test_a_clock_on_its_bound_meets_it_whatever_the_rounding(tmp_path, method):
         assert low - 1e-9 <= exact <= high + 1e-9 and high - low < 1e-3
         low, high = MC.check(model, bound, {"samples": 4000}).probability
         assert low <= exact <= high
+
+
+def test_the_method_reported_is_the_one_that_ran():
+    """``-o method=genz`` on a point initial state: a reach and a reach-avoid probability, both
+    by Genz's QMC of a Gaussian box, both say so (the reach one said 'gaussian')."""
+    from reach.checking import check_files
+    results = check_files("models/fsr_burn.yaml", "properties/fsr_burn.yaml", "fsr", {"method": "genz"})
+    assert [r.details["method"] for r in results] == ["genz", "genz"]

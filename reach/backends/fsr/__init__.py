@@ -424,7 +424,7 @@ class FsrBackend:
             else:
                 p = reach(problem, *target, abs_error=opts.abs_error, seed=opts.seed,
                           max_points=opts.max_points)
-                details.update(method="gaussian", dimension=p.dimension, points=p.points,
+                details.update(method="genz", dimension=p.dimension, points=p.points,
                                error="randomised QMC, 3.5 standard errors")
         else:
             if opts.method == "fourier":
