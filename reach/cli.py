@@ -40,7 +40,7 @@ import yaml
 
 from reach.errors import InputError
 from reach.locate import find_model
-from reach.paths import printable, safe_name, writable_file
+from reach.paths import few, printable, safe_name, writable_file
 
 EXIT_CODES = """exit codes: 0 every property SAFE; 1 a violation (UNSAFE with a replayed counterexample, a
 probability below its threshold; bench: a failed cross-check); 2 bad input or options (one line
@@ -270,8 +270,8 @@ def cmd_replay(args) -> int:
     rep = replay(model, prop, cex.initial_state, cex.switch_time, cex.dt or None, cex.input_signal, branches)
     state = ", ".join(f"{n}={v:.6g}" for n, v in zip(model.state, rep.state))
     if cex.transitions is not None and rep.transitions[:len(cex.transitions)] != cex.transitions:
-        print(printable(f"note: the run took the transitions {_few(rep.transitions)}; "
-                        f"the file names {_few(cex.transitions)}"))
+        print(printable(f"note: the run took the transitions {few(rep.transitions, 8, '(none)')}; "
+                        f"the file names {few(cex.transitions, 8, '(none)')}"))
     if isinstance(prop, BoundEvent):        # the extremum along the run against the requirement
         verdict = "replayed" if rep.violated else "NOT replayed"
         print(printable(f"{verdict}: {model.name} {'violates' if rep.violated else 'satisfies'} '{prop.id}': "
@@ -407,13 +407,6 @@ def cmd_sweep(args) -> int:
         print(f"| {angle:.1f} | [{low[0]:.0f}, {high[0]:.0f}] | [{low[1]:.0f}, {high[1]:.0f}] | {shown} |")
     print(printable(f"{len(cells)} cells in {seconds:.1f} s; wrote {out}"))
     return 0
-
-
-def _few(names, shown: int = 8) -> str:
-    """``a, b, c`` (the first ``shown`` names, then how many in all), or ``(none)``."""
-    if not names:
-        return "(none)"
-    return ", ".join(names[:shown]) + (f", ... ({len(names)} in all)" if len(names) > shown else "")
 
 
 def _in_unit(unit: str) -> str:

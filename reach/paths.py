@@ -82,6 +82,15 @@ def safe_name(name, fallback: str = "unnamed") -> str:
 _CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f]")
 
 
+def few(names, limit: int = 10, empty: str = "") -> str:
+    """``a, b, c`` for messages: the first ``limit`` names, then how many in all (``empty`` for none)."""
+    names = list(names)
+    if not names:
+        return empty
+    shown = ", ".join(names[:limit])
+    return shown if len(names) <= limit else f"{shown}, ... ({len(names)} in all)"
+
+
 def printable(text) -> str:
     """``text`` with control characters shown as escapes (``\\x1b``), for one-line messages."""
     return _CONTROL.sub(lambda m: m.group().encode("unicode_escape").decode("ascii"), str(text))

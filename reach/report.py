@@ -269,7 +269,7 @@ def line(result, prop, model) -> str:
             text += f": smallest margin in {_with_unit(interval(*m['margin_bound']), unit)}"
             if unit is None:
                 text += " (model units)"
-        if "closest_margin" in m and "violation_margin" not in f:
+        if "closest_margin" in m and "violation_margin" not in m:
             unit = prop.margin_unit()
             text += f": closest margin {_with_unit(number(m['closest_margin']), unit)}"
             if unit is None:

@@ -71,6 +71,20 @@ MODE_FIELDS = {"flow", "control", "invariant", "description"}
 TRANSITION_FIELDS = {"from", "to", "guard", "urgent", "reset", "description"}
 RESERVED = set(FUNCTIONS) | set(CONSTANTS)
 MAX_EXTENDS = 8
+MIN_HORIZON = 1e-12            # model time units: below, horizon / 60 and its products underflow
+MAX_HORIZON = 1e12             # model time units: beyond, grid steps of horizon / 60 overflow exp(A h)
+
+
+def hint_problem(key: str, value) -> str | None:
+    """What is wrong with a SpaceEx cfg hint's value (``sampling-time``: a positive time;
+    ``iter-max``: a whole number, negative for no bound), or None."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+        return "expected a number"
+    if key == "sampling-time" and value <= 0:
+        return "expected a positive time"
+    if key == "iter-max" and value != int(value):
+        return "expected a whole number"
+    return None
 
 
 def bad_name(name) -> str | None:
@@ -84,8 +98,6 @@ def bad_name(name) -> str | None:
     if normal != name:
         return f"'{name}' is not a valid name (expressions read it as '{normal}': write that)"
     return None
-MIN_HORIZON = 1e-12            # model time units: below, horizon / 60 and its products underflow
-MAX_HORIZON = 1e12             # model time units: beyond, grid steps of horizon / 60 overflow exp(A h)
 
 
 def read_with_templates(path: Path, depth: int = 0, chain=()) -> Doc:
@@ -155,8 +167,8 @@ class _Builder:
         seen = set()
         for i, name in enumerate(names):
             w = self.where(key, name if mapping else i)
-            if bad_name(name):
-                raise w.error(bad_name(name))
+            if why := bad_name(name):
+                raise w.error(why)
             if name in RESERVED:
                 raise w.error(f"'{name}' is a reserved function or constant name")
             if name in seen:
@@ -278,8 +290,8 @@ class _Builder:
             raise self.where("constants").error("expected a mapping name: value")
         self.constant_names: dict[str, sympy.Expr] = {}
         for key in raw:
-            if bad_name(key):
-                raise self.where("constants", key).error(bad_name(key))
+            if why := bad_name(key):
+                raise self.where("constants", key).error(why)
             if key in RESERVED or key in self.state or key in self.inputs:
                 raise self.where("constants", key).error(
                     f"constant '{key}' clashes with a reserved, state or input name")
@@ -519,13 +531,9 @@ class _Builder:
         for key in ("sampling-time", "iter-max"):
             if key not in notes:
                 continue
-            value, where = notes[key], self.where("notes", key)
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
-                raise where.error("expected a number")
-            if key == "sampling-time" and value <= 0:
-                raise where.error("expected a positive time")
-            if key == "iter-max" and value != int(value):
-                raise where.error("expected a whole number")
+            value = notes[key]
+            if why := hint_problem(key, value):
+                raise self.where("notes", key).error(why)
             hints[key] = float(value) if key == "sampling-time" else int(value)
         return hints
 
@@ -591,8 +599,8 @@ class _Builder:
             self.dims.names = self.dims.names | {k for k in raw if isinstance(k, str)}
         for name, spec in raw.items():
             w = self.where("bounded_inputs", name)
-            if bad_name(name) or name in RESERVED:
-                raise w.error(bad_name(name) or f"'{name}' is a reserved function or constant name")
+            if (why := bad_name(name)) or name in RESERVED:
+                raise w.error(why or f"'{name}' is a reserved function or constant name")
             if name in self.state or name in self.inputs or name in self.constants:
                 raise w.error(f"bounded input '{name}' clashes with a state, input or constant")
             if not isinstance(spec, dict) or "range" not in spec or set(spec) - {"range", "varying", "description"}:

@@ -109,12 +109,11 @@ def _signal_of(model: HybridAutomaton, data: dict | None):
     names = [u.name for u in model.varying_inputs]
     if data is None and not names:
         return None
-    if (not isinstance(data, dict) or data.get("inputs") != names) and not names:
-        raise InputError("the model has no time-varying inputs: expected null, or a switching signal "
-                         "{step, inputs: [], values, switch}", field="input_signal")
     if not isinstance(data, dict) or data.get("inputs") != names:
         raise InputError(f"the model has time-varying inputs ({', '.join(names)}): the counterexample "
-                         "needs their input_signal", field="input_signal")
+                         "needs their input_signal" if names else
+                         "the model has no time-varying inputs: expected null, or a switching signal "
+                         "{step, inputs: [], values, switch}", field="input_signal")
     try:
         step = float(data["step"])
         values = np.asarray(data["values"], dtype=float)

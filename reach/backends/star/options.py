@@ -152,8 +152,8 @@ class StarOptions:
     rebase_generators: where ``input_cells`` is 0, a chain explored ``rebase_cells`` cells at a
         time carries each completed cell's input effect as generators, as ``input_cells = 1``
         would (at most ``2 rebase_cells`` coefficients per input and block, as many as the
-        block's end box adds); other chains keep the box. Off by default; the second pass of
-        the aggregating pass turns it on (:func:`aggregating_retry`).
+        block's end box adds); other chains keep the box. Off by default; the aggregating second
+        pass of a clockless model turns it on (:func:`aggregating_retry`).
     """
 
     step: float | None = None
@@ -253,9 +253,9 @@ def aggregating_retry(model, options: dict | None, opt: StarOptions) -> tuple[St
     On a model that does not depend on time, the second pass carries time-varying inputs as
     generators in the chains explored a few cells at a time (``rebase_generators``) where the
     user set neither that nor ``input_cells`` (where time matters, the box does, at a third of
-    the cost: a clocked deadband's aggregates close without the fixpoint check): the first chain's successors are aggregated at once, and a box of the
-    input effect, exact per state but not jointly, would hand them corners no signal reaches
-    together (a deadband whose disturbance both speeds the attitude rate up and moves the
+    the cost: a clocked deadband's aggregates close without the fixpoint check): the first
+    chain's successors are aggregated at once, and a box of the input effect, exact per state
+    but not jointly, would hand them corners no signal reaches together (a deadband whose disturbance both speeds the attitude rate up and moves the
     angle) that no refinement behind the aggregate can remove; a witness through the aggregate
     then points to an initial state and signal that do not violate. Such chains add a few
     coefficients per block either way; a chain to the horizon would gain two per cell, so it

@@ -39,10 +39,11 @@ import sympy
 
 from reach import lp
 from reach.errors import InputError, Where
-from reach.paths import printable
+from reach.paths import few, printable
 from reach.model.automaton import MAX_VARIABLES
 from reach.model.constraints import affine_coefficients
 from reach.model.expr import CONSTANTS, FUNCTIONS, parse_expr
+from reach.model.loader import hint_problem
 from reach.model.spaceex.compose import Flat, Instance, Part, blocked_labels
 from reach.model.spaceex.formula import (Const, FormulaError, Loc, Relation, Token, conjunction, formula_error,
                                          is_primed_name, names_in, parse_formula, to_python)
@@ -58,13 +59,6 @@ class Atoms:
 
     relations: list[tuple[Relation, Instance]] = field(default_factory=list)
     false: bool = False
-
-
-def few(names, limit: int = 10) -> str:
-    """``a, b, c`` (the first ``limit`` names, then how many in all)."""
-    names = list(names)
-    shown = ", ".join(names[:limit])
-    return shown if len(names) <= limit else f"{shown}, ... ({len(names)} in all)"
 
 
 class Converter:
@@ -633,13 +627,9 @@ class DocumentBuilder(Converter):
         notes = {"source": self.file, "config": cfg.file}
         for key in ("sampling-time", "iter-max"):
             if cfg.text(key) is not None:
-                notes[key] = value = cfg.number(key)
-                if key == "sampling-time" and value <= 0:
-                    raise InputError(f"{key}: expected a positive time, got '{cfg.text(key)}'", cfg.file,
-                                     line=cfg.line(key))
-                if key == "iter-max" and value != int(value):
-                    raise InputError(f"{key}: expected a whole number, got '{cfg.text(key)}'", cfg.file,
-                                     line=cfg.line(key))
+                notes[key] = cfg.number(key)
+                if why := hint_problem(key, notes[key]):
+                    raise InputError(f"{key}: {why}, got '{cfg.text(key)}'", cfg.file, line=cfg.line(key))
         blocked = blocked_labels(self.flat)
         if blocked:
             notes["blocked"] = blocked
