@@ -8,7 +8,8 @@ and the exit code of a list of results (the command-line contract of DESIGN.md):
 
 (2, bad input, is an :class:`InputError` raised before any result exists.) A property whose
 ``modes`` the model lacks is bad input, unless the property says ``optional: true``: then, on a
-model with none of its modes, it is not applicable and left out of the exit code.
+model with none of its modes, it is not applicable and left out of the exit code (a check
+where no property applies is undecided, 3: nothing was proved).
 """
 
 from __future__ import annotations
@@ -87,11 +88,12 @@ def violated(result: Result) -> bool:
 
 
 def exit_code(results: list[Result]) -> int:
-    """0 all SAFE, 1 a violation, 3 undecided (see the module docstring)."""
+    """0 all SAFE, 1 a violation, 3 undecided (see the module docstring); 3 also when no
+    property applied (every one optional and not applicable): nothing was proved."""
     relevant = [r for r in results if not not_applicable(r)]
     if any(violated(r) for r in relevant):
         return 1
-    return 0 if all(r.status == Status.SAFE for r in relevant) else 3
+    return 0 if relevant and all(r.status == Status.SAFE for r in relevant) else 3
 
 
 def check_model(backend, model, bound: list, options: dict | None = None) -> list[Result]:
@@ -101,7 +103,7 @@ def check_model(backend, model, bound: list, options: dict | None = None) -> lis
     checked as its SpaceEx files are."""
     if backend.name == "star" and model.hints:
         from reach.backends.star.options import cfg_hints
-        options = cfg_hints(model.hints, model.horizon, options)
+        options = cfg_hints(model.hints, model.horizon, options, len(model.state))
     results: dict[int, Result] = {}
     todo = []
     for prop in bound:

@@ -448,6 +448,18 @@ class _Parser(argparse.ArgumentParser):
         raise SystemExit(2)
 
 
+class _Once(argparse.Action):
+    """An option that may be given once: a second value is an error (the first is not
+    silently replaced)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        if getattr(namespace, f"_{self.dest}_given", False):
+            parser.error(f"{option_string}: given twice ('{getattr(namespace, self.dest)}' and '{values}'); "
+                         "check runs one back-end (reach bench compares back-ends)")
+        setattr(namespace, f"_{self.dest}_given", True)
+        setattr(namespace, self.dest, values)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="reach", description="Reachability verification of spacecraft "
                      "guidance and control: one model, several back-ends.", epilog=EXIT_CODES,
@@ -456,7 +468,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("check", help="check a model against a property file", epilog=EXIT_CODES)
     p.add_argument("model", help="model file, or a model's name (searched in models/)")
     p.add_argument("properties", help="property file")
-    p.add_argument("--backend", "-b", default="montecarlo")
+    p.add_argument("--backend", "-b", default="montecarlo", action=_Once)
     p.add_argument("--property", "-p", action="append", help="check only this property (repeatable)")
     p.add_argument("--option", "-o", action="append", metavar="KEY=VALUE",
                    help="back-end option (B.KEY=VALUE: the same, for back-end B)")

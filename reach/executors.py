@@ -3,7 +3,9 @@
 Both take a picklable function and a list of argument tuples and yield ``(index, result)``
 as units finish, so the runner can print progress. A unit that exceeds the time limit is
 stopped inside its worker (SIGALRM) and reported as timed out; a worker's address space is
-capped so one runaway case cannot take the machine down.
+capped so one runaway case cannot take the machine down, and a local worker ends with the
+process that started it (Linux: the parent-death signal), so a ``reach bench -j 2`` stopped by
+SIGTERM or SIGKILL leaves no worker computing on.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ import signal
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 
 MEMORY_LIMIT_BYTES = 16 * 2 ** 30
+PR_SET_PDEATHSIG = 1               # prctl option (linux/prctl.h)
 CONNECT_SECONDS = 10
 
 
@@ -39,12 +42,21 @@ def guarded(fn, args, time_limit):
             signal.setitimer(signal.ITIMER_REAL, 0)
 
 
-def _limit_memory():
+def _worker_start():
+    """In each local worker: the address-space cap, and SIGTERM when the parent dies
+    (``prctl(PR_SET_PDEATHSIG)``; nothing where the call does not exist)."""
     try:
         import resource
         resource.setrlimit(resource.RLIMIT_AS, (MEMORY_LIMIT_BYTES, MEMORY_LIMIT_BYTES))
     except (ImportError, ValueError, OSError):
         pass
+    try:
+        import ctypes
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+    except (OSError, AttributeError):
+        pass
+    if os.getppid() == 1:           # the parent died before the signal was armed
+        os._exit(1)
 
 
 class LocalExecutor:
@@ -60,7 +72,7 @@ class LocalExecutor:
             for i, args in enumerate(arg_list):
                 yield i, guarded(fn, args, time_limit)
             return
-        with ProcessPoolExecutor(max_workers=self.jobs, initializer=_limit_memory) as pool:
+        with ProcessPoolExecutor(max_workers=self.jobs, initializer=_worker_start) as pool:
             futures = {pool.submit(guarded, fn, args, time_limit): i for i, args in enumerate(arg_list)}
             pending = set(futures)
             while pending:

@@ -68,7 +68,13 @@ def parse_text(text: str, file: str) -> Doc:
     """Parse YAML text (safe loader only) into a :class:`Doc`."""
     if len(text) > MAX_BYTES:
         raise InputError(f"file larger than {MAX_BYTES} bytes", file)
-    loader = yaml.SafeLoader(text)
+    try:
+        loader = yaml.SafeLoader(text)
+    except yaml.reader.ReaderError as exc:      # a control character YAML does not allow
+        line = text[:exc.position].count("\n") + 1 if isinstance(exc.position, int) else None
+        code = exc.character if isinstance(exc.character, int) else None
+        raise InputError(f"invalid YAML: {exc.reason}" + (f" (U+{code:04X})" if code is not None else ""),
+                         file, line=line) from None
     try:
         node = loader.get_single_node()
         lines: dict[tuple, tuple[str, int]] = {}

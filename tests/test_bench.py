@@ -7,6 +7,7 @@ import pytest
 from reach.bench.crosscheck import cross_check
 from reach.bench.runner import run_suite
 from reach.bench.tables import compare_runs
+from reach.errors import InputError
 
 
 def _row(backend, status, **extra):
@@ -108,3 +109,29 @@ def test_a_sweep_that_would_say_nothing_is_bad_input(tmp_path, model, message):
                          capture_output=True, text=True, cwd=tmp_path)
     assert run.returncode == 2, run.stdout + run.stderr
     assert message in run.stderr and "m.yaml" in run.stderr and len(run.stderr.strip().splitlines()) == 1
+
+
+def test_an_expected_verdict_no_back_end_reached_is_undecided(tmp_path):
+    """Monte Carlo never proves SAFE: the thermostat's expected-safe band stays unproved, a
+    note, and the run exits 3 (undecided) instead of 0, though the expected violation is found.
+    A filter that selects no unit is bad input before anything runs."""
+    root = __import__("pathlib").Path.cwd()
+    suite = tmp_path / "suite.yaml"
+    suite.write_text(f"""backends:
+  montecarlo: {{samples: 5, search_rounds: 0, optimise: false}}
+  star: {{}}
+instances:
+  - id: thermo
+    model: {root}/models/thermostat.yaml
+    properties: {root}/properties/thermostat.yaml
+    backends: [montecarlo]
+    expect: {{band: safe, below_20p5: unsafe}}
+""")
+    with open(tmp_path / "log.txt", "w") as stream:
+        assert run_suite(suite, out=tmp_path / "out", jobs=1, stream=stream) == 3
+    report = json.loads((tmp_path / "out" / "results.json").read_text())
+    notes = sorted(c["message"] for c in report["cross_checks"] if c["level"] == "note")
+    assert [n.split(":")[0] for n in notes] == ["thermo/band"]
+    assert "expected safe, but no back-end proved it (montecarlo UNKNOWN)" in notes[0]
+    with pytest.raises(InputError, match="no unit to run: star runs on none of the chosen instances"):
+        run_suite(suite, out=tmp_path / "out2", jobs=1, backends=["star"])

@@ -293,3 +293,13 @@ def test_a_reader_that_goes_away_ends_the_run_quietly(tmp_path):
     proc.stdout.close()                 # before reach has written anything
     err = proc.stderr.read().decode()
     assert proc.wait(timeout=120) == 3 and "error" not in err, err
+
+
+def test_a_check_where_no_property_applies_proves_nothing(capsys):
+    """SRNA01 has no Passive mode, so the optional collision property does not apply: with it
+    alone nothing is checked, which is undecided (3), not "every property SAFE" (0); beside a
+    property that applies and holds, it is left out (0)."""
+    args = ["check", "SRNA01", "properties/rendezvous.yaml", "-b", "star"]
+    assert main([*args, "-p", "collision"]) == 3
+    assert "not applicable" in capsys.readouterr().out
+    assert main([*args, "-p", "collision", "-p", "velocity"]) == 0

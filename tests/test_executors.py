@@ -94,3 +94,43 @@ def test_monte_carlo_batches_give_the_same_answer_whatever_the_split_and_the_exe
                                   dashboard_address=None) as cluster, distributed.Client(cluster) as client:
         dask = _mc_essence(model_file, prop_file, {**base, "batch": 700, "scheduler": client})
     assert dask == one
+
+
+WORKERS_OF_A_KILLED_PARENT = """
+import os, sys, time
+from reach.executors import LocalExecutor
+def pid_then_sleep(seconds):
+    print(os.getpid(), flush=True)
+    time.sleep(seconds)
+for _ in LocalExecutor(jobs=2).map_unordered(pid_then_sleep, [(60,), (60,)]):
+    pass
+"""
+
+
+def test_local_workers_end_with_a_killed_parent():
+    """A ``reach bench -j 2`` ended by SIGTERM or SIGKILL (a CI job cancelled) leaves no worker
+    computing on: each worker gets SIGTERM when its parent dies."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+    parent = subprocess.Popen([sys.executable, "-c", WORKERS_OF_A_KILLED_PARENT], stdout=subprocess.PIPE, text=True)
+    workers = [int(parent.stdout.readline()) for _ in range(2)]
+    parent.kill()
+    parent.wait()
+
+    def alive(pid):
+        try:
+            with open(f"/proc/{pid}/stat") as f:
+                return f.read().split(")")[-1].split()[0] != "Z"
+        except FileNotFoundError:
+            return False
+    for _ in range(100):
+        if not any(alive(p) for p in workers):
+            break
+        time.sleep(0.1)
+    survivors = [p for p in workers if alive(p)]
+    for p in survivors:
+        os.kill(p, signal.SIGKILL)
+    assert not survivors

@@ -43,6 +43,22 @@ def test_a_long_linear_form_is_no_deep_nesting():
         parse_expr("(" * 80 + "x" + ")*2" * 80, NAMES, W)
 
 
+def test_a_long_expression_is_quoted_short_in_its_message():
+    """A bad input is one short line: an unparsable 200-term form (an imported alias) or a
+    chain past Python's parser shows its start and length, not its thousands of characters."""
+    names = {f"x{k}": sympy.Symbol(f"x{k}") for k in range(200)}
+    bad = " + ".join(f"0.123456789*x{k}" for k in range(200)) + " +"
+    with pytest.raises(InputError) as info:
+        parse_expr(bad, names, Where("m.yaml", "flow.x0", 4))
+    message = str(info.value)
+    assert message.startswith("m.yaml:4: flow.x0: cannot parse '0.123456789*x0 + 0.123456789*x1")
+    assert f"... ({len(bad)} characters)" in message and len(message) < 250
+    chain = "+".join(["x1"] * 20000)
+    with pytest.raises(InputError, match=r"too many operations in one chain .*\(59999 characters\)|"
+                                         r"\(59999 characters\).*too many operations"):
+        parse_expr(chain, names, Where("m.yaml", "flow.x0", 4))
+
+
 @pytest.mark.parametrize("caret, power", [
     ("x^2", "x**2"), ("-x^2 + y", "-x**2 + y"), ("k*x^3/y^2", "k*x**3/y**2"), ("2^-1*x", "2**-1*x")])
 def test_caret_is_the_power(caret, power):

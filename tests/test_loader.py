@@ -52,6 +52,8 @@ MALFORMED = [
      .replace("horizon: 240", "horizon: 240\nmodes:\n  passive:\n    flow: {vx: vyy}"),
      ":8: modes.passive.flow.vx: unknown name 'vyy'"),
     ("yaml syntax", "name: x\nstate: [x, y\n", "invalid YAML"),
+    ("control character", "name: x\nstate: [x]\nhorizon: 1\u0086\n", ":3: invalid YAML: special characters are not "
+                                                                     "allowed (U+0086)"),
     ("missing field", "name: x\nstate: [x]\nmodes: {a: {flow: {x: 1}}}\n", "missing required field 'initial'"),
     ("unknown top field", "name: x\nhorizont: 3\n", "unknown field 'horizont'"),
     ("code injection", "name: x\nstate: [x]\nmodes: {a: {flow: {x: \"__import__('os').getcwd()\"}}}\n"

@@ -179,6 +179,31 @@ def test_triangle_vertices_faces_and_uniform_interior():
     assert abs(np.mean(X[:, 0] > 0.5) - 0.25) < 0.03
 
 
+def test_a_box_cut_by_loose_rows_is_sampled_exactly_by_rejection():
+    """A 150-state box cut by two loose slabs on weighted sums (as the ISS's initial box by its
+    outputs' ranges) with a pinned clock ``t == 0``: points by rejection from the box (hit-and-run
+    would take 30 d steps of (d x k) products per point), uniform: each coordinate's mean 0 and
+    P(x_i > 1/2) = 1/4 on [-1, 1], the slab respected. A thin triangle (2 % of its box) is left
+    to hit-and-run."""
+    n = 151
+    rng = np.random.default_rng(3)
+    c = np.append(rng.uniform(0, 0.02, n - 1), 0.0)
+    A = np.vstack([np.eye(n), -np.eye(n), c, -c])
+    b = np.concatenate([np.ones(n), np.ones(n), [0.25, 0.25]])
+    E, f = np.eye(n)[-1:], np.zeros(1)
+    low, high = np.append(-np.ones(n - 1), 0.0), np.append(np.ones(n - 1), 0.0)
+    S = PolytopeSampler(LinearSet(A, b, E, f), low, high)
+    X = S._rejection(4000, np.random.default_rng(4))
+    assert X is not None and X.shape == (4000, n) and S.contains(X).all()
+    assert np.all(X[:, -1] == 0.0) and np.abs(X @ c).max() <= 0.25
+    assert np.abs(X[:, :-1].mean(axis=0)).max() < 0.07            # standard error 0.009 each
+    assert abs(np.mean(X[:, :-1] > 0.5) - 0.25) < 0.01
+    thin = PolytopeSampler(LinearSet(np.array([[-1.0, 0], [0, -1], [1, 1]]), np.array([0.0, 0, 0.2]),
+                                     np.zeros((0, 2)), np.zeros(0)), np.zeros(2), np.ones(2))
+    assert thin._rejection(100, np.random.default_rng(5)) is None
+    assert thin.contains(thin.uniform(100, np.random.default_rng(5))).all()
+
+
 @settings(max_examples=25, deadline=None)
 @given(st.integers(0, 10_000))
 def test_random_polytopes_extreme_points_attain_the_support(seed):

@@ -652,11 +652,41 @@ def test_a_variable_a_flow_sets_cannot_be_mapped_to_a_number(tmp_path, capsys):
 
 def test_a_sampling_time_too_fine_for_star_is_capped():
     """SpaceEx's own time step (1e-5 over 20 s) would be two million cells: star's step stops at
-    horizon / MAX_HINT_CELLS; a coarser hint is taken as it is, one above horizon / 60 not at all."""
-    from reach.backends.star.options import MAX_HINT_CELLS, cfg_hints
+    horizon / MAX_HINT_CELLS; a coarser hint is taken as it is, one above horizon / 60 not at all.
+    Past HINT_FULL_STATES states the cap falls with the cube of the states (a cell's work), and
+    on the ISS's 273 star keeps its own step."""
+    from reach.backends.star.options import HINT_FULL_STATES, MAX_HINT_CELLS, cfg_hints
     assert cfg_hints({"sampling-time": 1e-5}, 20.0, {})["step"] == 20.0 / MAX_HINT_CELLS
+    assert cfg_hints({"sampling-time": 1e-5}, 20.0, {}, HINT_FULL_STATES)["step"] == 20.0 / MAX_HINT_CELLS
     assert cfg_hints({"sampling-time": 0.05}, 20.0, {})["step"] == 0.05
     assert "step" not in cfg_hints({"sampling-time": 1.0}, 20.0, {})
+    assert cfg_hints({"sampling-time": 1e-5}, 20.0, {}, 2 * HINT_FULL_STATES)["step"] == pytest.approx(
+        20.0 / (MAX_HINT_CELLS / 8))
+    assert "step" not in cfg_hints({"sampling-time": 0.001}, 20.0, {}, 273)
+
+
+def test_an_alias_longer_than_a_page_imports_and_checks(tmp_path):
+    """An output defined in the invariant over 100 states with 40-digit coefficients (as the
+    ISS's y1..y3 over 270), 4900 characters: the imported model and its YAML check alike.
+    Closed form: x_k' = -x_k from [0.9, 1], so y = sum c_k x_k peaks at sum c_k at t = 0."""
+    n = 100
+    coef = [f"{0.5 + k / (3 * n):.40f}" for k in range(n)]
+    params = "".join(f'<param name="x{k}" type="real" local="false" dynamics="any"/>\n' for k in range(n))
+    y = " + ".join(f"{c}*x{k}" for k, c in enumerate(coef))
+    assert len(y) > 4500
+    flow = " &amp; ".join(f"x{k}' == -x{k}" for k in range(n))
+    body = (f'<component id="sys">{params}<param name="y" type="real" local="false" dynamics="any"/>\n'
+            f'<location id="1" name="run"><invariant>y == {y}</invariant>'
+            f'<flow>{flow}</flow></location></component>\n')
+    total = sum(float(c) for c in coef)
+    initially = " & ".join(f"0.9 <= x{k} & x{k} <= 1" for k in range(n))
+    for bound, code in [(1.01 * total, 0), (0.99 * total, 1)]:
+        xml, cfg = write(tmp_path, body, f'system = sys\ninitially = "{initially}"\n'
+                                         f'forbidden = "y >= {bound!r}"\ntime-horizon = 1\n')
+        assert main(["check", str(xml), str(cfg), "-b", "star"]) == code
+    out = tmp_path / "out"
+    assert main(["import", str(xml), str(cfg), "--out", str(out)]) == 0
+    assert main(["check", str(out / "models/m.yaml"), str(out / "properties/m.yaml"), "-b", "star"]) == 1
 
 
 @pytest.mark.parametrize("line, message", [("sampling-time = -1", "sampling-time: expected a positive time, got '-1'"),

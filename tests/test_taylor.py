@@ -206,3 +206,43 @@ def test_a_point_initial_set_with_non_polynomial_terms(tmp_path, options):
     assert [r.status.value for r in results] == ["SAFE", "SAFE"]
     truth = np.sqrt(2 * (1 - np.cos(1)))
     assert results[0].bound[0] <= truth <= results[0].bound[1] < truth + 0.01
+
+
+TIMER_AT_HORIZON = """
+name: timer_at_horizon
+state: [x, v, c]
+modes:
+  a: {flow: {x: v, v: "-x", c: 1}, invariant: ["c <= 1.5"]}
+  b: {flow: {x: v, v: "-2*x", c: 1}, invariant: ["c <= 1.5"]}
+transitions:
+  - {from: a, to: b, guard: ["c >= 1.5"], urgent: true, reset: {c: 0}}
+  - {from: b, to: a, guard: ["c >= 1.5"], urgent: true, reset: {c: 0}}
+initial: {mode: a, box: {x: [0.9, 1.1], v: [-0.1, 0.1], c: 0}}
+horizon: HORIZON
+"""
+
+
+@pytest.mark.parametrize("horizon", [4.5, 4.4])
+def test_a_timed_switch_at_the_horizon_is_an_answer(tmp_path, horizon):
+    """A timer switch every 1.5 whose third falls at the horizon 4.5 (its event time refined a
+    rounding past it) crashed on the run to the horizon it had not kept. Now an answer, whose
+    margin interval holds x's largest value on 200 sampled runs' grids (solve_ivp)."""
+    path, props = tmp_path / "m.yaml", tmp_path / "p.yaml"
+    path.write_text(TIMER_AT_HORIZON.replace("HORIZON", str(horizon)))
+    props.write_text('properties:\n  - {id: xmax, kind: safety, modes: [a, b], require: ["x <= 2"]}\n')
+    model = load_model(path)
+    (prop,) = [bind(p, model) for p in load_properties(props)]
+    result = BACKEND.check(model, prop, {})
+    assert result.status in (Status.SAFE, Status.UNKNOWN)
+    rng = np.random.default_rng(0)
+    largest = -np.inf
+    for x0, v0 in zip(rng.uniform(0.9, 1.1, 200), rng.uniform(-0.1, 0.1, 200)):
+        state, t = np.array([x0, v0]), 0.0
+        for k, w2 in enumerate([1.0, 2.0, 1.0]):
+            span = min(1.5, horizon - t)
+            sol = solve_ivp(lambda _, y, w2=w2: [y[1], -w2 * y[0]], (0, span), state, rtol=1e-10, atol=1e-12,
+                            dense_output=True)
+            largest = max(largest, sol.sol(np.linspace(0, span, 200))[0].max())
+            state, t = sol.y[:, -1], t + span
+    low, high = result.details["margin_bound"]
+    assert low <= 2 - largest <= high + 1e-9

@@ -7,7 +7,9 @@ Failures (``reach bench`` exits 1):
 * an event bound that excludes a value sampled by Monte Carlo;
 * a verdict contradicting the expected one (SAFE where unsafe is expected, or UNSAFE where
   safe is expected); an error or time-out.
-Notes: an expected-unsafe property that no back-end falsified.
+Notes (``reach bench`` exits 3 when there is one and no failure: undecided): an expected
+verdict that no back-end reached, an expected-unsafe property that no back-end falsified or an
+expected-safe one that none proved.
 """
 
 from __future__ import annotations
@@ -64,6 +66,9 @@ def cross_check(rows: list[dict]) -> list[dict]:
                 add("fail", f"{inst}/{prop}: {r['backend']} says SAFE, expected unsafe ({r.get('source', '')})")
         if expected == "unsafe" and not replayed:
             add("note", f"{inst}/{prop}: expected unsafe, but no back-end produced a counterexample")
+        if expected == "safe" and not any(r["status"] == "safe" for r in group):
+            add("note", f"{inst}/{prop}: expected safe, but no back-end proved it "
+                        f"({', '.join(sorted(r['backend'] + ' ' + r['status'].upper() for r in group))})")
         intervals = [(r["backend"], r["probability"]) for r in group if r.get("probability")]
         for i in range(len(intervals)):
             for j in range(i + 1, len(intervals)):

@@ -14,7 +14,7 @@ from reach.executors import make_executor
 from reach.bench.suite import load_suite
 from reach.bench.tables import markdown_table
 from reach.errors import InputError
-from reach.paths import writable_folder
+from reach.paths import few, writable_folder
 
 
 def run_unit(model_path: str, property_path: str, backend: str, options: dict) -> list[dict]:
@@ -134,8 +134,10 @@ def read_report(path) -> dict:
 
 def run_suite(suite_path, backends=None, instances=None, out="results", jobs=None, scheduler=None,
               time_limit=None, stream=sys.stdout) -> int:
-    """Run (a filtered part of) a suite; exit code 1 if a cross-check fails, else 0 (bad input,
-    a malformed suite, model or property file, raises InputError before any unit runs).
+    """Run (a filtered part of) a suite; exit code 1 if a cross-check fails, else 3 if one
+    leaves a note (an expected verdict no back-end reached: undecided), else 0 (bad input, a
+    malformed suite, model or property file, or a filter that selects no unit, raises
+    InputError before any unit runs).
 
     A filtered run (``backends`` or ``instances``) replaces only its own rows of an existing
     ``results.json`` of the same suite and keeps the others; every row says which run it came
@@ -159,6 +161,9 @@ def run_suite(suite_path, backends=None, instances=None, out="results", jobs=Non
         chosen = [i for i in chosen if i.id in instances]
     units = [(inst, b) for inst in chosen for b in names
              if b not in missing and (inst.backends is None or b in inst.backends)]
+    if not units:
+        raise InputError(f"no unit to run: {', '.join(names) or 'no back-end'} runs on none of the chosen "
+                         f"instances ({few([i.id for i in chosen])})", field="--backend" if backends else "--instance")
     _read_inputs(chosen)
     executor = make_executor(jobs, scheduler)
     run_id = datetime.now(timezone.utc).isoformat(timespec="seconds")
@@ -216,4 +221,4 @@ def run_suite(suite_path, backends=None, instances=None, out="results", jobs=Non
     for c in checks:
         print(f"  {c['level'].upper()}: {c['message']}", file=stream)
     print(f"wrote {out / 'results.json'} and {out / 'results.md'}", file=stream)
-    return 1 if failures else 0
+    return 1 if failures else 3 if checks else 0

@@ -28,7 +28,7 @@ from reach.errors import Where
 from reach.model.units import (DIMENSIONLESS, SI, UNITS, DimensionSystem, DisplayUnit, Form, UnitSystem,
                                bracket_display, known_units, model_display)
 
-MAX_LENGTH = 4000
+MAX_LENGTH = 200_000
 MAX_DEPTH = 60
 MAX_EXPONENT = 64
 
@@ -143,7 +143,7 @@ class _Parser:
         raise self.where.error(message)
 
     def text(self, node: ast.AST) -> str:
-        return (ast.get_source_segment(self.source, node) if self.source else None) or ast.unparse(node)
+        return _quoted((ast.get_source_segment(self.source, node) if self.source else None) or ast.unparse(node))
 
     def side(self, node: ast.AST, shown: str) -> str:
         return self.text(node) if _is_literal(node) else f"{self.text(node)} {shown}"
@@ -315,9 +315,19 @@ def _parse_tree(text, where: Where) -> ast.AST:
     try:
         return _parse(text)
     except SyntaxError as exc:
-        raise where.error(f"cannot parse '{text}': {exc.msg}") from None
-    except (ValueError, RecursionError, MemoryError):
-        raise where.error(f"cannot parse '{text}'") from None
+        raise where.error(f"cannot parse '{_quoted(text)}': {exc.msg}") from None
+    except (RecursionError, MemoryError):
+        raise where.error(f"cannot parse '{_quoted(text)}': too many operations in one chain for "
+                          "Python's parser (at most about a thousand terms)") from None
+    except ValueError:
+        raise where.error(f"cannot parse '{_quoted(text)}'") from None
+
+
+def _quoted(text) -> str:
+    """``text`` as a message quotes it: whole up to 120 characters, else its start and its
+    length (an imported linear form can run to thousands; a bad input is one short line)."""
+    text = str(text).strip()
+    return text if len(text) <= 120 else f"{text[:100]}... ({len(text)} characters)"
 
 
 def _source(text) -> str:
@@ -341,7 +351,7 @@ def parse_quantity(text, names: Mapping[str, sympy.Expr], where: Where, units: U
     try:
         value, form = _Parser(names, where, units, dims, _source(text)).expr(tree)
     except (RecursionError, OverflowError, MemoryError, ZeroDivisionError):
-        raise where.error(f"expression '{text}' is too large to evaluate") from None
+        raise where.error(f"expression '{_quoted(text)}' is too large to evaluate") from None
     _check_numbers(value, text, where)
     return value, form
 
@@ -358,7 +368,7 @@ def _check_numbers(value: sympy.Expr, text, where: Where) -> None:
         except (TypeError, ValueError, OverflowError):
             finite = False
         if not finite:
-            raise where.error(f"expression '{text}' holds a number out of the floating-point range")
+            raise where.error(f"expression '{_quoted(text)}' holds a number out of the floating-point range")
     walk = sympy.preorder_traversal(value)
     for part in walk:
         if part.free_symbols:
@@ -372,7 +382,7 @@ def _check_numbers(value: sympy.Expr, text, where: Where) -> None:
         except (TypeError, ValueError, OverflowError, ZeroDivisionError):
             real = False
         if not real:
-            raise where.error(f"expression '{text}': '{part}' is not a finite real number")
+            raise where.error(f"expression '{_quoted(text)}': '{part}' is not a finite real number")
 
 
 def parse_expr(text, names: Mapping[str, sympy.Expr], where: Where, units: UnitSystem = SI,
@@ -387,7 +397,7 @@ def parse_comparison(text, names: Mapping[str, sympy.Expr], where: Where,
     comparisons."""
     tree = _parse_tree(text, where)
     if not isinstance(tree, ast.Compare):
-        raise where.error(f"expected a comparison such as 'x <= 1', got '{text}'")
+        raise where.error(f"expected a comparison such as 'x <= 1', got '{_quoted(text)}'")
     parser = _Parser(names, where, units, dims, _source(text))
     if dims is not None:
         dims.brackets = []
@@ -395,7 +405,7 @@ def parse_comparison(text, names: Mapping[str, sympy.Expr], where: Where,
     try:
         operands = [parser.expr(node) for node in nodes]
     except (RecursionError, OverflowError, MemoryError, ZeroDivisionError):
-        raise where.error(f"expression '{text}' is too large to evaluate") from None
+        raise where.error(f"expression '{_quoted(text)}' is too large to evaluate") from None
     for value, _ in operands:
         _check_numbers(value, text, where)
     result = []
@@ -406,7 +416,7 @@ def parse_comparison(text, names: Mapping[str, sympy.Expr], where: Where,
         return [Comparison(lhs, "==", rhs, dimension, unit)]
     for i, op in enumerate(tree.ops):
         if type(op) not in _COMPARE:
-            raise where.error(f"only <=, <, >=, > (or one ==) are allowed in '{text}'")
+            raise where.error(f"only <=, <, >=, > (or one ==) are allowed in '{_quoted(text)}'")
         (lhs, lf), (rhs, rf) = operands[i], operands[i + 1]
         form = parser.meet(nodes[i], lf, nodes[i + 1], rf, "compared with")
         dimension, unit = dims.display(form, dims.brackets) if dims is not None else (None, None)

@@ -176,6 +176,24 @@ def zero_time_witness(n: int, jumps, fixed=None) -> tuple[bool, np.ndarray | Non
     return (x is not None), (None if x is None else x[:n])
 
 
+def on_cycles(model) -> set[int]:
+    """The transitions that lie on some cycle of modes: those whose source and target are in
+    one strongly connected component of the mode graph (every cycle stays in one), so that the
+    search below never starts on a chain of modes that no run can close (a mission's phases in a
+    line: no LP at all)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    index = {name: i for i, name in enumerate(model.modes)}
+    edges = [(index[tr.source], index[tr.target]) for tr in model.transitions]
+    if not edges:
+        return set()
+    rows, cols = zip(*edges)
+    graph = coo_matrix((np.ones(len(edges)), (rows, cols)), shape=(len(index), len(index)))
+    _, component = connected_components(graph, directed=True, connection="strong")
+    return {k for k, (a, b) in enumerate(edges) if component[a] == component[b]}
+
+
 def zero_dwell_cycles(model) -> tuple[list, bool]:
     """``(found, complete)``: ``found`` lists ``(modes, transition names, state)`` for simple
     mode cycles (``modes``: ``[m0, m1, ..., m0]``), one choice of transition per step, on which
@@ -190,15 +208,16 @@ def zero_dwell_cycles(model) -> tuple[list, bool]:
     kept. A chain that cannot be taken once at one instant is pruned; a cycle is reported when
     it can be taken twice (see the module doc)."""
     transitions = model.transitions
-    signature = [edge_signature(model, tr) for tr in transitions]
-    jumps = [linear_jump(model, tr) for tr in transitions]
+    cyclic = on_cycles(model)
+    signature = {k: edge_signature(model, transitions[k]) for k in cyclic}
+    jumps = {k: linear_jump(model, transitions[k]) for k in cyclic}
     leaving: dict[str, list[int]] = {}
-    for k, tr in enumerate(transitions):
-        leaving.setdefault(tr.source, []).append(k)
+    for k in sorted(cyclic):
+        leaving.setdefault(transitions[k].source, []).append(k)
     order = {name: i for i, name in enumerate(model.modes)}
     fixed = fixed_ranges(model)
     found, tried = [], 0
-    for first in range(len(transitions)):
+    for first in sorted(cyclic):
         home = transitions[first].source
         stack = [iter([first])]
         chain: list[int] = []

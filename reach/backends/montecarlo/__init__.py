@@ -55,6 +55,7 @@ of its extremum from the requirement (:mod:`.event_sampling`).
 
 from __future__ import annotations
 
+import logging
 import math
 import time
 from functools import partial
@@ -79,6 +80,9 @@ from reach.stats import clopper_pearson_upper, wilson
 __all__ = ["BACKEND", "NAME", "MonteCarloBackend", "Options", "SafetyMonitor", "check_run",
            "constant_signal", "random_plan", "replay", "structured_plan", "switch_window"]
 
+
+#: progress under ``reach check -v``: the rounds of runs and the searches, with their times
+LOG = logging.getLogger("reach.montecarlo")
 
 class MonteCarloBackend:
     name = NAME
@@ -136,6 +140,8 @@ class MonteCarloBackend:
         sim = Simulator(model, opts.dt)
         kicks = _kicks(model, rng)
         X, tau, signal, choice, n_structured, seeding = run_plan(model, sim, window, opts, rng)
+        LOG.info("%d structured and %d random runs of %d steps (%.1f s)", n_structured, X.shape[0] - n_structured,
+                 sim.steps, time.perf_counter() - start)
         parts, kept = _simulate_rounds(model, props, sim, opts, X, tau, signal, choice, n_structured, kicks,
                                        time.time() + (deadline - time.perf_counter()))
         if kept.size < X.shape[0]:          # the time budget left i.i.d. blocks unsimulated
@@ -150,6 +156,7 @@ class MonteCarloBackend:
         if opts.keep_sets:
             pictured_kicks = _kicks(model, np.random.default_rng(np.random.SeedSequence(opts.seed, spawn_key=(2 ** 32,))))
             runs = sampled_runs(model, sim, X, tau, signal, choice, n_structured, pictured_kicks)
+        LOG.info("simulated %d runs (%.1f s)", X.shape[0], time.perf_counter() - start)
         shared = (time.perf_counter() - start) / len(props)
         results = []
         for prop, monitor in zip(props, monitors):
@@ -174,12 +181,16 @@ class MonteCarloBackend:
                 found, depth = self._extremal(model, prop, sim, rounds, n_structured, monitors_of)
                 closest = min(closest, depth)
             if found is None and model.disturbance is None:
+                LOG.info("%s: no violation sampled (closest margin %.4g, model units); searching", prop.id, closest)
                 found = self._search(model, window, sim, rounds, opts, rng, branching, deadline, monitors_of,
                                      seeding)
             if found is None and model.disturbance is None and opts.optimise and time.perf_counter() <= deadline:
+                LOG.info("%s: optimising the robustness (%.1f s)", prop.id, time.perf_counter() - start)
                 found = self._optimise(model, prop, window, sim, rounds, opts, branching, deadline, monitors_of,
                                        seeding)
                 details["optimiser_runs"] = int(rounds[-1][3].runs)
+            LOG.info("%s: %s (%.1f s)", prop.id, "violation found" if found is not None else "no violation found",
+                     time.perf_counter() - start)
             if found is None and time.perf_counter() > deadline and "note" not in details:
                 details["note"] = (f"time budget of {opts.max_seconds:.3g} s (option max_seconds) "
                                    f"ended the search")
@@ -311,6 +322,7 @@ class MonteCarloBackend:
         sim.run(X, None, observers=monitors, signal=signal,
                 branches=None if choice is None else Branches(values=choice))
         runs = sampled_runs(model, sim, X, None, signal, choice, n_structured) if opts.keep_sets else []
+        LOG.info("simulated %d runs (%.1f s)", X.shape[0], time.perf_counter() - start)
         shared = (time.perf_counter() - start) / len(props)
         results = []
         for prop, monitor in zip(props, monitors):

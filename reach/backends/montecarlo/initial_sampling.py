@@ -8,7 +8,10 @@ hull: ``x = x0 + N z`` with ``E x0 = f`` and ``N`` an orthonormal basis of ``nul
   small (brute force: each ``d``-subset of facets solved as equalities, kept when feasible),
   else LP maximisers along the coordinate axes and random directions (each an extreme point);
   then one point per facet (the mean of the vertices on it) and the mean of the vertices;
-* *uniform interior*: hit-and-run (Smith 1984): from an interior point, a uniform random
+* *uniform interior*: by rejection from the bounding box where ``P`` fills at least
+  :data:`MIN_ACCEPTANCE` of the box (equalities only on coordinates the box pins, ``t == 0``) (exactly uniform; a box cut by a few loose
+  rows, as the ISS's initial box by its outputs' ranges, at a few products per sample), else
+  by hit-and-run (Smith 1984): from an interior point, a uniform random
   direction, a uniform point on the chord through ``P``; chains are run in parallel and only
   their state after a burn-in of ``30 d + 50`` steps is kept (one chain per sample).
 
@@ -40,6 +43,9 @@ MAX_PIECES = 10_000     # pieces of a sampled input signal over the horizon (eac
 TOL = 1e-9
 SWITCH_SIGNAL_RUNS = 2000   # one-switch input signals of the structured round, about (structured_signals)
 CHOICE_SLOTS = 8        # choice values per run where transitions may be enabled together (Branches)
+#: the least share of its bounding box a polytope must fill to be sampled by rejection from the
+#: box (at most 1 / MIN_ACCEPTANCE draws per point on average)
+MIN_ACCEPTANCE = 0.1
 
 
 class PolytopeSampler:
@@ -47,6 +53,7 @@ class PolytopeSampler:
 
     def __init__(self, P: LinearSet, low: np.ndarray, high: np.ndarray):
         self.P = P
+        self.low, self.high = np.asarray(low, float), np.asarray(high, float)
         n = P.A.shape[1]
         if P.E.shape[0]:
             x0, *_ = np.linalg.lstsq(P.E, P.f, rcond=None)
@@ -126,13 +133,36 @@ class PolytopeSampler:
 
     # ------------------------------------------------------------ interior
     def uniform(self, count: int, rng) -> np.ndarray:
-        """``count`` points by parallel hit-and-run chains from the centre."""
+        """``count`` points by rejection from the bounding box where ``P`` fills enough of it,
+        else by parallel hit-and-run chains from the centre."""
         Z = np.repeat(self.centre_z[None, :], count, axis=0)
         if self.d == 0:
             return self.to_x(Z)
+        X = self._rejection(count, rng)
+        if X is not None:
+            return X
         for _ in range(30 * self.d + 50):
             Z = self._step(Z, rng)
         return self.to_x(Z)
+
+    def _rejection(self, count: int, rng) -> np.ndarray | None:
+        """``count`` uniform points of ``P`` drawn uniformly in its bounding box and kept when
+        inside (exactly uniform on ``P``); None where the box is not finite or a first batch
+        keeps less than :data:`MIN_ACCEPTANCE` (an equality other than a coordinate pinned by
+        the box, ``t == 0``, keeps next to nothing)."""
+        if not (np.all(np.isfinite(self.low)) and np.all(np.isfinite(self.high))):
+            return None
+        kept, total = [], 0
+        for _ in range(int(np.ceil(2 / MIN_ACCEPTANCE))):
+            X = self.low + (self.high - self.low) * rng.random((count, self.low.size))
+            inside = X[self.contains(X)]
+            if not kept and inside.shape[0] < MIN_ACCEPTANCE * count:
+                return None
+            kept.append(inside)
+            total += inside.shape[0]
+            if total >= count:
+                return np.concatenate(kept)[:count]
+        return None
 
     def _step(self, Z, rng):
         u = rng.normal(size=Z.shape)

@@ -15,6 +15,7 @@ same answer whatever the split and the executor.
 from __future__ import annotations
 
 import itertools
+import logging
 import math
 import time
 
@@ -27,6 +28,7 @@ from reach.backends.montecarlo.options import Options
 from reach.model.automaton import HybridAutomaton
 from reach.model.simulate import Branches, Simulator, check_size, single_threaded
 
+LOG = logging.getLogger("reach.montecarlo")
 KEPT_RUNS = 40                 # sampled runs kept for pictures (option keep_sets)
 SWITCH_PROBABILITY = 0.3       # chance that a random run takes an enabled may-transition at a piece start
 
@@ -214,20 +216,32 @@ def _simulate_rounds(model, props, sim, opts: Options, X, tau, signal, choice, n
     per_unit = max(1, -(-opts.batch // SAMPLE_BLOCK))
     units = [(model, props, sim.dt, opts.seed, blocks[i:i + per_unit], deadline)
              for i in range(0, len(blocks), per_unit)]
+    begin = time.perf_counter()
     if len(units) <= 1 or (opts.jobs <= 1 and opts.scheduler is None):
-        out = [simulate_blocks(*unit) for unit in units]
+        out = []
+        for unit in units:
+            out.append(simulate_blocks(*unit))
+            _progress(len(out), len(units), begin)
     else:
         from reach.executors import make_executor
 
         out = [None] * len(units)
-        for i, (status, value) in make_executor(opts.jobs, opts.scheduler).map_unordered(simulate_blocks, units):
+        for done, (i, (status, value)) in enumerate(
+                make_executor(opts.jobs, opts.scheduler).map_unordered(simulate_blocks, units), start=1):
             if status != "ok":
                 raise RuntimeError(f"a Monte Carlo batch did not finish ({status})")
             out[i] = value
+            _progress(done, len(units), begin)
     done = [j for i, unit in enumerate(out) for j in range(i * per_unit, i * per_unit + len(unit))]
     kept = np.concatenate([np.arange(n_structured)] + [np.arange(starts[j], min(starts[j] + SAMPLE_BLOCK, X.shape[0]))
                                                        for j in done]).astype(int)
     return parts + [part for unit in out for part in unit], kept
+
+
+def _progress(done: int, total: int, begin: float) -> None:
+    """One line under ``-v`` per batch of i.i.d. runs simulated, when there are several."""
+    if total > 1:
+        LOG.info("batch %d of %d of random runs simulated (%.1f s)", done, total, time.perf_counter() - begin)
 
 
 def simulate_blocks(model, props, dt, seed, blocks, deadline: float = math.inf) -> list:

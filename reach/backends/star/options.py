@@ -193,23 +193,30 @@ class StarOptions:
         return cls(**parse_options(cls, options, "star"))
 
 
-#: the most grid cells a cfg's sampling time may ask of star (100 times the default 60)
+#: the most grid cells a cfg's sampling time may ask of star (100 times the default 60) on a
+#: model of up to HINT_FULL_STATES states; a cell's work grows as the cube of the states (its
+#: stars' bases), so on larger models the cap falls with it, down to the default step: the ISS
+#: (273 states, SpaceEx's sampling time 0.001 over 20 s) is checked at star's own step in
+#: 20 s instead of running out of its 120 s on 6000 cells
 MAX_HINT_CELLS = 6000
+HINT_FULL_STATES = 32
 
 
-def cfg_hints(notes: dict, horizon: float, options: dict | None) -> dict:
-    """Star options from a SpaceEx cfg (``notes`` of the imported model) where the user set
-    none: ``sampling-time`` bounds the step from above (``step = min(sampling-time,
-    horizon / 60)``: a finer step costs time, never soundness), though never below
-    ``horizon / MAX_HINT_CELLS`` (SpaceEx's time step for its own discrete-time scheme, 1e-5
-    over 20 s, would be two million cells for star, which covers the time between grid points
-    anyway), and ``iter-max`` (when not
-    negative: SpaceEx's "no bound") becomes ``max_jumps``, so a path with more jumps ends the
-    check in UNKNOWN, never in SAFE."""
+def cfg_hints(notes: dict, horizon: float, options: dict | None, states: int = 0) -> dict:
+    """Star options from a SpaceEx cfg (``notes`` of the imported model, which has ``states``
+    states) where the user set none: ``sampling-time`` bounds the step from above
+    (``step = min(sampling-time, horizon / 60)``: a finer step costs time, never soundness),
+    though never below ``horizon / cells`` with ``cells = MAX_HINT_CELLS min(1,
+    (HINT_FULL_STATES / states)^3)`` (SpaceEx's time step for its own discrete-time scheme,
+    1e-5 over 20 s, would be two million cells for star, which covers the time between grid
+    points anyway; on a large model each cell costs the cube of its states), and ``iter-max``
+    (when not negative: SpaceEx's "no bound") becomes ``max_jumps``, so a path with more jumps
+    ends the check in UNKNOWN, never in SAFE."""
     options = dict(options or {})
     sampling = notes.get("sampling-time")
-    if "step" not in options and sampling is not None and 0 < sampling < horizon / 60.0:
-        options["step"] = max(float(sampling), horizon / MAX_HINT_CELLS)
+    cells = MAX_HINT_CELLS * min(1.0, (HINT_FULL_STATES / max(states, 1)) ** 3)
+    if "step" not in options and sampling is not None and 0 < sampling < horizon / 60.0 and cells > 60:
+        options["step"] = max(float(sampling), horizon / cells)
     iterations = notes.get("iter-max")
     if "max_jumps" not in options and iterations is not None and iterations >= 0:
         options["max_jumps"] = int(iterations)

@@ -67,7 +67,7 @@ from reach.backends.taylor.units import expand_boxes, sweep_box
 from reach.result import Result, Status
 from reach.backends.taylor.safety import check_safety, margins
 from reach.backends.taylor.window import unsupported_window, with_switch_time
-from reach.executors import _limit_memory, guarded
+from reach.executors import _worker_start, guarded
 from reach.spec.properties import BoundEvent, BoundSafety
 
 
@@ -401,7 +401,7 @@ def _unit_runner(opts: Options, portable: bool):
         yield lambda fn, arg_list: [fn(*args) for args in arg_list]
         return
     if opts.scheduler is None:
-        with ProcessPoolExecutor(max_workers=opts.jobs, initializer=_limit_memory) as pool:
+        with ProcessPoolExecutor(max_workers=opts.jobs, initializer=_worker_start) as pool:
             yield _runner(_Workers(pool))
         return
     from reach.executors import make_executor

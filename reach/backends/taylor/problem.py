@@ -339,6 +339,7 @@ class EventProblem:
                     grid = run.grid()
                     leave = code.exit(grid)
                 last = len(run.nodes) - 1 if leave is None else leave[0]
+                to_horizon = run            # the nominal run in the mode, up to its switch or the horizon
                 if code.q is not None:
                     out.add(entry, code.q(X), partial)
                     values = np.asarray(code.q_numeric(list(grid[: last + 1].T)))
@@ -356,7 +357,6 @@ class EventProblem:
                                        f"{t0 + run.nodes[flat]:.6g} in mode '{mode}' and perturbed runs are not: "
                                        "their extrema there continue no nominal one")
                 if leave is None:
-                    to_horizon = run
                     leave, run = yield from self._continued(code, X, t0, tol)
                     if leave is None:                   # the nominal run does not switch
                         at_T = yield from self._at_horizon(code, X, to_horizon.nodes, t0, hop, order)
