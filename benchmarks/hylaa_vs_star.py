@@ -390,8 +390,7 @@ def load_aff(name: str):
     pieces = {m: [piece for b in bound for piece in b.pieces.get(m, [])] for m in modes}
     from reach.backends.star.options import cfg_hints
     return (model, BoundSafety(docs.property_id, modes, pieces, model.symbols, str(cfg), f"forbidden set of {cfg}"),
-            cfg_hints(docs.model.get("notes", {}), model.horizon, dict(rest[1]) if len(rest) > 1 else {},
-                      len(model.state)))
+            cfg_hints(docs.model.get("notes", {}), dict(rest[1]) if len(rest) > 1 else {}))
 
 
 def compare_aff(name: str, args) -> str:

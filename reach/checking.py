@@ -98,12 +98,12 @@ def exit_code(results: list[Result]) -> int:
 
 def check_model(backend, model, bound: list, options: dict | None = None) -> list[Result]:
     """Check bound properties; back-ends with ``check_many`` share work across properties. For
-    star, a SpaceEx cfg's hints that the model keeps (``sampling-time``, ``iter-max``) become
-    option defaults (:func:`reach.backends.star.options.cfg_hints`), so an imported model is
-    checked as its SpaceEx files are."""
+    star, a SpaceEx cfg's hint that the model keeps (``iter-max``) becomes an option default
+    (:func:`reach.backends.star.options.cfg_hints`), so an imported model is checked as its
+    SpaceEx files are."""
     if backend.name == "star" and model.hints:
         from reach.backends.star.options import cfg_hints
-        options = cfg_hints(model.hints, model.horizon, options, len(model.state))
+        options = cfg_hints(model.hints, options)
     results: dict[int, Result] = {}
     todo = []
     for prop in bound:
@@ -138,8 +138,8 @@ def check_spaceex(xml_path, cfg_path, backend_name: str, options: dict | None = 
     """Check a SpaceEx model against its cfg's forbidden set: one property whose id is the cfg's
     file name and whose unsafe set is the union of the forbidden terms. Returns
     ``(results, model, documents, {id: bound property})``. A cfg that forbids nothing is bad
-    input (a run would prove nothing). For star the cfg's ``sampling-time`` and ``iter-max``
-    become option defaults, as for the imported model (:func:`check_model`)."""
+    input (a run would prove nothing). For star the cfg's ``iter-max`` becomes an option
+    default, as for the imported model (:func:`check_model`)."""
     from reach.model.spaceex import load_spaceex
     from reach.spec.properties import BoundSafety
 

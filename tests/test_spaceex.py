@@ -593,19 +593,23 @@ def test_a_forbidden_location_reads_as_never_in_it(tmp_path, capsys, horizon, co
 
 
 def test_imported_model_keeps_the_cfg_hints_for_star(tmp_path):
-    """The cfg's ``sampling-time`` bounds star's step and ``iter-max`` its jumps: on the SpaceEx
-    files and on their import alike (the notes carry them), so both give the same verdicts."""
+    """The cfg's ``iter-max`` bounds star's jumps on the SpaceEx files and on their import alike
+    (the notes carry it), so both give the same verdicts: the ball lands in 'hit' at
+    sqrt(2 / 9.81) = 0.4515, past the horizon 0.44 but not past 0.5, where iter-max 0 leaves it
+    UNKNOWN (one jump allowed: UNSAFE). The sampling time sets no step: star keeps its own
+    (horizon / 60)."""
     from reach.checking import check_files, check_spaceex
-    xml, cfg = write(tmp_path, BALL, 'system = ball\ninitially = "loc(ball)==air & x == 1 & v == 0"\n'
-                                     'forbidden = "loc(ball)==hit"\ntime-horizon = 0.44\n'
-                                     'sampling-time = 0.001\niter-max = 0\n')
-    direct = check_spaceex(xml, cfg, "star")[0][0]
-    assert main(["import", str(xml), str(cfg), "--out", str(tmp_path / "out")]) == 0
-    imported = check_files(tmp_path / "out/models/m.yaml", tmp_path / "out/properties/m.yaml", "star")[0]
-    for result in (direct, imported):
-        assert result.status.value == "SAFE" and result.details["step"] == 0.001
+    for horizon, status in [(0.44, "SAFE"), (0.5, "UNKNOWN")]:
+        xml, cfg = write(tmp_path, BALL, 'system = ball\ninitially = "loc(ball)==air & x == 1 & v == 0"\n'
+                                         f'forbidden = "loc(ball)==hit"\ntime-horizon = {horizon}\n'
+                                         'sampling-time = 0.001\niter-max = 0\n')
+        direct = check_spaceex(xml, cfg, "star")[0][0]
+        assert main(["import", str(xml), str(cfg), "--out", str(tmp_path / "out")]) == 0
+        imported = check_files(tmp_path / "out/models/m.yaml", tmp_path / "out/properties/m.yaml", "star")[0]
+        for result in (direct, imported):
+            assert result.status.value == status and result.details["step"] == pytest.approx(horizon / 60)
     assert check_files(tmp_path / "out/models/m.yaml", tmp_path / "out/properties/m.yaml", "star",
-                       {"step": 0.002})[0].details["step"] == 0.002          # an explicit option wins
+                       {"max_jumps": 1})[0].status.value == "UNSAFE"        # an explicit option wins
 
 
 @pytest.mark.parametrize("notes, message", [("{sampling-time: -1}", "expected a positive time"),
@@ -648,21 +652,6 @@ def test_a_variable_a_flow_sets_cannot_be_mapped_to_a_number(tmp_path, capsys):
         f"reach: {xml}:6: the variable 'x' of component 'plant' is mapped to the number 1 (at instance 'p'), "
         "but its flow in location 'run' sets it (only a variable that no flow or assignment sets, an input, "
         "may be fixed to a number)")
-
-
-def test_a_sampling_time_too_fine_for_star_is_capped():
-    """SpaceEx's own time step (1e-5 over 20 s) would be two million cells: star's step stops at
-    horizon / MAX_HINT_CELLS; a coarser hint is taken as it is, one above horizon / 60 not at all.
-    Past HINT_FULL_STATES states the cap falls with the cube of the states (a cell's work), and
-    on the ISS's 273 star keeps its own step."""
-    from reach.backends.star.options import HINT_FULL_STATES, MAX_HINT_CELLS, cfg_hints
-    assert cfg_hints({"sampling-time": 1e-5}, 20.0, {})["step"] == 20.0 / MAX_HINT_CELLS
-    assert cfg_hints({"sampling-time": 1e-5}, 20.0, {}, HINT_FULL_STATES)["step"] == 20.0 / MAX_HINT_CELLS
-    assert cfg_hints({"sampling-time": 0.05}, 20.0, {})["step"] == 0.05
-    assert "step" not in cfg_hints({"sampling-time": 1.0}, 20.0, {})
-    assert cfg_hints({"sampling-time": 1e-5}, 20.0, {}, 2 * HINT_FULL_STATES)["step"] == pytest.approx(
-        20.0 / (MAX_HINT_CELLS / 8))
-    assert "step" not in cfg_hints({"sampling-time": 0.001}, 20.0, {}, 273)
 
 
 def test_an_alias_longer_than_a_page_imports_and_checks(tmp_path):

@@ -246,3 +246,21 @@ def test_a_timed_switch_at_the_horizon_is_an_answer(tmp_path, horizon):
             state, t = sol.y[:, -1], t + span
     low, high = result.details["margin_bound"]
     assert low <= 2 - largest <= high + 1e-9
+
+
+def test_a_run_released_at_its_extremum_keeps_the_extremum_of_its_neighbours(tmp_path):
+    """th' = w, w' = -th from th in [0.9, 1.1], w in [-0.1, 0.1]: the nominal run starts at rest
+    at its maximum, but runs with w > 0 rise to hypot(th0, w0) (closed form), at most
+    hypot(1.1, 0.1) = 1.10454, just after the start. The estimated bound on max th must hold it
+    (it was [0.9, 1.1]), and th <= 1.102 is violated with a counterexample."""
+    (tmp_path / "m.yaml").write_text("name: osc\nstate: [th, w]\nmodes:\n  m: {flow: {th: w, w: '-th'}}\n"
+                                     "initial: {mode: m, box: {th: [0.9, 1.1], w: [-0.1, 0.1]}}\nhorizon: 1\n")
+    (tmp_path / "p.yaml").write_text("properties:\n"
+                                     "  - {id: ev, kind: event, modes: [m], maximize: th, require: '<= 1.102'}\n"
+                                     "  - {id: cap, kind: safety, modes: [m], require: ['th <= 1.102']}\n")
+    model = load_model(tmp_path / "m.yaml")
+    event, cap = [bind(p, model) for p in load_properties(tmp_path / "p.yaml")]
+    low, high = BACKEND.check(model, event, {}).bound
+    assert low <= np.hypot(1.1, 0.1) <= high
+    result = BACKEND.check(model, cap, {})
+    assert result.status is Status.UNSAFE

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 import sympy
 
-from reach.backends.taylor.bound import enclose, estimated_remainder
+from reach.backends.taylor.bound import enclose, estimated_remainder, polynomial_range
 from reach.backends.taylor.da import DA, algebra
 from reach.backends.taylor.deadline import NONE, Deadline
 from reach.backends.taylor.event import (Picard, event_map_steps, fixed_time_map_steps, initial_state,
@@ -343,8 +343,11 @@ class EventProblem:
                 if code.q is not None:
                     out.add(entry, code.q(X), partial)
                     values = np.asarray(code.q_numeric(list(grid[: last + 1].T)))
-                    for k in local_extrema(values, self.prop.sense):
-                        tk = run.sharpen(k, lambda Y: sign * np.asarray(code.q_numeric(list(Y))))
+                    turning = list(local_extrema(values, self.prop.sense))
+                    if _turns_at_entry(code.qdot(X)):
+                        turning.insert(0, None)
+                    for k in turning:
+                        tk = 0.0 if k is None else run.sharpen(k, lambda Y: sign * np.asarray(code.q_numeric(list(Y))))
                         t_e, _ = yield from refine_time_steps(code.f, code.qdot, run.solution, tk, order)
                         em = yield from event_map_steps(code.f, code.qdot, X, run.nodes, t_e, order)
                         late = self._time_range(self._event_time(em, t0))[1] > T
@@ -675,6 +678,18 @@ def _plateau(values: np.ndarray) -> int | None:
     steps = np.abs(np.diff(values))
     still = np.flatnonzero(steps <= 1e-12 * (1.0 + np.abs(values[:-1])))
     return int(still[0]) if still.size else None
+
+
+def _turns_at_entry(rate: DA) -> bool:
+    """Whether the quantity's rate at the mode's entry, a polynomial over the subdomain, may
+    take both signs (its range, eq. (27), holds 0): some runs then start moving against the
+    nominal run's way and reach an extremum just after the entry that no extremum of the nominal
+    run continues (a pendulum released at rest, nominally at its maximum). Such an extremum is
+    one more candidate, from the time the rate vanishes (the event map of ``qdot = 0`` taken
+    from t = 0; runs whose root lies before the entry add the value of their run continued
+    backwards, which only widens the bound)."""
+    lo, hi = polynomial_range(rate)
+    return bool(np.all(np.isfinite([lo, hi])) and lo <= 0.0 <= hi and _varies(rate))
 
 
 def _varies(p: DA) -> bool:

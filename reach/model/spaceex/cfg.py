@@ -1,7 +1,7 @@
 """SpaceEx configuration files (``.cfg``): ``key = value`` lines, ``#`` comments, quoted values.
 
 Read: ``system`` (the component to analyse), ``initially`` and ``forbidden`` (formulas),
-``time-horizon``, ``iter-max`` and ``sampling-time`` (a step hint). The other keys are options of
+``time-horizon``, ``iter-max`` and ``sampling-time`` (kept in the model's notes). The other keys are options of
 SpaceEx's own algorithms (scenario, directions, tolerances, output) and are kept but unused.
 A key that is none of SpaceEx's and is spelt like one that is read (``forbiden``) is bad input:
 what it was meant to say would otherwise be dropped without a word.
