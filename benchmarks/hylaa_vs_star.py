@@ -343,8 +343,8 @@ def hylaa_verdict(result: dict) -> str:
 #: no usable sampling time, so the steps are those of Hylaa's ARCH-COMP AFF runs where there is
 #: one (0.01 s for Building; 5e-4 s in Hylaa's examples/drivetrain, the ARCH-COMP 2018 drivetrain
 #: encoding; 0.1 min in its examples/rendezvous), 1/500 of the horizon for Gearbox, 0.01 s for
-#: Platoon (no Hylaa Platoon run in the reports) and the cfg's sampling-time 0.02 for the
-#: filtered oscillator (no ARCH instance).
+#: Platoon (no Hylaa Platoon run in the reports), the cfg's sampling-time 0.02 for the
+#: filtered oscillator (no ARCH instance) and 0.01 for the ISS (2000 steps over 20).
 AFF = {
     "BLDC01-BDS01": ("Building/BLDC01.xml", "Building/BLDC01-BDS01.cfg", 0.01),
     "BLDF01-BDS01": ("Building/BLDF01.xml", "Building/BLDF01-BDS01.cfg", 0.01),
@@ -372,6 +372,8 @@ AFF = {
                                 "FilteredOscillator/filtered_oscillator-x07.cfg", 0.02),
     "filtered_oscillator-x06": ("FilteredOscillator/filtered_oscillator.xml",
                                 "FilteredOscillator/filtered_oscillator-x06.cfg", 0.02),
+    "ISSC01-ISS02": ("SpaceStation/iss_270.xml", "SpaceStation/ISSC01-ISS02-forbidden.cfg", 0.01),
+    "ISSC01-ISU02": ("SpaceStation/iss_270.xml", "SpaceStation/ISSC01-ISU02-forbidden.cfg", 0.01),
 }
 
 

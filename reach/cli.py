@@ -32,6 +32,7 @@ import json
 import logging
 import math
 import os
+import shlex
 import sys
 import warnings
 from pathlib import Path
@@ -128,7 +129,8 @@ def _report(args, results, bound: dict, model, saved: dict, title: str, empty: s
         print(printable(f"  {r.property:<16} {status:<11} {r.seconds:8.2f} s  "
                         f"{summary(r, bound.get(r.property), model)}"))
         if r.property in saved:
-            print(printable(f"  {'':<16} counterexample: {saved[r.property]}  (reach replay {saved[r.property]})"))
+            print(printable(f"  {'':<16} counterexample: {saved[r.property]}  "
+                            f"(reach replay {shlex.quote(str(saved[r.property]))})"))
     return exit_code(results)
 
 
@@ -295,6 +297,9 @@ def _figure_path(out: str | None, default: Path) -> Path:
     from matplotlib.figure import Figure
 
     path = Path(out) if out else default
+    if path.is_dir():
+        raise InputError(f"{printable(path)} is a folder (give a file name such as {printable(path / default.name)})",
+                         field="--out")
     formats = Figure().canvas.get_supported_filetypes()
     if path.suffix.lstrip(".").lower() not in formats:
         raise InputError(f"unknown picture format '{path.suffix or '(none)'}'; use one of "

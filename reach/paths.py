@@ -119,14 +119,25 @@ def writable_folder(folder, option: str) -> Path:
 
 def writable_file(path, option: str) -> Path:
     """``path`` can be written: its folder exists or is made (:func:`writable_folder`), and it is
-    not a read-only file nor a symbolic link (writing would go through it, to wherever it
-    points)."""
+    not a folder, a read-only file nor a symbolic link (writing would go through it, to wherever
+    it points); a file is opened (and removed again if it was new), so that a place that takes
+    no file (``/proc``) is bad input before any computation, not after it."""
     path = Path(path)
     writable_folder(path.parent, option)
     if path.is_symlink():
         raise InputError(f"{printable(path)} is a symbolic link: not written through", field=option)
+    if path.is_dir():
+        raise InputError(f"{printable(path)} is a folder (give a file name)", field=option)
     if path.exists() and not os.access(path, os.W_OK):
         raise InputError(f"cannot write {printable(path)}", field=option)
+    existed = path.exists()
+    try:                    # a folder the file system will not create files in (/proc), checked now
+        with open(path, "ab"):
+            pass
+    except OSError as exc:
+        raise InputError(f"cannot write {printable(path)} ({exc.__class__.__name__})", field=option) from None
+    if not existed:
+        path.unlink(missing_ok=True)
     return path
 
 

@@ -88,7 +88,11 @@ def parse_text(text: str, file: str) -> Doc:
         raise InputError(f"invalid YAML: {exc.problem or exc.context}{hint}", file, line=line) from None
     except yaml.YAMLError as exc:
         raise InputError(f"invalid YAML: {exc}", file) from None
-    except (RecursionError, ValueError, TypeError, OverflowError) as exc:
+    except RecursionError:
+        line = getattr(loader, "line", None)
+        raise InputError("invalid YAML: nested too deeply", file,
+                         line=line + 1 if isinstance(line, int) else None) from None
+    except (ValueError, TypeError, OverflowError) as exc:
         raise InputError(f"invalid YAML: {type(exc).__name__}", file) from None
     finally:
         loader.dispose()

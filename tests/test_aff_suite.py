@@ -46,6 +46,8 @@ SOURCES = {
                                 "FilteredOscillator/filtered_oscillator-x06.cfg"),
     "DTN-2theta-30": ("Powertrain/drivetrain_2theta_30percent.xml",
                       "Powertrain/drivetrain_2theta_30percent-forbidden.cfg"),
+    "ISSC01-ISS02": ("SpaceStation/iss_270.xml", "SpaceStation/ISSC01-ISS02-forbidden.cfg"),
+    "ISSC01-ISU02": ("SpaceStation/iss_270.xml", "SpaceStation/ISSC01-ISU02-forbidden.cfg"),
 }
 #: the imported file's name where it is not the instance's
 FILE = {"PLAD01-BND42": "PLAD01-BND42-forbidden", "PLAD01-BND30": "PLAD01-BND30-forbidden",
@@ -53,7 +55,8 @@ FILE = {"PLAD01-BND42": "PLAD01-BND42-forbidden", "PLAD01-BND30": "PLAD01-BND30-
         "PLAN01-UNB50": "PLAN01-UNB50-forbidden", "PLAA01-BND50": "PLAA01-BND50-forbidden",
         "PLAA01-BND50-h20": "PLAA01-BND50-h20-forbidden",
         "SRA01-SR0-LOS": "SRA01-SR0_-LOS", "SRA01-SR0-collision": "SRA01-SR0_-collision",
-        "SRNA01-SR0-LOS": "SRNA01-SR0_-LOS", "DTN-2theta-30": "drivetrain_2theta_30percent-forbidden"}
+        "SRNA01-SR0-LOS": "SRNA01-SR0_-LOS", "DTN-2theta-30": "drivetrain_2theta_30percent-forbidden",
+        "ISSC01-ISS02": "ISSC01-ISS02-forbidden", "ISSC01-ISU02": "ISSC01-ISU02-forbidden"}
 THRESHOLD = -0.00078                     # BDU02: forbidden x25 < -7.8e-4 at t = 20
 T_END = 20.0
 
@@ -329,3 +332,35 @@ def test_bench_plots_a_one_state_suite_model(tmp_path):
     target = tmp_path / "thermostat_runs.png"
     plot_model_runs(model, target, runs=4)
     assert target.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_iss_expected_verdicts_follow_from_the_linear_flow():
+    """ISSC01 (270 states, constant inputs as states): y3 = c x is linear in the initial state, so
+    at each instant its extremes over the initial polytope are LPs and over the polytope's box a
+    closed form (a weaker bound). On a grid of 2001 instants over [0, 20] the box bound stays
+    inside |y3| < 5e-4 (ISS02: safe), and one LP at t = 0.5 (where star's witness violates)
+    brings y3 below -1.7e-4 (ISU02: unsafe) while the box keeps it above -5e-4."""
+    from reach import lp
+    from reach.model.constraints import halfspaces
+    model, props, _ = load_spaceex(SPACEEX / "SpaceStation/iss_270.xml",
+                                   SPACEEX / "SpaceStation/ISSC01-ISU02-forbidden.cfg")
+    below = bind(props[1], model).pieces["Model"][0]           # y3 <= -1.7e-4 as c x <= g
+    (c,), (g,) = halfspaces(below, model.symbols)
+    assert g == pytest.approx(-1.7e-4)
+    A, b = model.modes["Model"].linear
+    n = len(model.state)
+    M = np.zeros((n + 1, n + 1))
+    M[:n, :n], M[:n, n] = A, b
+    step = sl.expm(0.01 * M)
+    low, high = model.initial.low, model.initial.high
+    row, extremes = np.append(c, 0.0), []
+    for _ in range(2001):                                      # row = (c, 0) e^{M t}: y3(t) = row (x0, 1)
+        w, w0 = row[:-1], row[-1]
+        extremes.append((w0 + np.minimum(w * low, w * high).sum(), w0 + np.maximum(w * low, w * high).sum()))
+        row = row @ step
+    extremes = np.array(extremes)
+    assert -5e-4 < extremes[:, 0].min() and extremes[:, 1].max() < 5e-4
+    row = np.append(c, 0.0) @ sl.expm(0.5 * M)
+    P = model.initial.polytope
+    res = lp.maximize(-row[:-1], P.A, P.b, A_eq=P.E, b_eq=P.f)
+    assert res.optimal and -res.value + row[-1] < -1.7e-4

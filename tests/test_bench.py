@@ -135,3 +135,43 @@ instances:
     assert "expected safe, but no back-end proved it (montecarlo UNKNOWN)" in notes[0]
     with pytest.raises(InputError, match="no unit to run: star runs on none of the chosen instances"):
         run_suite(suite, out=tmp_path / "out2", jobs=1, backends=["star"])
+
+
+def test_two_filtered_runs_into_one_folder_keep_each_others_rows(tmp_path, monkeypatch):
+    """Two filtered runs (one instance each) that finish together into the same --out: each
+    merges its rows under a lock, so neither overwrites the other's (both instances' rows end
+    in results.json). Reading the earlier rows is slowed down so that, unlocked, both runs would
+    read before either writes."""
+    import threading
+    import time
+
+    import reach.bench.runner as runner
+    read = runner.previous_rows
+
+    def slow_read(*args, **kwargs):
+        rows = read(*args, **kwargs)
+        time.sleep(0.5)
+        return rows
+    monkeypatch.setattr(runner, "previous_rows", slow_read)
+    root = __import__("pathlib").Path.cwd()
+    suite = tmp_path / "suite.yaml"
+    suite.write_text(f"""backends:
+  montecarlo: {{samples: 5, search_rounds: 0, optimise: false}}
+instances:
+  - id: one
+    model: {root}/models/thermostat.yaml
+    properties: {root}/properties/thermostat.yaml
+  - id: two
+    model: {root}/models/thermostat.yaml
+    properties: {root}/properties/thermostat.yaml
+""")
+    import io
+    threads = [threading.Thread(target=run_suite, args=(suite,),
+                                kwargs={"instances": [i], "out": tmp_path / "out", "jobs": 1, "stream": io.StringIO()})
+               for i in ("one", "two")]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    report = json.loads((tmp_path / "out" / "results.json").read_text())
+    assert {r["instance"] for r in report["rows"]} == {"one", "two"}

@@ -52,8 +52,6 @@ MALFORMED = [
      .replace("horizon: 240", "horizon: 240\nmodes:\n  passive:\n    flow: {vx: vyy}"),
      ":8: modes.passive.flow.vx: unknown name 'vyy'"),
     ("yaml syntax", "name: x\nstate: [x, y\n", "invalid YAML"),
-    ("control character", "name: x\nstate: [x]\nhorizon: 1\u0086\n", ":3: invalid YAML: special characters are not "
-                                                                     "allowed (U+0086)"),
     ("missing field", "name: x\nstate: [x]\nmodes: {a: {flow: {x: 1}}}\n", "missing required field 'initial'"),
     ("unknown top field", "name: x\nhorizont: 3\n", "unknown field 'horizont'"),
     ("code injection", "name: x\nstate: [x]\nmodes: {a: {flow: {x: \"__import__('os').getcwd()\"}}}\n"
@@ -71,6 +69,8 @@ MALFORMED = [
      "disturbance: {gaussian: {cov: [[1, 2], [2, 1]]}, enters: [x], step: 1}\n", "expected a 1x1 matrix"),
     ("bad units base", "name: x\nunits: {time: kg}\n", "'kg' is not a unit of time"),
     ("cyclic constants", "name: x\nstate: [x]\nconstants: {a: b, b: a}\n", "cycle"),
+    ("control character", "name: x\nstate: [x]\nhorizon: 1\u0086\n", ":3: invalid YAML: special characters are not "
+                                                                     "allowed (U+0086)"),
 ]
 
 

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import fcntl
 import json
 import platform
 import sys
 import time
+from contextlib import contextmanager
 from datetime import datetime, timezone
 from pathlib import Path
 
@@ -132,6 +134,19 @@ def read_report(path) -> dict:
     return report
 
 
+@contextmanager
+def _results_lock(out: Path):
+    """An exclusive lock on ``out``'s results while a run merges its rows into them and writes
+    them (another run writing the same folder waits, then keeps these rows)."""
+    out.mkdir(parents=True, exist_ok=True)
+    with open(out / ".results.lock", "a") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
+
+
 def run_suite(suite_path, backends=None, instances=None, out="results", jobs=None, scheduler=None,
               time_limit=None, stream=sys.stdout) -> int:
     """Run (a filtered part of) a suite; exit code 1 if a cross-check fails, else 3 if one
@@ -168,7 +183,7 @@ def run_suite(suite_path, backends=None, instances=None, out="results", jobs=Non
     executor = make_executor(jobs, scheduler)
     run_id = datetime.now(timezone.utc).isoformat(timespec="seconds")
     flags = [f"--backend {b}" for b in backends or []] + [f"--instance {i}" for i in instances or []]
-    print(f"reach bench: {len(units)} units ({len(chosen)} instances x {len(names)} back-ends) "
+    print(f"reach bench: {len(units)} units ({len(chosen)} instances, {len({b for _, b in units})} back-ends) "
           f"on {executor.name} executor", file=stream)
     for b in missing:
         print(f"  back-end '{b}' is not available in this installation; skipped", file=stream)
@@ -192,29 +207,30 @@ def run_suite(suite_path, backends=None, instances=None, out="results", jobs=Non
               file=stream, flush=True)
     wall = time.perf_counter() - start
     out = Path(out)
-    runs = []
-    if flags:
-        kept, runs = previous_rows(out / "results.json", suite_path, {(inst.id, b) for inst, b in units},
-                                   {i.id for i in suite.instances}, stream)
-        if kept:
-            print(f"  kept {len(kept)} rows of earlier runs in {out / 'results.json'}", file=stream)
-        rows = kept + rows
-    runs = [r for r in runs if any(row.get("run") == r["run"] for row in rows)]
-    runs.append({"run": run_id, "filter": " ".join(flags), "wall_seconds": wall})
-    checks = cross_check(rows)
-    (out / "plots").mkdir(parents=True, exist_ok=True)
-    report = {
-        "suite": str(suite_path), "started": run_id,
-        "machine": {"python": platform.python_version(), "platform": platform.platform(),
-                    "processor": platform.machine()},
-        "executor": executor.name, "wall_seconds": wall,
-        "backends": [b for b in suite.backends if any(r.get("backend") == b for r in rows)],
-        "runs": runs, "rows": rows, "cross_checks": checks,
-    }
-    report["plots"] = plot_models(chosen, out / "plots", stream, executor) + plot_subdomains(
-        [r for r in rows if r.get("run") == run_id], out / "plots")
-    (out / "results.json").write_text(json.dumps(report, indent=1))
-    (out / "results.md").write_text(markdown_table(report, out))
+    with _results_lock(out):        # two runs writing one folder merge their rows in turn
+        runs = []
+        if flags:
+            kept, runs = previous_rows(out / "results.json", suite_path, {(inst.id, b) for inst, b in units},
+                                       {i.id for i in suite.instances}, stream)
+            if kept:
+                print(f"  kept {len(kept)} rows of earlier runs in {out / 'results.json'}", file=stream)
+            rows = kept + rows
+        runs = [r for r in runs if any(row.get("run") == r["run"] for row in rows)]
+        runs.append({"run": run_id, "filter": " ".join(flags), "wall_seconds": wall})
+        checks = cross_check(rows)
+        (out / "plots").mkdir(parents=True, exist_ok=True)
+        report = {
+            "suite": str(suite_path), "started": run_id,
+            "machine": {"python": platform.python_version(), "platform": platform.platform(),
+                        "processor": platform.machine()},
+            "executor": executor.name, "wall_seconds": wall,
+            "backends": [b for b in suite.backends if any(r.get("backend") == b for r in rows)],
+            "runs": runs, "rows": rows, "cross_checks": checks,
+        }
+        report["plots"] = plot_models(chosen, out / "plots", stream, executor) + plot_subdomains(
+            [r for r in rows if r.get("run") == run_id], out / "plots")
+        (out / "results.json").write_text(json.dumps(report, indent=1))
+        (out / "results.md").write_text(markdown_table(report, out))
     failures = [c for c in checks if c["level"] == "fail"]
     print(f"wall time {wall:.1f} s; cross-checks: {len(checks) - len(failures)} notes, {len(failures)} failures",
           file=stream)

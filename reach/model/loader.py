@@ -122,6 +122,8 @@ def read_with_templates(path: Path, depth: int = 0, chain=()) -> Doc:
         raise where.error(f"'{printable(parent)}' is not a regular file (a template must be a plain YAML file)")
     if parent_path in chain or depth >= MAX_EXTENDS:
         raise where.error("'extends' forms a cycle or is nested too deeply")
+    if parent_path.suffix.lower() not in (".yaml", ".yml"):
+        raise where.error(f"'{printable(parent)}' is not a .yaml or .yml file (a template is a model file)")
     base = read_with_templates(parent_path, depth + 1, chain + (path.resolve(),))
     merged = merge(base, doc)
     merged.data.pop("extends", None)

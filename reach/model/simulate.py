@@ -519,6 +519,7 @@ class Simulator:
         while True:
             active = np.flatnonzero((t < horizon - 1e-12) & np.isnan(blocked_at))
             if active.size == 0:
+                self._urgent_now(np.flatnonzero(np.isnan(blocked_at)), runs)    # jumps due at the horizon
                 break
             now = np.floor(t[active] / self.dt)
             stuck = now == cell[active]

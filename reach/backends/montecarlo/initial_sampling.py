@@ -29,6 +29,7 @@ random ones (:func:`branch_plan`).
 from __future__ import annotations
 
 import itertools
+from functools import cached_property
 from math import comb
 
 import numpy as np
@@ -66,8 +67,6 @@ class PolytopeSampler:
         keep = np.linalg.norm(self.G, axis=1) > TOL  # rows constant on the hull
         self.G, self.h = self.G[keep], self.h[keep]
         self.d = self.N.shape[1]
-        self.vertices = self._vertices()
-        self.centre_z = self._centre()
 
     def to_x(self, Z: np.ndarray) -> np.ndarray:
         return self.x0 + Z @ self.N.T
@@ -83,6 +82,16 @@ class PolytopeSampler:
         return ok
 
     # ------------------------------------------------------------ extreme points
+    @cached_property
+    def vertices(self) -> np.ndarray:
+        """The extreme points (hull coordinates), found on first use: a containment test needs
+        none (on the ISS's 273-dimensional polytope they are 1638 LPs)."""
+        return self._vertices()
+
+    @cached_property
+    def centre_z(self) -> np.ndarray:
+        return self._centre()
+
     def _vertices(self) -> np.ndarray:
         d, k = self.d, self.G.shape[0]
         if d == 0:

@@ -348,7 +348,12 @@ class EventProblem:
                         turning.insert(0, None)
                     for k in turning:
                         tk = 0.0 if k is None else run.sharpen(k, lambda Y: sign * np.asarray(code.q_numeric(list(Y))))
-                        t_e, _ = yield from refine_time_steps(code.f, code.qdot, run.solution, tk, order)
+                        try:
+                            t_e, _ = yield from refine_time_steps(code.f, code.qdot, run.solution, tk, order)
+                        except ArithmeticError:
+                            if k is not None:
+                                raise
+                            continue        # the rate does not change with time at the entry: no turn
                         em = yield from event_map_steps(code.f, code.qdot, X, run.nodes, t_e, order)
                         late = self._time_range(self._event_time(em, t0))[1] > T
                         out.add(f"{mode}:extremum@{t0 + t_e:.6g}", code.q(em.state), partial or late)

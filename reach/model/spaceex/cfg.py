@@ -97,9 +97,9 @@ def parse_cfg(text: str, file: str) -> Config:
         line += 1
         if not key or not all(c.isalnum() or c in "-_" for c in key):
             raise InputError(f"'{key}' is not a cfg key", file, line=start_line)
-        if key in cfg.values:
-            raise InputError(f"duplicate key '{key}'", file, line=start_line)
-        cfg.values[key] = (value, start_line)
+        if key in cfg.values and key in READ_KEYS:
+            raise InputError(f"duplicate key '{key}' (first on line {cfg.values[key][1]})", file, line=start_line)
+        cfg.values[key] = (value, start_line)     # an option read by SpaceEx only: the last one stands
     _refuse_misspelt_keys(cfg)
     return cfg
 
