@@ -139,14 +139,14 @@ def test_iter_max_bounds_the_jumps_and_never_gives_safe(tmp_path):
     assert free.status is Status.SAFE
 
 
-def test_sampling_time_bounds_the_step(tmp_path):
+def test_sampling_time_sets_no_step(tmp_path):
+    """SpaceEx's sampling time is its own scheme's step: star keeps its default (horizon / 60),
+    finer or coarser, and the user's option wins."""
     body = 'system = sys\ninitially = "loc(sys) == go & x == 0"\nforbidden = "x >= 5"\ntime-horizon = 3\n'
-    xml, cfg = write(tmp_path, RAMP, body + "sampling-time = 0.01\n")
-    (fine,), *_ = check_spaceex(xml, cfg, "star")
-    assert fine.details["step"] == 0.01
-    xml, cfg = write(tmp_path, RAMP, body + "sampling-time = 1\n", name="coarse")
-    (coarse,), *_ = check_spaceex(xml, cfg, "star")
-    assert coarse.details["step"] == pytest.approx(3 / 60)          # never coarser than the default
+    for sampling, name in [("0.01", "fine"), ("1", "coarse")]:
+        xml, cfg = write(tmp_path, RAMP, body + f"sampling-time = {sampling}\n", name=name)
+        (result,), *_ = check_spaceex(xml, cfg, "star")
+        assert result.status.value == "SAFE" and result.details["step"] == pytest.approx(3 / 60)
     (chosen,), *_ = check_spaceex(xml, cfg, "star", {"step": 0.5})
     assert chosen.details["step"] == 0.5                              # the user's option wins
 
