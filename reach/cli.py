@@ -245,7 +245,7 @@ def cmd_replay(args) -> int:
     from reach.backends.montecarlo import check_run, replay
     from reach.model import load_model
     from reach.model.simulate import Branches
-    from reach.report import margin_at, quantity
+    from reach.report import margin_at, margin_text, quantity
     from reach.result import Counterexample
     from reach.spec import bind, load_properties
     from reach.spec.properties import BoundEvent
@@ -282,13 +282,13 @@ def cmd_replay(args) -> int:
         return 1 if rep.violated else 3
     if rep.violated:
         there = margin_at(prop, rep.mode, rep.state)
-        depth = (f"deepest margin {rep.depth:.4g} along the run" if there is None else
-                 f"margin {there:.4g} there, deepest {rep.depth:.4g} along the run")
+        depth = (f"deepest margin {margin_text(prop, rep.depth)} along the run" if there is None else
+                 f"margin {margin_text(prop, there)} there, deepest {margin_text(prop, rep.depth)} along the run")
         print(printable(f"replayed: {model.name} violates '{prop.id}' at t={rep.time:.6g} in mode {rep.mode} "
                         f"({depth}); state {state}"))
         return 1
     print(printable(f"NOT replayed: {model.name} satisfies '{prop.id}' along this run "
-                    f"(closest margin {rep.depth:.4g})"))
+                    f"(closest margin {margin_text(prop, rep.depth)})"))
     return 3
 
 

@@ -58,6 +58,14 @@ def _in(unit, value: float) -> float:
     return value if unit is None else unit.of(value)
 
 
+def margin_text(prop, value: float, digits: int = 4) -> str:
+    """A margin of a safety property in its requirement's unit (``-0.01271 deg``), or in model
+    units, said so, where the pieces mix dimensions."""
+    unit = prop.margin_unit()
+    shown = number(_in(unit, value), digits)
+    return _with_unit(shown, unit) if unit is not None and unit.text else f"{shown} (model units)"
+
+
 MAX_REQUIREMENT_CHARS = 160     # a requirement longer than this is shown by its description
 
 

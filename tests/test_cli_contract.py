@@ -303,3 +303,21 @@ def test_a_check_where_no_property_applies_proves_nothing(capsys):
     assert main([*args, "-p", "collision"]) == 3
     assert "not applicable" in capsys.readouterr().out
     assert main([*args, "-p", "collision", "-p", "velocity"]) == 0
+
+
+def test_replay_shows_the_margin_in_the_requirements_unit(tmp_path, capsys):
+    """th' = 0.01 rad/s from 0 over 2 s reaches 0.02 rad = 1.1459 deg; against th <= 1[deg] the
+    replay's margins are in degrees as check's are: -0.1459 deg at the end (1 - 1.1459), not
+    -0.002546 rad unlabelled."""
+    (tmp_path / "m.yaml").write_text("name: slew\nunits: {length: m, time: s, mass: kg}\n"
+                                     "state: {th: rad}\nmodes:\n  go: {flow: {th: '0.01[rad/s]'}}\n"
+                                     "initial: {mode: go, box: {th: 0}}\nhorizon: 2\n")
+    (tmp_path / "p.yaml").write_text("properties:\n  - {id: cap, kind: safety, require: ['th <= 1[deg]']}\n")
+    cex = tmp_path / "cx"
+    assert main(["check", str(tmp_path / "m.yaml"), str(tmp_path / "p.yaml"), "-b", "star",
+                 "--counterexamples", str(cex)]) == 1
+    capsys.readouterr()
+    (saved,) = cex.glob("*.json")
+    assert main(["replay", str(saved)]) == 1
+    out = capsys.readouterr().out
+    assert "deg there" in out and "deepest -0.1459 deg along the run" in out
