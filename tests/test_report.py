@@ -225,7 +225,7 @@ def test_a_counterexample_replays_from_any_working_folder(tmp_path, monkeypatch,
     assert "replayed: thermostat violates 'below_20p5'" in out
     # the margin at the violating state is that state's distance past the bound T <= 20.5
     T = float(re.search(r"state T=([-\d.e]+)", out).group(1))
-    there = float(re.search(r"margin ([-\d.e]+) there", out).group(1))
+    there = float(re.search(r"margin ([-\d.e]+) \(model units\) there", out).group(1))
     assert there == pytest.approx(20.5 - T, abs=1e-5) and there < 0
 
 
