@@ -58,12 +58,16 @@ def _in(unit, value: float) -> float:
     return value if unit is None else unit.of(value)
 
 
+def _in_margin_unit(text: str, unit) -> str:
+    """A margin or interval of margins (``text``, already in ``unit``) with its unit, or said to
+    be in model units where the property's pieces mix dimensions (``unit`` None)."""
+    return _with_unit(text, unit) + (" (model units)" if unit is None else "")
+
+
 def margin_text(prop, value: float, digits: int = 4) -> str:
-    """A margin of a safety property in its requirement's unit (``-0.01271 deg``), or in model
-    units, said so, where the pieces mix dimensions."""
+    """A margin of a safety property (model units) in its requirement's unit: ``-0.01271 deg``."""
     unit = prop.margin_unit()
-    shown = number(_in(unit, value), digits)
-    return _with_unit(shown, unit) if unit is not None and unit.text else f"{shown} (model units)"
+    return _in_margin_unit(number(_in(unit, value), digits), unit)
 
 
 MAX_REQUIREMENT_CHARS = 160     # a requirement longer than this is shown by its description
@@ -272,21 +276,13 @@ def line(result, prop, model) -> str:
     elif kind == "safety":
         text = f["requirement"]
         m = {} if _whole_modes(prop) else f     # being in the mode is the violation: no margin
+        unit = prop.margin_unit()
         if "margin_bound" in m:
-            unit = prop.margin_unit()
-            text += f": smallest margin in {_with_unit(interval(*m['margin_bound']), unit)}"
-            if unit is None:
-                text += " (model units)"
+            text += f": smallest margin in {_in_margin_unit(interval(*m['margin_bound']), unit)}"
         if "closest_margin" in m and "violation_margin" not in m:
-            unit = prop.margin_unit()
-            text += f": closest margin {_with_unit(number(m['closest_margin']), unit)}"
-            if unit is None:
-                text += " (model units)"
+            text += f": closest margin {_in_margin_unit(number(m['closest_margin']), unit)}"
         if "violation_margin" in m:
-            unit = prop.margin_unit()
-            text += f": margin {_with_unit(number(m['violation_margin']), unit)} at the violation"
-            if unit is None:
-                text += " (model units)"
+            text += f": margin {_in_margin_unit(number(m['violation_margin']), unit)} at the violation"
         parts.append(text)
     if result.probability is not None:
         p = f"P in {interval(*result.probability)}"

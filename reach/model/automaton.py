@@ -193,7 +193,7 @@ class HybridAutomaton:
     clocks: list[int] = field(default_factory=list)   # states with rate 1 in every mode
     bounded_inputs: list[BoundedInput] = field(default_factory=list)
     dimensions: DimensionSystem | None = None          # None: the model declares no units
-    hints: dict = field(default_factory=dict)          # a SpaceEx cfg's sampling-time, iter-max
+    hints: dict = field(default_factory=dict)          # a SpaceEx cfg's iter-max
 
     @property
     def time_unit(self) -> str:

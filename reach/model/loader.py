@@ -522,10 +522,11 @@ class _Builder:
         return InitialSet(raw["mode"], low, high)
 
     def read_hints(self) -> dict:
-        """A SpaceEx cfg's ``sampling-time`` (a positive time) and ``iter-max`` (an integer; negative:
-        no bound) kept in ``notes`` by the import: analysis hints, so that the imported model is
-        checked as the SpaceEx files are (:func:`reach.backends.star.options.cfg_hints`). Notes in
-        prose, or other keys, are the reader's only."""
+        """A SpaceEx cfg's ``iter-max`` (an integer; negative: no bound) kept in ``notes`` by the
+        import: an analysis hint, so that the imported model is checked as the SpaceEx files are
+        (:func:`reach.backends.star.options.cfg_hints`). ``sampling-time`` (a positive time) is
+        checked as the cfg's is but sets nothing. Notes in prose, or other keys, are the reader's
+        only."""
         notes = self.data.get("notes")
         if not isinstance(notes, dict):
             return {}
@@ -536,7 +537,8 @@ class _Builder:
             value = notes[key]
             if why := hint_problem(key, value):
                 raise self.where("notes", key).error(why)
-            hints[key] = float(value) if key == "sampling-time" else int(value)
+            if key == "iter-max":
+                hints[key] = int(value)
         return hints
 
     def read_disturbance(self, horizon: float) -> Disturbance | None:

@@ -9,9 +9,9 @@ hull: ``x = x0 + N z`` with ``E x0 = f`` and ``N`` an orthonormal basis of ``nul
   else LP maximisers along the coordinate axes and random directions (each an extreme point);
   then one point per facet (the mean of the vertices on it) and the mean of the vertices;
 * *uniform interior*: by rejection from the bounding box where ``P`` fills at least
-  :data:`MIN_ACCEPTANCE` of the box (equalities only on coordinates the box pins, ``t == 0``) (exactly uniform; a box cut by a few loose
-  rows, as the ISS's initial box by its outputs' ranges, at a few products per sample), else
-  by hit-and-run (Smith 1984): from an interior point, a uniform random
+  :data:`MIN_ACCEPTANCE` of the box, equalities only on coordinates the box pins (``t == 0``):
+  exactly uniform, a few products per sample (the ISS's initial box cut by its outputs'
+  ranges); else by hit-and-run (Smith 1984): from an interior point, a uniform random
   direction, a uniform point on the chord through ``P``; chains are run in parallel and only
   their state after a burn-in of ``30 d + 50`` steps is kept (one chain per sample).
 
@@ -144,12 +144,13 @@ class PolytopeSampler:
     def uniform(self, count: int, rng) -> np.ndarray:
         """``count`` points by rejection from the bounding box where ``P`` fills enough of it,
         else by parallel hit-and-run chains from the centre."""
+        if self.d:
+            X = self._rejection(count, rng)
+            if X is not None:
+                return X
         Z = np.repeat(self.centre_z[None, :], count, axis=0)
         if self.d == 0:
             return self.to_x(Z)
-        X = self._rejection(count, rng)
-        if X is not None:
-            return X
         for _ in range(30 * self.d + 50):
             Z = self._step(Z, rng)
         return self.to_x(Z)

@@ -364,8 +364,10 @@ class StarBackend:
             return self._check(model, prop, opt, start)
         retry, stars, clocked = retry
         budget = min(opt.max_stars, stars)
-        halved = opt.max_seconds * DEFAULT_PASS_SHARE if clocked and opt.max_seconds is not None else opt.max_seconds
-        first = self._check(model, prop, replace(opt, max_stars=budget, max_seconds=halved), start)
+        first_budget = opt.max_seconds
+        if clocked and first_budget is not None:
+            first_budget *= DEFAULT_PASS_SHARE
+        first = self._check(model, prop, replace(opt, max_stars=budget, max_seconds=first_budget), start)
         many = first.details.get("stars", 0) > budget
         slow = clocked and OUT_OF_TIME in first.details.get("reason", "")
         vague = clocked and bool(first.details.get("finer_step_may_decide"))
@@ -377,7 +379,7 @@ class StarBackend:
             if vague and not (many or slow):    # a try, not the rest of the budget (as a finer pass)
                 left = min(left, max(FINER_FACTOR * spent, FINER_SECONDS))
             if left <= 0:
-                return _whole_budget(first, halved, opt.max_seconds)
+                return _whole_budget(first, first_budget, opt.max_seconds)
             retry = replace(retry, max_seconds=left)
         result = _whole_budget(self._check(model, prop, retry, start), retry.max_seconds, opt.max_seconds)
         why = (f"took more than {budget} stars" if many else "ran out of half the time budget" if slow

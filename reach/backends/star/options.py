@@ -248,8 +248,8 @@ def aggregating_retry(model, options: dict | None, opt: StarOptions) -> tuple[St
     user set neither that nor ``input_cells`` (where time matters, the box does, at a third of
     the cost: a clocked deadband's aggregates close without the fixpoint check): the first
     chain's successors are aggregated at once, and a box of the input effect, exact per state
-    but not jointly, would hand them corners no signal reaches together (a deadband whose disturbance both speeds the attitude rate up and moves the
-    angle) that no refinement behind the aggregate can remove; a witness through the aggregate
+    but not jointly, would hand them corners no signal reaches together (a deadband whose
+    disturbance both speeds the attitude rate up and moves the angle) that no refinement behind the aggregate can remove; a witness through the aggregate
     then points to an initial state and signal that do not violate. Such chains add a few
     coefficients per block either way; a chain to the horizon would gain two per cell, so it
     keeps the box."""
