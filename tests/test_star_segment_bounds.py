@@ -13,6 +13,7 @@
 
 from __future__ import annotations
 
+import importlib
 import itertools
 
 import numpy as np
@@ -25,6 +26,8 @@ from scipy.linalg import expm
 from reach.backends.star.flowpipe import (AffineFlow, _chain_abs_bounds, _chain_bounds, _drift_segment,
                                           _plus_box, _segment)
 from reach.sets import Box, HPolytope, Star
+
+flowpipe = importlib.import_module("reach.backends.star.flowpipe")    # the package also has a function of that name
 
 SEEDS = st.integers(0, 2**32 - 1)
 
@@ -103,6 +106,33 @@ def test_chain_bounds_are_the_box_corner_extremes(seed):
     assert _chain_bounds(centers, bases, box, W) == pytest.approx(np.max(points @ W.T, axis=1))
     values = np.abs(np.einsum("lin,jkn->jkli", D, points) + d[None, None])
     assert _chain_abs_bounds(centers, bases, box, D, d) == pytest.approx(np.max(values, axis=1))
+
+
+@given(SEEDS)
+@settings(max_examples=25, deadline=None)
+def test_hull_curvature_bound_is_the_interval_hulls_extreme(seed):
+    """The cheap bound of the chain's screening is ``max |D_l x + d_l|`` over the interval hull
+    of each ``Y_j`` (brute force over the hull's corners): never below the exact one, equal to it
+    where ``V_j`` is diagonal. The exact one, formed a grid star at a time, is unchanged."""
+    rng = np.random.default_rng(seed)
+    J, n, L = 4, 2, 3
+    centers, bases = rng.normal(size=(J, n)), rng.normal(size=(J, n, n))
+    bases[0] = np.diag(rng.normal(size=n))
+    box = random_box(rng, n)
+    D, d = rng.normal(size=(L, n, n)), rng.normal(size=(L, n))
+    mid, radius = centers + bases @ box.center, np.abs(bases) @ box.radius
+    hull = mid[:, None, :] + np.array(list(itertools.product((-1, 1), repeat=n)))[None] * radius[:, None, :]
+    values = np.abs(np.einsum("lin,jkn->jkli", D, hull) + d[None, None])
+    loose = flowpipe._hull_abs_bounds(centers, bases, box, D, d)
+    assert loose == pytest.approx(np.max(values, axis=1))
+    exact = _chain_abs_bounds(centers, bases, box, D, d)
+    assert np.all(loose >= exact * (1 - 1e-12))
+    assert loose[0] == pytest.approx(exact[0])
+    old, flowpipe.PRODUCT_BYTES = flowpipe.PRODUCT_BYTES, 1         # one grid star at a time
+    try:
+        assert _chain_abs_bounds(centers, bases, box, D, d) == pytest.approx(exact)
+    finally:
+        flowpipe.PRODUCT_BYTES = old
 
 
 def cut_star(rng):

@@ -349,3 +349,27 @@ def test_temperature_is_a_fourth_base_dimension():
     assert MINUTES.name(dimension(temperature=1, time=-1)) == "K/min"
     # 2 W for 60 s is 120 J = 120 kg m^2/s^2 = 120 * 3600 kg m^2/min^2
     assert float(parse_expr("2[W]*60[s]", {}, W, MINUTES, dims)) == pytest.approx(120.0 * 3600.0, rel=1e-12)
+
+
+def test_a_plain_bound_reads_in_the_unit_its_state_was_declared_in(tmp_path, capsys):
+    """``w: rad/s`` reduces to 1/s (an angle is a pure number), but a requirement on ``w`` alone
+    shows its margin in rad/s; a bracket in the requirement still wins (deg/s), a sum of two
+    states keeps the model's unit, and the margin's number is the same in each."""
+    data = {"name": "spin", "units": {"length": "m", "time": "s", "mass": "kg"},
+            "state": {"th": "rad", "w": "rad/s"},
+            "modes": {"coast": {"flow": {"th": "w", "w": "-0.01[1/s^2]*th - 0.1[1/s]*w"}}},
+            "initial": {"mode": "coast", "box": {"th": [0.1, 0.2], "w": [0, 0.01]}}, "horizon": 20}
+    model = load_model(_write(tmp_path, "spin.yaml", data))
+    props = _write(tmp_path, "p.yaml", {"properties": [
+        {"id": "rate", "kind": "safety", "require": ["w <= 0.001"]},
+        {"id": "angle", "kind": "safety", "require": ["th <= 0.5"]},
+        {"id": "rate_deg", "kind": "safety", "require": ["w <= 0.3[deg/s]"]},
+        {"id": "sum", "kind": "safety", "require": ["w + 0.1[1/s]*th <= 1[1/s]"]}]})
+    rate, angle, rate_deg, both = (bind(p, model) for p in load_properties(props))
+    assert rate.margin_unit().text == "rad/s" and rate.margin_unit().scale == pytest.approx(1.0)
+    assert angle.margin_unit().text == "rad"
+    assert rate_deg.margin_unit().text == "deg/s"
+    assert both.margin_unit().text == "1/s"
+    assert main(["check", str(tmp_path / "spin.yaml"), str(props), "-b", "montecarlo", "-p", "rate",
+                 "--counterexamples", str(tmp_path / "cx")]) == 1
+    assert "margin -0.009 rad/s at the violation" in capsys.readouterr().out

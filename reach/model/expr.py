@@ -94,13 +94,16 @@ class DimensionContext:
 
     def display(self, form: Form | None, brackets: list) -> tuple[tuple | None, DisplayUnit | None]:
         """Dimension of ``form`` and the unit to show it in: the first bracketed unit it is a
-        power of, else the model's unit."""
+        power of, else the unit a single state or input was declared in (``w: rad/s``), else the
+        model's unit."""
         if form is None:
             return None, None
         value = self.system.value(form)
         if value is None:
             return None, None
-        for text, si, dim in brackets:
+        (name, k), = form.coeffs.items() if len(form.coeffs) == 1 else ((None, 0),)
+        declared = [self.system.written[name]] if k == 1 and name in self.system.written else []
+        for text, si, dim in list(brackets) + declared:
             shown = bracket_display(self.units, value, text, si, dim)
             if shown is not None:
                 return value, shown

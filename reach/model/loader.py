@@ -212,6 +212,7 @@ class _Builder:
                 raise where.error(f"'{unit}' is not in the model's units (values are in model units): "
                                   f"write {self.units.name(dim)}")
             dims.system.equate(Form.name(name), Form(const=dim))
+            dims.system.written[name] = (unit, si, dim)
         return dims
 
     def build(self) -> HybridAutomaton:

@@ -348,7 +348,10 @@ class Simulator:
         Linear: in windows of grid points, :data:`FIRST_WINDOW` and each next one twice as
         long up to :data:`MAX_WINDOW`, the states ``[x_j; 1] = P^(j - a) [x_a; 1]`` from the
         last state ``x_a`` of the window before (``P`` the one-step matrix: one product per
-        window, and at most ``MAX_WINDOW + 1`` powers). Nonlinear: RK4 steps, checked every 16.
+        window, and at most ``MAX_WINDOW + 1`` powers). A large model followed by a few runs
+        (fewer than ``n - 16``: a replay) steps instead, ``[x_j; 1] = P [x_{j-1}; 1]``: ``N n^2``
+        operations per grid point rather than the ``n^3`` of each power. Nonlinear: RK4 steps,
+        checked every 16.
         """
         N = Y0.shape[0]
         done = np.zeros(N, dtype=bool)
@@ -356,10 +359,14 @@ class Simulator:
             Z = np.concatenate([Y0, np.ones((N, 1))], axis=1)            # (N, n+1): [x_a; 1]
             windows, a, j0 = [], 0, 0
             width = FIRST_WINDOW if met is not None else MAX_WINDOW
+            stepping = N < self.n - 16
             while j0 < count and not done.all():
                 j1 = min(count, j0 + width)
-                P = self.powers[mode][j0 - a:j1 - a, :self.n, :]         # (j1 - j0, n, n+1)
-                windows.append((Z @ P.reshape(-1, self.n + 1).T).reshape(N, j1 - j0, self.n))
+                if stepping:
+                    windows.append(self._stepped(mode, Z, j0 - a, j1 - j0))
+                else:
+                    P = self.powers[mode][j0 - a:j1 - a, :self.n, :]     # (j1 - j0, n, n+1)
+                    windows.append((Z @ P.reshape(-1, self.n + 1).T).reshape(N, j1 - j0, self.n))
                 if met is not None:
                     done |= met(windows[-1], j0)
                 a, Z[:, :self.n] = j1 - 1, windows[-1][:, -1]
@@ -375,6 +382,18 @@ class Simulator:
                 checked = j + 1
                 if done.all():
                     return out[:, :j + 1]
+        return out
+
+    def _stepped(self, mode: str, Z: np.ndarray, first: int, count: int) -> np.ndarray:
+        """States ``P^(first + k) [x; 1]`` for ``k < count`` from ``Z = [x; 1]`` (N, n+1), by
+        successive products with the one-step matrix: (N, count, n)."""
+        step = self.powers[mode][1].T                                    # (n+1, n+1)
+        z = Z if first == 0 else Z @ self.powers[mode][first].T
+        out = np.empty((Z.shape[0], count, self.n))
+        for k in range(count):
+            if k:
+                z = z @ step
+            out[:, k] = z[:, :self.n]
         return out
 
     def _first_entry(self, mode: str, X: np.ndarray, h: np.ndarray, guard) -> np.ndarray:

@@ -207,10 +207,13 @@ class DimensionSystem:
 
     def __init__(self):
         self.rows: dict[str, Form] = {}
+        #: the units states and inputs were declared in, as written: ``name -> (text, SI value,
+        #: dimension)``, so a value of ``w: rad/s`` reads in rad/s, not in the ``1/s`` it reduces to
+        self.written: dict[str, tuple] = {}
 
     def copy(self) -> "DimensionSystem":
         other = DimensionSystem()
-        other.rows = dict(self.rows)
+        other.rows, other.written = dict(self.rows), dict(self.written)
         return other
 
     def reduce(self, form: Form) -> Form:

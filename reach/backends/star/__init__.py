@@ -34,7 +34,11 @@ star at that instant, bloated by the instant's width times a bound on ``|x'|``
 coefficients, so a schedule of switches keeps its stars small.
 Invariants are intersected exactly (predicate rows). Every unsafe convex piece of the
 property is checked per segment: cheap support bounds first (vectorised over the chain),
-an LP on the segment only where they do not exclude the piece.
+an LP on the segment only where they do not exclude the piece. The chain's screening takes
+``M`` first over each grid star's interval hull (``|D_l| |V_j| r``: ``n^2`` operations per
+sample instead of ``n^2 m``, 273 states in a few milliseconds) and the exact support above
+only for the cells that bound does not clear, so every cell checked further has the same
+error as before.
 
 Refinement. Each cell's segment adds a block of coefficients (hull weights, chord weight,
 error terms) to its star, and successors keep their ancestors' blocks. When a piece is

@@ -14,6 +14,7 @@ from reach import lp
 from reach.backends.star.aggregation import _Aggregate, interval_hull, one_coordinate, shared_shape_hull
 from reach.backends.star.fixpoint import Covered, applies, enlarged, time_invariant
 from reach.backends.star.flowpipe import (ChainInputs, _block_spreads, _chain_abs_bounds, _chain_bounds, _depth,
+                                         _hull_abs_bounds,
                                           _plus_box, _segment, _tightened, folded)
 from reach.backends.star.options import (CHATTER_JUMPS, ERROR_RATIO, INSTANT_STEP_FRACTION, INSTANT_WIDTH,
                                          MAX_CELLS, MAX_CHAIN_BYTES, MEMORY_FRACTION, MEMORY_PERIOD, NAME,
@@ -555,7 +556,7 @@ class _Explorer:
             point = np.concatenate([point, np.zeros(inputs.count)])   # input at its centre
         dev = None if inputs is None else inputs.grid             # the box left per grid point
         centers = star.center @ np.swapaxes(Phis, 1, 2) + psis
-        bases = np.einsum("jab,bm->jam", Phis, star.basis)
+        bases = np.matmul(Phis, star.basis)
         carried = self._cancellation_guard(mode, star, Phis, psis, centers, bases, inherited)
         if inputs is not None and inputs.count:
             bases[:, :, -inputs.count:] += inputs.columns
@@ -609,25 +610,29 @@ class _Explorer:
             return
         self.stats.cells += len(cells)
 
-        # cheap screening, vectorised over the chain
-        candidates = set()
+        # cheap screening, vectorised over the chain: the interpolation error from the grid
+        # stars' interval hulls first, the exact one (:func:`_chain_abs_bounds`) for the cells
+        # that do not pass with it (all of them when the sets are kept for a picture)
+        curvature = None                        # the cells' interpolation errors, where exact
         if self.opt.discrete_time:
             error = np.zeros((last + 1, self.n)) if dev is None else dev[:last + 1].copy()
+            candidates, fanout = self._screen_chain(mode, centers, bases, box, error, cells)
         else:
             D, d, F, _ = flow.curvature(h)
-            samples = _chain_abs_bounds(centers[:last], bases[:last], box, D, d).max(axis=1)
-            error = h * h / 8 * samples @ F.T
-            if inputs is not None:
-                error = error + inputs.cell[:last]       # the whole cell
-        for piece in self.pieces.get(mode, []):
-            candidates |= self._screen(centers, bases, box, error, piece.H, piece.g, cells)
-        fanout = 0              # the most cells a transition on a cycle of modes may fire from
-        for jump in self.jumps[mode]:
-            if jump.target in self.relevant:
-                firing = self._screen(centers, bases, box, error, jump.H, jump.g, cells)
-                candidates |= firing
-                if jump.target in self._leading_to(mode):          # back to mode: a cycle
-                    fanout = max(fanout, len(firing))
+            spread = 0.0 if inputs is None else inputs.cell[:last]        # the whole cell
+            exact = list(cells) if self.opt.keep_sets else None
+            if exact is None:
+                loose = h * h / 8 * _hull_abs_bounds(centers[:last], bases[:last], box, D, d).max(axis=1) @ F.T
+                candidates, fanout = self._screen_chain(mode, centers, bases, box, loose + spread, cells)
+                exact = sorted(candidates)
+            curvature = np.zeros((last, self.n)) if exact == list(cells) else loose
+            if exact:
+                curvature[exact] = h * h / 8 * _chain_abs_bounds(
+                    centers[exact], bases[exact], box, D, d).max(axis=1) @ F.T
+                candidates, fanout = self._screen_chain(mode, centers, bases, box, curvature + spread, cells)
+            error = curvature + spread
+            if not np.all(np.isfinite(box.radius)):     # the cells bound their errors by LPs
+                curvature = None
         if self.opt.keep_sets:
             self._keep_chain(mode, grid_star, centers, bases, error, [j for j in cells if j not in candidates])
 
@@ -642,14 +647,16 @@ class _Explorer:
         pending: dict[int, list] | None = None if not aggregate else {} if collect is None else collect
         runs = _consecutive(sorted(candidates)) if merged else [(j, 1) for j in sorted(candidates)]
         for j, length in runs:
+            known = None if curvature is None or length > 1 else curvature[j]
             if inputs is None:
-                self._cell(mode, grid_star(j), length * h, path, 0, point, pending)
+                self._cell(mode, grid_star(j), length * h, path, 0, point, pending, error=known)
             elif self.opt.discrete_time:
                 self._cell(mode, grid_star(j), h, path, 0, point, pending, dev[j])
             else:
                 self._cell(mode, grid_star(j), h, path, 0, point, pending, inputs.cell[j],
                            inputs.since[j], inputs.carried[j],
-                           None if inputs.directed is None else (inputs.directed[0], inputs.directed[1][j]))
+                           None if inputs.directed is None else (inputs.directed[0], inputs.directed[1][j]),
+                           error=known)
         if collect is None:
             self._aggregate_pending(mode, pending)
         if handoff and ended_inside:
@@ -939,6 +946,22 @@ class _Explorer:
         low[self.clock] = max(low[self.clock], start)
         return Box(low, ranges.high)
 
+    def _screen_chain(self, mode: str, centers, bases, box, error, cells) -> tuple[set[int], int]:
+        """The cells of a chain whose segments may meet an unsafe piece or a relevant guard
+        (:meth:`_screen`), and the most cells a transition back into ``mode`` (on a cycle of
+        modes) may fire from."""
+        candidates = set()
+        for piece in self.pieces.get(mode, []):
+            candidates |= self._screen(centers, bases, box, error, piece.H, piece.g, cells)
+        fanout = 0
+        for jump in self.jumps[mode]:
+            if jump.target in self.relevant:
+                firing = self._screen(centers, bases, box, error, jump.H, jump.g, cells)
+                candidates |= firing
+                if jump.target in self._leading_to(mode):
+                    fanout = max(fanout, len(firing))
+        return candidates, fanout
+
     def _screen(self, centers, bases, box, error, H, g, cells) -> set[int]:
         """Cells whose segment may meet ``{H x <= g}`` by support bounds (cheap). A cell is
         passed over only where a bound misses a row by more than the touch tolerance
@@ -958,23 +981,25 @@ class _Explorer:
 
     # ---- one cell
 
-    def _segment(self, mode: str, start: Star, h: float, spread=None, directed=None) -> tuple[Star, np.ndarray]:
+    def _segment(self, mode: str, start: Star, h: float, spread=None, directed=None,
+                 error=None) -> tuple[Star, np.ndarray]:
         """``(segment, error)`` of the cell of length ``h`` starting at ``start``; ``spread``:
         the bound of the input effect on the cell (added as a box met by the rows ``directed``,
-        :func:`.flowpipe._plus_box`, then the invariant, :meth:`_flow_invariant`)."""
+        :func:`.flowpipe._plus_box`, then the invariant, :meth:`_flow_invariant`); ``error``:
+        the interpolation error, when the chain has computed it."""
         Hi, gi = self._flow_invariant(mode)
         if self.opt.discrete_time:
             if spread is None:
                 return start, np.zeros(self.n)
             return _plus_box(start, spread).intersect_halfspaces(Hi, gi), np.zeros(self.n)
-        seg, _, error = _segment(self.flows[mode], start, h)
+        seg, _, error = _segment(self.flows[mode], start, h, error)
         if spread is not None:
             seg = _plus_box(seg, spread, directed)
         seg = seg.intersect_halfspaces(Hi, gi)
         return (_tightened(seg, len(gi)) or seg) if self.flows[mode].drift else seg, error
 
     def _cell(self, mode: str, start: Star, h: float, path: _Path, depth: int, point, pending=None,
-              spread=None, since: float = 0.0, carried=0.0, directed=None):
+              spread=None, since: float = 0.0, carried=0.0, directed=None, error=None):
         """Check one cell and launch its successors; bisect when a failure is blamed on it.
 
         The segment's own coefficients are the block starting at ``start.nvars``; a failure
@@ -988,12 +1013,13 @@ class _Explorer:
         half keeps ``spread``, the first takes the bound at its own end (:meth:`_half_spread`).
         ``directed``: rows and bounds of the input effect on the cell along the unsafe pieces'
         and guards' directions (:class:`.flowpipe.ChainInputs`), split as ``spread`` is
-        (:meth:`_half_directed`).
+        (:meth:`_half_directed`). ``error``: the cell's interpolation error, when the chain has
+        computed it (the halves compute their own).
         """
         if self._past_cutoff(start, path):
             return
         self._memory_guard()
-        seg, error = self._segment(mode, start, h, spread, directed)
+        seg, error = self._segment(mode, start, h, spread, directed, error)
         final = depth >= self.opt.max_refinements or self.opt.discrete_time or self.flows[mode].drift
         block = start.nvars
         kept_sets = len(self.sets)
