@@ -208,3 +208,56 @@ def test_a_spent_time_budget_bounds_nothing_and_names_the_option(tmp_path):
     free = BACKEND.check(model, props["low"], RIGOROUS)
     assert within.status is free.status is Status.SAFE
     assert within.details["margin_bound"] == free.details["margin_bound"]
+
+
+TANK = """
+name: tank
+state: [x, c]
+modes:
+  "on":
+    flow: {x: "1 - 0.1*x", c: 1}
+    invariant: ["x <= 8"]
+  on_delay:
+    flow: {x: "1 - 0.1*x", c: 1}
+    invariant: ["c <= 1"]
+  "off":
+    flow: {x: "-0.1*x", c: 1}
+    invariant: ["x >= 4"]
+  off_delay:
+    flow: {x: "-0.1*x", c: 1}
+    invariant: ["c <= 1"]
+transitions:
+  - {from: "on", to: on_delay, guard: ["x >= 8"], urgent: true, reset: {c: 0}}
+  - {from: on_delay, to: "off", guard: ["c >= 1"], urgent: true}
+  - {from: "off", to: off_delay, guard: ["x <= 4"], urgent: true, reset: {c: 0}}
+  - {from: off_delay, to: "on", guard: ["c >= 1"], urgent: true}
+initial: {mode: "on", box: {x: [5, 6], c: 0}}
+horizon: 100
+"""
+
+
+@pytest.mark.parametrize("side", ["avoid", "require"])
+def test_a_forbidden_bound_the_rigorous_sweep_leaves_open_is_searched_and_replayed(tmp_path, side):
+    """A pump switched off 1 s after the level reaches 8: every run peaks at 10 - 2 e^-0.1 =
+    8.19033 (closed form), so ``x >= 8.1`` is met by all of them. The rigorous sweep (forced for
+    an avoid set, asked for the requirement) cannot show that every run leaves ``on``; the
+    one-constraint margin is then searched with the estimated remainder, and its violation
+    replays. A bound above the peak is never called UNSAFE."""
+    path, props = tmp_path / "tank.yaml", tmp_path / "p.yaml"
+    path.write_text(TANK)
+    unsafe = '["x >= 8.1"]' if side == "avoid" else '["x < 8.1"]'
+    safe = '["x >= 8.3"]' if side == "avoid" else '["x < 8.3"]'
+    props.write_text("properties:\n"
+                     f"  - {{id: over, kind: safety, modes: ['on', on_delay, 'off', off_delay], {side}: {unsafe}}}\n"
+                     f"  - {{id: under, kind: safety, modes: ['on', on_delay, 'off', off_delay], {side}: {safe}}}\n")
+    model = load_model(path)
+    over, under = (bind(p, model) for p in load_properties(props))
+    result = BACKEND.check(model, over, RIGOROUS)
+    assert result.status == Status.UNSAFE
+    cx = result.counterexample
+    run = replay(model, over, np.asarray(cx.initial_state), cx.switch_time)
+    assert run.violated
+    peak = 10 - 2 * np.exp(-0.1)
+    low, high = result.details["margin_bound"]
+    assert low <= 8.1 - peak + 1e-6 and high >= 8.1 - peak - 1e-3      # the estimate holds the truth
+    assert BACKEND.check(model, under, RIGOROUS).status != Status.UNSAFE

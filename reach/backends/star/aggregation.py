@@ -26,6 +26,10 @@ class _Aggregate:
     star: Star
     members: list[tuple[Star, _Path]]
     refined: bool = False
+    #: the leading coefficients of ``star`` that its descendants' shapes keep: all of an interval
+    #: hull's (fresh ones), those of the aggregate a shaped hull descends from
+    #: (:meth:`.explorer._Explorer._shaped`)
+    base: int = 0
 
 
 def interval_hull(members, invariant, count_lps, ranges: Box | None = None):

@@ -865,22 +865,25 @@ class _Explorer:
         self.stats.members += len(kept)
         self._explore_joined(mode, kept, candidates)
 
-    def _explore_joined(self, mode: str, members: list[tuple[Star, _Path]], candidates, record: bool = True):
+    def _explore_joined(self, mode: str, members: list[tuple[Star, _Path]], candidates, record: bool = True,
+                        base: int | None = None):
         """Explore ``members`` entering ``mode`` as one star: under each of ``candidates``
         (``(star, rows)``, each containing every member) in turn while a check under the one
         before fails without a replayed witness, then as the members themselves, each with its
         own history. ``record``: the candidates are boxes the fixpoint check records
-        (:mod:`.fixpoint`; forgotten again with what followed when one fails)."""
+        (:mod:`.fixpoint`). Whatever the exploration under a candidate that fails has recorded
+        (the aggregates below it, itself if recorded) is forgotten: their exploration did not
+        end, so they cover nothing. ``base``: the leading coefficients the candidates keep (all
+        of them where None: fresh ones)."""
         start = min(path.since for _, path in members)
         jumps = max(path.jumps for _, path in members)
         stalled = max(path.stalled for _, path in members if path.since == start)   # as from ``start``
         nested = max(path.nested for _, path in members)
         kept_sets = len(self.sets)
-        recording = record and self.covered is not None
         for k, (star, star_rows) in enumerate(candidates):
-            agg = _Aggregate(mode, star, members)
-            if recording:
-                mark = self.covered.mark()
+            agg = _Aggregate(mode, star, members, base=star.nvars if base is None else base)
+            mark = None if self.covered is None else self.covered.mark()
+            if record and self.covered is not None:
                 self.covered.record(mode, star, star_rows)
             try:
                 self._chain(mode, star, _Path(jumps=jumps, stalled=stalled, origin=agg, since=start,
@@ -893,7 +896,7 @@ class _Explorer:
             # what replaces it is explored once the handler has ended (the failure's traceback
             # holds the frames of the failed exploration: see _cell)
             del self.sets[kept_sets:]               # what replaces it has its own segments
-            if recording:
+            if mark is not None:
                 self.covered.forget(mark)
             if k + 1 < len(candidates):
                 LOG.info("enlarged aggregate entering '%s' replaced by the exact hull (%s)", mode, piece)
@@ -911,25 +914,37 @@ class _Explorer:
         where that keeps them small: a lone member, or members of one shape
         (:func:`.aggregation.shared_shape_hull`: one instant met by two cells), with tiny
         coefficients folded into a box (:func:`.flowpipe.folded`; an instant jump's spread),
-        at most ``n`` more than the initial star. A sampled controller's tick keeps the start's
-        shape so, the held control tied to the state it was computed from, which an interval
-        hull would lose at every tick. The star stands for the members as an aggregate does:
-        a failure under it that no replay confirms is checked again under the members. Not
-        recorded for the fixpoint check (that records boxes), but not explored where an
-        earlier aggregate covers it. False where it does not apply."""
-        star = members[0][0] if len(members) == 1 else shared_shape_hull(members, self.root.nvars, self._lp_count)
+        at most ``n`` more than the star they descend from. A sampled controller's tick keeps
+        the start's shape so, the held control tied to the state it was computed from, which an
+        interval hull would lose at every tick. The shape is that of the initial star, or of the
+        interval hull the members descend from where one came between (:meth:`_base`): one
+        tick that had to be hulled does not hull every later one. The star stands for the
+        members as an aggregate does: a failure under it that no replay confirms is checked
+        again under the members. Not recorded for the fixpoint check (that records boxes), but
+        not explored where an earlier aggregate covers it. False where it does not apply."""
+        keep = self._base(members)
+        if keep is None:
+            return False
+        star = members[0][0] if len(members) == 1 else shared_shape_hull(members, keep, self._lp_count)
         if star is None:
             return False
-        star = folded(star, self.root.nvars)
-        if star.nvars > self.root.nvars + self.n:
+        star = folded(star, keep)
+        if star.nvars > keep + self.n:
             return False
         if self.covered is not None and self.covered.covers(mode, star, self._lp_count):
             return True
-        if len(members) == 1 and star is members[0][0]:
-            self._chain(mode, star, members[0][1])
+        if len(members) == 1 and star is members[0][0]:        # its cells' frames are gone:
+            self._chain(mode, star, members[0][1].closed())   # nothing of its history to bisect
             return True
-        self._explore_joined(mode, members, [(star, None)], record=False)
+        self._explore_joined(mode, members, [(star, None)], record=False, base=keep)
         return True
+
+    def _base(self, members) -> int | None:
+        """The leading coefficients all ``members`` share (:attr:`.aggregation._Aggregate.base`
+        of the aggregate they descend from, the initial star's where none), None where they
+        descend from aggregates of different bases."""
+        bases = {self.root.nvars if path.origin is None else path.origin.base for _, path in members}
+        return bases.pop() if len(bases) == 1 else None
 
     def _clock_from(self, ranges: Box, start: float) -> Box:
         """``ranges`` with the clock at least ``start``.
@@ -1023,6 +1038,7 @@ class _Explorer:
         final = depth >= self.opt.max_refinements or self.opt.discrete_time or self.flows[mode].drift
         block = start.nvars
         kept_sets = len(self.sets)
+        mark = None if self.covered is None else self.covered.mark()
         parts = ()
         try:
             if not final and self._transient(mode, seg, error):
@@ -1045,6 +1061,8 @@ class _Explorer:
         # (and, chained as the context of a later exception, past the check)
         del seg, error, parts
         del self.sets[kept_sets:]                   # the halves keep their own segments
+        if mark is not None:            # aggregates explored from the cell cover nothing: their
+            self.covered.forget(mark)   # exploration was cut short, the halves explore their own
         self.stats.refined += 1
         self.stats.deepest = max(self.stats.deepest, depth + 1)
         half = h / 2

@@ -17,6 +17,12 @@ require ``>= 0``":
   (:class:`~reach.backends.taylor.problem.Largest`), so the set is excluded step by step through
   the rigorous enclosures only.
 
+Where a rigorous bound leaves a margin open (a sweep that cannot show every run leaves a mode)
+and the piece is one constraint (every ``avoid`` bound of a SpaceEx cfg, a requirement checked
+with ``remainder: rigorous``), the same margin as a smooth event is searched with the estimated
+remainder, and the centres and corners of its lowest subdomains are replayed: a run that
+violates is an UNSAFE as any other (the replay decides, not the estimate).
+
 A required linear constraint implied in a mode by one of the mode's invariant constraints
 (``c = lambda c_inv + b`` with ``lambda > 0``, ``b <= 0``) holds there by the semantics of the
 automaton (a run stays inside the invariant of its mode) and is not bounded there.
@@ -24,7 +30,7 @@ automaton (a run stays inside the invariant of its mode) and is not bounded ther
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import sympy
@@ -45,6 +51,9 @@ class Margin:
     event: BoundEvent | None
     implied_in: list[str]
     avoid: bool
+    #: the same margin as a smooth event (a piece of one constraint), searched with the estimated
+    #: remainder for a violation when a rigorous bound leaves it open; None for a piece of several
+    smooth: BoundEvent | None = None
 
 
 def margins(model, prop: BoundSafety) -> list[Margin]:
@@ -76,16 +85,17 @@ def margins(model, prop: BoundSafety) -> list[Margin]:
         if not listed:
             out.append(Margin(text, None, implied, avoid))
             continue
-        if avoid:
-            quantity = {m: tuple(c.g for c in per_mode[m]) for m in listed}
-        else:
-            quantity = {m: per_mode[m][0].g for m in listed}
         value = 0.0 if all(c.strict for c in first) else STRICT_ZERO
         units = {c.unit for c in first}
-        event = BoundEvent(f"{prop.id}[{j}]", listed, "min", quantity, ">=", value, prop.symbols,
-                           prop.file, f"margin of {text}", text=f"margin of {text}",
-                           unit=units.pop() if len(units) == 1 else None)
-        out.append(Margin(text, event, implied, avoid))
+
+        def event_of(quantity):
+            return BoundEvent(f"{prop.id}[{j}]", listed, "min", quantity, ">=", value, prop.symbols,
+                              prop.file, f"margin of {text}", text=f"margin of {text}",
+                              unit=next(iter(units)) if len(units) == 1 else None)
+
+        smooth = event_of({m: per_mode[m][0].g for m in listed}) if len(first) == 1 else None
+        event = event_of({m: tuple(c.g for c in per_mode[m]) for m in listed}) if avoid else smooth
+        out.append(Margin(text, event, implied, avoid, smooth))
     return out
 
 
@@ -128,9 +138,15 @@ def check_safety(backend, model, prop: BoundSafety, opts, deadline):
             continue
         result = backend.check_event(model, part.event, opts, deadline)
         sets = sets or result.sets
-        lo, hi = result.bound
         if result.status != Status.SAFE and counterexample is None:
             counterexample = _witness(model, prop, result)
+            if counterexample is None and part.smooth is not None and \
+                    result.details["remainder"] != "estimated" and not deadline.passed():
+                search = backend.check_event(model, part.smooth, replace(opts, remainder="estimated"), deadline)
+                counterexample = _witness(model, prop, search)
+                if counterexample is not None:      # the replayed run decides; its estimate is shown
+                    result = search
+        lo, hi = result.bound
         lows.append(lo)
         highs.append(hi)
         statuses.append(result.status)
