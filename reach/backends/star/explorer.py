@@ -14,8 +14,7 @@ from reach import lp
 from reach.backends.star.aggregation import _Aggregate, interval_hull, one_coordinate, shared_shape_hull
 from reach.backends.star.fixpoint import Covered, applies, enlarged, time_invariant
 from reach.backends.star.flowpipe import (ChainInputs, _block_spreads, _chain_abs_bounds, _chain_bounds, _depth,
-                                         _hull_abs_bounds,
-                                          _plus_box, _segment, _tightened, folded)
+                                          _hull_abs_bounds, _plus_box, _segment, _tightened, folded)
 from reach.backends.star.options import (CHATTER_JUMPS, ERROR_RATIO, INSTANT_STEP_FRACTION, INSTANT_WIDTH,
                                          MAX_CELLS, MAX_CHAIN_BYTES, MEMORY_FRACTION, MEMORY_PERIOD, NAME,
                                          PROGRESS_SECONDS, STALL_JUMPS, TIGHT_RATIO, StarOptions)
