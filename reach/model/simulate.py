@@ -72,6 +72,7 @@ INVARIANT_TOLERANCE = 1e-11          # invariants and guards hold where margins 
 SWITCH_TOLERANCE = 1e-14             # a guard asked to switch at a piece start: rounding only (_take_may)
 FIRST_WINDOW = 64                 # grid points of a linear segment's first window of states
 MAX_WINDOW = 256                  # grid points of its longest window
+POWERS_HELD = 2 * (MAX_WINDOW + 2)  # one-step matrix powers a mode's table may hold (doubling past MAX_WINDOW + 2)
 CHUNK_VALUES = 4_000_000          # states x steps x dims held at once in a linear segment
 BATCH_RUNS = 4096                 # runs of one linear segment advanced together
 MAX_STEPS = 5_000_000             # grid steps over the horizon (horizon / dt)
@@ -99,8 +100,10 @@ def _blas_controller():
 def check_size(model: HybridAutomaton, dt: float, runs: int = 0, given: bool = True) -> None:
     """Refuse (InputError) a grid or a batch of runs that would not fit: more than
     :data:`MAX_STEPS` steps, or an estimate of the one-step matrix powers of the linear modes
-    plus ``runs`` runs' arrays above :data:`MEMORY_BUDGET`. ``given``: ``dt`` is the option's
-    (else the model's default, and the message names the model's field that set it)."""
+    plus ``runs`` runs' arrays above :data:`MEMORY_BUDGET`. The powers of a mode are at most
+    :data:`POWERS_HELD` (:class:`_Powers` holds those asked for, and a segment asks for at most
+    ``MAX_WINDOW + 1``), whatever the number of steps. ``given``: ``dt`` is the option's (else
+    the model's default, and the message names the model's field that set it)."""
     from reach.errors import InputError
 
     if given:
@@ -115,7 +118,7 @@ def check_size(model: HybridAutomaton, dt: float, runs: int = 0, given: bool = T
                          f"most {MAX_STEPS:.0e} (" + ("use a larger dt)" if given else "a longer step)"),
                          file, step_field)
     linear = sum(1 for m in model.modes.values() if m.linear is not None)
-    matrices = linear * (steps + 2) * (model.n + 1) ** 2 * 8
+    matrices = linear * min(steps + 2, POWERS_HELD) * (model.n + 1) ** 2 * 8
     planned = matrices + runs * (model.n + 4) * RUN_BYTES_PER_VALUE
     if planned > MEMORY_BUDGET:
         what = (f"{runs} runs" if runs else
