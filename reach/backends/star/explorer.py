@@ -913,7 +913,8 @@ class _Explorer:
         where that keeps them small: a lone member, or members of one shape
         (:func:`.aggregation.shared_shape_hull`: one instant met by two cells), with tiny
         coefficients folded into a box (:func:`.flowpipe.folded`; an instant jump's spread),
-        at most ``n`` more than the star they descend from. A sampled controller's tick keeps
+        at most ``2 n`` more than the star they descend from (a tick from a bisected cell
+        carries its halves' chord and error coefficients). A sampled controller's tick keeps
         the start's shape so, the held control tied to the state it was computed from, which an
         interval hull would lose at every tick. The shape is that of the initial star, or of the
         interval hull the members descend from where one came between (:meth:`_base`): one
@@ -928,7 +929,7 @@ class _Explorer:
         if star is None:
             return False
         star = folded(star, keep)
-        if star.nvars > keep + self.n:
+        if star.nvars > keep + 2 * self.n:
             return False
         if self.covered is not None and self.covered.covers(mode, star, self._lp_count):
             return True
