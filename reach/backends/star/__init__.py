@@ -535,6 +535,11 @@ def _run_details(explorer: _Explorer) -> dict:
     if s.instants:
         soundness += (f"; {s.instants} jumps at a single instant taken from the image of their cell's start "
                       f"star at that instant, bloated by the instant's width times a bound on |x'|")
+    if s.returns:
+        soundness += (f"; {s.returns} jumps back to the mode a chain's runs had just left not taken from "
+                      f"its first cell: the guard's row rises strictly there, so only runs that had not "
+                      f"moved could take them, at the state and instant they left (runs the earlier mode "
+                      f"follows on)")
     if s.rebased:
         soundness += (f"; {s.rebased} chain blocks restarted the input effect from the previous block's "
                       f"end star (grid star plus R, cut by the invariant), which holds every run still "
@@ -567,7 +572,7 @@ def _run_details(explorer: _Explorer) -> dict:
             "aggregated_stars": s.members, "refined_aggregates": s.deaggregated,
             "nested_refinements": s.nested,
             "covered_aggregates": 0 if explorer.covered is None else explorer.covered.pruned,
-            "rebased_blocks": s.rebased, "instant_jumps": s.instants}
+            "rebased_blocks": s.rebased, "instant_jumps": s.instants, "zero_dwell_returns": s.returns}
 
 
 BACKEND = StarBackend()

@@ -14,10 +14,11 @@ from reach import lp
 from reach.backends.star.aggregation import _Aggregate, interval_hull, one_coordinate, shared_shape_hull
 from reach.backends.star.fixpoint import Covered, applies, enlarged, time_invariant
 from reach.backends.star.flowpipe import (ChainInputs, _block_spreads, _chain_abs_bounds, _chain_bounds, _depth,
-                                          _hull_abs_bounds, _plus_box, _segment, _tightened, folded)
+                                          _hull_abs_bounds, _plus_box, _segment, _tightened, chunk_cells, folded)
 from reach.backends.star.options import (CHATTER_JUMPS, ERROR_RATIO, INSTANT_STEP_FRACTION, INSTANT_WIDTH,
                                          MAX_CELLS, MAX_CHAIN_BYTES, MEMORY_FRACTION, MEMORY_PERIOD, NAME,
                                          PROGRESS_SECONDS, STALL_JUMPS, TIGHT_RATIO, StarOptions)
+from reach.backends.star.returns import entry_rows, rising, undone
 from reach.backends.star.switching import group_pieces
 from reach.backends.star.transitions import (_LinearModel, _modes_leading_to, _Piece,
                                              _unsafe_pieces, kept_rows, misses)
@@ -58,6 +59,10 @@ def budget_text(seconds: float) -> str:
 #: pieces of a replay's switching signal (:meth:`_Explorer._switching_signal`), at most: as many
 #: as a counterexample's input signal may have (:func:`reach.backends.montecarlo.replay`)
 MAX_SIGNAL_PIECES = 1_000_000
+#: instants per step at which a failing cell's witness run is probed (:meth:`_Explorer._probed`)
+PROBES = 64
+#: probed witnesses whose replay did not violate, after which a check probes no more
+PROBE_MISSES = 2
 
 
 @dataclass
@@ -137,6 +142,7 @@ class _Stats:
     rebased: int = 0                # block ends of chains with inputs (see _rebase_cells)
     memory_blocks: int = 0          # block ends of chains too long to hold (_cells_in_memory)
     instants: int = 0               # jumps taken at one instant (see _at_instant)
+    returns: int = 0                # zero-dwell returns not taken (see .returns)
 
 
 def _urgent_keeps(model, data, options) -> tuple[dict[str, list], dict[str, list]]:
@@ -239,9 +245,14 @@ class _Explorer:
         self._guard_rows: dict[str, np.ndarray] = {}       # per mode, see _transient
         self._timer_rows: dict[str, list] = {}              # per mode, see _timers
         self._directions: dict[str, np.ndarray | None] = {}     # per mode, see _input_directions
+        self._sources = {}                                  # jump name -> (mode, jump), see _returns
+        for source, jumps in self.jumps.items():
+            for jump in jumps:
+                self._sources.setdefault(jump.name, []).append((source, jump))
         self.stats = _Stats()
         self.unresolved: list[_Witness] = []
         self.finer_replays = 0          # replays allowed beyond max_replays (replay_finer)
+        self.probe_misses = 0           # probed witnesses that did not violate (_probed)
         self.replayed: list = []
         self.sets: list = []            # SetPiece of every explored segment (option keep_sets)
         self.root = initial if initial is not None else data.initial_star(model.initial)
@@ -612,23 +623,35 @@ class _Explorer:
         # cheap screening, vectorised over the chain: the interpolation error from the grid
         # stars' interval hulls first, the exact one (:func:`_chain_abs_bounds`) for the cells
         # that do not pass with it (all of them when the sets are kept for a picture)
+        # (lazily where a chunk of them costs much: :data:`.flowpipe.PRODUCT_BYTES` per chunk,
+        # computed when the exploration reaches it, so a violation found early spares the rest)
         curvature = None                        # the cells' interpolation errors, where exact
+        later, chunk = [], 0                    # cells whose exact error waits, and per chunk
+        lowers: dict = {}                       # the grid stars' support bounds, per row set
         if self.opt.discrete_time:
             error = np.zeros((last + 1, self.n)) if dev is None else dev[:last + 1].copy()
-            candidates, fanout = self._screen_chain(mode, centers, bases, box, error, cells)
+            candidates, fanout = self._screen_chain(mode, centers, bases, box, error, cells, lowers)
         else:
             D, d, F, _ = flow.curvature(h)
             spread = 0.0 if inputs is None else inputs.cell[:last]        # the whole cell
             exact = list(cells) if self.opt.keep_sets else None
+
+            def exact_error(js):
+                return h * h / 8 * _chain_abs_bounds(centers[js], bases[js], box, D, d).max(axis=1) @ F.T
+
             if exact is None:
                 loose = h * h / 8 * _hull_abs_bounds(centers[:last], bases[:last], box, D, d).max(axis=1) @ F.T
-                candidates, fanout = self._screen_chain(mode, centers, bases, box, loose + spread, cells)
+                candidates, fanout = self._screen_chain(mode, centers, bases, box, loose + spread, cells, lowers)
                 exact = sorted(candidates)
+                chunk = chunk_cells(D, bases.shape[1], bases.shape[2])
+                # the exact errors only lower the fanout: lazily where it cannot make the chain wide
+                if len(exact) > chunk and np.all(np.isfinite(box.radius)) and not (flow.drift and inputs is None) \
+                        and (self.opt.aggregate_fanout is None or fanout <= self.opt.aggregate_fanout):
+                    exact, later = exact[:chunk], exact[chunk:]
             curvature = np.zeros((last, self.n)) if exact == list(cells) else loose
             if exact:
-                curvature[exact] = h * h / 8 * _chain_abs_bounds(
-                    centers[exact], bases[exact], box, D, d).max(axis=1) @ F.T
-                candidates, fanout = self._screen_chain(mode, centers, bases, box, curvature + spread, cells)
+                curvature[exact] = exact_error(exact)
+                candidates, fanout = self._screen_chain(mode, centers, bases, box, curvature + spread, cells, lowers)
             error = curvature + spread
             if not np.all(np.isfinite(box.radius)):     # the cells bound their errors by LPs
                 curvature = None
@@ -645,17 +668,27 @@ class _Explorer:
                      and star.nvars > drift_limit)
         pending: dict[int, list] | None = None if not aggregate else {} if collect is None else collect
         runs = _consecutive(sorted(candidates)) if merged else [(j, 1) for j in sorted(candidates)]
-        for j, length in runs:
+        returns = self._returns(mode, star, path) if inherited is None and 0 in candidates else ()
+        while runs:
+            j, length = runs.pop(0)
+            if later and j >= later[0]:         # the next chunk's exact errors, then its cells again
+                block, later = later[:chunk], later[chunk:]
+                curvature[block] = exact_error(block)
+                error[block] = curvature[block] + (spread if np.isscalar(spread) else spread[block])
+                kept, _ = self._screen_chain(mode, centers, bases, box, error, block, lowers)
+                runs = [(k, 1) for k in sorted({j, *(k for k, _ in runs)} - (set(block) - kept))]
+                continue
             known = None if curvature is None or length > 1 else curvature[j]
+            first = returns if j == 0 else ()
             if inputs is None:
-                self._cell(mode, grid_star(j), length * h, path, 0, point, pending, error=known)
+                self._cell(mode, grid_star(j), length * h, path, 0, point, pending, error=known, returns=first)
             elif self.opt.discrete_time:
                 self._cell(mode, grid_star(j), h, path, 0, point, pending, dev[j])
             else:
                 self._cell(mode, grid_star(j), h, path, 0, point, pending, inputs.cell[j],
                            inputs.since[j], inputs.carried[j],
                            None if inputs.directed is None else (inputs.directed[0], inputs.directed[1][j]),
-                           error=known)
+                           error=known, returns=first)
         if collect is None:
             self._aggregate_pending(mode, pending)
         if handoff and ended_inside:
@@ -961,23 +994,24 @@ class _Explorer:
         low[self.clock] = max(low[self.clock], start)
         return Box(low, ranges.high)
 
-    def _screen_chain(self, mode: str, centers, bases, box, error, cells) -> tuple[set[int], int]:
-        """The cells of a chain whose segments may meet an unsafe piece or a relevant guard
-        (:meth:`_screen`), and the most cells a transition back into ``mode`` (on a cycle of
-        modes) may fire from."""
+    def _screen_chain(self, mode: str, centers, bases, box, error, cells, lowers) -> tuple[set[int], int]:
+        """The cells among ``cells`` of a chain whose segments may meet an unsafe piece or a
+        relevant guard (:meth:`_screen`), and the most of them a transition back into ``mode``
+        (on a cycle of modes) may fire from. ``lowers``: the chain's support bounds per piece and
+        guard, kept between calls."""
         candidates = set()
         for piece in self.pieces.get(mode, []):
-            candidates |= self._screen(centers, bases, box, error, piece.H, piece.g, cells)
+            candidates |= self._screen(centers, bases, box, error, piece.H, piece.g, cells, lowers)
         fanout = 0
         for jump in self.jumps[mode]:
             if jump.target in self.relevant:
-                firing = self._screen(centers, bases, box, error, jump.H, jump.g, cells)
+                firing = self._screen(centers, bases, box, error, jump.H, jump.g, cells, lowers)
                 candidates |= firing
                 if jump.target in self._leading_to(mode):
                     fanout = max(fanout, len(firing))
         return candidates, fanout
 
-    def _screen(self, centers, bases, box, error, H, g, cells) -> set[int]:
+    def _screen(self, centers, bases, box, error, H, g, cells, lowers) -> set[int]:
         """Cells whose segment may meet ``{H x <= g}`` by support bounds (cheap). A cell is
         passed over only where a bound misses a row by more than the touch tolerance
         (``touch_tolerance * max(1, |g|, |bound|)``, as the depth LP reads a touch): the grid
@@ -986,11 +1020,14 @@ class _Explorer:
         screened out by the last digits (with 2000 cells or more of the ramp ``x' = 1``)."""
         if H.shape[0] == 0:
             return set(cells)
-        lower = -_chain_bounds(centers, bases, box, -H)          # (J, rows)
+        if id(H) not in lowers:
+            lowers[id(H)] = (H, -_chain_bounds(centers, bases, box, -H))      # (J, rows)
+        lower = lowers[id(H)][1]
+        k = error.shape[0]
         if self.opt.discrete_time:
-            seg = lower[:len(cells)] - error[:len(cells)] @ np.abs(H).T
+            seg = lower[:k] - error @ np.abs(H).T
         else:
-            seg = np.minimum(lower[:-1], lower[1:])[:len(cells)] - error[:len(cells)] @ np.abs(H).T
+            seg = np.minimum(lower[:-1], lower[1:])[:k] - error @ np.abs(H).T
         missed = np.any(seg > g + self._touch(g, seg), axis=1)
         return {j for j in cells if not missed[j]}
 
@@ -1014,7 +1051,8 @@ class _Explorer:
         return (_tightened(seg, len(gi)) or seg) if self.flows[mode].drift else seg, error
 
     def _cell(self, mode: str, start: Star, h: float, path: _Path, depth: int, point, pending=None,
-              spread=None, since: float = 0.0, carried=0.0, directed=None, error=None):
+              spread=None, since: float = 0.0, carried=0.0, directed=None, error=None, returns=(),
+              skip=frozenset()):
         """Check one cell and launch its successors; bisect when a failure is blamed on it.
 
         The segment's own coefficients are the block starting at ``start.nvars``; a failure
@@ -1029,12 +1067,17 @@ class _Explorer:
         ``directed``: rows and bounds of the input effect on the cell along the unsafe pieces'
         and guards' directions (:class:`.flowpipe.ChainInputs`), split as ``spread`` is
         (:meth:`_half_directed`). ``error``: the cell's interpolation error, when the chain has
-        computed it (the halves compute their own).
+        computed it (the halves compute their own). ``returns``: in the first cell of a chain,
+        the jumps that may return its runs to the mode they came from (:meth:`_returns`);
+        ``skip``: the names of those proved not to be taken from the cell (:mod:`.returns`),
+        passed on to its halves.
         """
         if self._past_cutoff(start, path):
             return
         self._memory_guard()
         seg, error = self._segment(mode, start, h, spread, directed, error)
+        if returns:
+            skip = skip | {jump.name for jump, rows in returns if rising(self.flows[mode], jump, rows, seg)}
         final = depth >= self.opt.max_refinements or self.opt.discrete_time or self.flows[mode].drift
         block = start.nvars
         kept_sets = len(self.sets)
@@ -1049,9 +1092,9 @@ class _Explorer:
             # the directed rows may cut the input box: its columns are no error an LP cannot remove
             cut_from = None if directed is None else seg.nvars - int(np.count_nonzero(np.asarray(spread) > 0))
             for part in parts:
-                self._check_segment(mode, part, path, block, not final, cut_from)
+                self._check_segment(mode, part, path, block, not final, cut_from, (start, h))
             for part in parts:
-                self._jump_from(mode, part, path, block, not final, point, pending, (start, spread))
+                self._jump_from(mode, part, path, block, not final, point, pending, (start, spread), skip)
             return
         except _Refine as failure:
             if final or failure.blame != block:
@@ -1068,14 +1111,41 @@ class _Explorer:
         half = h / 2
         first = self._half_spread(mode, spread, since, half, carried)
         self._cell(mode, start, half, path, depth + 1, point, pending, first, since, carried,
-                   self._half_directed(mode, directed, since, half, carried))
+                   self._half_directed(mode, directed, since, half, carried), skip=skip)
         mid = start.affine_map(*self.flows[mode].step(half))
         Hi, gi = self._flow_invariant(mode)      # relaxed by the input effect, as on the grid
         mid = mid.intersect_halfspaces(Hi, gi if first is None else gi + np.abs(Hi) @ first)
         mid, mid_point = self._start(mid, point)
         if mid is not None:
             self._cell(mode, mid, half, path, depth + 1, mid_point, pending, spread, since + half,
-                       carried, directed)
+                       carried, directed, skip=skip)
+
+    def _returns(self, mode: str, start: Star, path: _Path) -> tuple:
+        """``(jump, rows)`` for each jump of ``mode`` that may return the runs of a chain's
+        ``start`` to the mode they all came from, undoing the reset they came by, with the rows of
+        its guard that every run meets from outside at its entry: conditions (a) of
+        :mod:`.returns` (``_cell`` checks (b) on the first cell's segment). Empty where the runs
+        came by different jumps (an aggregate of several), from the initial star, or where the
+        mode's flow is a linearisation (valid only in its block's region)."""
+        if self.linearise is not None and mode in self.linearise.curved:
+            return ()
+        if path.entries:
+            names = {path.entries[-1].transition}
+        elif path.origin is not None and all(p.entries for _, p in path.origin.members):
+            names = {p.entries[-1].transition for _, p in path.origin.members}
+        else:
+            return ()
+        came = self._sources.get(names.pop(), []) if len(names) == 1 else []
+        if len(came) != 1:
+            return ()
+        source, first = came[0]
+        out = []
+        for jump in self.jumps[mode]:
+            if jump.target == source and jump.H.shape[0] and undone(first, jump):
+                rows = entry_rows(jump, self.invariants[mode], start)
+                if rows:
+                    out.append((jump, rows))
+        return tuple(out)
 
     def _half_spread(self, mode: str, spread, since: float, half: float, carried=0.0):
         """The input-effect bound ``carried + R(since + half)`` of the first half of a bisected cell
@@ -1135,7 +1205,7 @@ class _Explorer:
         return bool(np.any(np.abs(rows) @ error > ERROR_RATIO * magnitude))
 
     def _check_segment(self, mode: str, seg: Star, path: _Path, block: int, own_open: bool,
-                       cut_from: int | None = None):
+                       cut_from: int | None = None, cell=None):
         """Check every unsafe piece of ``mode`` on a segment.
 
         Cheap support bounds first. When they fail, the interpolation error of each cell
@@ -1177,7 +1247,29 @@ class _Explorer:
             tight = np.isfinite(piece.inradius) and removable < TIGHT_RATIO * piece.inradius
             if blame is None or depth > removable or tight:
                 self._try_replay(witness, piece, seg)
+            elif cell is not None and self._probed(mode, piece, witness, *cell):
+                self._try_replay(witness, piece, seg)
+                self.probe_misses += 1          # (the replay did not violate)
             self._unresolved(witness, blame, seg)
+
+    def _probed(self, mode: str, piece: _Piece, witness: _Witness, start: Star, h: float) -> bool:
+        """Whether the run through the witness's point of the cell's ``start`` enters ``piece`` at
+        one of the instants ``k h / PROBES`` of the mode's step that fall in the cell: then the
+        witness is worth a replay before the cell is refined (the replay alone decides). One
+        matrix-vector product per instant. Not in modes with time-varying inputs (the run of
+        one signal says little of the others), nor after :data:`PROBE_MISSES` probed witnesses
+        whose replay did not violate."""
+        flow = self.flows[mode]
+        if flow.drift or flow.inputs or self.opt.discrete_time or self.probe_misses >= PROBE_MISSES:
+            return False
+        Phi, psi = flow.step(self.h / PROBES)
+        x = start.center + start.basis @ witness.alpha[:start.nvars]
+        for _ in range(max(1, int(round(h / self.h * PROBES)))):
+            x = Phi @ x + psi
+            slack = piece.g - piece.H @ x
+            if np.all(slack > 0 if piece.strict else slack >= 0):
+                return True
+        return False
 
     def _check_whole_mode(self, mode: str, seg: Star, path: _Path, blocks, open_, piece):
         """A piece without rows: the whole of ``mode`` is unsafe (a SpaceEx ``loc() == error``),
@@ -1224,7 +1316,7 @@ class _Explorer:
         return self._earliest(seg)
 
     def _jump_from(self, mode: str, seg: Star, path: _Path, block: int, own_open: bool, point,
-                   pending=None, cell=None):
+                   pending=None, cell=None, skip=frozenset()):
         for index, jump in enumerate(self.jumps[mode]):
             if jump.target not in self.relevant:
                 continue
@@ -1239,6 +1331,9 @@ class _Explorer:
             lower = -seg.support_bounds(-jump.H)
             relaxed = jump.g + self._touch(jump.g, lower) if self._at_horizon(seg) else jump.g
             if jump.H.shape[0] and np.any(lower > relaxed):
+                continue
+            if jump.name in skip:               # a zero-dwell return (see _cell)
+                self.stats.returns += 1
                 continue
             # runs that switch after the horizon do not matter: the clock row cuts them
             H = np.vstack([jump.H, self.clock_row])

@@ -321,6 +321,11 @@ def _abs_at_centres(center, basis, box, D, d):
     return np.abs(np.swapaxes(np.matmul(shifted[None], np.swapaxes(D, 1, 2)), 0, 1) + d[None])
 
 
+def chunk_cells(D, n: int, m: int) -> int:
+    """Grid stars per chunk of :func:`_chain_abs_bounds` for ``n`` states, ``m`` coefficients."""
+    return max(1, PRODUCT_BYTES // (8 * D.shape[0] * n * max(m, 1)))
+
+
 def _chain_abs_bounds(center, basis, box, D, d):
     """``max |D_l x + d_l|`` over each ``Y_j``, per sample ``l`` and component: ``(J, L, n)``.
 
@@ -328,8 +333,8 @@ def _chain_abs_bounds(center, basis, box, D, d):
     ``|D_l (c_j + V_j m) + d_l| + |D_l V_j| r``. The products ``D_l V_j`` are formed a few
     grid stars at a time (:data:`PRODUCT_BYTES`): all at once they take ``J L n m`` numbers,
     600 MB for a 273-state model over 60 cells, and are slower for it."""
-    J, (L, n, _), m = center.shape[0], D.shape, basis.shape[2]
-    step = max(1, PRODUCT_BYTES // (8 * L * n * max(m, 1)))
+    J, (L, n, _) = center.shape[0], D.shape
+    step = chunk_cells(D, n, basis.shape[2])
     spread = np.empty((J, L, n))
     for s in range(0, J, step):
         spread[s:s + step] = np.abs(np.matmul(D[None], basis[s:s + step, None])) @ box.radius
