@@ -156,3 +156,38 @@ def test_rising_is_a_lower_bound_of_the_guard_rate(a, b, centre, u_radius, shift
     for x in np.array(centre) + grid:
         for u in (-u_radius, u_radius):
             assert jump.H[0] @ (A @ x + flow.b + B[:, 0] * u) > 0
+
+
+# Two jumps into `m`: j1 (identity, undone by the urgent j2) and j5 (y := y + 1). The j5 runs
+# enter `m` at states inside the hull of the j1 runs; from (1, 2) they are back in `p` at once,
+# with y - x = 1 (closed form: x = y = t until t = 1). The j1 aggregate skips its returns, so it
+# must not cover the j5 one (the fixpoint check's tag).
+
+TWO_WAYS_IN = """
+name: two-ways-in
+state: [x, y, s]
+modes:
+  i0: {flow: {x: 1, y: 1, s: 0}, invariant: ["x <= 0.1"]}
+  i1: {flow: {x: 1, y: 1, s: 0}, invariant: ["x <= 0.2"]}
+  p:  {flow: {x: 1, y: 1, s: "-s"}, invariant: ["x <= 3"]}
+  m:  {flow: {x: 2, y: 0, s: 0}, invariant: ["x >= 1"]}
+transitions:
+  a:  {from: i0, to: i1, guard: ["x >= 0.1"]}
+  b:  {from: i1, to: p, guard: ["x >= 0.2"]}
+  j1: {from: p, to: m, guard: ["x >= 1"]}
+  j5: {from: p, to: m, guard: ["x >= 1", "x <= 2"], reset: {y: "y + 1"}}
+  j2: {from: m, to: p, guard: ["x <= 1"], urgent: true}
+initial: {mode: i0, box: {x: 0, y: 0, s: 1}}
+horizon: 4
+"""
+
+
+def test_an_aggregate_that_skips_returns_covers_only_runs_that_came_its_way(tmp_path):
+    path = tmp_path / "m.yaml"
+    path.write_text(TWO_WAYS_IN)
+    model = load_model(path)
+    props = tmp_path / "p.yaml"
+    props.write_text('properties:\n  - {id: p, kind: safety, modes: [p], require: ["y - x <= 0.5"]}\n')
+    (prop,) = [bind(p, model) for p in load_properties(props)]
+    result = BACKEND.check(model, prop, {"finer_retry": False})
+    assert result.status != Status.SAFE

@@ -888,7 +888,7 @@ class _Explorer:
             return
         candidates = [(hull, rows)]
         if self.covered is not None:
-            if self.covered.covers(mode, hull, self._lp_count):
+            if self.covered.covers(mode, hull, self._lp_count, self._entered_by(kept)):
                 return
             if not self.covered.shift:                         # the clock's start is exact
                 ranges = self._clock_from(ranges, hull.box_bound().low[self.clock])
@@ -915,8 +915,9 @@ class _Explorer:
         for k, (star, star_rows) in enumerate(candidates):
             agg = _Aggregate(mode, star, members, base=star.nvars if base is None else base)
             mark = None if self.covered is None else self.covered.mark()
-            if record and self.covered is not None:
-                self.covered.record(mode, star, star_rows)
+            if record and self.covered is not None:         # (tagged: see .fixpoint, returns)
+                entry = self._entered_by(members)
+                self.covered.record(mode, star, star_rows, entry if self._undoing(mode, entry) else None)
             try:
                 self._chain(mode, star, _Path(jumps=jumps, stalled=stalled, origin=agg, since=start,
                                               nested=nested), star.box.center if record else None)
@@ -964,7 +965,7 @@ class _Explorer:
         star = folded(star, keep)
         if star.nvars > keep + 2 * self.n:
             return False
-        if self.covered is not None and self.covered.covers(mode, star, self._lp_count):
+        if self.covered is not None and self.covered.covers(mode, star, self._lp_count, self._entered_by(members)):
             return True
         if len(members) == 1 and star is members[0][0]:        # its cells' frames are gone:
             self._chain(mode, star, members[0][1].closed())   # nothing of its history to bisect
@@ -1130,22 +1131,32 @@ class _Explorer:
         if self.linearise is not None and mode in self.linearise.curved:
             return ()
         if path.entries:
-            names = {path.entries[-1].transition}
-        elif path.origin is not None and all(p.entries for _, p in path.origin.members):
-            names = {p.entries[-1].transition for _, p in path.origin.members}
+            name = path.entries[-1].transition
+        elif path.origin is not None:
+            name = self._entered_by(path.origin.members)
         else:
             return ()
-        came = self._sources.get(names.pop(), []) if len(names) == 1 else []
-        if len(came) != 1:
-            return ()
-        source, first = came[0]
         out = []
-        for jump in self.jumps[mode]:
-            if jump.target == source and jump.H.shape[0] and undone(first, jump):
-                rows = entry_rows(jump, self.invariants[mode], start)
-                if rows:
-                    out.append((jump, rows))
+        for jump in self._undoing(mode, name):
+            rows = entry_rows(jump, self.invariants[mode], start)
+            if rows:
+                out.append((jump, rows))
         return tuple(out)
+
+    def _undoing(self, mode: str, name: str | None) -> list:
+        """The jumps of ``mode`` back to the mode the transition ``name`` leaves that undo its
+        reset (:func:`.returns.undone`); empty where ``name`` is None or names several jumps."""
+        came = self._sources.get(name, []) if name is not None else []
+        if len(came) != 1:
+            return []
+        source, first = came[0]
+        return [j for j in self.jumps[mode] if j.target == source and j.H.shape[0] and undone(first, j)]
+
+    @staticmethod
+    def _entered_by(members) -> str | None:
+        """The transition every member (a successor star with its path) entered by, or None."""
+        names = {path.entries[-1].transition if path.entries else None for _, path in members}
+        return names.pop() if len(names) == 1 else None
 
     def _half_spread(self, mode: str, spread, since: float, half: float, carried=0.0):
         """The input-effect bound ``carried + R(since + half)`` of the first half of a bisected cell

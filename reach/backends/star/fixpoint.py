@@ -26,6 +26,14 @@ The sets computed along two paths that reach the same states differ by rounding 
 1e-9 relative), so an aggregate is explored enlarged by :data:`MARGIN` where that decides
 nothing (a check that fails under the enlarged hull is redone under the exact one).
 
+One exception to "its runs are explored": an aggregate whose runs all entered by a jump ``J1``
+that a jump ``J2`` of the mode undoes does not take ``J2`` from its first cell
+(:mod:`.returns`), since its runs would be back where and when they left. That holds for runs
+that came by ``J1``, not for a later aggregate inside it that came by another jump (it would
+be back at states its source never held). Such an aggregate is recorded with ``J1``
+(``entry``) and covers only aggregates that came by ``J1`` too; a chain's block end (runs that
+have flowed in the mode) is covered by untagged aggregates only.
+
 Either argument holds while the earlier aggregate's exploration stands: an aggregate refined
 back into its members (:meth:`.explorer._Explorer._aggregate`) is forgotten with everything
 recorded after it (explored depth first, so those are its descendants, whose exploration is
@@ -100,6 +108,7 @@ class _Explored:
     H: np.ndarray
     g: np.ndarray
     start: float
+    entry: str | None = None        # the jump its runs came by, where it skips their returns
 
 
 @dataclass
@@ -122,29 +131,32 @@ class Covered:
         and its descendants)."""
         del self.entries[mark:]
 
-    def record(self, mode: str, star: Star, rows) -> None:
+    def record(self, mode: str, star: Star, rows, entry: str | None = None) -> None:
         """Record the aggregate ``star`` entering ``mode``: a box star cut by the mode's
-        invariant and the jump's ``rows = (H, g)``."""
+        invariant and the jump's ``rows = (H, g)``; ``entry``: the jump all its runs came by,
+        where one of the mode's jumps undoes it (module docstring), else None."""
         box = star.box_bound()
         self.entries.append(_Explored(mode, box.low, box.high, np.asarray(rows[0], float),
-                                      np.asarray(rows[1], float), float(box.low[self.clock])))
+                                      np.asarray(rows[1], float), float(box.low[self.clock]), entry))
 
-    def covers(self, mode: str, hull: Star, count_lps) -> bool:
+    def covers(self, mode: str, hull: Star, count_lps, entry: str | None = None) -> bool:
         """Whether an earlier aggregate of ``mode`` holds every state of ``hull`` (a star inside
         the mode's invariant), the clock within its interval or, with ``shift``, starting no
         earlier (module docstring); each jump row not settled by the boxes costs one LP over
-        ``hull`` (reported to ``count_lps``)."""
+        ``hull`` (reported to ``count_lps``). ``entry``: the jump every run of ``hull`` came by
+        (None: several, or runs that have flowed in the mode); an aggregate recorded with
+        another covers nothing of it."""
         box = hull.box_bound()
         low, high, start = box.low, box.high, float(box.low[self.clock])
         if np.isnan(low).any() or np.isnan(high).any():     # NaN fails every test below: not covered
             return False
         states = np.arange(low.size) != self.clock if self.shift else np.ones(low.size, dtype=bool)
-        for entry in self.entries:
-            if entry.mode != mode or entry.start > start:
+        for explored in self.entries:
+            if explored.mode != mode or explored.start > start or explored.entry not in (None, entry):
                 continue
-            if np.any(low[states] < entry.low[states]) or np.any(high[states] > entry.high[states]):
+            if np.any(low[states] < explored.low[states]) or np.any(high[states] > explored.high[states]):
                 continue
-            if self._rows_hold(entry, hull, count_lps):
+            if self._rows_hold(explored, hull, count_lps):
                 self.pruned += 1
                 return True
         return False
