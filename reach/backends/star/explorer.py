@@ -3,6 +3,7 @@ refinement and aggregation (the method is described in :mod:`reach.backends.star
 
 from __future__ import annotations
 
+import itertools
 import logging
 import threading
 import time
@@ -63,6 +64,8 @@ MAX_SIGNAL_PIECES = 1_000_000
 PROBES = 64
 #: probed witnesses whose replay did not violate, after which a check probes no more
 PROBE_MISSES = 2
+#: time-varying inputs read by resets along a witness's path whose range corners are replayed
+MAX_READ_INPUTS = 3
 
 
 @dataclass
@@ -1363,7 +1366,12 @@ class _Explorer:
                            float(entered.center[self.clock]), entered.basis[self.clock].copy(),
                            jump.window is None or jump.window[0] == self.clock)
             earliest = self._earliest(entered)
+            reads = self._inputs_read(jump)
+            if reads:                           # the input's value at the jump: any of its range
+                entered = self._fresh_inputs(entered, reads)
             successor = entered.affine_map(jump.R, jump.r)
+            if reads:                           # and later ones independent of what it set
+                successor = self._fresh_inputs(successor, reads)
             successor = successor.intersect_halfspaces(*self.invariants[jump.target])
             if self.flows[mode].drift:
                 successor = _tightened(successor, len(self.invariants[jump.target][1]))
@@ -1389,6 +1397,24 @@ class _Explorer:
                 direction = np.concatenate([np.zeros(m), point, [1.0], np.zeros(pad - m - 1)]) \
                     if pad > m else None
             self._chain(jump.target, successor, descended, guess, direction)
+
+    def _inputs_read(self, jump) -> list[int]:
+        """The coordinates of the time-varying inputs that ``jump``'s reset reads into another
+        state (``y := u``)."""
+        return [u.index for u in self.data.varying if np.any(np.delete(jump.R[:, u.index], u.index) != 0)]
+
+    def _fresh_inputs(self, star: Star, inputs: list[int]) -> Star:
+        """``star`` with the time-varying inputs ``inputs`` free in their ranges, each on a new
+        coefficient. Their coordinate stands for the input's value at the time of the set; a
+        reset that reads one takes its value at the jump, which the signal may choose anywhere in
+        the range whatever it was before, and after the jump it is again independent of the
+        state it was copied into."""
+        center, basis = star.center.copy(), star.basis.copy()
+        low, high = self.data.ranges.low[inputs], self.data.ranges.high[inputs]
+        center[inputs], basis[inputs] = (low + high) / 2, 0.0
+        radius = np.zeros(self.n)
+        radius[inputs] = (high - low) / 2
+        return _plus_box(Star(center, basis, star.predicate, star.box), radius)
 
     def _at_instant(self, mode: str, entered: Star, seg: Star, H, g, start: Star, spread) -> Star | None:
         """The runs that take a time-triggered jump out of a cell, as an image of the cell's start
@@ -1471,6 +1497,24 @@ class _Explorer:
             found = self._extremal_witness(witness, piece, seg)
             if found is not None:
                 self._replay(*found)
+        for corner in self._input_corners(x0, transitions):
+            self._replay(witness, corner, switch, constant_signal(self.model, corner), transitions)
+
+    def _input_corners(self, x0, transitions) -> list:
+        """``x0`` with the time-varying inputs that a reset along ``transitions`` reads held at
+        each corner of their ranges (none where more than :data:`MAX_READ_INPUTS` are read): the
+        witness takes such an input's value at the jump freely (:meth:`_fresh_inputs`), which
+        the run of the one value ``x0`` holds does not."""
+        read = sorted({k for name in transitions for _, jump in self._sources.get(name, [])
+                       for k in self._inputs_read(jump)})
+        if not read or len(read) > MAX_READ_INPUTS:
+            return []
+        out = []
+        for values in itertools.product(*[(self.data.ranges.low[k], self.data.ranges.high[k]) for k in read]):
+            corner = x0.copy()
+            corner[read] = values
+            out.append(corner)
+        return out
 
     def _replay(self, witness: _Witness, x0, switch, signal, transitions, dt=None):
         """One replay of ``witness``'s run: where transitions are enabled together, the run takes

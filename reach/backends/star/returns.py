@@ -11,7 +11,7 @@ Claim. Let every run of a chain's start star ``S`` in mode ``M`` have entered ``
 undo it: ``R2 R1 = I`` and ``R2 r1 + r2 = 0``. Let one row ``h x <= g`` of ``J2``'s guard satisfy
 
 (a) ``h x >= g`` for every run at its entry: ``M``'s invariant holds the row ``-h x <= c`` with
-    ``c <= -g`` (rows normalised, as :func:`.explorer._invariant_keeps` reads them), or ``S``
+    ``c <= -g`` (rows normalised; exactly opposite, as rows from one expression are), or ``S``
     reaches no deeper than 0 into ``h x <= g`` (the weak-duality bound of :meth:`.Star.depth`);
 (b) ``h x`` strictly increases along every run while it is in the segment ``Q`` of the chain's
     first cell: ``d/dt (h x) = h (A x + b) + h B (u - u_c) >= min_Q h A x + h b - |h B| u_r > 0``
@@ -29,10 +29,6 @@ from __future__ import annotations
 
 import numpy as np
 
-#: the normalised rows of an invariant and a guard count as opposite within this
-ROW_ATOL = 1e-12
-
-
 def undone(first, second) -> bool:
     """Whether jump ``second`` undoes the reset of jump ``first``: ``R2 R1 = I``, ``R2 r1 + r2 = 0``."""
     R = second.R @ first.R
@@ -45,7 +41,7 @@ def entry_rows(jump, invariant, start) -> list[int]:
     H, g = invariant
     rows = []
     for k, (a, b) in enumerate(zip(jump.H, jump.g)):
-        kept = any(np.allclose(H[i], -a, rtol=0.0, atol=ROW_ATOL) and g[i] <= -b for i in range(H.shape[0]))
+        kept = any(np.array_equal(H[i], -a) and g[i] <= -b for i in range(H.shape[0]))
         if kept or (start.box.bounded and start.depth(a[None], np.array([b]))[0] <= 0.0):
             rows.append(k)
     return rows
