@@ -12,9 +12,8 @@ import pytest
 import scipy.linalg
 
 from reach.backends.star import BACKEND
-from reach.model import load_model
 from reach.result import Status
-from reach.spec import bind, load_properties
+from model_files import load_files
 
 explorer = importlib.import_module("reach.backends.star.explorer")
 flowpipe = importlib.import_module("reach.backends.star.flowpipe")     # (the package exports a function of that name)
@@ -43,13 +42,9 @@ def _least_x(horizon=12.0, samples=12001):
 
 
 def _check(text, tmp_path, require, options=None):
-    path = tmp_path / "m.yaml"
-    path.write_text(text)
-    model = load_model(path)
-    props = tmp_path / "p.yaml"
-    props.write_text(f'properties:\n  - {{id: p, kind: safety, modes: [run], require: ["{require}"]}}\n')
-    (prop,) = [bind(p, model) for p in load_properties(props)]
-    return BACKEND.check(model, prop, options or {})
+    props = f'properties: [{{id: p, kind: safety, modes: [run], require: ["{require}"]}}]'
+    model, bound = load_files(tmp_path, text, props)
+    return BACKEND.check(model, bound["p"], options or {})
 
 
 @pytest.fixture(scope="module")

@@ -7,9 +7,8 @@ may set anywhere in its range whatever it was before or will be after. Closed fo
 import pytest
 
 from reach.backends.star import BACKEND
-from reach.model import load_model
 from reach.result import Status
-from reach.spec import bind, load_properties
+from model_files import load_files
 
 ONE_JUMP = """
 name: input-reset
@@ -43,13 +42,9 @@ horizon: 3
 
 
 def _check(text, tmp_path, mode, require):
-    path = tmp_path / "m.yaml"
-    path.write_text(text)
-    model = load_model(path)
-    props = tmp_path / "p.yaml"
-    props.write_text(f'properties:\n  - {{id: p, kind: safety, modes: [{mode}], require: ["{require}"]}}\n')
-    (prop,) = [bind(p, model) for p in load_properties(props)]
-    return BACKEND.check(model, prop, {"finer_retry": False})
+    props = f'properties: [{{id: p, kind: safety, modes: [{mode}], require: ["{require}"]}}]'
+    model, bound = load_files(tmp_path, text, props)
+    return BACKEND.check(model, bound["p"], {"finer_retry": False})
 
 
 @pytest.mark.parametrize("text, mode, require", [

@@ -13,10 +13,9 @@ from reach.backends.star import BACKEND
 from reach.backends.star.flowpipe import AffineFlow
 from reach.backends.star.returns import rising, undone
 from reach.backends.star.transitions import _Jump
-from reach.model import load_model
 from reach.result import Status
 from reach.sets import Box, Star
-from reach.spec import bind, load_properties
+from model_files import load_files
 
 SATURATED = """
 name: saturated
@@ -39,6 +38,7 @@ transitions:
 initial: {mode: satn, box: {x: [4, 4.2], v: 0}}
 horizon: 15
 """
+SATURATED_MODES = ["lin", "satp", "satn"]
 
 
 def _least_v(samples=41):
@@ -52,15 +52,10 @@ def _least_v(samples=41):
     return low
 
 
-def _check(text, tmp_path, require, modes=None):
-    path = tmp_path / "m.yaml"
-    path.write_text(text)
-    model = load_model(path)
-    props = tmp_path / "p.yaml"
-    listed = ", ".join(modes or model.modes)
-    props.write_text(f'properties:\n  - {{id: p, kind: safety, modes: [{listed}], require: ["{require}"]}}\n')
-    (prop,) = [bind(p, model) for p in load_properties(props)]
-    return BACKEND.check(model, prop, {})
+def _check(text, tmp_path, require, modes, options=None):
+    props = f'properties: [{{id: p, kind: safety, modes: [{", ".join(modes)}], require: ["{require}"]}}]'
+    model, bound = load_files(tmp_path, text, props)
+    return BACKEND.check(model, bound["p"], options or {})
 
 
 @pytest.fixture(scope="module")
@@ -73,13 +68,13 @@ def least_v():
 def test_a_saturated_loop_with_closed_shared_guards_is_proved(least_v, tmp_path):
     """Both guards hold on each boundary, so a run may switch there back and forth at one
     instant; those returns are not taken, and a bound 0.3 % beyond the least v is SAFE."""
-    result = _check(SATURATED, tmp_path, f"v >= {least_v * 1.003:.5f}")
+    result = _check(SATURATED, tmp_path, f"v >= {least_v * 1.003:.5f}", SATURATED_MODES)
     assert result.status == Status.SAFE, result.reason
     assert result.details["zero_dwell_returns"] > 0
 
 
 def test_a_bound_the_saturated_loop_crosses_is_violated(least_v, tmp_path):
-    result = _check(SATURATED, tmp_path, f"v >= {least_v * 0.997:.5f}")
+    result = _check(SATURATED, tmp_path, f"v >= {least_v * 0.997:.5f}", SATURATED_MODES)
     assert result.status == Status.UNSAFE
     assert result.counterexample is not None
 
@@ -121,7 +116,7 @@ def test_a_return_after_time_in_the_other_mode_is_taken(text, tmp_path):
     (condition (b) fails): from ``y(0) = 0.02`` the run is back at ``x = 1`` after 0.04 s.
     ``entered-inside``: the runs enter ``m`` at x in [0.9, 1], inside the guard back (condition
     (a) fails) and return after up to 0.1 s. Either way a run is back in ``p`` with z > 0.01."""
-    result = _check(text, tmp_path, "z <= 0.01", modes=["p"])
+    result = _check(text, tmp_path, "z <= 0.01", ["p"])
     assert result.status == Status.UNSAFE, result.reason
 
 
@@ -183,11 +178,5 @@ horizon: 4
 
 
 def test_an_aggregate_that_skips_returns_covers_only_runs_that_came_its_way(tmp_path):
-    path = tmp_path / "m.yaml"
-    path.write_text(TWO_WAYS_IN)
-    model = load_model(path)
-    props = tmp_path / "p.yaml"
-    props.write_text('properties:\n  - {id: p, kind: safety, modes: [p], require: ["y - x <= 0.5"]}\n')
-    (prop,) = [bind(p, model) for p in load_properties(props)]
-    result = BACKEND.check(model, prop, {"finer_retry": False})
+    result = _check(TWO_WAYS_IN, tmp_path, "y - x <= 0.5", ["p"], {"finer_retry": False})
     assert result.status != Status.SAFE
