@@ -14,7 +14,10 @@ the same initial deviations. The chain is followed until the horizon, or until n
 be reached any more. A switch whose time straddles the horizon (some runs of the box make it
 before, some after) is followed too, and past the horizon while some runs may still switch before
 it; the candidates that some runs may not reach are marked partial
-(:meth:`EventProblem.candidate_steps`). Where the chain stops earlier (more than ``MAX_SWITCHES``
+(:meth:`EventProblem.candidate_steps`). The sweep does not take an exit straight back to the mode
+a stretch's runs came from while its face rises (:meth:`EventProblem._returning`: closed guards on
+a shared boundary), and starts the states entering through one affine face on that face
+(:func:`_on_face`). Where the chain stops earlier (more than ``MAX_SWITCHES``
 switches), where runs may switch before the horizon where the nominal run does not, or where the
 nominal run is stationary in ``q`` and perturbed runs are not (their extrema there continue no
 nominal one), the candidates say so (:class:`Candidates`). :meth:`EventProblem.sweep` is the
@@ -41,7 +44,7 @@ from reach.backends.taylor.lockstep import run_batch, run_one
 from reach.backends.taylor.nominal import NominalRun, nominal
 from reach.backends.taylor.tm import TM
 from reach.backends.taylor.tm_flowpipe import stretch_from_box
-from reach.backends.taylor.verified import at_sigma, crossing, enclose_stretch
+from reach.backends.taylor.verified import ROUNDING, at_sigma, crossing, enclose_stretch
 from reach.model.constraints import affine_coefficients, lambdify_margins, opposite_pairs
 from reach.spec.properties import BoundEvent
 
@@ -71,7 +74,7 @@ class ModeCode:
 
     def __init__(self, model, name: str, quantity):
         mode, symbols = model.modes[name], model.symbols
-        self.name = name
+        self.name, self.model, self._returns = name, model, {}
         self.f = compile_expressions(mode.flow, symbols)
         self.f_numeric = compile_numeric(mode.flow, symbols)
         self.exits = []
@@ -117,6 +120,28 @@ class ModeCode:
         """For states ``X`` ``(k, n)``: the smallest over the urgent exits of the guard's largest
         margin (positive outside every guard)."""
         return np.min([np.max(ex.margins(X), axis=1) for ex in self.exits], axis=0)
+
+    def returns(self, came) -> dict:
+        """For a stretch whose runs all entered by the transition ``came``: ``{i: rate}`` for each
+        exit ``i`` straight back to ``came``'s source, neither resetting a state, whose guard has a
+        face ``g <= 0`` with ``-g <= 0`` a face of ``came``'s guard (so ``g >= 0`` for every run at
+        its entry); ``rate`` is ``dg/dt`` along this mode's flow, compiled
+        (:meth:`EventProblem._returning`)."""
+        if came.name not in self._returns:
+            out = {}
+            symbols, flow = self.model.symbols, self.model.modes[self.name].flow
+            if _keeps_state(came, symbols):
+                for i, ex in enumerate(self.exits):
+                    tr = ex.transition
+                    if tr.target != came.source or not _keeps_state(tr, symbols):
+                        continue
+                    face = next((c.g for c in tr.guard if any(sympy.expand(c.g + d.g) == 0 for d in came.guard)),
+                                None)
+                    if face is not None:
+                        rate = sum(sympy.diff(face, s) * f for s, f in zip(symbols, flow))
+                        out[i] = _first(compile_expressions([rate], symbols))
+            self._returns[came.name] = out
+        return self._returns[came.name]
 
     def may_enter(self, ex: Exit, X) -> bool:
         """Whether the guard of ``ex`` may hold for some deviation of the Taylor models ``X``."""
@@ -195,6 +220,11 @@ class Largest:
 
 def _first(fn):
     return lambda x: fn(x)[0]
+
+
+def _keeps_state(transition, symbols) -> bool:
+    """Whether ``transition`` resets no state (every assignment, if any, is ``x := x``)."""
+    return all(sympy.sympify(e) == symbols[i] for i, e in transition.reset.items())
 
 
 def unsupported_switch(model) -> str | None:
@@ -564,9 +594,9 @@ class EventProblem:
         outer, inner, steps, error, stretches = -np.inf, -np.inf, 0, 0.0, 0
         kept = [] if keep_sets else None
         x0 = initial_state(algebra(order, m + 1), center, half_width, self.uncertain)
-        branches = [(self.model.initial.mode, x0, np.zeros(len(x0)), 0.0, 0, True)]
+        branches = [(self.model.initial.mode, x0, np.zeros(len(x0)), 0.0, 0, True, None)]
         while branches:
-            mode, x0, x0_error, t_earliest, hop, sure = branches.pop()
+            mode, x0, x0_error, t_earliest, hop, sure, came = branches.pop()
             if deadline.passed():
                 return _unbounded(deadline.text)
             if hop > MAX_SWITCHES:
@@ -592,10 +622,13 @@ class EventProblem:
                 lo, hi = code.q(start).bound()
                 inner = max(inner, lo if sign > 0 else -hi)
             entry = {i: [] for i in range(len(code.exits))}
+            slices = {i: [] for i in range(len(code.exits))}     # their instants that may (_entry_slices)
             first = {}                  # the first step that may meet each exit's guard
             exit_taken = None
+            returning = dict(code.returns(came)) if came is not None else {}
             for k in range(len(enc.steps)):
                 X = enc.tm(k)
+                returning = self._returning(returning, X)
                 if kept is not None:
                     kept.append(_step_box(mode, X, enc.steps[k], t_earliest, self.clock))
                 if code.q is not None:
@@ -606,10 +639,17 @@ class EventProblem:
                         inner = max(inner, lo0 if sign > 0 else -hi0)
                 box = None
                 for i, ex in enumerate(code.exits):
+                    if i in returning:          # met only at the entry instant: a return
+                        continue
                     if code.may_enter(ex, X):
+                        sliced = _entry_slices(code, ex, X)
+                        if sliced is None:      # no instant of the step meets the guard
+                            continue
                         certified = False
                         box = np.array([x.bound() for x in X]) if box is None else box
                         entry[i].append(box)
+                        slices[i].append(np.stack([np.maximum(box[:, 0], sliced[:, 0]),
+                                                   np.minimum(box[:, 1], sliced[:, 1])], axis=1))
                         first.setdefault(i, k)
                 exit_taken = code.inside(enc.tm_at_end(k), True)
                 if exit_taken is not None:
@@ -627,14 +667,20 @@ class EventProblem:
                 hull = _entry_box(ex, entry[i], self.model)
                 states = _no_wider(self._crossing(code, ex, enc, first[i], end), hull)
                 if states is None:
-                    box = hull
+                    box = _entry_box(ex, slices[i], self.model)
+                    tie = None if ex.reset is not None or first[i] == 0 or not np.all(np.isfinite(box)) \
+                        else self._face(ex)
                     if ex.reset is not None:
                         out = ex.reset(Jet.seed(box[:, 0], box[:, 1]))
                         box = np.array([[o.lo, o.hi] if isinstance(o, Jet) else [o, o] for o in out], dtype=float)
-                    wide = [j for j in range(self.model.n) if box[j, 1] > box[j, 0]]
+                    if tie is not None:
+                        box, tied = _on_face(box, *tie)
+                    wide = [j for j in range(self.model.n) if box[j, 1] > box[j, 0] and (tie is None or j != tied)]
                     start_box = initial_state(algebra(order, len(wide) + 1), box.mean(axis=1),
                                               0.5 * (box[:, 1] - box[:, 0]), wide)
                     start_error = np.zeros(self.model.n)
+                    if tie is not None:
+                        start_box[tied], start_error[tied] = _tied(start_box, box, tied, *tie)
                 else:
                     if ex.reset is not None:
                         states = ex.reset(states)
@@ -644,13 +690,45 @@ class EventProblem:
                 # no run enters before this stretch's earliest start plus the window's start
                 earliest = max(box[self.clock, 0], t_earliest + enc.steps[first[i]].t0)
                 branches.append((ex.transition.target, start_box, start_error, earliest, hop + 1,
-                                 sure and len(possible) == 1 and ex is exit_taken))
+                                 sure and len(possible) == 1 and ex is exit_taken, ex.transition))
         bound = (inner, outer) if sign > 0 else (-outer, -inner)
         out = {"bound": tuple(float(v) for v in bound), "steps": steps, "error": error,
                "stretches": stretches}
         if kept is not None:
             out["sets"] = kept
         return out
+
+    def _face(self, ex: Exit):
+        """``(a, b)`` where the guard of ``ex`` is the one affine face ``a . x + b <= 0`` (not
+        strict, not reading the clock), else None: a run outside it at a window's start enters it
+        on ``a . x + b = 0`` (:func:`_on_face`)."""
+        guard = ex.transition.guard
+        if len(guard) != 1 or guard[0].strict:
+            return None
+        coeffs = affine_coefficients(guard[0].g, self.model.symbols)
+        if coeffs is None or coeffs[0][self.clock] != 0 or not np.any(coeffs[0]):
+            return None
+        return coeffs
+
+    @staticmethod
+    def _returning(returning: dict, X) -> dict:
+        """The exits of ``returning`` (:meth:`ModeCode.returns`) still not met after the entry
+        instant, one step further: those whose face's rate stays positive over the step's
+        enclosure ``X`` (a Taylor-model bound).
+
+        Every run of the stretch entered by a transition ``J1`` from mode ``P`` without a reset,
+        so with ``g >= 0`` for a face ``g <= 0`` of the exit ``J2`` back to ``P``. While
+        ``dg/dt > 0`` over every step so far, ``g > 0`` for every run after it has flowed any time,
+        so ``J2``'s guard has held only at the entry instant. A run that takes ``J2`` then is back
+        in ``P`` at the state and instant it left, which ``P``'s stretch already holds (the
+        simulator does not take such a jump: ``Simulator._urgent_now``). From the first step
+        where the rate may not be positive on, ``J2`` is taken as any exit; at that step's start
+        every run is strictly outside its guard, as the crossing models assume (:meth:`_crossing`).
+        A saturated loop written as three modes with closed guards on the shared boundaries
+        (``lin``, ``satp``, ``satn``) would otherwise switch back and forth at its entry until the
+        switch limit, and the entry states' hull, a box wider than the boundary they lie on, would
+        meet the guard after the entry too."""
+        return {i: rate for i, rate in returning.items() if rate(X).bound()[0] > 0}
 
     def _crossing(self, code: ModeCode, ex: Exit, enc, k: int, end: float):
         """The entry states of ``ex`` as Taylor models (:func:`.verified.crossing`) over the window
@@ -723,6 +801,76 @@ def _loosened(rel_tol: float) -> list[float]:
 
 def _unbounded(why: str) -> dict:
     return {"bound": (-np.inf, np.inf), "steps": 0, "error": np.inf, "why": why}
+
+
+#: time slices of a step in which the states entering a guard are bounded (:func:`_entry_slices`)
+ENTRY_SLICES = 16
+
+
+def _entry_slices(code: ModeCode, ex: Exit, X) -> np.ndarray | None:
+    """The hull of the states of a step's Taylor models ``X`` in the slices of its time ``sigma``
+    (``ENTRY_SLICES`` equal parts of ``[-1, 1]``, the models' last variable substituted) in which
+    the guard of ``ex`` may hold, padded by ``ROUNDING``; None where it holds in none. A run
+    entering the guard during the step is inside it then, so in one of those slices: the hull
+    holds every entry state of the step, without the states of the step's other instants (a step
+    of a slow flowpipe is long against a crossing)."""
+    alg = X[0].poly.alg
+    last = alg.nvars - 1
+    kept = []
+    for s in range(ENTRY_SLICES):
+        args = [DA.var(alg, j) for j in range(last)] + \
+               [DA.var(alg, last, -1.0 + (2 * s + 1) / ENTRY_SLICES, 1.0 / ENTRY_SLICES)]
+        part = [TM(x.poly.compose(args), x.lo, x.hi) for x in X]
+        if code.may_enter(ex, part):
+            kept.append(np.array([x.bound() for x in part], dtype=float))
+    if not kept:
+        return None
+    low, high = np.min([k[:, 0] for k in kept], axis=0), np.max([k[:, 1] for k in kept], axis=0)
+    pad = ROUNDING * (1.0 + np.maximum(np.abs(low), np.abs(high)))
+    return np.stack([low - pad, high + pad], axis=1)
+
+
+def _on_face(box: np.ndarray, a: np.ndarray, b: float):
+    """``(box, j)``: the entry states' hull ``box`` cut to the states it holds on the face
+    ``a . x + b = 0`` and the coordinate ``j`` the face ties to the others.
+
+    Where no run is inside a guard of one face at a window's start (no earlier step may meet
+    it), each run that enters it does so on the face: the guard's margin is continuous, positive
+    before and at most 0 at the first instant the guard holds. So the entry states lie in
+    ``box`` and on the face. Each coordinate ``i`` is cut to ``-(b + sum_{k != i} a_k x_k) / a_i``
+    over the box (interval arithmetic, twice round, padded outward by ``ROUNDING``), and the
+    entry states are written with ``x_j`` the face's function of the others
+    (:func:`_tied`), ``j`` the coordinate with the widest ``|a_j| (hi_j - lo_j)``: the next
+    mode starts from a set one dimension thinner than the box, tied as the runs are. A
+    saturated loop entering ``lin`` at ``x + v = 1`` from ``x`` in ``[1.06, 2.54]`` otherwise
+    starts from every ``v`` of the box with every ``x``, and its rigorous bound from runs that
+    never reach the boundary."""
+    low, high = box[:, 0].copy(), box[:, 1].copy()
+    nz = np.flatnonzero(np.abs(a) > 1e-9 * np.abs(a).max())      # coefficients that can tie
+    for _ in range(2):
+        for i in nz:
+            terms = [(a[k] * low[k], a[k] * high[k]) for k in np.flatnonzero(a) if k != i]
+            rest_lo = -b - sum(max(p, q) for p, q in terms)
+            rest_hi = -b - sum(min(p, q) for p, q in terms)
+            lo, hi = sorted((rest_lo / a[i], rest_hi / a[i]))
+            pad = ROUNDING * (abs(b) + np.abs(a) @ np.maximum(np.abs(low), np.abs(high))) / abs(a[i])
+            low[i], high[i] = max(low[i], lo - pad), min(high[i], hi + pad)
+    if np.any(low > high):                   # no state of the hull on the face (rounding): as it was
+        low, high = box[:, 0].copy(), box[:, 1].copy()
+    j = int(nz[np.argmax(np.abs(a[nz]) * (high[nz] - low[nz]))])
+    return np.stack([low, high], axis=1), j
+
+
+def _tied(start: list, box: np.ndarray, j: int, a: np.ndarray, b: float):
+    """``(x_j, e_j)``: the coordinate ``j`` of the entry states on the face ``a . x + b = 0`` as a
+    polynomial of the others' (``start``, over ``box``), with its rounding ``e_j`` (a relative
+    ``ROUNDING`` of the magnitudes summed: the face holds exactly, its floating-point sum up to
+    that)."""
+    others = [k for k in range(len(start)) if k != j]
+    weights = np.array([-a[k] / a[j] for k in others] + [-b / a[j]])
+    poly = DA.weighted_sum(weights, [start[k] for k in others] + [1.0])
+    size = (abs(b) + np.abs(a[others]) @ np.abs(box[others]).max(axis=1)) / abs(a[j])
+    return poly, 4 * ROUNDING * size
 
 
 def _no_wider(states, hull: np.ndarray):
