@@ -339,13 +339,17 @@ def test_uniform_initial_box_matches_the_quadrature_of_its_closed_form():
     """Uniform burn error and Gaussian kicks: the position at 500 s is ``d vy0 + g`` with ``vy0``
     uniform (the initial box) and ``g ~ N(0, S)``, ``S = sum_k G_k Q G_k^T`` over the kicks at
     ``0, 10, ..., 490`` s. P(box) is the average over ``vy0`` (Gauss-Legendre) of scipy's normal
-    box probabilities, about 0.698; the Fourier interval must contain it and be no wider than
-    twice the requested error."""
+    box probabilities, about 0.698; fsr's interval (randomised QMC over the initial box and the
+    kicks' Genz variables together) must contain it and be no wider than twice the requested
+    error. The Fourier path (on request) must contain it too; its truncation bound does not close
+    at the frequency cap here (the kicks spread 0.3 m against a window of kilometres), so its
+    estimate goes to the details and its interval stays the honest, wide one."""
     from scipy.stats import multivariate_normal
 
     m, props = load("fsr_burn_uniform", "fsr_burn")
     result = BACKEND.check(m, props["arrive"], {"abs_error": 1e-2})
-    assert result.details["method"] == "fourier"
+    assert result.details["method"] == "genz"
+    by_fourier = BACKEND.check(m, props["arrive"], {"abs_error": 1e-2, "method": "fourier"})
     A, _ = m.modes["coast"].linear
     d = scipy.linalg.expm(A * 500.0)[:3, 4]
     S = sum(G @ m.disturbance.cov @ G.T for G in
@@ -362,6 +366,9 @@ def test_uniform_initial_box_matches_the_quadrature_of_its_closed_form():
     assert result.probability[0] <= exact <= result.probability[1]
     assert result.probability[1] - result.probability[0] <= 2e-2
     assert result.status is Status.SAFE                                  # at least 0.6
+    assert by_fourier.probability[0] <= exact <= by_fourier.probability[1]
+    low, high = by_fourier.details["estimated_interval"]
+    assert low <= exact <= high and high - low <= 2e-2
     assert run(BACKEND, m, props["arrive_safe"]).status is Status.UNSUPPORTED
 
 

@@ -46,8 +46,25 @@ REPLICATES = 16
 SOBOL_BITS = 52           # binary digits of the Sobol' points (exact in a double)
 ROUNDING = 1e-12          # allowance on closed-form values
 PIVOT_TOL = 1e-6          # conditional standard deviation (correlation scale) treated as zero
-ZERO_VARIANCE = 1e-24     # relative variance below which a row is deterministic
+ZERO_VARIANCE = 1e-24     # relative variance below which a row is deterministic (against the
+                          # largest row and against its own mean and bounds; see box_probability)
 FIXED_TOLERANCE = 1e-9    # a deterministic row meets a bound it misses by at most this (relative)
+
+
+def deterministic(mean, var, lower, upper):
+    """``(fixed, ambiguous)`` per row of variance ``var``, mean ``mean`` and bounds ``lower``,
+    ``upper``: ``fixed`` rows are deterministic (variance 0, or at most ``ZERO_VARIANCE`` times
+    both the largest row's and the square of the row's own size, its mean and finite bounds);
+    ``ambiguous`` rows are that small against the largest row only (an angle of 1e-8 rad beside a
+    range of 1e5 m), which rounding of the larger rows could have made or a real spread: a
+    caller takes both readings and the hull of their intervals. Against the largest row alone, a
+    real spread of one row was read as none, and a requirement on it met with probability 1."""
+    var = np.asarray(var, dtype=float)
+    noise = var <= ZERO_VARIANCE * max(float(np.max(var, initial=0.0)), np.finfo(float).tiny)
+    size = np.maximum(np.abs(mean), np.maximum(np.where(np.isfinite(lower), np.abs(lower), 0.0),
+                                               np.where(np.isfinite(upper), np.abs(upper), 0.0)))
+    fixed = noise & ((var <= ZERO_VARIANCE * size ** 2) | (var == 0))
+    return fixed, noise & ~fixed
 
 
 def fixed_meets(value, lower, upper):
@@ -179,9 +196,19 @@ def box_probability(mean, cov, lower, upper, *, abs_error: float = 1e-4,
     upper = np.atleast_1d(np.asarray(upper, dtype=float)) - mean
     if np.any(lower > upper):
         return Probability(0.0, 0.0, 0.0)
-    var = np.diag(cov).copy()
-    scale = max(float(np.max(var, initial=0.0)), np.finfo(float).tiny)
-    fixed = var <= ZERO_VARIANCE * scale
+    fixed, ambiguous = deterministic(mean, np.diag(cov), lower + mean, upper + mean)
+    if np.any(ambiguous):                       # both readings count
+        as_fixed = _integrate(mean, cov, lower, upper, fixed | ambiguous, abs_error, max_points, rng)
+        spread = _integrate(mean, cov, lower, upper, fixed, abs_error, max_points, rng)
+        return Probability(spread.value, min(as_fixed.low, spread.low), max(as_fixed.high, spread.high),
+                           spread.dimension, as_fixed.points + spread.points)
+    return _integrate(mean, cov, lower, upper, fixed, abs_error, max_points, rng)
+
+
+def _integrate(mean, cov, lower, upper, fixed, abs_error, max_points, rng) -> Probability:
+    """:func:`box_probability` with the rows ``fixed`` taken as deterministic (``lower`` and
+    ``upper`` relative to ``mean``)."""
+    var = np.diag(cov)
     if np.any(fixed & ~fixed_meets(mean, lower + mean, upper + mean)):
         return Probability(0.0, 0.0, 0.0)
     keep = ~fixed & (np.isfinite(lower) | np.isfinite(upper))
@@ -195,6 +222,53 @@ def box_probability(mean, cov, lower, upper, *, abs_error: float = 1e-4,
         half = ROUNDING + factor.allowance
         return Probability(p, max(0.0, p - half), min(1.0, p + half))
     return factor.integrate(abs_error, max_points, np.random.default_rng(rng))
+
+
+def uniform_shift_probability(mean, cov, lower, upper, D, half, *, abs_error: float = 1e-4,
+                               max_points: int = 2 ** 22, rng=0) -> Probability:
+    """``P(lower <= z + D v <= upper)`` for ``z ~ N(mean, cov)`` and ``v`` independent of it, uniform
+    on ``[-half, half]`` (independent components): a uniform initial box carried linearly to the
+    target's rows, ``D`` its image, plus Gaussian kicks.
+
+    One randomised QMC integral (:func:`randomized_qmc`) over ``v`` and the Genz variables of the
+    Gaussian part together: for each point, the rows' bounds move by ``-(D v)_i`` and the Genz
+    product of conditional masses (:class:`_Factor`, prioritised at ``v = 0``, which only orders
+    the variables) gives ``P(box | v)``; a row without Gaussian spread is met or not given ``v``
+    (``fixed_meets``). Its mean over ``v`` is the probability, so the interval is the same
+    randomised-QMC interval as :func:`box_probability`'s."""
+    mean = np.atleast_1d(np.asarray(mean, dtype=float))
+    cov = np.atleast_2d(np.asarray(cov, dtype=float))
+    D, half = np.atleast_2d(np.asarray(D, dtype=float)), np.asarray(half, dtype=float)
+    if not (np.all(np.isfinite(mean)) and np.all(np.isfinite(cov)) and np.all(np.isfinite(D))):
+        return Probability(np.nan, 0.0, 1.0)
+    lower = np.atleast_1d(np.asarray(lower, dtype=float))
+    upper = np.atleast_1d(np.asarray(upper, dtype=float))
+    if np.any(lower > upper):
+        return Probability(0.0, 0.0, 0.0)
+    var = np.diag(cov)
+    reach = np.abs(D) @ half                    # how far the box moves each row
+    fixed, _ = deterministic(mean, var, np.where(np.isfinite(lower), np.abs(lower) + reach, lower),
+                             np.where(np.isfinite(upper), np.abs(upper) + reach, upper))
+    spread = ~fixed                             # an ambiguous row keeps its spread
+    sd = np.sqrt(var[spread])
+    factor = None
+    if np.any(spread):
+        corr = cov[np.ix_(spread, spread)] / np.outer(sd, sd)
+        factor = _Factor(corr, (lower - mean)[spread] / sd, (upper - mean)[spread] / sd)
+    rank = 0 if factor is None else factor.rank
+    uniform = half.size
+
+    def integrand(W):
+        shift = (2 * W[:, :uniform] - 1) * half @ D.T                  # (points, rows)
+        p = np.all(fixed_meets(mean[~spread] + shift[:, ~spread], lower[~spread], upper[~spread]), axis=1)
+        p = p.astype(float)
+        if factor is not None:
+            p *= factor.masses(W[:, uniform:], shift[:, spread] / sd)
+        return p.mean()
+
+    dim = uniform + max(rank - 1, 0)
+    return randomized_qmc(integrand, dim, abs_error, max_points, np.random.default_rng(rng),
+                          0.0 if factor is None else factor.allowance)
 
 
 def normal_mass(lo, hi):
@@ -230,6 +304,7 @@ class _Factor:
         d = corr.shape[0]
         R = corr.copy()
         a, b = lower.copy(), upper.copy()
+        order = np.arange(d)                  # original row at each pivoted position
         L = np.zeros((d, d))
         expected = np.zeros(d)
         rank = 0
@@ -248,7 +323,7 @@ class _Factor:
                 hi = np.where(live, (b[rest] - shift) / sd, np.inf)
             mass = np.where(live, normal_mass(lo, hi), np.inf)
             j = rank + int(np.argmin(mass))
-            for arr in (a, b):
+            for arr in (a, b, order):
                 arr[[rank, j]] = arr[[j, rank]]
             R[[rank, j]] = R[[j, rank]]
             R[:, [rank, j]] = R[:, [j, rank]]
@@ -269,6 +344,7 @@ class _Factor:
         self.rank = rank
         self.allowance = float(np.sum(2e-9 + 12 * neglected[rank:] / np.sqrt(2 * np.pi)))
         self.groups = []
+        self.moved = []         # per group: the original rows of its constraints and their signs
         for j in range(rank):
             rows = [j]
             for k in range(rank, d):
@@ -282,11 +358,17 @@ class _Factor:
             sign = np.where(neg, -1.0, 1.0)
             C = L[rows, :j] * sign[:, None]
             self.groups.append((C, np.abs(c), lo_b, hi_b))
+            self.moved.append((order[rows], sign))
 
-    def _bounds(self, j, U):
-        """Bounds on ``u_j`` given ``U = u_{<j}`` (one row per point)."""
+    def _bounds(self, j, U, delta=None):
+        """Bounds on ``u_j`` given ``U = u_{<j}`` (one row per point); ``delta`` (points x original
+        rows, standardised): per point, a shift of the constrained value ``z`` (``z + delta`` is
+        bounded, so the bounds move by ``-delta``)."""
         C, c, a, b = self.groups[j]
         shift = U @ C.T if j else np.zeros((U.shape[0], c.size))
+        if delta is not None:
+            rows, sign = self.moved[j]
+            shift = shift + sign * delta[:, rows]
         with np.errstate(invalid="ignore"):
             lo = np.max((a - shift) / c, axis=1)
             hi = np.min((b - shift) / c, axis=1)
@@ -299,17 +381,22 @@ class _Factor:
         return float(np.clip(normal_mass(lo, hi)[0], 0.0, 1.0))
 
     def _replicate(self, W):
+        return self.masses(W).mean()
+
+    def masses(self, W, delta=None):
+        """Per point of ``W`` (the first ``rank - 1`` Genz variables), the conditional masses'
+        product; ``delta`` as in :meth:`_bounds`."""
         n = W.shape[0]
         U = np.zeros((n, self.rank))
         p = np.ones(n)
         for j in range(self.rank):
-            lo, hi = self._bounds(j, U[:, :j])
+            lo, hi = self._bounds(j, U[:, :j], delta)
             if j < self.rank - 1:
                 mass, U[:, j] = mass_and_draw(lo, hi, W[:, j])
             else:
                 mass = normal_mass(lo, hi)
             p *= mass
-        return p.mean()
+        return p
 
     def integrate(self, abs_error, max_points, rng) -> Probability:
         return randomized_qmc(self._replicate, self.rank - 1, abs_error, max_points, rng, self.allowance)

@@ -53,9 +53,17 @@ lies in ``[P_M - B, P_M + B]`` where ``P_M`` is the probability computed on ``M`
 "never leaves", the switched runs and the runs of ``M`` coincide. This is the sliding-mode
 boundary layer of the VTXO models (``|s_i| <= phi_i`` decays as ``s_i' = -lam_i s_i`` inside).
 
-Non-Gaussian laws go through :mod:`.fourier`; from a model this is the case
-for a reach property when the initial state is a box (uniformly distributed over it, as the
-Monte Carlo back-end samples it), or on request with ``method: fourier``. A bounded input with a
+A reach property from an initial box (the state uniformly distributed over it, as the Monte Carlo
+back-end samples it) is one randomised QMC integral over the box and the kicks' Genz variables
+together (:func:`reach.sets.gaussian.uniform_shift_probability`): the box moves the target's bounds,
+the kicks are integrated as above. Non-Gaussian laws go through :mod:`.fourier`, from a model on
+request with ``method: fourier`` (the initial box's sinc factors). Its interval is a bound
+where the Gaussian kicks spread every direction of the target (the frequency sum's truncation is
+then bounded); otherwise the truncation is only estimated, and the result is UNKNOWN with
+``P in [0, 1]`` and the estimate in the details. A polytope initial set (not a box) is refused.
+A row whose variance is negligible against the largest row's but not against its own mean and
+bounds is integrated both as deterministic and as spread, and the hull of the two intervals
+reported (:func:`reach.sets.gaussian.deterministic`). A bounded input with a
 range is nondeterministic (any value, the worst deciding), not distributed: averaging over it
 could call SAFE a requirement that fails for one value, so such a model is unsupported.
 """
@@ -74,12 +82,13 @@ from reach.backends.options import option_error, parse_options, ranged
 from reach.model.ltv import KickedLinearSystem
 from reach.model.constraints import halfspaces
 from reach.result import Result, Status
-from reach.sets.gaussian import (ZERO_VARIANCE, Probability, box_probability, fixed_meets, interval_form,
-                                 mass_and_draw, normal_mass, polytope_probability, randomized_qmc)
+from reach.sets.gaussian import (ZERO_VARIANCE, Probability, box_probability, deterministic, fixed_meets,
+                                 interval_form, mass_and_draw, normal_mass, polytope_probability, randomized_qmc,
+                                 uniform_shift_probability)
 from reach.spec.properties import BoundReach, BoundReachAvoid, article
 
 NAME = "fsr"
-METHODS = ("auto", "genz", "markov", "fourier")   # auto: genz, or fourier for a box initial state
+METHODS = ("auto", "genz", "markov", "fourier")   # auto: genz (over the initial box too, where it is one)
 
 
 @dataclass
@@ -173,45 +182,54 @@ def reach_avoid(problem: GaussianProblem, target, safe, abs_error: float = 1e-3,
     rows = _rows(K, target, safe)
     mu = np.einsum("ri,ri->r", rows.h, means[rows.step])
     var = np.einsum("ri,rij,rj->r", rows.h, covs[rows.step], rows.h)
-    scale = max(float(np.max(var, initial=0.0)), np.finfo(float).tiny)
-    fixed = var <= ZERO_VARIANCE * scale
-    info = {"rows": int(mu.size), "method": method}
-    if np.any(fixed & ~fixed_meets(mu, rows.lower, rows.upper)) or np.any(rows.lower > rows.upper):
-        info.update(kept=0, dropped=int(mu.size), boole=0.0, reason="a deterministic constraint fails")
-        return Probability(0.0, 0.0, 0.0), info
-    sd = np.sqrt(np.where(fixed, 1.0, var))
-    q_low = np.where(fixed, 0.0, ndtr((rows.lower - mu) / sd))      # P(h.x < lower)
-    q_high = np.where(fixed, 0.0, ndtr((mu - rows.upper) / sd))     # P(h.x > upper)
-    sides = np.concatenate([q_low, q_high])
-    order = np.argsort(sides, kind="stable")
-    dropped = np.zeros(sides.size, bool)
-    dropped[order[np.cumsum(sides[order]) <= budget]] = True
-    lower = np.where(dropped[:mu.size], -np.inf, rows.lower)
-    upper = np.where(dropped[mu.size:], np.inf, rows.upper)
-    keep = np.isfinite(lower) | np.isfinite(upper)
-    capped = 0
-    if max_rows is not None and np.count_nonzero(keep) > max_rows:
-        alive = np.flatnonzero(keep)                 # in time order
-        chosen = alive[np.unique(np.round(np.linspace(0, alive.size - 1, max_rows)).astype(int))]
-        cut = np.setdiff1d(alive, chosen)
-        capped = int(cut.size)
-        dropped[cut] |= np.isfinite(rows.lower[cut])
-        dropped[mu.size + cut] |= np.isfinite(rows.upper[cut])
-        lower[cut], upper[cut] = -np.inf, np.inf
-        keep[cut] = False
-    boole = float(min(1.0, np.sum(sides[dropped])))
-    kept = _Rows(rows.step[keep], rows.h[keep], lower[keep], upper[keep])
-    info.update(kept=int(keep.sum()), dropped=int(mu.size - keep.sum()), boole=boole, capped=capped)
-    if not np.any(keep):
-        p = Probability(1.0, 1.0, 1.0)
-    elif method == "genz":
-        mean_k, cov_k = _stacked(problem.system, means, covs, kept)
-        p = box_probability(mean_k, cov_k, kept.lower, kept.upper, abs_error=abs_error, rng=seed,
-                            max_points=max_points)
-    else:
-        p = _sequential(problem, means, covs, kept, abs_error, seed, max_points)
-    info["points"] = p.points
-    return Probability(p.value, max(0.0, p.low - boole), p.high, p.dimension, p.points), info
+    fixed, ambiguous = deterministic(mu, var, rows.lower, rows.upper)
+
+    def integrate(fixed):
+        """The probability and the work done, with the rows ``fixed`` taken as deterministic."""
+        info = {"rows": int(mu.size), "method": method}
+        if np.any(fixed & ~fixed_meets(mu, rows.lower, rows.upper)) or np.any(rows.lower > rows.upper):
+            info.update(kept=0, dropped=int(mu.size), boole=0.0, reason="a deterministic constraint fails")
+            return Probability(0.0, 0.0, 0.0), info
+        sd = np.sqrt(np.where(fixed, 1.0, var))
+        q_low = np.where(fixed, 0.0, ndtr((rows.lower - mu) / sd))      # P(h.x < lower)
+        q_high = np.where(fixed, 0.0, ndtr((mu - rows.upper) / sd))     # P(h.x > upper)
+        sides = np.concatenate([q_low, q_high])
+        order = np.argsort(sides, kind="stable")
+        dropped = np.zeros(sides.size, bool)
+        dropped[order[np.cumsum(sides[order]) <= budget]] = True
+        lower = np.where(dropped[:mu.size], -np.inf, rows.lower)
+        upper = np.where(dropped[mu.size:], np.inf, rows.upper)
+        keep = np.isfinite(lower) | np.isfinite(upper)
+        capped = 0
+        if max_rows is not None and np.count_nonzero(keep) > max_rows:
+            alive = np.flatnonzero(keep)                 # in time order
+            chosen = alive[np.unique(np.round(np.linspace(0, alive.size - 1, max_rows)).astype(int))]
+            cut = np.setdiff1d(alive, chosen)
+            capped = int(cut.size)
+            dropped[cut] |= np.isfinite(rows.lower[cut])
+            dropped[mu.size + cut] |= np.isfinite(rows.upper[cut])
+            lower[cut], upper[cut] = -np.inf, np.inf
+            keep[cut] = False
+        boole = float(min(1.0, np.sum(sides[dropped])))
+        kept = _Rows(rows.step[keep], rows.h[keep], lower[keep], upper[keep])
+        info.update(kept=int(keep.sum()), dropped=int(mu.size - keep.sum()), boole=boole, capped=capped)
+        if not np.any(keep):
+            p = Probability(1.0, 1.0, 1.0)
+        elif method == "genz":
+            mean_k, cov_k = _stacked(problem.system, means, covs, kept)
+            p = box_probability(mean_k, cov_k, kept.lower, kept.upper, abs_error=abs_error, rng=seed,
+                                max_points=max_points)
+        else:
+            p = _sequential(problem, means, covs, kept, abs_error, seed, max_points)
+        info["points"] = p.points
+        return Probability(p.value, max(0.0, p.low - boole), p.high, p.dimension, p.points), info
+
+    if np.any(ambiguous):                       # both readings count (reach.sets.gaussian.deterministic)
+        (p1, _), (p2, info) = integrate(fixed | ambiguous), integrate(fixed)
+        info["ambiguous_rows"] = int(ambiguous.sum())
+        return Probability(p2.value, min(p1.low, p2.low), max(p1.high, p2.high), p2.dimension,
+                           p1.points + p2.points), info
+    return integrate(fixed)
 
 
 def _stacked(system: KickedLinearSystem, means, covs, rows: _Rows):
@@ -248,7 +266,11 @@ def _sequential(problem: GaussianProblem, means, covs, rows: _Rows, abs_error, s
         k_now = k
         Ch = C @ rows.h[r]
         s2 = float(rows.h[r] @ Ch)
-        s = np.sqrt(s2) if s2 > ZERO_VARIANCE * max(float(np.trace(covs[k])), 1e-300) else 0.0
+        # deterministic as in reach.sets.gaussian.deterministic (an ambiguous row counts as spread)
+        own = max(abs(means[k] @ rows.h[r]), *(abs(v) for v in (rows.lower[r], rows.upper[r]) if np.isfinite(v)))
+        fixed = s2 <= 0 or (s2 <= ZERO_VARIANCE * max(float(np.trace(covs[k])), 1e-300)
+                            and s2 <= ZERO_VARIANCE * own ** 2)
+        s = 0.0 if fixed else np.sqrt(s2)
         gain = Ch / s if s > 0 else np.zeros(system.n)
         if s > 0:
             C = C - np.outer(Ch, Ch) / s2
@@ -389,6 +411,9 @@ class FsrBackend:
         if isinstance(prop, BoundReachAvoid) and halfspaces(prop.safe, prop.symbols) is None:
             return "the safe set is not a polytope (nonlinear constraint)"
         point = np.array_equal(model.initial.low, model.initial.high)
+        if not point and not model.initial.is_box:
+            return ("the initial set is a polytope, not a box: fsr takes a point, or a box with the state "
+                    "uniform over it; montecarlo samples a polytope")
         if not point and isinstance(prop, BoundReachAvoid):
             return "reach-avoid from a distributed (box) initial state is not supported; use a point"
         if not point and (len(model.modes) != 1 or model.transitions):
@@ -410,7 +435,20 @@ class FsrBackend:
             return Result(NAME, model.name, prop.id, Status.UNKNOWN, time.perf_counter() - start,
                           probability=(0.0, 1.0), details=details)
         if isinstance(prop, BoundReach):
-            if opts.method == "fourier" or not point:
+            if not point and opts.method != "fourier":
+                T, lower, upper = interval_form(*target)
+                box = fourier.UniformLaw(model.initial.low, model.initial.high)
+                kicks = fourier.GaussianLaw(problem.w_mean, problem.w_cov)
+                z = fourier.ProjectedSum.of(problem.system, T, box, kicks)
+                wide = np.flatnonzero(box.halfwidth > 0)
+                mean = z.zc + z.D0 @ box.mean + z.D.sum(axis=0) @ kicks.mean
+                cov = np.einsum("kip,pq,kjq->ij", z.D, kicks.cov, z.D)
+                p = uniform_shift_probability(mean, cov, lower, upper, z.D0[:, wide], box.halfwidth[wide],
+                                              abs_error=opts.abs_error, max_points=opts.max_points, rng=opts.seed)
+                details.update(method="genz", dimension=p.dimension, points=p.points,
+                               initial="uniform over the initial box",
+                               error="randomised QMC over the initial box and the kicks, 3.5 standard errors")
+            elif opts.method == "fourier":
                 initial = (fourier.point_law(problem.x0) if point
                            else fourier.UniformLaw(model.initial.low, model.initial.high))
                 T, lower, upper = interval_form(*target)
@@ -420,7 +458,7 @@ class FsrBackend:
                                             max_frequencies=opts.max_frequencies)
                 details.update(method="fourier", frequencies=p.points,
                                initial="point" if point else "uniform over the initial box",
-                               error="periodisation bound + truncation estimate")
+                               error="periodisation bound + truncation " + ("bound" if p.rigorous else "estimate"))
             else:
                 p = reach(problem, *target, abs_error=opts.abs_error, seed=opts.seed,
                           max_points=opts.max_points)
@@ -448,10 +486,21 @@ class FsrBackend:
             p = Probability(p.value, max(0.0, p.low - exit_bound), min(1.0, p.high + exit_bound),
                             p.dimension, p.points)
         status, verdict = _verdict(p, prop.at_least)
-        details["verdict"] = verdict
         details["estimate"] = p.value
+        bounds = (p.low, p.high)
+        if isinstance(p, fourier.Inversion) and p.high - p.low > 2 * p.shell:
+            estimated = [max(0.0, p.value - p.shell), min(1.0, p.value + p.shell)]
+            details["estimated_interval"] = estimated
+            why = ("no Gaussian kick spreads every direction of the target, so the truncation has no bound"
+                   if not p.rigorous else f"the truncation bound is still {p.high - p.value:.3g} at "
+                   f"{p.points} frequencies (option max_frequencies)")
+            details["reason"] = (f"P is about {p.value:.6g} (in [{estimated[0]:.6g}, {estimated[1]:.6g}] as far as "
+                                 f"the frequency sum's truncation is estimated), but {why}")
+        if not getattr(p, "rigorous", True):     # fourier.Inversion: an estimate bounds nothing
+            status, verdict, bounds = Status.UNKNOWN, "undecided", (0.0, 1.0)
+        details["verdict"] = verdict
         return Result(NAME, model.name, prop.id, status, time.perf_counter() - start,
-                      probability=(p.low, p.high), details=details)
+                      probability=bounds, details=details)
 
 
 def _verdict(p: Probability, at_least):

@@ -25,10 +25,22 @@ i.e. the exact integral over the target of the trigonometric interpolant the FFT
 
 Errors: (i) periodisation — at most ``P(z outside the window)``, zero when every law has
 bounded support inside it, otherwise bounded by Chernoff's inequality with the laws' moment
-generating functions (rigorous); (ii) truncation of the frequency sum at ``|k_i| <= K_i`` —
-estimated by the magnitude of the outer shell ``|k_i| > 3 K_i / 4`` of retained terms; ``K_i``
-grows by half along the axes whose shell carries mass until the estimate is below the
-tolerance or ``MAX_FREQUENCIES`` is reached (an estimate, not a bound).
+generating functions (rigorous); (ii) truncation of the frequency sum at ``|k_i| <= K_i``.
+Where the kicks are Gaussian with a covariance ``S`` of ``z`` whose least eigenvalue ``lam`` is
+positive, every factor but theirs has modulus at most 1, so ``|Psi_z(omega)| <= exp(-lam |omega|^2
+/ 2)``, and with ``|int_{l_i}^{u_i} exp(-j omega z) dz| <= u_i - l_i = w_i`` the omitted terms sum
+to at most (a union over the axis on which ``k`` leaves the grid, sums bounded by integrals)
+
+    (prod_i w_i / L_i) sum_i sqrt(pi / a_i) erfc(sqrt(a_i) K_i) prod_{j != i} (1 + sqrt(pi / a_j)),
+
+``a_i = lam (2 pi / L_i)^2 / 2`` (:func:`truncation_bound`, which also uses the box transform's
+decay ``2 / |omega_i|`` in the tail): a bound, and ``K_i`` grows by half along
+the axes whose term exceeds the tolerance's share until it is met or ``MAX_FREQUENCIES`` is
+reached. Without such a factor (no Gaussian kick, or one that leaves a direction of ``z``
+unspread, as a uniform initial state alone) the truncation is only estimated, by the magnitude of
+the outer shell ``|k_i| > 3 K_i / 4`` of retained terms, and the result says so
+(:attr:`Inversion.rigorous`): the sinc factors of a uniform law decay too slowly to bound the
+tail at a useful frequency count, and an estimate is no ground for a verdict.
 """
 
 from __future__ import annotations
@@ -36,6 +48,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.special import erfc
 
 from reach.model.ltv import KickedLinearSystem
 from reach.sets.gaussian import Probability
@@ -334,37 +347,80 @@ def _box_transform(omega, lower, upper):
     return np.where(omega == 0, upper - lower + 0j, val)
 
 
+@dataclass(frozen=True)
+class Inversion(Probability):
+    """:class:`Probability` from :func:`box_probability`; ``rigorous``: the interval is a bound
+    (the truncation bounded), else an estimate; ``shell``: the truncation as the outer shell of
+    retained terms estimates it (what the interval's half-width would be on that estimate)."""
+
+    rigorous: bool = True
+    shell: float = 0.0
+
+
+def truncation_bound(lam: float, widths, L, counts) -> np.ndarray | None:
+    """Per axis ``i``, the bound of the module docstring on the omitted terms whose ``k`` leaves
+    the grid along axis ``i`` (their sum bounds the truncation), or None where ``lam <= 0``. The
+    box transform is also at most ``2 / |omega_i| = L_i / (pi |k_i|)``, which beyond ``K_i`` is
+    at most ``L_i / (pi (K_i + 1))``: the smaller of the two factors is taken for the tail."""
+    if not lam > 0:
+        return None
+    L, w, K = np.asarray(L, float), np.asarray(widths, float), np.asarray(counts, float)
+    a = 0.5 * lam * (2 * np.pi / L) ** 2
+    whole = w * (1.0 + np.sqrt(np.pi / a))
+    tails = np.minimum(w, L / (np.pi * (K + 1))) * np.sqrt(np.pi / a) * erfc(np.sqrt(a) * K)
+    others = np.array([np.prod(np.delete(whole, i)) for i in range(whole.size)])
+    return tails * others / np.prod(L) * (1 + ROUNDING)
+
+
+def _gaussian_floor(z: ProjectedSum) -> float:
+    """The least eigenvalue of the covariance the Gaussian kicks give ``z`` (0 without them),
+    lowered by a relative 1e-9 against rounding."""
+    if not isinstance(z.kick, GaussianLaw) or not z.D.size:
+        return 0.0
+    S = np.einsum("kdp,pq,keq->de", z.D, z.kick.cov, z.D)
+    values = np.linalg.eigvalsh(0.5 * (S + S.T))
+    return max(0.0, float(values[0]) - 1e-9 * float(np.abs(values).max(initial=0.0)))
+
+
 def box_probability(z: ProjectedSum, lower, upper, tol: float = 1e-6,
-                    max_frequencies: int = MAX_FREQUENCIES) -> Probability:
+                    max_frequencies: int = MAX_FREQUENCIES) -> Inversion:
     """``P(lower <= z <= upper)`` by Fourier inversion over a periodic window (module docstring).
 
-    ``max_frequencies`` caps the frequency vectors evaluated; the interval is honest either way.
+    ``max_frequencies`` caps the frequency vectors evaluated; the interval is honest either way
+    where it is ``rigorous``, an estimate otherwise.
     """
     window = _window(z, tol / 4)
     lo = np.maximum(np.asarray(lower, float), window.centre - window.half) - window.centre
     hi = np.minimum(np.asarray(upper, float), window.centre + window.half) - window.centre
     if np.any(lo >= hi):
-        return Probability(0.0, 0.0, min(1.0, window.alias))
+        return Inversion(0.0, 0.0, min(1.0, window.alias))
     L = window.period
     sd = np.sqrt(np.maximum(np.diag(z.cov), 1e-300))
     counts = np.maximum(8, np.ceil(9.0 * L / (2 * np.pi * sd))).astype(int)
     zc = ProjectedSum(z.zc - window.centre, z.D0, z.D, z.initial, z.kick)
+    lam = _gaussian_floor(z)
     while True:
         k, weight = _half_frequencies(counts)
         omega = 2 * np.pi * k / L
         terms = weight * zc.cf(omega) * np.prod(_box_transform(omega, lo, hi), axis=1) / np.prod(L)
         value = float(np.real(terms.sum()))
         outer = np.abs(k) > 0.75 * counts                    # the outer shell, axis by axis
-        per_axis = np.array([np.abs(terms[outer[:, i]]).sum() for i in range(counts.size)])
-        truncation = float(np.abs(terms[np.any(outer, axis=1)]).sum())
+        shell = float(np.abs(terms[np.any(outer, axis=1)]).sum())
+        per_axis = truncation_bound(lam, hi - lo, L, counts)
+        if per_axis is None:
+            per_axis = np.array([np.abs(terms[outer[:, i]]).sum() for i in range(counts.size)])
+            truncation = shell
+        else:
+            truncation = float(per_axis.sum())
         grow = per_axis > tol / (2 * counts.size)
         larger = np.where(grow, np.ceil(1.5 * counts), counts).astype(int)
-        if truncation <= tol / 2 or np.prod(2 * larger + 1) // 2 > max_frequencies:
+        if truncation <= tol / 2 or not np.any(grow) or np.prod(2 * larger + 1) // 2 > max_frequencies:
             break
         counts = larger
     half = window.alias + truncation + ROUNDING
     value = float(np.clip(value, 0.0, 1.0))
-    return Probability(value, max(0.0, value - half), min(1.0, value + half), 0, int(2 * k.shape[0] - 1))
+    return Inversion(value, max(0.0, value - half), min(1.0, value + half), 0, int(2 * k.shape[0] - 1),
+                     rigorous=lam > 0, shell=window.alias + shell + ROUNDING)
 
 
 def density_on_grid(z: ProjectedSum, points: int = 64, tol: float = 1e-9):
