@@ -148,3 +148,15 @@ def test_the_time_slices_of_a_step_hold_every_state_entering_the_guard():
     whole = np.array([part.bound() for part in X])
     assert box[0, 0] > whole[0, 0] + 0.5          # the slices that cannot meet the guard are gone
     assert _entry_slices(code, SimpleNamespace(faces=[lambda part: 5.0 - part[0]]), X) is None
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(1, 6), st.integers(1, 4), st.floats(-1, 1), st.floats(0.01, 1), st.integers(0, 2**31 - 1))
+def test_a_slice_of_the_step_time_is_the_composition_with_its_affine_map(order, nvars, centre, radius, seed):
+    """``sigma_in(p, c, r)`` is ``p(xi, c + r sigma)`` (DA composition)."""
+    from reach.backends.taylor.verified import sigma_in
+
+    alg = algebra(order, nvars)
+    p = DA(alg, np.random.default_rng(seed).normal(size=alg.size))
+    args = [DA.var(alg, j) for j in range(nvars - 1)] + [DA.var(alg, nvars - 1, centre, radius)]
+    assert np.allclose(sigma_in(p, centre, radius).c, p.compose(args).c, rtol=1e-12, atol=1e-12)

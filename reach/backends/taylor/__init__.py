@@ -65,7 +65,7 @@ from reach.backends.taylor import units
 from reach.backends.taylor.problem import EventProblem, global_clock, unsupported_switch
 from reach.backends.taylor.units import expand_boxes, sweep_box
 from reach.result import Result, Status
-from reach.backends.taylor.safety import check_safety, margins
+from reach.backends.taylor.safety import check_safety, margins, witness
 from reach.backends.taylor.window import unsupported_window, with_switch_time
 from reach.executors import _worker_start, guarded
 from reach.spec.properties import BoundEvent, BoundSafety
@@ -154,7 +154,16 @@ class TaylorBackend:
         deadline = Deadline.start(opts.max_seconds)
         if isinstance(prop, BoundSafety):
             return check_safety(self, model, prop, opts, deadline)
-        return self.check_event(model, prop, opts, deadline)
+        result = self.check_event(model, prop, opts, deadline)
+        if result.status is not Status.SAFE and not deadline.passed():
+            found = witness(model, prop, result, prop.op, prop.value)
+            if found is not None:
+                result.status, result.counterexample = Status.UNSAFE, found
+                result.details["argument"] = (
+                    "a point of a subdomain whose bound reaches past the requirement (its centre or a corner), "
+                    "mapped back to an initial state and replayed by the simulator: its extremum breaks it")
+                result.details.pop("note", None)
+        return result
 
     def check_event(self, model, prop: BoundEvent, opts: Options, deadline: Deadline) -> Result:
         """An event property's bound, nothing started past the ``deadline``."""

@@ -44,7 +44,7 @@ from reach.backends.taylor.lockstep import run_batch, run_one
 from reach.backends.taylor.nominal import NominalRun, nominal
 from reach.backends.taylor.tm import TM
 from reach.backends.taylor.tm_flowpipe import stretch_from_box
-from reach.backends.taylor.verified import ROUNDING, at_sigma, crossing, enclose_stretch
+from reach.backends.taylor.verified import ROUNDING, at_sigma, crossing, enclose_stretch, sigma_in
 from reach.model.constraints import affine_coefficients, lambdify_margins, opposite_pairs
 from reach.spec.properties import BoundEvent
 
@@ -814,13 +814,10 @@ def _entry_slices(code: ModeCode, ex: Exit, X) -> np.ndarray | None:
     entering the guard during the step is inside it then, so in one of those slices: the hull
     holds every entry state of the step, without the states of the step's other instants (a step
     of a slow flowpipe is long against a crossing)."""
-    alg = X[0].poly.alg
-    last = alg.nvars - 1
     kept = []
     for s in range(ENTRY_SLICES):
-        args = [DA.var(alg, j) for j in range(last)] + \
-               [DA.var(alg, last, -1.0 + (2 * s + 1) / ENTRY_SLICES, 1.0 / ENTRY_SLICES)]
-        part = [TM(x.poly.compose(args), x.lo, x.hi) for x in X]
+        centre = -1.0 + (2 * s + 1) / ENTRY_SLICES
+        part = [TM(sigma_in(x.poly, centre, 1.0 / ENTRY_SLICES), x.lo, x.hi) for x in X]
         if code.may_enter(ex, part):
             kept.append(np.array([x.bound() for x in part], dtype=float))
     if not kept:

@@ -139,11 +139,11 @@ def check_safety(backend, model, prop: BoundSafety, opts, deadline):
         result = backend.check_event(model, part.event, opts, deadline)
         sets = sets or result.sets
         if result.status != Status.SAFE and counterexample is None:
-            counterexample = _witness(model, prop, result)
+            counterexample = witness(model, prop, result)
             if counterexample is None and part.smooth is not None and \
                     result.details["remainder"] != "estimated" and not deadline.passed():
                 search = backend.check_event(model, part.smooth, replace(opts, remainder="estimated"), deadline)
-                counterexample = _witness(model, prop, search)
+                counterexample = witness(model, prop, search)
                 if counterexample is not None:      # the replayed run decides; its estimate is shown
                     result = search
         lo, hi = result.bound
@@ -188,17 +188,19 @@ def check_safety(backend, model, prop: BoundSafety, opts, deadline):
 WITNESSES = 4      # subdomains whose centre and corners are replayed, per margin
 
 
-def _witness(model, prop: BoundSafety, result):
-    """A replayed counterexample from the subdomains with the lowest margin bounds: their
-    centres and corners, each an initial state (and switch time, the state after the model's
-    own) that the simulator runs alone; None if none violates."""
+def witness(model, prop, result, op: str = ">=", value: float = 0.0):
+    """A replayed counterexample from the subdomains whose bounds reach furthest past the
+    requirement ``extremum op value`` (a margin ``>= 0`` for a safety property, an event's own):
+    their centres and corners, each an initial state (and switch time, the state after the
+    model's own) that the simulator runs alone; None if none violates."""
     from reach.backends.montecarlo import replay
 
-    rows = [r for r in result.details.get("subdomains", []) if np.isfinite(r["bound"][1])]
-    rows.sort(key=lambda r: r["bound"][1])
+    side = 1 if op == ">=" else 0             # the end of a bound that a violation moves past
+    rows = [r for r in result.details.get("subdomains", []) if np.isfinite(r["bound"][side])]
+    rows.sort(key=lambda r: r["bound"][side] if op == ">=" else -r["bound"][side])
     names = result.details.get("variables", [])
     for row in rows[:WITNESSES]:
-        if row["bound"][0] > 0:
+        if (row["bound"][0] > value) if op == ">=" else (row["bound"][1] < value):
             break
         low, high = np.asarray(row["low"]), np.asarray(row["high"])
         points = [0.5 * (low + high)] + [np.where(corner, high, low) for corner in _corners(len(low))]

@@ -47,6 +47,7 @@ is added.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from functools import lru_cache
 
@@ -78,6 +79,31 @@ def _sigma_tables(order: int, nvars: int):
     base[:, -1] = 0
     target = np.array([alg.index[tuple(e)] for e in base])
     return target, power
+
+
+@lru_cache(maxsize=None)
+def _shift_tables(order: int, nvars: int):
+    """For each monomial ``xi^b sigma^p`` and each ``j <= p``: its index, the index of
+    ``xi^b sigma^j``, ``p`` and ``j`` (the binomial expansion of ``(c + r sigma)^p``)."""
+    alg = algebra(order, nvars)
+    rows = []
+    for k, e in enumerate(alg.exps):
+        for j in range(e[-1] + 1):
+            f = e.copy()
+            f[-1] = j
+            rows.append((k, alg.index[tuple(f)], e[-1], j))
+    source, target, power, j = np.array(rows, dtype=int).T
+    return source, target, power, j, np.array([math.comb(a, b) for a, b in zip(power, j)], dtype=float)
+
+
+def sigma_in(p: DA, centre: float, radius: float) -> DA:
+    """``p(xi, centre + radius sigma)``: the step's time restricted to a slice, in the same
+    algebra (the degree of no term grows); a linear map of the coefficients."""
+    source, target, power, j, binomial = _shift_tables(p.alg.order, p.alg.nvars)
+    weight = binomial * float(centre) ** (power - j) * float(radius) ** j
+    c = np.zeros_like(p.c)
+    np.add.at(c.T, target, (p.c[..., source] * weight).T)
+    return DA(p.alg, c)
 
 
 def at_sigma(p: DA, value: float) -> DA:
