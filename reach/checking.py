@@ -22,6 +22,7 @@ from reach.errors import InputError
 from reach.model import load_model
 from reach.result import Result, Status
 from reach.spec import bind, load_properties
+from reach.spec.properties import BoundSafety
 
 
 def resolve_backend(name: str):
@@ -112,6 +113,11 @@ def check_model(backend, model, bound: list, options: dict | None = None) -> lis
             results[id(prop)] = unsupported(backend.name, model, prop,
                                             f"not applicable: the model has no mode {', '.join(absent)}")
             results[id(prop)].details["not_applicable"] = True
+            continue
+        if isinstance(prop, BoundSafety) and prop.empty:
+            results[id(prop)] = Result(backend.name, model.name, prop.id, Status.SAFE, details={
+                "argument": "the unsafe set is empty: every piece has a constant constraint that no state meets "
+                            "(a SpaceEx forbidden = false, a requirement such as 0 <= 1); nothing was explored"})
             continue
         reason = input_reason(backend, model) or backend.supports(model, prop)
         if reason is not None:

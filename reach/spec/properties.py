@@ -89,6 +89,16 @@ class BoundSafety:
     kind: str = "safety"
     missing_modes: list[str] = field(default_factory=list)
 
+    @property
+    def empty(self) -> bool:
+        """Whether no state is unsafe: every piece in every mode has a constant constraint that
+        fails (``1 <= 0``: a SpaceEx ``forbidden = false``, a requirement ``0 <= 1``), or there
+        are no pieces at all."""
+        def never(c: Constraint) -> bool:
+            g = sympy.sympify(c.g)
+            return bool(g.is_number) and (float(g) > 0 or (c.strict and float(g) == 0))
+        return all(any(never(c) for c in piece) for pieces in self.pieces.values() for piece in pieces)
+
     def halfspace_pieces(self, mode: str):
         """The unsafe pieces of ``mode`` as ``[(H, g)]`` with ``H x <= g``; None if any is nonlinear."""
         out = []
