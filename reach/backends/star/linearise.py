@@ -109,10 +109,16 @@ class LinearisedModel(_LinearModel):
         """``(flow, remainder)``: the mode's flow linearised over ``box`` (explored states), the
         remainder as a bounded input. ValueError if the remainder is unbounded over the box."""
         m = self.n - self.added_clock
-        rem = self.curved[mode].over(box.low[:m], box.high[:m])
+        try:
+            rem = self.curved[mode].over(box.low[:m], box.high[:m])
+        except (ArithmeticError, ValueError) as failure:    # sqrt of a negative level, log of 0
+            raise ValueError(f"the flow of mode '{mode}' is not real everywhere on the box {_text(box)} its "
+                             f"runs may reach ({failure}): an invariant that keeps the states in the flow's "
+                             f"domain (a level >= 0 under a square root) lets the linearisation stay there") from None
         if not rem.finite:
             raise ValueError(f"the remainder of mode '{mode}' is unbounded over the box {_text(box)} "
-                             f"(a singularity of the flow)")
+                             f"(a singularity of the flow, or states outside its domain: an invariant that "
+                             f"keeps them in it lets the linearisation stay there)")
         shifted, active, radius = rem.as_input()
         A, b = self._with_clock(rem.A, shifted)
         if not active.size:
