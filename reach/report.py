@@ -31,7 +31,8 @@ import numpy as np
 from reach.model.constraints import NUMERICAL_TOLERANCE
 from reach.result import Status, _plain
 
-TOUCH = f"touching: within the rounding tolerance {NUMERICAL_TOLERANCE:g}*(1 + |x|), not a violation"
+TOUCH = (f"touching: within the rounding tolerance {NUMERICAL_TOLERANCE:g}*(1 + m), m the magnitude the row "
+         f"combines, not a violation")
 
 
 def number(value: float, digits: int = 4) -> str:
@@ -234,8 +235,8 @@ def _margin_note(result, kind: str, out: dict) -> str | None:
     if margin is None or margin > 0 or result.status in (Status.UNSAFE, Status.SAFE):
         return None
     d = result.details
-    if d.get("note") or d.get("unreplayed"):
-        return d.get("note") or d.get("unreplayed")
+    if d.get("note") or d.get("unreplayed") or d.get("undefined"):
+        return d.get("note") or d.get("unreplayed") or d.get("undefined")
     if kind == "event" and "bound" in out and margin < 0:
         return "the bound reaches past the requirement: neither proved nor refuted"
     if kind == "event":
@@ -298,6 +299,8 @@ def line(result, prop, model) -> str:
                      + (" (the counterexample is a structured, aimed or search run)" if not d["violating_runs"] else ""))
     elif result.status != Status.UNSAFE and "violation_probability_upper_95" in d:
         parts.append(f"P(violation) <= {d['violation_probability_upper_95']:.2g} (95 %)")
+    if d.get("undefined") and f.get("margin_note") != d["undefined"]:
+        parts.append(d["undefined"])
     if d.get("blocked_runs"):
         total = d.get("structured_runs", 0) + d.get("random_runs", 0)
         parts.append(f"{d['blocked_runs']} of {total} runs stopped before the horizon and were watched "

@@ -15,16 +15,17 @@ the last multiple of ``J`` steps into the segment (the next one ``P^J z``, the s
 ``W_J z``), so a run's states do not depend on which runs share its chunk. Blocks hold about
 :data:`BLOCK_VALUES` numbers (memory bounded, cache-sized); the block loop stops as soon as
 every run of the chunk has met its event, its blocking point or the end of its segment (the
-first block is short and each next one twice as long, up to that size). ``|x|_inf``, which scales the invariant and violation
-tolerances, is computed only for the runs whose margin already exceeds the unscaled tolerance.
+first block is short and each next one twice as long, up to that size). The rows' magnitudes,
+which scale the invariant and violation tolerances, are computed only for the runs whose margin
+already exceeds the unscaled tolerance.
 
 The semantics are the general path's (:meth:`reach.model.simulate.Simulator._segment_chunk`)
 step for step: the same grid points are visited, an urgent guard that holds at a grid point
 is located inside the grid interval before it to the resolution of the general path's
 bisection (``Simulator._first_entry``; here :func:`first_entry`, sub-grids of that interval),
 the window switch is taken at ``tau``, the first grid point outside the invariant (beyond
-``INVARIANT_TOLERANCE (1 + |x|_inf)``) is not visited and the run stops at the last instant
-inside (the segment's end is the general path's, ``Simulator._finish``). Only rounding differs
+``INVARIANT_TOLERANCE (1 + m)`` in a row, ``m`` the magnitude it combines) is not visited and
+the run stops at the last instant inside (the segment's end is the general path's, ``Simulator._finish``). Only rounding differs
 (``(L P^j) z`` against ``L (P^j z)``; the states at segment starts and events by
 :func:`taylor_flow`). In a
 mode with a scalar state (``x' = a x + b``) the guard entry and the propagation to events are
@@ -401,14 +402,16 @@ def segment_chunk(sim, name, rows, runs, next_kick, horizon, table):
         limit_j = np.full(A, B)
         out_any = np.zeros(A, dtype=bool)
         if inv_rows:
-            # outside: a margin above INVARIANT_TOLERANCE (1 + |x|_inf), so above the tolerance
-            # itself; |x|_inf only for the runs with such a margin
-            worst = O[:, inv_offset:inv_offset + inv_rows, :].max(axis=1)
-            near = (worst > INVARIANT_TOLERANCE) & valid & (gt < event_time[sel])
+            # outside: a margin above INVARIANT_TOLERANCE (1 + m), m the magnitude its row
+            # combines (Simulator.inside), so above the tolerance itself; m only for the runs
+            # with such a margin
+            inv_margins = O[:, inv_offset:inv_offset + inv_rows, :]
+            near = (inv_margins.max(axis=1) > INVARIANT_TOLERANCE) & valid & (gt < event_time[sel])
             c = np.flatnonzero(near.any(axis=0))
             if c.size:
-                absmax = np.abs(S[:, :, c]).max(axis=1)
-                outside = near[:, c] & (worst[:, c] > INVARIANT_TOLERANCE * (1.0 + absmax))
+                states = S[:, :, c].transpose(0, 2, 1).reshape(-1, n)
+                scale = sim.invariant_scale(name)(states).reshape(B, c.size, inv_rows).transpose(0, 2, 1)
+                outside = near[:, c] & np.any(inv_margins[:, :, c] > INVARIANT_TOLERANCE * (1.0 + scale), axis=1)
                 b = c[outside.any(axis=0)]
                 if b.size:
                     jb = outside[:, outside.any(axis=0)].argmax(axis=0)

@@ -171,31 +171,101 @@ def equality_rows(constraints: Sequence[Constraint]) -> list[int]:
                    for k in (i, j)})
 
 
-def violation_test(constraints: Sequence[Constraint], symbols: Sequence[sympy.Symbol]):
+def row_magnitudes(constraints: Sequence[Constraint], symbols: Sequence[sympy.Symbol],
+                   sources: np.ndarray | None = None):
+    """The scale of each constraint's rounding at a state: ``X (N, n) -> (N, m)``, for ``g <= 0``
+    the largest magnitude that ``g`` combines there, not the state's largest coordinate: for an
+    affine row ``a.x + c``, the largest of ``|c|`` and ``|a_i| s_i`` over the states it reads;
+    for another, the largest of its terms' ``|.|`` and of ``s_i`` over the states it reads.
+    ``s_i = |x_i|``, or with ``sources`` ((n, n) booleans, ``[i, j]`` where state ``i`` is
+    computed from state ``j``, ``[i, i]`` true: :func:`reach.model.simulate.value_sources`) the
+    largest ``|x_j|`` over those ``j``, the scale of the rounding a simulated ``x_i`` carries.
+    An angle of 1e-4 rad beside a range of 7e6 m keeps its own scale; a position keeps that of
+    the velocity it is integrated from."""
+    index = {s: i for i, s in enumerate(symbols)}
+    rows = []
+    for con in constraints:
+        coeffs = affine_coefficients(con.g, symbols)
+        if coeffs is not None:
+            rows.append((np.abs(coeffs[0]), abs(coeffs[1]), None))
+            continue
+        expr = sympy.expand(con.g)
+        weights = np.zeros(len(symbols))
+        weights[[index[v] for v in expr.free_symbols if v in index]] = 1.0
+        terms = sympy.lambdify([list(symbols)], list(sympy.Add.make_args(expr)), modules="numpy")
+        rows.append((weights, 0.0, terms))
+    return _magnitudes(rows, len(symbols), sources)
+
+
+def affine_magnitudes(H: np.ndarray, g: np.ndarray, sources: np.ndarray | None = None):
+    """:func:`row_magnitudes` of the rows ``H x <= g`` (margins ``H x - g``)."""
+    return _magnitudes([(np.abs(h), abs(float(c)), None) for h, c in zip(H, g)], H.shape[1], sources)
+
+
+def _magnitudes(rows: list, n: int, sources: np.ndarray | None):
+    """``X (N, n) -> (N, m)`` from ``rows`` of ``(weights, constant, terms)``: the largest of the
+    constant, of ``weights_i s_i`` (:func:`row_magnitudes`) and, where ``terms`` is not None (a
+    function of the states giving the row's additive terms), of the terms' magnitudes."""
+    columns = [np.flatnonzero(w) for w, _, _ in rows]
+    read = np.zeros(n, dtype=bool)
+    for cols in columns:
+        read[cols] = True
+    sources = np.eye(n, dtype=bool) if sources is None else np.asarray(sources, dtype=bool)
+    # s_i for the states the rows read, by groups of states computed from the same ones
+    groups, which = np.unique(sources[read], axis=0, return_inverse=True)
+    members = [np.flatnonzero(read)[which.reshape(-1) == k] for k in range(groups.shape[0])]
+    groups = [np.flatnonzero(g) for g in groups]
+
+    def magnitudes(X: np.ndarray) -> np.ndarray:
+        size = np.abs(X)
+        S = np.zeros_like(size)
+        for cols, states in zip(groups, members):
+            S[:, states] = size[:, cols].max(axis=1, initial=0.0)[:, None]
+        out = np.empty((X.shape[0], len(rows)))
+        for r, ((weights, constant, terms), cols) in enumerate(zip(rows, columns)):
+            out[:, r] = (S[:, cols] * weights[cols]).max(axis=1, initial=constant)
+            if terms is not None:
+                for term in terms(X.T):
+                    np.maximum(out[:, r], np.abs(np.broadcast_to(np.asarray(term, dtype=float), X.shape[:1])),
+                               out=out[:, r])
+        return out
+
+    return magnitudes
+
+
+def violation_test(constraints: Sequence[Constraint], symbols: Sequence[sympy.Symbol],
+                   sources: np.ndarray | None = None):
     """Vectorised robust membership in the conjunction: ``X -> (inside, depth)``.
 
     ``depth = max_j g_j(X)`` is non-positive on the closure and its size is a margin.
-    ``inside`` asks for ``depth < -1e-9 (1 + |x|_inf)``: a point counts as inside only if
-    rounding errors of that relative size cannot have put it there, so a violation found
-    this way is a violation of the strict and the non-strict reading alike.
+    ``inside`` asks for ``g_j < -1e-9 (1 + m_j(x))`` for every ``j``, ``m_j`` the magnitude
+    that row combines (:func:`row_magnitudes`, with ``sources``): a point counts as inside
+    only if rounding errors of that relative size cannot have put it there, so a violation
+    found this way is a violation of the strict and the non-strict reading alike. The scale
+    is each row's own, so a large coordinate the row does not read (a range in metres beside
+    an angle) does not hide a violation of it.
 
     Equalities (:func:`equality_rows`, e.g. the instant ``t == 20``) cannot hold with a
-    margin: a point meets one when ``|g| <= 1e-9 (1 + |x|_inf)`` (it is on the equality up
+    margin: a point meets one when ``|g| <= 1e-9 (1 + m)`` (it is on the equality up
     to rounding), and is inside when it meets every equality and lies beyond rounding in
     every other constraint; its depth is then the largest of the other margins."""
     margins = lambdify_margins(constraints, symbols)
+    magnitudes = row_magnitudes(constraints, symbols, sources)
     equal = np.zeros(len(constraints), dtype=bool)
     equal[equality_rows(constraints)] = True
 
     def test(X: np.ndarray):
         g = margins(X)
         depth = g.max(axis=1) if g.shape[1] else np.full(X.shape[0], -np.inf)
-        tolerance = NUMERICAL_TOLERANCE * (1.0 + np.abs(X).max(axis=1))
-        if not equal.any():
-            return depth < -tolerance, depth
-        on = np.all(np.abs(g[:, equal]) <= tolerance[:, None], axis=1)
-        rest = g[:, ~equal].max(axis=1) if (~equal).any() else np.full(X.shape[0], -np.inf)
-        depth = np.where(on, rest, depth)
-        return on & (rest < -tolerance), depth
+        rest = g[:, ~equal].max(axis=1, initial=-np.inf)
+        # every tolerance is at least NUMERICAL_TOLERANCE: the rows' magnitudes are needed only
+        # below it, or to tell which states are on the equalities
+        rows = np.arange(X.shape[0]) if equal.any() else np.flatnonzero(rest < -NUMERICAL_TOLERANCE)
+        tolerance = NUMERICAL_TOLERANCE * (1.0 + magnitudes(X[rows]))
+        on = np.ones(X.shape[0], dtype=bool)
+        on[rows] = np.all(np.abs(g[rows][:, equal]) <= tolerance[:, equal], axis=1)
+        inside = np.zeros(X.shape[0], dtype=bool)
+        inside[rows] = on[rows] & np.all(g[rows][:, ~equal] < -tolerance[:, ~equal], axis=1)
+        return inside, np.where(on, rest, depth)
 
     return test

@@ -46,10 +46,13 @@ together:
 Observers see every state a run visits (grid points, event instants, the states after each
 jump) together with the run's mode, in time order per run; properties are monitored this way
 without storing paths. Every state they see lies in its mode's invariant to
-:data:`INVARIANT_TOLERANCE` ``(1 + |x|_inf)``, a hundredth of the tolerance
-``NUMERICAL_TOLERANCE (1 + |x|_inf)`` a violation must exceed
+:data:`INVARIANT_TOLERANCE` ``(1 + m)`` per row, a hundredth of the tolerance
+``NUMERICAL_TOLERANCE (1 + m)`` a violation must exceed
 (:func:`reach.model.constraints.violation_test`): a violation is never reported at a state
-beyond an invariant by more than rounding.
+beyond an invariant by more than rounding. ``m`` is the magnitude the row combines, its
+states counted with those they are computed from (:func:`value_sources`,
+:func:`reach.model.constraints.row_magnitudes`): a large state a row never meets does not
+widen its tolerance.
 """
 
 from __future__ import annotations
@@ -64,11 +67,11 @@ import sympy
 from reach.model import batch
 from reach.model.automaton import HybridAutomaton
 from reach.model.batch_nonlinear import rk4_step
-from reach.model.constraints import affine_coefficients, lambdify_margins
+from reach.model.constraints import affine_coefficients, lambdify_margins, row_magnitudes
 from reach.model.crossing import Crossings
 
 BISECTION_STEPS = 40
-INVARIANT_TOLERANCE = 1e-11          # invariants and guards hold where margins <= this (1 + |x|_inf)
+INVARIANT_TOLERANCE = 1e-11          # invariants and guards hold where margins <= this (1 + m), per row
 SWITCH_TOLERANCE = 1e-14             # a guard asked to switch at a piece start: rounding only (_take_may)
 FIRST_WINDOW = 64                 # grid points of a linear segment's first window of states
 MAX_WINDOW = 256                  # grid points of its longest window
@@ -142,6 +145,28 @@ def fixed_parameters(model: HybridAutomaton) -> dict:
         if all(m.timeless or sympy.sympify(m.flow[i]) == 0 for m in model.modes.values()):
             out[symbol] = float(model.initial.low[i])
     return out
+
+
+def value_sources(model: HybridAutomaton) -> np.ndarray:
+    """``(n, n)`` booleans, ``[i, j]`` where a simulated state ``i`` is computed from state
+    ``j``: itself, the states its flow in some mode or a reset of it reads, and theirs in turn
+    (the transitive closure). Its rounding, and where an event is located its error (its rate,
+    a function of those states, times the bisection's resolution), scale with their sizes,
+    not with the states it never meets (a range in metres beside an angle in radians):
+    :func:`reach.model.constraints.row_magnitudes`."""
+    index = {symbol: i for i, symbol in enumerate(model.symbols)}
+    reads = np.eye(model.n, dtype=bool)
+    exprs = [(i, f) for m in model.modes.values() for i, f in enumerate(m.flow)]
+    exprs += [(i, e) for tr in model.transitions for i, e in tr.reset.items()]
+    for i, expr in exprs:
+        for symbol in sympy.sympify(expr).free_symbols:
+            if symbol in index:
+                reads[i, index[symbol]] = True
+    while True:                         # the closure, by squaring
+        closed = (reads.astype(np.float32) @ reads.astype(np.float32)) > 0
+        if np.array_equal(closed, reads):
+            return reads
+        reads = closed
 
 
 def linear_with(mode, fixed: dict):
@@ -306,6 +331,7 @@ class Simulator:
             else:
                 self.exits[tr.source].append((tr, lambdify_margins(tr.guard, model.symbols)))
         self.resets = {tr.name: _reset_function(tr, model) for tr in model.transitions if tr.reset}
+        self.sources, self.scales = value_sources(model), {}
         self.timeless = {m for m, mode in model.modes.items() if mode.timeless}
         self.crossings = {m: Crossings(self, m) for m in model.modes}
         # what a run may take at an instant: urgent transitions; in a timeless mode, every one
@@ -403,11 +429,23 @@ class Simulator:
         """Earliest time in ``(0, h]`` at which ``guard`` holds (it holds at ``h``), by bisection."""
         return self._bisect(mode, X, h, lambda Z: np.all(guard(Z) <= 0, axis=1))[1]
 
+    def invariant_scale(self, mode: str):
+        """The magnitudes of the rows of ``mode``'s invariant, ``X -> (N, m)``: the scale of
+        their tolerances (:func:`reach.model.constraints.row_magnitudes` over
+        :func:`value_sources`), compiled on first use."""
+        return self._scale(("invariant", mode), self.model.modes[mode].invariant)
+
+    def _scale(self, key: tuple, constraints: list):
+        """The magnitudes of ``constraints`` (:meth:`invariant_scale`), kept under ``key``."""
+        if key not in self.scales:
+            self.scales[key] = row_magnitudes(constraints, self.model.symbols, self.sources)
+        return self.scales[key]
+
     def inside(self, mode: str, X: np.ndarray) -> np.ndarray:
         """Whether each state of ``X`` (N, n) lies in the invariant of ``mode``: every margin at
-        most ``INVARIANT_TOLERANCE (1 + |x|_inf)``."""
-        margins = self.model.modes[mode].invariant_margins(X)
-        return np.all(margins <= INVARIANT_TOLERANCE * (1.0 + np.abs(X).max(axis=1))[:, None], axis=1)
+        most ``INVARIANT_TOLERANCE (1 + m)``, ``m`` the magnitude its row combines
+        (:func:`reach.model.constraints.row_magnitudes`)."""
+        return _holds(self.model.modes[mode].invariant_margins(X), INVARIANT_TOLERANCE, self.invariant_scale(mode), X)
 
     def _last_inside(self, mode: str, X: np.ndarray, h: np.ndarray) -> tuple:
         """``(s, x(s))``: the latest time in ``[0, h)`` at which the runs are still inside the
@@ -619,47 +657,84 @@ class Simulator:
                 and not mode.invariant)
 
     def _step_eventless(self, X, mode, t, kicks, kick_step, watchers):
-        """Grid stepping ``x <- Phi x + phi`` with kicks: the fast path for disturbed LTI models."""
+        """Grid stepping ``x <- Phi x + phi`` with kicks: the fast path for disturbed LTI models.
+
+        Kick ``j`` lands at its instant ``j kick_step`` (those before the horizon), whatever
+        ``dt``: on the grid point it lies on (to 1e-9 of the horizon, as the general path takes a
+        kick due), after that point is watched; between two grid points, the step is cut there
+        (the exact flow over each part) and the state just before the kick is watched, as the
+        general path's segments end at a kick (:meth:`_kick_plan`)."""
         (name,) = self.model.modes
         E = self.powers[name][1]
         Phi, phi = E[:self.n, :self.n].T, E[:self.n, self.n]
         rows = np.arange(X.shape[0])
-        kick_every = int(round(kick_step / self.dt)) if kicks is not None else 0
-        steps = int(np.ceil(self.model.horizon / self.dt - 1e-9))    # the horizon may have been cut
-        for k in range(steps):
-            if kick_every and k % kick_every == 0:
-                kicks(k // kick_every, rows)
-            h = min(self.dt, self.model.horizon - k * self.dt)
-            X[:] = X @ Phi + phi if h == self.dt else self.propagate(name, X, h)
-            t[:] = k * self.dt + h
+        horizon = self.model.horizon
+        steps = int(np.ceil(horizon / self.dt - 1e-9))    # the horizon may have been cut
+        on_grid, between = self._kick_plan(kick_step if kicks is not None else None, steps)
+
+        def advance(to: float, h: float, full: bool, kick: int | None) -> None:
+            X[:] = X @ Phi + phi if full else self.propagate(name, X, h)
+            t[:] = to
             for f in watchers:
                 f(t.copy(), X, mode, rows)
+            if kick is not None:
+                kicks(kick, rows)
+
+        if kicks is not None:
+            kicks(0, rows)
+        pending = iter(between + [(np.inf, None)])
+        instant, j = next(pending)
+        for k in range(steps):
+            at, end = k * self.dt, min((k + 1) * self.dt, horizon)
+            while instant < end:                        # kicks between this step's grid points
+                advance(instant, instant - at, False, j)
+                at = instant
+                instant, j = next(pending)
+            full = at == k * self.dt and end == (k + 1) * self.dt
+            advance(end, self.dt if full else end - at, full, on_grid.get(k + 1))
+
+    def _kick_plan(self, kick_step: float | None, steps: int) -> tuple[dict, list]:
+        """Where the kicks ``j >= 1`` at ``j kick_step`` before the horizon land on a grid of
+        ``steps`` steps: ``({grid index: j}, [(instant, j), ...])``, the second those more
+        than 1e-9 of the horizon from every grid point before the last, in time order
+        (none without kicks)."""
+        if kick_step is None:
+            return {}, []
+        horizon = self.model.horizon
+        tol = 1e-9 * max(1.0, horizon)
+        on_grid, between = {}, []
+        for j in range(1, int(np.ceil((horizon - tol) / kick_step))):
+            instant = j * kick_step
+            k = int(round(instant / self.dt))
+            if 1 <= k < steps and abs(k * self.dt - instant) <= tol:
+                on_grid[k] = j
+            else:
+                between.append((instant, j))
+        return on_grid, between
 
     def _enabled(self, options: list, X: np.ndarray, winner: np.ndarray | None = None,
                  tolerance: float = INVARIANT_TOLERANCE) -> tuple:
         """``(guards, enabled)``, (R, T) each, of the transitions ``options`` (``(tr, guard)``
         pairs) at the states ``X`` (R, n): where each guard holds (margins at most ``tolerance
-        (1 + |x|_inf)``; the option ``winner[r]`` holds by construction -- its guard located the
-        event, as the window's instant does for its transition, whose guard is given as None),
-        and where the transition is enabled: its guard holds and the target's invariant holds at
-        the reset state ``y`` (margins at most ``INVARIANT_TOLERANCE (1 + max(|x|_inf,
-        |y|_inf))``: the rounding of the state before the jump stays allowed after a reset that
-        shrinks it)."""
+        (1 + m)``, ``m`` the magnitude the row combines,
+        :func:`reach.model.constraints.row_magnitudes`; the option ``winner[r]`` holds by
+        construction -- its guard located the event, as the window's instant does for its
+        transition, whose guard is given as None), and where the transition is enabled: its
+        guard holds and the target's invariant holds at the reset state ``y`` (margins at most
+        ``INVARIANT_TOLERANCE (1 + max(m(x), m(y)))``: the rounding of the state before the jump
+        stays allowed after a reset that shrinks it)."""
         R, T = X.shape[0], len(options)
         guards, enabled = np.zeros((R, T), dtype=bool), np.zeros((R, T), dtype=bool)
-        size = np.abs(X).max(axis=1, initial=0.0)
-        tol = tolerance * (1.0 + size)
         for j, (tr, guard) in enumerate(options):
             if guard is not None:                       # (the window transition's is its instant)
-                guards[:, j] = np.all(guard(X) <= tol[:, None], axis=1)
+                guards[:, j] = _holds(guard(X), tolerance, self._scale(("guard", tr.name), tr.guard), X)
             if winner is not None:
                 guards[:, j] |= winner == j
             sel = np.flatnonzero(guards[:, j])
             if sel.size:
                 Y = self.resets[tr.name](X[sel]) if tr.name in self.resets else X[sel]
-                margins = self.model.modes[tr.target].invariant_margins(Y)
-                scale = 1.0 + np.maximum(size[sel], np.abs(Y).max(axis=1, initial=0.0))
-                enabled[sel, j] = np.all(margins <= INVARIANT_TOLERANCE * scale[:, None], axis=1)
+                enabled[sel, j] = _holds(self.model.modes[tr.target].invariant_margins(Y), INVARIANT_TOLERANCE,
+                                         self.invariant_scale(tr.target), X[sel], Y)
         return guards, enabled
 
     def _jump(self, rows: np.ndarray, options: list, enabled: np.ndarray, runs: _Runs) -> np.ndarray:
@@ -743,7 +818,7 @@ class Simulator:
     def _take_may(self, rows: np.ndarray, runs: _Runs) -> None:
         """Each run of ``rows`` (at a piece start) takes an enabled may-transition with a
         general guard, if it has one, and then what it must take at once. The guard must hold
-        up to rounding only, margins at most ``SWITCH_TOLERANCE (1 + |x|_inf)`` (a few units in
+        up to rounding only, margins at most ``SWITCH_TOLERANCE (1 + m)`` per row (a few units in
         the last place: ``x' = 1`` from 0 is 1 - 1e-16 at t = 1 by the flow's exponential, and a
         switch asked for at ``x >= 1`` there is meant), not the looser ``INVARIANT_TOLERANCE``:
         a switch asked for at an instant is no event that located the guard, so a wider
@@ -917,6 +992,19 @@ class Simulator:
             runs.X[sel], runs.t[sel] = X_stop[q], end[go[q]]
             off_grid = end[go[q]] - last_t[go[q]] > 1e-9 * max(1.0, horizon)
             runs.watch(sel[off_grid])
+
+
+def _holds(margins: np.ndarray, tolerance: float, scale, *states: np.ndarray) -> np.ndarray:
+    """Whether every margin (N, m) of each state is at most ``tolerance (1 + m)``, ``m`` the
+    larger of the row's magnitudes ``scale(X)`` (N, m) over ``states`` (the state before a
+    jump and after its reset); the magnitudes are computed only where a margin exceeds
+    ``tolerance`` (below it the row holds at any scale)."""
+    holds = np.all(margins <= tolerance, axis=1)
+    near = np.flatnonzero(~holds)
+    if near.size and tolerance > 0:
+        size = np.maximum.reduce([scale(X[near]) for X in states])
+        holds[near] = np.all(margins[near] <= tolerance * (1.0 + size), axis=1)
+    return holds
 
 
 class _Recorder:

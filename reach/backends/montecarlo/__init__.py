@@ -45,7 +45,8 @@ Clopper-Pearson upper bound on the violation probability from the i.i.d. round. 
 never says SAFE.
 
 Reach and reach-avoid properties of stochastic models are estimated from ``samples`` runs
-with Gaussian kicks; the probability is a 95 % Wilson interval.
+with Gaussian kicks from initial states uniform over the initial box or polytope; the
+probability is a 95 % Wilson interval.
 
 Event properties (the extremum of a quantity along the run) take the same structured and
 i.i.d. runs (initial states, input signals, branches), one simulation shared by all event
@@ -71,7 +72,7 @@ from reach.backends.montecarlo.replays import check_run, constant_signal, replay
 from reach.backends.montecarlo.sampling import (SWITCH_PROBABILITY, _kicks, _simulate_rounds, random_plan, run_plan,
                                                 sampled_runs, structured_plan, switch_window)
 from reach.model.automaton import HybridAutomaton
-from reach.model.constraints import NUMERICAL_TOLERANCE, lambdify_margins
+from reach.model.constraints import NUMERICAL_TOLERANCE, lambdify_margins, row_magnitudes
 from reach.model.simulate import Branches, Simulator, single_threaded
 from reach.result import Result, Status
 from reach.spec.properties import BoundEvent, BoundReach, BoundReachAvoid, BoundSafety
@@ -168,15 +169,21 @@ class MonteCarloBackend:
                        "assumes": "states checked at grid points and event instants only "
                                   "(a falsifier, not a proof)"}
             fails = int(np.count_nonzero(np.isfinite(monitor.violation_time[n_structured:])))
+            undefined = int(np.count_nonzero(np.isnan(monitor.min_depth[n_structured:])))
             details["violating_runs"] = fails
-            details["violation_probability_upper_95"] = clopper_pearson_upper(fails, sampled)
+            details["violation_probability_upper_95"] = clopper_pearson_upper(fails, sampled - undefined)
+            if undefined:                   # NaN states: sqrt of a negative level, a division by zero
+                details["undefined_runs"] = undefined
+                details["undefined"] = (f"{undefined} of {sampled} random runs reached states where the model's "
+                                        f"flow is not a real number (NaN): the model leaves its domain there (an "
+                                        f"invariant can keep it in); the violation bound counts the other runs")
             if sampled < opts.samples:
                 details["note"] = (f"time budget of {opts.max_seconds:.3g} s (option max_seconds) ended the "
                                    f"sampling after {sampled} of {opts.samples} random runs")
             found = monitor.first_violation()
             found = None if found is None else (0, found)
             monitors_of = partial(SafetyMonitor, model, prop)
-            closest = float(np.min(monitor.min_depth))
+            closest = _least(monitor.min_depth)
             if found is None and model.disturbance is None:
                 found, depth = self._extremal(model, prop, sim, rounds, n_structured, monitors_of)
                 closest = min(closest, depth)
@@ -195,7 +202,7 @@ class MonteCarloBackend:
                 details["note"] = (f"time budget of {opts.max_seconds:.3g} s (option max_seconds) "
                                    f"ended the search")
             details["search_runs"] = int(sum(r[1].shape[0] for r in rounds[1:] if r[0].startswith("search")))
-            details["closest_depth"] = min([closest] + [float(np.min(r[3].min_depth)) for r in rounds])
+            details["closest_depth"] = min([closest] + [_least(r[3].min_depth) for r in rounds])
             if found is not None and model.disturbance is not None:
                 details["note"] = ("violations were sampled under random disturbance; "
                                    "a single run is not a replayable counterexample")
@@ -354,18 +361,25 @@ class MonteCarloBackend:
 
     # ---------------------------------------------------------- reach / reach-avoid
     def _probability(self, model, prop, opts: Options) -> Result:
+        """``samples`` runs under Gaussian kicks from initial states drawn from the initial set
+        (uniform over the box, or over the polytope: :class:`.initial_sampling.PolytopeSampler`,
+        ``details["initial"]`` says which law); the 95 % Wilson interval of the share that
+        meets the property."""
         rng = np.random.default_rng(opts.seed)
+        init = model.initial
+        sampler = None if init.is_box else PolytopeSampler(init.polytope, init.low, init.high)
         sim = Simulator(model, opts.dt)
         kicks = _kicks(model, rng)
-        target = lambdify_margins(prop.target, model.symbols)
-        safe = lambdify_margins(prop.safe, model.symbols) if isinstance(prop, BoundReachAvoid) else None
+        target = _meets(prop.target, model.symbols)
+        safe = _meets(prop.safe, model.symbols) if isinstance(prop, BoundReachAvoid) else None
         step = model.disturbance.step if model.disturbance is not None else sim.dt
         successes, total = 0, 0
         remaining = opts.samples
         while remaining > 0:
             count = min(opts.batch, remaining)
             remaining -= count
-            X0 = model.initial.low + (model.initial.high - model.initial.low) * rng.random((count, model.n))
+            X0 = (init.low + (init.high - init.low) * rng.random((count, model.n)) if sampler is None
+                  else sampler.uniform(count, rng))
             ok = np.ones(count, bool)
             final = np.full((count, model.n), np.nan)
 
@@ -377,7 +391,7 @@ class MonteCarloBackend:
                     k = t / step
                     on_step = (np.abs(k - np.round(k)) <= 1e-9 * max(1.0, k.max(initial=1.0))) & (t < prop.at - 1e-9)
                     if np.any(on_step):
-                        ok[rows[on_step][~_meets(safe, X[on_step])]] = False
+                        ok[rows[on_step][~safe(X[on_step])]] = False
 
             horizon = model.horizon
             model.horizon = prop.at
@@ -385,23 +399,33 @@ class MonteCarloBackend:
                 sim.run(X0, None, observers=[observe], kicks=kicks)
             finally:
                 model.horizon = horizon
-            hit = ok & _meets(target, final)
+            hit = ok & target(final)
             successes += int(np.count_nonzero(hit))
             total += count
         lo, hi = wilson(successes, total)
         status = Status.UNKNOWN
         details = {"samples": total, "successes": successes, "estimate": successes / total, "dt": sim.dt,
-                   "seed": opts.seed, "interval": "95 % Wilson"}
+                   "seed": opts.seed, "interval": "95 % Wilson",
+                   "initial": (sampler.law() if sampler is not None else "point"
+                               if np.array_equal(init.low, init.high) else "uniform over the initial box")}
         return Result(NAME, model.name, prop.id, status, probability=(lo, hi), details=details)
 
 
-def _meets(margins, X) -> np.ndarray:
-    """Whether each state of ``X`` meets the constraints of ``margins`` up to rounding
-    (``NUMERICAL_TOLERANCE (1 + |x|_inf)``, as fsr treats a deterministic row): a clock at
-    ``0.9000000000000001`` meets ``z <= 0.9`` (a state with a continuous law meets a bound
-    exactly with probability 0, so only deterministic coordinates feel it)."""
-    tol = NUMERICAL_TOLERANCE * (1.0 + np.abs(X).max(axis=1, initial=0.0))
-    return np.all(margins(X) <= tol[:, None], axis=1)
+def _meets(constraints, symbols):
+    """``X (N, n) -> (N,)``: whether each state meets every constraint up to rounding relative
+    to that row, ``g <= NUMERICAL_TOLERANCE m`` with ``m`` the magnitude the row combines
+    (:func:`reach.model.constraints.row_magnitudes`; as fsr treats a deterministic row): a clock
+    at ``0.9000000000000001`` meets ``z <= 0.9``. A state with a continuous law meets a bound
+    exactly with probability 0, so only deterministic coordinates feel it; a row's scale is its
+    own, so a large coordinate it does not read (a range of 7e6 m beside an angle) does not
+    widen it."""
+    margins = lambdify_margins(constraints, symbols)
+    magnitudes = row_magnitudes(constraints, symbols)
+
+    def meets(X: np.ndarray) -> np.ndarray:
+        return np.all(margins(X) <= NUMERICAL_TOLERANCE * magnitudes(X), axis=1)
+
+    return meets
 
 
 def _verdict(model: HybridAutomaton, prop, rounds: list, found, sim: Simulator, details: dict) -> Result:
@@ -423,3 +447,10 @@ def _verdict(model: HybridAutomaton, prop, rounds: list, found, sim: Simulator, 
 
 
 BACKEND = MonteCarloBackend()
+
+
+def _least(depths) -> float:
+    """The least depth of runs whose states are numbers (a run that left its flow's domain has
+    NaN ones, which say nothing of a margin); ``inf`` if there is none."""
+    depths = np.asarray(depths, dtype=float)
+    return float(np.min(depths[~np.isnan(depths)], initial=np.inf))

@@ -38,6 +38,7 @@ import scipy.linalg
 from reach import lp
 from reach.errors import InputError
 from reach.model.automaton import HybridAutomaton, LinearSet
+from reach.model.constraints import affine_magnitudes
 
 MAX_SUBSETS = 4000
 MAX_PIECES = 10_000     # pieces of a sampled input signal over the horizon (each run holds them all)
@@ -67,6 +68,7 @@ class PolytopeSampler:
         keep = np.linalg.norm(self.G, axis=1) > TOL  # rows constant on the hull
         self.G, self.h = self.G[keep], self.h[keep]
         self.d = self.N.shape[1]
+        self.drawn_by = None                      # how the last uniform() drew its points (law())
 
     def to_x(self, Z: np.ndarray) -> np.ndarray:
         return self.x0 + Z @ self.N.T
@@ -75,11 +77,18 @@ class PolytopeSampler:
         return (X - self.x0) @ self.N
 
     def contains(self, X: np.ndarray) -> np.ndarray:
-        scale = 1.0 + np.abs(X).max(axis=1)
-        ok = np.all(X @ self.P.A.T - self.P.b <= TOL * scale[:, None], axis=1)
+        """Whether each state of ``X`` lies in ``P`` up to rounding of each row's own size
+        (``TOL``, equalities ``1e-7``, times ``1 + m``, ``m`` the magnitude the row combines:
+        :func:`reach.model.constraints.affine_magnitudes`), not the state's largest coordinate."""
+        ok = np.all(X @ self.P.A.T - self.P.b <= TOL * (1.0 + self._magnitudes[0](X)), axis=1)
         if self.P.E.shape[0]:
-            ok &= np.all(np.abs(X @ self.P.E.T - self.P.f) <= 1e-7 * scale[:, None], axis=1)
+            ok &= np.all(np.abs(X @ self.P.E.T - self.P.f) <= 1e-7 * (1.0 + self._magnitudes[1](X)), axis=1)
         return ok
+
+    @cached_property
+    def _magnitudes(self) -> tuple:
+        """The row magnitudes of ``A x <= b`` and of ``E x == f``."""
+        return affine_magnitudes(self.P.A, self.P.b), affine_magnitudes(self.P.E, self.P.f)
 
     # ------------------------------------------------------------ extreme points
     @cached_property
@@ -143,17 +152,35 @@ class PolytopeSampler:
     # ------------------------------------------------------------ interior
     def uniform(self, count: int, rng) -> np.ndarray:
         """``count`` points by rejection from the bounding box where ``P`` fills enough of it,
-        else by parallel hit-and-run chains from the centre."""
+        else by parallel hit-and-run chains from the centre; :meth:`law` says which."""
+        self.drawn_by = "point" if self.d == 0 else "rejection"
         if self.d:
             X = self._rejection(count, rng)
             if X is not None:
                 return X
+            self.drawn_by = "hit-and-run"
         Z = np.repeat(self.centre_z[None, :], count, axis=0)
         if self.d == 0:
             return self.to_x(Z)
-        for _ in range(30 * self.d + 50):
+        for _ in range(self.burn_in):
             Z = self._step(Z, rng)
         return self.to_x(Z)
+
+    @property
+    def burn_in(self) -> int:
+        """Hit-and-run steps per point: ``30 d + 50``."""
+        return 30 * self.d + 50
+
+    def law(self) -> str:
+        """The law of the points the last :meth:`uniform` drew, in words: exactly uniform by
+        rejection; by hit-and-run, uniform in the limit of the chain (exactly on a segment,
+        where each step is a uniform point of the whole chord)."""
+        if self.drawn_by == "point":
+            return "the polytope's single point"
+        if self.drawn_by == "rejection":
+            return "uniform over the polytope (rejection from its bounding box: exact)"
+        exact = "exact on a segment" if self.d == 1 else "the chain's law tends to uniform"
+        return f"uniform over the polytope (hit-and-run, {self.burn_in} steps per point: {exact})"
 
     def _rejection(self, count: int, rng) -> np.ndarray | None:
         """``count`` uniform points of ``P`` drawn uniformly in its bounding box and kept when

@@ -5,7 +5,11 @@ Every visited state is checked against every unsafe piece of the property, one m
 property sharing a simulation. Whole blocks of grid states are tested at once, every unsafe piece
 of a mode stacked in one matrix whose rows the simulator's block product evaluates with the
 guards and invariants (:mod:`reach.model.batch`); a mode with a nonlinear piece (or an equality,
-an instant) takes the property's state-by-state test.
+an instant) takes the state-by-state test (:func:`reach.model.constraints.violation_test`). A
+state violates a piece when every row of it is beyond rounding, ``g < -1e-9 (1 + m)`` with ``m``
+the magnitude the row combines, its states counted with those the simulator computes them from
+(:func:`reach.model.simulate.value_sources`): the invariants' tolerance per row, a hundredth
+of this one, uses the same scale.
 """
 
 from __future__ import annotations
@@ -13,7 +17,8 @@ from __future__ import annotations
 import numpy as np
 
 from reach.model.automaton import HybridAutomaton
-from reach.model.constraints import NUMERICAL_TOLERANCE, equality_rows
+from reach.model.constraints import NUMERICAL_TOLERANCE, affine_magnitudes, equality_rows, violation_test
+from reach.model.simulate import value_sources
 from reach.spec.properties import BoundSafety
 
 _COMPILED: dict = {}
@@ -22,26 +27,44 @@ _COMPILED: dict = {}
 def _compiled_tests(model: HybridAutomaton, prop: BoundSafety):
     """``(tests, stacked)`` of ``prop`` in ``model``'s modes, compiled once per (model, property):
     ``tests[mode index]`` the state-by-state violation test, ``stacked[mode index] = (L, c,
-    starts)`` every unsafe piece's ``H x <= g`` stacked (pieces starting at rows ``starts``) where
-    all pieces are linear and the property uses the standard test."""
+    starts, magnitudes)`` every unsafe piece's ``H x <= g`` stacked (pieces starting at rows
+    ``starts``; ``magnitudes`` of their rows, :func:`reach.model.constraints.affine_magnitudes`)
+    where all pieces are linear and the property uses the standard test."""
     key = (id(model), id(prop))
     if key in _COMPILED and _COMPILED[key][0] is model and _COMPILED[key][1] is prop:
         return _COMPILED[key][2]
     names = list(model.modes)
-    tests = {names.index(m): prop.violation(m) for m in prop.modes if prop.violation(m) is not None}
-    stacked = {}
+    sources = value_sources(model)
     standard = type(prop).violation is BoundSafety.violation          # not a subclass's own test
+    tests = {names.index(m): _union_test(prop.pieces[m], prop.symbols, sources) if standard else prop.violation(m)
+             for m in prop.modes if prop.pieces.get(m)}
+    stacked = {}
     for m_index, m in enumerate(names):
         hs = prop.halfspace_pieces(m) if m_index in tests and standard else None
         if any(equality_rows(piece) for piece in prop.pieces.get(m, [])):
             hs = None                   # an equality (an instant) takes the state-by-state test
         if hs:
-            stacked[m_index] = (np.vstack([H for H, _ in hs]), np.concatenate([g for _, g in hs]),
-                                np.cumsum([0] + [H.shape[0] for H, _ in hs[:-1]]))
+            L, c = np.vstack([H for H, _ in hs]), np.concatenate([g for _, g in hs])
+            stacked[m_index] = (L, c, np.cumsum([0] + [H.shape[0] for H, _ in hs[:-1]]),
+                                affine_magnitudes(L, c, sources))
     if len(_COMPILED) > 256:
         _COMPILED.clear()
     _COMPILED[key] = (model, prop, (tests, stacked))
     return tests, stacked
+
+
+def _union_test(pieces: list, symbols, sources: np.ndarray):
+    """``X -> (violated, depth)`` over a union of unsafe ``pieces`` (as
+    :meth:`BoundSafety.violation`), each piece's rows with the magnitudes of ``sources``
+    (:func:`reach.model.constraints.violation_test`): violated in some piece, the smallest
+    depth over them."""
+    tests = [violation_test(piece, symbols, sources) for piece in pieces]
+
+    def violation(X: np.ndarray):
+        results = [test(X) for test in tests]
+        return (np.any([r[0] for r in results], axis=0), np.min([r[1] for r in results], axis=0))
+
+    return violation
 
 
 class SafetyMonitor:
@@ -65,16 +88,17 @@ class SafetyMonitor:
         (B, R), ``seen`` (B, R) the states the runs ``rows`` (distinct) visit, ``margins`` (B,
         k, R) the values of :meth:`margin_rows` there if the simulator computed them. The same
         test as :meth:`__call__`: a piece's depth is the largest of its margins ``H x - g``, the
-        depth the smallest over the pieces, a violation a depth below ``-NUMERICAL_TOLERANCE (1
-        + |x|_inf)``. That bound is at most ``-NUMERICAL_TOLERANCE``, so only the runs whose
-        smallest depth in the block is below it are searched for their first violation."""
+        depth the smallest over the pieces, a violation a piece whose every margin is below
+        ``-NUMERICAL_TOLERANCE (1 + m)``, ``m`` its row's magnitude. That bound is at most
+        ``-NUMERICAL_TOLERANCE``, so only the runs whose smallest depth in the block is below
+        it are searched for their first violation."""
         if m_index not in self.tests or not seen.any():
             return
         if m_index not in self.stacked:            # a nonlinear piece: the state-by-state test
             j, r = np.nonzero(seen)
             self(t[j, r], np.moveaxis(X, 1, 2)[j, r], np.full(j.size, m_index), rows[r])
             return
-        L, c, starts = self.stacked[m_index]
+        L, c, starts, magnitudes = self.stacked[m_index]
         if margins is None:
             margins = np.matmul(L, X)
             margins -= c[:, None]
@@ -85,8 +109,10 @@ class SafetyMonitor:
         self.min_depth[rows] = np.minimum(self.min_depth[rows], low)
         r = np.flatnonzero((low < -NUMERICAL_TOLERANCE) & np.isnan(self.violation_time[rows]))
         if r.size:
-            depth = _piece_depth(margins[:, :, r], starts)
-            violated = seen[:, r] & (depth < -NUMERICAL_TOLERANCE * (1.0 + np.abs(X[:, :, r]).max(axis=1)))
+            B, k = margins.shape[:2]
+            size = magnitudes(X[:, :, r].transpose(0, 2, 1).reshape(-1, X.shape[1]))
+            size = size.reshape(B, r.size, k).transpose(0, 2, 1)
+            violated = seen[:, r] & _beyond(margins[:, :, r], size, starts)
             first = violated.any(axis=0)
             r, j = r[first], violated[:, first].argmax(axis=0)
             self.violation_time[rows[r]] = t[j, r]
@@ -102,10 +128,14 @@ class SafetyMonitor:
             if sel.size == 0:
                 continue
             if m_index in self.stacked:
-                L, c, starts = self.stacked[m_index]
+                L, c, starts, magnitudes = self.stacked[m_index]
                 Y = X[sel]
-                d = _piece_depth((L @ Y.T - c[:, None])[None], starts)[0]
-                violated = d < -NUMERICAL_TOLERANCE * (1.0 + np.abs(Y).max(axis=1))
+                G = (L @ Y.T - c[:, None])[None]
+                d = _piece_depth(G, starts)[0]
+                violated = np.zeros(sel.size, dtype=bool)
+                near = np.flatnonzero(d < -NUMERICAL_TOLERANCE)      # every tolerance is at least that
+                if near.size:
+                    violated[near] = _beyond(G[:, :, near], magnitudes(Y[near]).T[None], starts)[0]
             else:
                 violated, d = test(X[sel])
             r = rows[sel]                      # a run may appear many times, in time order
@@ -136,6 +166,14 @@ class SafetyMonitor:
         """The violating run that went deepest into the unsafe set, if any."""
         hit = np.flatnonzero(np.isfinite(self.violation_time))
         return None if hit.size == 0 else int(hit[np.argmin(self.min_depth[hit])])
+
+
+def _beyond(G: np.ndarray, size: np.ndarray, starts: np.ndarray) -> np.ndarray:
+    """``(B, R)``: whether some piece (starting at rows ``starts`` of the margins ``G`` (B, k,
+    R)) has every margin below ``-NUMERICAL_TOLERANCE (1 + size)`` (``size`` (B, k, R), the
+    rows' magnitudes)."""
+    below = G < -NUMERICAL_TOLERANCE * (1.0 + size)
+    return np.logical_and.reduceat(below, starts, axis=1).any(axis=1)
 
 
 def _piece_depth(G: np.ndarray, starts: np.ndarray) -> np.ndarray:

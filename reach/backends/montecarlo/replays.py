@@ -22,7 +22,8 @@ from reach.backends.montecarlo.monitors import SafetyMonitor
 from reach.backends.montecarlo.sampling import switch_window
 from reach.errors import InputError
 from reach.model.automaton import HybridAutomaton
-from reach.model.simulate import MAX_STEPS, Branches, Simulator, single_threaded
+from reach.model.constraints import row_magnitudes
+from reach.model.simulate import MAX_STEPS, Branches, Simulator, single_threaded, value_sources
 from reach.result import Counterexample
 from reach.spec.properties import BoundEvent, BoundSafety
 
@@ -148,7 +149,9 @@ def check_run(model: HybridAutomaton, initial_state: list, switch_time: float | 
     the wrong length, not finite, outside the initial set or the initial mode's invariant; a
     switch time where the model has no window or outside it; an input signal with values
     outside the inputs' ranges; a transition the model does not have. Bounds are met to
-    ``REPLAY_TOLERANCE (1 + |bound|)`` (rounding in a written file)."""
+    ``REPLAY_TOLERANCE (1 + |bound|)`` (rounding in a written file), invariant rows to
+    ``REPLAY_TOLERANCE (1 + m)``, ``m`` the magnitude the row combines as the simulator
+    scales it (:meth:`reach.model.simulate.Simulator.inside`)."""
     if dt and not (model.horizon / MAX_STEPS <= dt <= model.horizon):
         raise InputError(f"a replay step of {dt:g} is outside [{model.horizon / MAX_STEPS:g}, {model.horizon:g}] "
                          f"(the horizon {model.horizon:g} in at most {MAX_STEPS:.0e} steps)", field="dt")
@@ -167,8 +170,10 @@ def check_run(model: HybridAutomaton, initial_state: list, switch_time: float | 
                          field="initial_state")
     if not init.is_box and not PolytopeSampler(init.polytope, init.low, init.high).contains(x[None, :])[0]:
         raise InputError("the state is outside the initial set (its polytope)", field="initial_state")
-    margins = model.modes[init.mode].invariant_margins(x[None, :])[0]
-    if np.any(margins > REPLAY_TOLERANCE * (1.0 + np.abs(x).max())):
+    mode = model.modes[init.mode]
+    margins = mode.invariant_margins(x[None, :])[0]
+    scale = row_magnitudes(mode.invariant, model.symbols, value_sources(model))(x[None, :])[0]
+    if np.any(margins > REPLAY_TOLERANCE * (1.0 + scale)):
         raise InputError(f"the state is outside the initial set: the invariant of mode '{init.mode}' does not hold",
                          field="initial_state")
     if switch_time is not None:
