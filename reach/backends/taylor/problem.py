@@ -622,7 +622,7 @@ class EventProblem:
                 lo, hi = code.q(start).bound()
                 inner = max(inner, lo if sign > 0 else -hi)
             entry = {i: [] for i in range(len(code.exits))}
-            slices = {i: [] for i in range(len(code.exits))}     # their instants that may (_entry_slices)
+            steps_in = {i: [] for i in range(len(code.exits))}   # the steps that may meet each exit's guard
             first = {}                  # the first step that may meet each exit's guard
             exit_taken = None
             returning = dict(code.returns(came)) if came is not None else {}
@@ -642,14 +642,10 @@ class EventProblem:
                     if i in returning:          # met only at the entry instant: a return
                         continue
                     if code.may_enter(ex, X):
-                        sliced = _entry_slices(code, ex, X)
-                        if sliced is None:      # no instant of the step meets the guard
-                            continue
                         certified = False
                         box = np.array([x.bound() for x in X]) if box is None else box
                         entry[i].append(box)
-                        slices[i].append(np.stack([np.maximum(box[:, 0], sliced[:, 0]),
-                                                   np.minimum(box[:, 1], sliced[:, 1])], axis=1))
+                        steps_in[i].append(k)
                         first.setdefault(i, k)
                 exit_taken = code.inside(enc.tm_at_end(k), True)
                 if exit_taken is not None:
@@ -667,7 +663,7 @@ class EventProblem:
                 hull = _entry_box(ex, entry[i], self.model)
                 states = _no_wider(self._crossing(code, ex, enc, first[i], end), hull)
                 if states is None:
-                    box = _entry_box(ex, slices[i], self.model)
+                    box = _entry_box(ex, _sliced(code, ex, enc, steps_in[i], entry[i]), self.model)
                     tie = None if ex.reset is not None or first[i] == 0 or not np.all(np.isfinite(box)) \
                         else self._face(ex)
                     if ex.reset is not None:
@@ -805,6 +801,24 @@ def _unbounded(why: str) -> dict:
 
 #: time slices of a step in which the states entering a guard are bounded (:func:`_entry_slices`)
 ENTRY_SLICES = 16
+#: the most steps meeting a guard whose entry states are bounded slice by slice (:func:`_sliced`)
+SLICED_STEPS = 8
+
+
+def _sliced(code: ModeCode, ex: Exit, enc, steps: list, boxes: list) -> list:
+    """The boxes of the steps ``steps`` that may meet the guard of ``ex`` (``boxes``, the steps'
+    own), each cut to its time slices that may (:func:`_entry_slices`; a step none of whose
+    slices may is dropped), where there are at most ``SLICED_STEPS`` of them: a crossing that
+    takes a few long steps (a slow flowpipe) is where a step's box is loose; many short steps
+    already slice the crossing, and slicing each would cost more than it gains."""
+    if len(steps) > SLICED_STEPS:
+        return boxes
+    out = []
+    for k, box in zip(steps, boxes):
+        cut = _entry_slices(code, ex, enc.tm(k))
+        if cut is not None:
+            out.append(np.stack([np.maximum(box[:, 0], cut[:, 0]), np.minimum(box[:, 1], cut[:, 1])], axis=1))
+    return out or boxes
 
 
 def _entry_slices(code: ModeCode, ex: Exit, X) -> np.ndarray | None:
