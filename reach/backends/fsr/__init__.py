@@ -441,9 +441,7 @@ class FsrBackend:
                 kicks = fourier.GaussianLaw(problem.w_mean, problem.w_cov)
                 z = fourier.ProjectedSum.of(problem.system, T, box, kicks)
                 wide = np.flatnonzero(box.halfwidth > 0)
-                mean = z.zc + z.D0 @ box.mean + z.D.sum(axis=0) @ kicks.mean
-                cov = np.einsum("kip,pq,kjq->ij", z.D, kicks.cov, z.D)
-                p = uniform_shift_probability(mean, cov, lower, upper, z.D0[:, wide], box.halfwidth[wide],
+                p = uniform_shift_probability(z.mean, z.kick_cov, lower, upper, z.D0[:, wide], box.halfwidth[wide],
                                               abs_error=opts.abs_error, max_points=opts.max_points, rng=opts.seed)
                 details.update(method="genz", dimension=p.dimension, points=p.points,
                                initial="uniform over the initial box",

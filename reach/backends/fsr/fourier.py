@@ -260,9 +260,13 @@ class ProjectedSum:
         return self.zc + self.D0 @ self.initial.mean + self.D.sum(axis=0) @ self.kick.mean
 
     @property
+    def kick_cov(self):
+        """The covariance the kicks alone give ``z``."""
+        return np.einsum("kip,pq,kjq->ij", self.D, self.kick.variance, self.D)
+
+    @property
     def cov(self):
-        return (self.D0 @ self.initial.variance @ self.D0.T
-                + np.einsum("kip,pq,kjq->ij", self.D, self.kick.variance, self.D))
+        return self.D0 @ self.initial.variance @ self.D0.T + self.kick_cov
 
     def cf(self, B):
         """``Psi_z`` at the frequency vectors ``B`` (m, d) (eq. 7)."""
@@ -377,7 +381,7 @@ def _gaussian_floor(z: ProjectedSum) -> float:
     lowered by a relative 1e-9 against rounding."""
     if not isinstance(z.kick, GaussianLaw) or not z.D.size:
         return 0.0
-    S = np.einsum("kdp,pq,keq->de", z.D, z.kick.cov, z.D)
+    S = z.kick_cov
     values = np.linalg.eigvalsh(0.5 * (S + S.T))
     return max(0.0, float(values[0]) - 1e-9 * float(np.abs(values).max(initial=0.0)))
 
