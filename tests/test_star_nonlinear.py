@@ -215,25 +215,3 @@ def test_srna01_thrust_is_proved_just_above_the_initial_corner_demand(tmp_path):
     assert safe.status is Status.SAFE, safe.details
     assert safe.details["linearisation"]["blocks"] >= 2          # both modes were linearised
     assert BACKEND.check(model, thrust_limit(tmp_path, model, 7.39)).status is not Status.SAFE
-
-
-def test_a_flow_undefined_on_the_box_is_undecided_naming_the_mode(tmp_path):
-    """A tank draining as x' = -sqrt(x) empties at t = 2 sqrt(x0) < 3: the linearisation's box
-    reaches x < 0, where the flow is not real. UNKNOWN, naming the mode and what would help."""
-    from model_files import load_files
-
-    model, props = load_files(tmp_path, """
-        name: tank
-        state: [x]
-        modes:
-          drain: {flow: {x: "-sqrt(x)"}}
-        initial: {mode: drain, box: {x: [0.5, 1]}}
-        horizon: 3
-    """, """
-        properties:
-          - {id: low, kind: safety, modes: [drain], require: ["x >= -1"]}
-    """)
-    result = BACKEND.check(model, props["low"], {"finer_retry": False})
-    reason = result.details["reason"]
-    assert result.status is Status.UNKNOWN
-    assert "mode 'drain'" in reason and "invariant that keeps" in reason
