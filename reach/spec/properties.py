@@ -109,15 +109,16 @@ class BoundSafety:
             out.append(hs)
         return out
 
-    def violation(self, mode: str):
+    def violation(self, mode: str, sources=None):
         """Vectorised test in ``mode``: ``X -> (violated, depth)``, None if no pieces there.
 
         For a piece ``{g_j <= 0 for all j}`` (``< 0`` for strict ones) the depth is
         ``max_j g_j``; over the union it is the minimum across pieces. ``violated`` asks for
-        a depth beyond rounding error (see :func:`violation_test`); positive depth is a
-        margin to the unsafe set.
+        a depth beyond rounding error (see :func:`violation_test`, whose row magnitudes count
+        ``sources`` where given: the simulator's :func:`reach.model.simulate.value_sources`);
+        positive depth is a margin to the unsafe set.
         """
-        tests = [violation_test(piece, self.symbols) for piece in self.pieces.get(mode, [])]
+        tests = [violation_test(piece, self.symbols, sources) for piece in self.pieces.get(mode, [])]
         if not tests:
             return None
 

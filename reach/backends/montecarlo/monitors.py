@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from reach.model.automaton import HybridAutomaton
-from reach.model.constraints import NUMERICAL_TOLERANCE, affine_magnitudes, equality_rows, violation_test
+from reach.model.constraints import NUMERICAL_TOLERANCE, affine_magnitudes, equality_rows
 from reach.model.simulate import value_sources
 from reach.spec.properties import BoundSafety
 
@@ -36,8 +36,8 @@ def _compiled_tests(model: HybridAutomaton, prop: BoundSafety):
     names = list(model.modes)
     sources = value_sources(model)
     standard = type(prop).violation is BoundSafety.violation          # not a subclass's own test
-    tests = {names.index(m): _union_test(prop.pieces[m], prop.symbols, sources) if standard else prop.violation(m)
-             for m in prop.modes if prop.pieces.get(m)}
+    tests = {names.index(m): test for m in prop.modes
+             if (test := prop.violation(m, sources) if standard else prop.violation(m)) is not None}
     stacked = {}
     for m_index, m in enumerate(names):
         hs = prop.halfspace_pieces(m) if m_index in tests and standard else None
@@ -51,20 +51,6 @@ def _compiled_tests(model: HybridAutomaton, prop: BoundSafety):
         _COMPILED.clear()
     _COMPILED[key] = (model, prop, (tests, stacked))
     return tests, stacked
-
-
-def _union_test(pieces: list, symbols, sources: np.ndarray):
-    """``X -> (violated, depth)`` over a union of unsafe ``pieces`` (as
-    :meth:`BoundSafety.violation`), each piece's rows with the magnitudes of ``sources``
-    (:func:`reach.model.constraints.violation_test`): violated in some piece, the smallest
-    depth over them."""
-    tests = [violation_test(piece, symbols, sources) for piece in pieces]
-
-    def violation(X: np.ndarray):
-        results = [test(X) for test in tests]
-        return (np.any([r[0] for r in results], axis=0), np.min([r[1] for r in results], axis=0))
-
-    return violation
 
 
 class SafetyMonitor:
