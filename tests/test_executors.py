@@ -100,7 +100,7 @@ WORKERS_OF_A_KILLED_PARENT = """
 import os, sys, time
 from reach.executors import LocalExecutor
 def pid_then_sleep(seconds):
-    print(os.getpid(), flush=True)
+    os.write(1, f"{os.getpid()}\\n".encode())  # one write: the two workers' lines never interleave
     time.sleep(seconds)
 for _ in LocalExecutor(jobs=2).map_unordered(pid_then_sleep, [(60,), (60,)]):
     pass
