@@ -148,3 +148,22 @@ def test_urgent_transitions_chain_at_the_same_instant(tmp_path):
     assert [list(model.modes)[m] for m in mode[:3]] == ["a", "b", "c"] and np.all(t[:3] == 0.0)
     assert traj.transitions[0] == ["ab", "bc"]
     np.testing.assert_allclose(traj.final_state[:, 0], 1.5)
+
+
+@pytest.mark.parametrize("y0,jumps", [(-5e-5, False), (-1e-13, True), (0.0, True)])
+def test_a_slab_crossed_between_grid_points_checks_its_other_rows_at_their_own_scale(tmp_path, y0, jumps):
+    """``x == 1 & y >= 0`` (urgent), crossed by ``x' = 1`` between two grid points, with a state
+    ``big = 1e7`` that no row of the guard reads: ``y = -5e-5`` misses the guard (a tolerance
+    scaled by the whole state, 1e-11 (1 + 1e7) = 1e-4, took it for ``y >= 0``), ``y`` within
+    the row's own tolerance (1e-11) or on it meets the guard at ``t = 1``."""
+    path = tmp_path / "slab.yaml"
+    path.write_text("name: slab\nstate: [x, y, big]\n"
+                    "modes: {go: {flow: {x: 1, y: 0, big: 0}}, bad: {flow: {x: 0, y: 0, big: 0}}}\n"
+                    "transitions:\n"
+                    "  in: {from: go, to: bad, urgent: true, guard: ['x == 1', 'y >= 0']}\n"
+                    f"initial: {{mode: go, box: {{x: 0, y: {y0}, big: 1e7}}}}\nhorizon: 3\n")
+    traj = Simulator(load_model(path)).run(np.array([[0.0, y0, 1e7]]), record=True)
+    assert traj.transitions[0] == (["in"] if jumps else [])
+    if jumps:
+        t, mode, X = traj.path[0]
+        assert t[np.flatnonzero(mode == 1)[0]] == pytest.approx(1.0, abs=1e-9)

@@ -20,7 +20,8 @@ it between two grid points without any grid state in it; this module finds three
 The instant is located as a guard entry is, by bisection on the row the run enters by (the
 whole guard for a grid point in it), which holds at the right end, to the entry search's
 resolution ``dt 2^-40``. The state found is the guard's entry where every other row of the
-guard holds there, to ``INVARIANT_TOLERANCE (1 + |x|_inf)`` (a slab's partner row is met within
+guard holds there, each to ``INVARIANT_TOLERANCE (1 + m)``, ``m`` the magnitude the row
+combines, as in the simulator's guard test (a slab's partner row is met within
 the resolution: it was crossed in the last halving, or, after a dip into one row of a slab, it
 holds where that row is met). Each run's candidates are tried in time order; one that fails
 (a dip whose lowest point misses, other rows that do not hold) is dropped and the next one
@@ -79,7 +80,8 @@ class Crossings:
                      [(i, j) for i, j, total, strict in opposite_pairs(tr.guard) if not strict and total <= 0])
             # the guards an entry is located on: each row alone, then all of them
             entries = [_Row(margins, i) for i in range(len(tr.guard))] + [margins]
-            self.guards.append((margins, rows, pairs, entries, self._rates(rows)))
+            scale = sim._scale(("guard", tr.name), tr.guard)       # the rows' own tolerances
+            self.guards.append((margins, rows, pairs, entries, self._rates(rows), scale))
 
     def _rates(self, rows):
         """``X -> (H f(X))`` (R, m): the rates of change of a linear guard's margins along the
@@ -108,7 +110,7 @@ class Crossings:
         when = np.full(R, np.inf)
         if R == 0:
             return when
-        guard_margins, _, pairs, entries, rates_of = self.guards[index]
+        guard_margins, _, pairs, entries, rates_of, scale = self.guards[index]
         points = np.concatenate([start_x[:, None, :], states], axis=1)      # (R, K+1, n)
         times = np.concatenate([start_t[:, None], grid_t], axis=1)
         margins = guard_margins(points.reshape(-1, points.shape[-1])).reshape(R, points.shape[1], -1)
@@ -148,17 +150,19 @@ class Crossings:
                 mask, a, b, dip = candidates[c_index]
                 sel = np.flatnonzero(active & (which == c_index))
                 k = first[sel]
-                found = self._locate(guard_margins, entries, rates_of, a, b, dip, points[sel, k], times[sel, k],
-                                     times[sel, k + 1] - times[sel, k])
+                found = self._locate(guard_margins, scale, entries, rates_of, a, b, dip, points[sel, k],
+                                     times[sel, k], times[sel, k + 1] - times[sel, k])
                 hit = np.isfinite(found)
                 when[sel[hit]], pending[sel[hit]] = found[hit], False
                 mask[sel[~hit], k[~hit]] = False
 
-    def _locate(self, guard_margins, entries, rates_of, a, b, dip, x0, t0, h) -> np.ndarray:
+    def _locate(self, guard_margins, scale, entries, rates_of, a, b, dip, x0, t0, h) -> np.ndarray:
         """The entry instants (``inf`` where none) of runs at ``x0`` at ``t0`` into the guard in
         ``(0, h]``, by row ``a`` (``m``: the whole guard), ``b`` its partner met within the
-        resolution (or -1), after a dip of row ``a`` (whose lowest point must reach it)."""
-        from reach.model.simulate import INVARIANT_TOLERANCE
+        resolution (or -1), after a dip of row ``a`` (whose lowest point must reach it); the
+        other rows must hold there to ``INVARIANT_TOLERANCE (1 + m)``, ``m`` the magnitude each
+        combines (``scale``, as the simulator's own guard test)."""
+        from reach.model.simulate import INVARIANT_TOLERANCE, _holds
 
         when = np.full(t0.shape, np.inf)
         go = np.ones(t0.shape, dtype=bool)
@@ -173,7 +177,7 @@ class Crossings:
         m_s = guard_margins(x_s)
         if b >= 0:
             m_s[:, b] = -np.inf                     # met within the resolution
-        holds = np.all(m_s <= INVARIANT_TOLERANCE * (1.0 + np.abs(x_s).max(axis=1))[:, None], axis=1)
+        holds = _holds(m_s, INVARIANT_TOLERANCE, scale, x_s)
         found = np.full(int(go.sum()), np.inf)
         found[holds] = t0[go][holds] + s[holds]
         when[go] = found
