@@ -6,9 +6,11 @@ matrix: both against the closed form
 
 import numpy as np
 import scipy.linalg
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from reach.model import load_model
-from reach.model.simulate import Simulator
+from reach.model.simulate import Simulator, batched_expm
 
 BUILDING = "models/spaceex/imported/models/BLDC01-BDS01.yaml"      # 48 states, one mode
 
@@ -60,3 +62,17 @@ def test_a_long_grid_is_not_refused_for_powers_it_never_holds():
     expected = _closed_form(model, x0, model.horizon)
     np.testing.assert_allclose(final, expected, rtol=0, atol=1e-8 * (1.0 + np.abs(expected).max()))
     assert all(p.table.shape[0] <= POWERS_HELD for p in sim.powers.values())
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2 ** 32 - 1), n=st.integers(1, 6),
+       exponents=st.lists(st.floats(-12, 1), min_size=1, max_size=12))
+def test_one_batched_exponential_of_many_durations_is_each_ones_exponential(seed, n, exponents):
+    """``batched_expm(M, h)`` for durations from 1e-12 to 10 in one call (each scaled and
+    squared for its own length) against ``scipy.linalg.expm(M h_k)`` one at a time."""
+    M = np.random.default_rng(seed).normal(size=(n, n))
+    h = 10.0 ** np.array(exponents)
+    E = batched_expm(M, h)
+    for k, hk in enumerate(h):
+        reference = scipy.linalg.expm(M * hk)
+        np.testing.assert_allclose(E[k], reference, rtol=1e-11, atol=1e-13 * np.abs(reference).max())

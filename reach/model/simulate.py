@@ -196,19 +196,26 @@ def default_dt(model: HybridAutomaton) -> float:
 def batched_expm(M: np.ndarray, h: np.ndarray) -> np.ndarray:
     """``expm(M h_k)`` for every ``h_k``, by scaling and squaring of a degree-16 Taylor series.
 
-    After scaling, ``||M h / 2^s||_1 <= 1/4``, where the truncation error of the series is
-    below ``(1/4)^17 / 17! < 1e-24``; the squarings are batched matrix products.
+    After scaling, ``||M h_k / 2^(s_k)||_1 <= 1/4``, where the truncation error of the series is
+    below ``(1/4)^17 / 17! < 1e-24``; each ``h_k`` has its own ``s_k`` (a short ``h_k`` is not
+    squared more than it needs, so one call for many durations is as accurate as one call
+    each), and the squarings are batched matrix products over the ``h_k`` that still need them.
     """
-    h = np.asarray(h, dtype=float)
-    norm = np.linalg.norm(M, 1) * float(np.max(np.abs(h), initial=0.0))
-    s = max(0, int(np.ceil(np.log2(norm / 0.25)))) if norm > 0.25 else 0
+    h = np.asarray(h, dtype=float).reshape(-1)
+    norm = np.linalg.norm(M, 1) * np.abs(h)
+    with np.errstate(divide="ignore"):
+        s = np.where(norm > 0.25, np.ceil(np.log2(np.maximum(norm, 0.25) / 0.25)), 0).astype(int)
     H = M[None, :, :] * (h / 2.0 ** s)[:, None, None]
     eye = np.broadcast_to(np.eye(M.shape[0]), H.shape)
     E = eye.copy()
     for k in range(16, 0, -1):          # Horner: I + H/1 (I + H/2 (I + ... ))
         E = eye + (H @ E) / k
-    for _ in range(s):
-        E = E @ E
+    for i in range(int(s.max(initial=0))):
+        more = s > i
+        if more.all():
+            E = E @ E
+        else:
+            E[more] = E[more] @ E[more]
     return E
 
 
@@ -502,7 +509,8 @@ class Simulator:
         missing = np.array([d for d, E in found.items() if E is None])
         if missing.size:
             M = self.generators[mode]
-            fresh = np.stack([batched_expm(M, missing * f) for f in fractions], axis=1)
+            F = len(fractions)
+            fresh = batched_expm(M, np.outer(missing, fractions)).reshape(missing.size, F, *M.shape)
             if sum(E.nbytes for E in self.exponentials.values()) + fresh.nbytes > EXPONENTIALS_BYTES:
                 self.exponentials.clear()
             for d, E in zip(missing, fresh):
