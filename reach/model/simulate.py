@@ -21,7 +21,9 @@ together:
   (:mod:`reach.model.crossing`); the window transition
   is taken exactly at ``tau``; a may-transition with a general guard is taken when a run would
   leave the source invariant, if its guard holds there (the exit instant, by bisection: one
-  of the automaton's runs, the one that stays longest); Gaussian kicks (if asked for) are
+  of the automaton's runs, the one that stays longest), and, in a piece of a switching signal
+  that asks for a switch, at the piece start or the first instant in it that its guard is
+  entered (the one that leaves earliest); Gaussian kicks (if asked for) are
   applied at ``k * step``, and so are the pieces of a time-varying input signal (and its
   switching decisions; a piece start on the grid where a run's inputs keep their values and no
   switch is asked for changes nothing and does not end its segment); an urgent transition
@@ -287,7 +289,9 @@ class _Runs:
     """What a simulation carries per run: state, mode, time, window switch instant, blocking
     time; how it chooses among enabled transitions (``branches`` and each run's ``count``,
     :meth:`Branches.pick`), how many of its jumps had a choice (``branched``), the names of the
-    transitions taken (``taken``, if recorded); and the observers."""
+    transitions taken (``taken``, if recorded); the observers; and which runs are in a piece
+    of their switching signal that asks for a switch (``eager``: they take a may-transition
+    with a general guard at the first instant its guard is entered, :meth:`Simulator.run`)."""
 
     X: np.ndarray
     mode: np.ndarray
@@ -299,6 +303,7 @@ class _Runs:
     count: np.ndarray
     branched: np.ndarray
     taken: list | None
+    eager: np.ndarray | None = None     # runs whose current piece asks for a switch (run's signal)
 
     def watch(self, rows: np.ndarray) -> None:
         """The observers see the runs ``rows`` as they are now."""
@@ -527,9 +532,12 @@ class Simulator:
         ``signal = (step, values[, switch])``: the varying bounded inputs (``model.varying_inputs``)
         are piecewise constant, ``values[r, k]`` on ``[k step, (k+1) step)`` for run ``r``
         (``values`` is (N, K, m); the last piece lasts to the horizon); with ``switch`` (N, K)
-        booleans, run ``r`` also takes, at ``k step`` where ``switch[r, k]``, a
-        may-transition with a general guard that is enabled there (if any; at time 0, after
-        the urgent transitions of the initial state). ``branches``: which
+        booleans, run ``r`` also takes, in a piece where ``switch[r, k]``, a may-transition with
+        a general guard: at ``k step`` where one is enabled there (at time 0 after the urgent
+        transitions of the initial state), and otherwise at the first instant in the piece that
+        its guard is entered (held at no earlier point of the segment), located as an urgent
+        guard's entry, where it is enabled there: the earliest switch, as the
+        invariant's exit is the latest. ``branches``: which
         of several enabled transitions each run takes (:class:`Branches`; the first by default).
         """
         X = np.array(x0, dtype=float).reshape(-1, self.n).copy()
@@ -540,7 +548,7 @@ class Simulator:
         runs = _Runs(X, np.full(N, self.mode_names.index(self.model.initial.mode)), np.zeros(N), tau,
                      np.full(N, np.nan), list(observers) + ([recorder] if recorder else []),
                      branches or Branches(), np.zeros(N, dtype=int), np.zeros(N, dtype=int),
-                     [[] for _ in range(N)] if record else None)
+                     [[] for _ in range(N)] if record else None, np.zeros(N, dtype=bool))
         mode, t, blocked_at = runs.mode, runs.t, runs.blocked_at
         kick_step = self.model.disturbance.step if (kicks is not None and self.model.disturbance) else None
         if signal is not None:
@@ -556,8 +564,10 @@ class Simulator:
                 piece = min(k, values.shape[1] - 1)
                 if columns.size:
                     X[np.ix_(sel, columns)] = values[sel, piece]
-                if switch is not None and k > 0:
-                    self._take_may(sel[switch[sel, piece]], runs)
+                if switch is not None:
+                    runs.eager[sel] = switch[sel, piece]
+                    if k > 0:
+                        self._take_may(sel[switch[sel, piece]], runs)
 
             kicks(0, np.arange(N))
             following = self._signal_stops(kick_step, values, switch)
@@ -637,14 +647,14 @@ class Simulator:
         A piece start changes nothing where the inputs keep their values and no switch is asked
         for; on the grid (``step`` a multiple of ``dt``, :meth:`on_grid`) the states a segment
         visits through it are those it would visit stopping there, so only the other piece starts
-        stop a segment: where the values change, where a switch is asked (every start past the
-        last piece if its switch is asked).
+        stop a segment: where the values change, where a switch is asked or was asked in the
+        piece before (every start past the last piece if its switch is asked).
         """
         N, K = values.shape[:2]
         stop = np.zeros((N, K + 1), dtype=bool)
         stop[:, 1:K] = np.any(values[:, 1:] != values[:, :-1], axis=2)
         if switch is not None:
-            stop[:, 1:K] |= switch[:, 1:]
+            stop[:, 1:K] |= switch[:, 1:] | switch[:, :-1]       # a switch asked for, or no longer
         # after[r, k]: the first stop of run r after piece start k (K if none among the pieces)
         index = np.where(stop, np.arange(K + 1), K)
         index[:, K] = K
@@ -870,8 +880,10 @@ class Simulator:
         span = float(np.max(np.minimum(next_kick[rows], horizon) - runs.t[rows], initial=0.0))
         count = min(self.steps + 1, int(np.ceil(span / self.dt)) + 2)
         per_run = max(1, CHUNK_VALUES // (count * self.n))
-        for start in range(0, rows.size, per_run):
-            self._segment_chunk(name, rows[start:start + per_run], runs, next_kick, horizon)
+        eager = runs.eager[rows] if self.exits[name] else np.zeros(rows.size, dtype=bool)
+        for group, may in ((rows[~eager], False), (rows[eager], True)):
+            for start in range(0, group.size, per_run):
+                self._segment_chunk(name, group[start:start + per_run], runs, next_kick, horizon, may)
 
     def segment_limits(self, name, rows, t, tau, next_kick, horizon):
         """``(t0, k0, end, win_time, stop_at, count)`` of the runs ``rows`` in mode ``name``:
@@ -889,7 +901,10 @@ class Simulator:
         count = int(np.max(np.ceil(np.minimum(stop_at, horizon) / self.dt - 1e-9) - k0 + 1, initial=0)) + 1
         return t0, k0, end, win_time, stop_at, count
 
-    def _segment_chunk(self, name, rows, runs: _Runs, next_kick, horizon):
+    def _segment_chunk(self, name, rows, runs: _Runs, next_kick, horizon, eager: bool = False):
+        """Advance ``rows`` to their next event (an urgent guard's entry, the window's instant,
+        the invariant's exit; with ``eager``, also the entry of a may-transition's guard that
+        held at no earlier point of the segment) or the segment's end."""
         X = runs.X
         n_rows = rows.size
         t0, k0, end, win_time, stop_at, count = self.segment_limits(name, rows, runs.t, runs.tau, next_kick,
@@ -899,14 +914,18 @@ class Simulator:
         Y0 = self.propagate(name, X[rows], np.maximum(first - t0, 0.0))
         grid_t = (k0[:, None] + np.arange(count)[None, :]) * self.dt       # (R, count)
 
-        guards = self.urgent[name]
+        guards = self.urgent[name] + (self.exits[name] if eager else [])
+        # where each guard may be entered: urgent ones anywhere; a may-transition's (eager runs)
+        # only where it does not hold at the segment's start (it is entered, not sat in)
+        fresh = [np.ones(n_rows, dtype=bool) if j < len(self.urgent[name]) else
+                 ~np.all(guard(X[rows]) <= 0, axis=1) for j, (_, guard) in enumerate(guards)]
 
         def met(states, j0):
             j1 = j0 + states.shape[1]
             done = grid_t[:, j1 - 1] >= stop_at
-            for _, guard in guards:
+            for (_, guard), entered in zip(guards, fresh):
                 G = guard(states.reshape(-1, self.n)).reshape(n_rows, j1 - j0, -1)
-                done |= np.any(np.all(G <= 0, axis=2), axis=1)
+                done |= np.any(np.all(G <= 0, axis=2), axis=1) & entered
             return done
 
         Y = self._grid_states(name, Y0, count, met)
@@ -919,7 +938,7 @@ class Simulator:
         event_time, event_tr = win_time.copy(), np.where(np.isfinite(win_time), 0, -1)
         for j_tr, (tr, guard) in enumerate(guards, start=1):
             G = guard(flat).reshape(n_rows, count, -1)
-            inside = np.all(G <= 0, axis=2) & valid
+            inside = np.all(G <= 0, axis=2) & valid & fresh[j_tr - 1][:, None]
             hit = np.flatnonzero(inside.any(axis=1))
             if hit.size:
                 j = inside[hit].argmax(axis=1)
@@ -930,6 +949,8 @@ class Simulator:
                 better = when < event_time[hit]
                 event_time[hit[better]] = when[better]
                 event_tr[hit[better]] = j_tr
+            if j_tr > len(self.urgent[name]):
+                continue                # (a may-transition's guard crossed between grid points: not followed)
             when = self.crossings[name].earliest(j_tr - 1, t0, X[rows], grid_t, Y, valid, event_time)
             better = when < event_time
             event_time[better], event_tr[better] = when[better], j_tr
@@ -944,10 +965,10 @@ class Simulator:
         last_x = np.where((last >= 0)[:, None], Y[np.arange(n_rows), np.maximum(last, 0)], X[rows])
         block_t = grid_t[np.arange(n_rows), np.minimum(block_j, count - 1)]
         self._finish(name, rows, runs, end, event_time, event_tr, blocked, block_t, last_t, last_x,
-                     lambda Z, h: self.propagate(name, Z, h))
+                     lambda Z, h: self.propagate(name, Z, h), guards)
 
     def _finish(self, name, rows, runs: _Runs, end, event_time, event_tr, blocked, block_t, last_t, last_x,
-                propagate) -> None:
+                propagate, guards: list | None = None) -> None:
         """The end of a segment of the runs ``rows`` in mode ``name``, from the last grid state
         each visited (``last_t``, ``last_x``): a run with an event at ``event_time <= end``
         (``event_tr`` 0 the window, ``j`` the ``j``-th urgent transition) goes to it and jumps,
@@ -959,7 +980,9 @@ class Simulator:
         is blocked. (An urgent guard that holds only on the invariant's boundary, SpaceEx's
         ``x == 2`` out of ``x <= 2``, holds at no grid point: it is met at the exit.) An urgent
         guard met between the last grid state and the stop (a slab crossed, a row dipped into:
-        :mod:`reach.model.crossing`) is an event there. ``propagate(X, h)`` advances states without event."""
+        :mod:`reach.model.crossing`) is an event there. ``propagate(X, h)`` advances states without
+        event; ``guards``: the transitions ``event_tr`` counts (the mode's urgent ones by default;
+        an eager segment's also its may-transitions, :meth:`_segment_chunk`)."""
         horizon = self.model.horizon
         has_event = ~blocked & (event_tr >= 0) & (event_time <= end)
         stop_t = np.where(blocked, block_t, np.where(has_event, event_time, end))
@@ -987,6 +1010,7 @@ class Simulator:
         if b.size:
             s, x_exit = self._last_inside(name, last_x[b], stop_t[b] - last_t[b])
             self._event(rows[b], x_exit, last_t[b] + s, urgent + self.exits[name], None, runs)
+        urgent = urgent if guards is None else guards
         window = [(self.window[name], None)]
         for kind in (0, 1):
             e = np.flatnonzero(has_event[go] & ((event_tr[go] > 0) == bool(kind)))

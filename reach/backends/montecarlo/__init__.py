@@ -20,9 +20,10 @@ in the structured round, uniform pieces in the random one, perturbed by the sear
 violation and the initial mode is linear, a round of bang-bang signals on finer pieces aimed
 into the unsafe set by the maximum principle
 (:func:`.initial_sampling.extremal_runs`) comes before the search. May-transitions with general guards are taken where a
-run would leave its invariant, and, in the random and search rounds, also at piece starts
-where the run's switching signal says so and a guard holds (each with probability
-``SWITCH_PROBABILITY``). A counterexample carries its input and switching signal.
+run would leave its invariant, and, in the pieces where the run's switching signal asks for a
+switch (every piece for one copy of each structured run; each with probability
+``SWITCH_PROBABILITY`` in the random and search rounds), also at the piece start where a guard
+holds or else where a guard is first entered in the piece. A counterexample carries its input and switching signal.
 
 Where several transitions can be enabled at one jump (two urgent guards that hold together,
 may-transitions with general guards at an exit), each run carries choice values

@@ -115,8 +115,9 @@ def run_plan(model: HybridAutomaton, sim: Simulator, window, opts: Options, rng)
     structured initial states (with the structured signals of the time-varying inputs,
     :func:`.initial_sampling.structured_signals`) and ``opts.samples`` i.i.d. ones (uniform
     signals); where the model has may-transitions, each structured run twice, staying in a
-    mode as long as it can and leaving at the first piece start a guard holds, and the random
-    runs switch at random piece starts; where transitions can be enabled together, each structured run once per branch
+    mode as long as it can and leaving where a guard is first entered (every piece asks for a
+    switch: :meth:`reach.model.simulate.Simulator.run`), and the random runs ask in random
+    pieces; where transitions can be enabled together, each structured run once per branch
     (:func:`branch_plan`). ``seeding`` marks the runs the search and the optimiser may start
     from: all but those of one-switch signals, a family of neighbours that would fill their
     populations around one local minimum (they are tried as they are)."""
@@ -134,8 +135,8 @@ def run_plan(model: HybridAutomaton, sim: Simulator, window, opts: Options, rng)
             Vs = input_signals(model, Xs.shape[0], step, rng)
         switch = None
         if mays:                        # structured runs twice: staying as long as they can, and
-            count = Xs.shape[0]         # switching at the first piece start a guard holds; random
-            Xs, Vs = np.concatenate([Xs, Xs]), np.concatenate([Vs, Vs])   # ones at random piece starts
+            count = Xs.shape[0]         # switching where a guard is first entered; random ones
+            Xs, Vs = np.concatenate([Xs, Xs]), np.concatenate([Vs, Vs])   # in random pieces
             taus = None if taus is None else np.concatenate([taus, taus])
             if model.varying_inputs:
                 once = np.concatenate([once, once])
