@@ -453,15 +453,16 @@ def test_an_initial_set_the_automaton_cannot_start_in_is_named_at_the_cfg_line(t
 @pytest.mark.parametrize("forbidden, code", [("x >= 0.995", 0), ("x >= 0.9", 1)])
 def test_an_initial_value_of_a_time_varying_input_alone_is_ignored_with_a_warning(tmp_path, capsys, forbidden,
                                                                                   code):
-    """``u == 0`` in ``initially`` (as JuliaReach's two_tanks writes it) constrains no run: the
-    input is any signal in [0.8, 1], so a value at t = 0 changes nothing. The import warns and
-    checks the same system as without it: x' = -x + u from 0 stays below 1 - e^{-5} = 0.9933
-    and reaches 0.9 (0.995 is never reached)."""
-    xml, cfg = write(tmp_path, DRIVEN, f'system = osc\ninitially = "x == 0 & u == 0"\nforbidden = "{forbidden}"\n'
+    """An initial value of an input (``u == 0.9``, as JuliaReach's two_tanks writes ``u == 0``
+    for its input in [-0.1, 0.1]) constrains no run: the input is any signal in [0.8, 1], so a
+    value at t = 0 changes nothing. The import warns and checks the same system as without it:
+    x' = -x + u from 0 stays below 1 - e^{-5} = 0.9933 and reaches 0.9 (0.995 is never
+    reached). (A value outside the range empties the initial set: bad input, as ``false``.)"""
+    xml, cfg = write(tmp_path, DRIVEN, f'system = osc\ninitially = "x == 0 & u == 0.9"\nforbidden = "{forbidden}"\n'
                                       f'time-horizon = 5\n')
     assert main(["check", str(xml), str(cfg), "-b", "star"]) == code
     err = capsys.readouterr().err
-    assert f"{cfg}:2: initially: 'u == 0' ignored: u is a time-varying input" in err
+    assert f"{cfg}:2: initially: 'u == 0.9' ignored: u is a time-varying input" in err
 
 
 # ------------------------------------------------------------------ constants the cfg gives

@@ -6,9 +6,14 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from reach.errors import InputError
+from reach.paths import printable
 from reach.model.spaceex.xmltree import Node
 
 LAYOUT = {"note", "labelposition", "middlepoint", "waypoints", "beforemiddle", "aftermiddle"}
+# transition attributes read here (source, target, asap, timedriven) or known to change nothing
+# (bezier: how the model editor draws the edge); any other (priority, urgent, a misspelt ASAP)
+# could change which jumps happen, so it is refused rather than read as absent
+TRANSITION_ATTRIBUTES = {"source", "target", "asap", "timedriven", "bezier"}
 PARAM_TYPES = ("real", "label")
 DYNAMICS = ("any", "const", "explicit")
 
@@ -139,6 +144,19 @@ def _text(node: Node | None) -> Text | None:
     return Text(node.text, node.line)
 
 
+def _single(node: Node, tag: str, file: str, where: str) -> Node | None:
+    """The one ``<tag>`` child of ``node``, or None. SpaceEx gives a location one invariant and
+    one flow, a transition one label, guard and assignment (each a conjunction written with
+    ``&``); a repeat is bad input at its line, never dropped, nor guessed to be a conjunction."""
+    found = node.all(tag)
+    if len(found) > 1:
+        hint = ("a transition takes one label" if tag == "label"
+                else f"write its conditions in one <{tag}>, joined with &")
+        raise _error(file, found[1], f"{where}: a second <{tag}> (the first is at line {found[0].line}): "
+                     f"SpaceEx reads one; {hint}")
+    return found[0] if found else None
+
+
 def _component(node: Node, cid: str, file: str) -> Base | Network:
     where = f"component '{cid}'"
     params: dict[str, Param] = {}
@@ -161,7 +179,14 @@ def _component(node: Node, cid: str, file: str) -> Base | Network:
         elif child.tag == "transition":
             transitions.append(_transition(child, file, where))
         elif child.tag == "bind":
-            binds.append(_bind(child, file, where))
+            bind = _bind(child, file, where)
+            first = next((b for b in binds if b.name == bind.name), None)
+            if first is not None:
+                # two instances under one name would share every local variable and location
+                shown = printable(bind.name)[:60]
+                raise _error(file, child, f"{where}: bind '{shown}': duplicate instance name (as=\"{shown}\" is "
+                             f"also bound at line {first.line}); each bind needs its own 'as'")
+            binds.append(bind)
         else:
             raise _unsupported(file, child, where)
     if binds and (locations or transitions):
@@ -189,7 +214,9 @@ def _location(node: Node, file: str, where: str) -> Location:
     for child in node.children:
         if child.tag not in LAYOUT | {"invariant", "flow"}:
             raise _unsupported(file, child, f"{where}: location '{name}'")
-    return Location(lid, name, _text(node.first("invariant")), _text(node.first("flow")), node.line)
+    where = f"{where}: location '{name}'"
+    return Location(lid, name, _text(_single(node, "invariant", file, where)),
+                    _text(_single(node, "flow", file, where)), node.line)
 
 
 def _flag(node: Node, name: str, file: str, where: str) -> bool:
@@ -208,19 +235,36 @@ def _transition(node: Node, file: str, where: str) -> Transition:
     source, target = node.attrs.get("source"), node.attrs.get("target")
     if not source or not target:
         raise _error(file, node, f"{where}: transition without 'source' or 'target'")
-    label = node.first("label")
+    where = f"{where}: transition"
+    _known_attributes(node, file, where)
+    label = _single(node, "label", file, where)
     label_text = label.text.strip() if label is not None and label.text.strip() else None
-    asap = _flag(node, "asap", file, f"{where}: transition")
-    if _flag(node, "timedriven", file, f"{where}: transition"):
-        raise _error(file, node, f"{where}: transition: construct timedriven=\"true\" is not supported")
-    return Transition(source, target, label_text, _text(node.first("guard")), _text(node.first("assignment")),
-                      asap, node.line)
+    asap = _flag(node, "asap", file, where)
+    if _flag(node, "timedriven", file, where):
+        raise _error(file, node, f"{where}: construct timedriven=\"true\" is not supported")
+    return Transition(source, target, label_text, _text(_single(node, "guard", file, where)),
+                      _text(_single(node, "assignment", file, where)), asap, node.line)
+
+
+def _known_attributes(node: Node, file: str, where: str) -> None:
+    """Refuse a transition attribute outside :data:`TRANSITION_ATTRIBUTES`: SpaceEx's
+    ``priority``, or a foreign or misspelt one (``urgent``, ``ASAP``: XML names are case
+    sensitive), would otherwise be read as absent and turn a forced jump into a possible one."""
+    for name in node.attrs:
+        if name not in TRANSITION_ATTRIBUTES:
+            shown = printable(f'{name}="{node.attrs[name]}"')[:80]
+            raise _error(file, node, f"{where}: construct {shown} is not supported (a transition may "
+                         "carry source, target, asap, timedriven and bezier)")
 
 
 def _bind(node: Node, file: str, where: str) -> Bind:
     comp, name = node.attrs.get("component"), node.attrs.get("as")
     if not comp or not name:
         raise _error(file, node, f"{where}: bind without 'component' or 'as'")
+    if "." in name:
+        # instance paths are joined with dots: 'N.T' would be the instance T inside N
+        raise _error(file, node, f"{where}: bind '{printable(name)[:60]}': an instance name ('as') cannot "
+                     "contain a dot (a dot separates nested instances: 'N.T' is instance T inside N)")
     maps = []
     for child in node.children:
         if child.tag in LAYOUT:

@@ -1,9 +1,10 @@
 """Flattening a SpaceEx network: instances of base components, then their parallel composition.
 
 Instantiation. A component bound as ``as`` inside an instance at path ``P`` gets the path
-``P.as``. Each of its params is bound by the ``map`` of its bind (to a number, to a name of the
-parent's scope, or to a dotted name ``inst.x`` of a sub-instance), or, if unmapped, is local to
-the instance and named ``P.as.param``. Params of the analysed system itself keep their names.
+``P.as`` (an ``as`` is unique in its network and has no dot, so two instances never share a
+path, nor their locals a name). Each of its params is bound by the ``map`` of its bind (to a
+number, to a name of the parent's scope, or to a dotted name ``inst.x`` of a sub-instance), or,
+if unmapped, is local to the instance and named ``P.as.param``. Params of the analysed system itself keep their names.
 A constant, or a variable that no flow or assignment of its component sets (an input), may be
 mapped to a number: it is that number in the instance.
 
@@ -137,11 +138,13 @@ def instantiate(doc: Document, system: str, line: int | None, cfg_file: str | No
             globals_[p.name] = p.dynamics
     flat = Flat([], globals_, doc.file, system, top.line)
     top_binding = {p.name: Binding(name=p.name) for p in top.params.values()}
-    _walk(doc, top, "", top_binding, flat, 0)
+    _walk(doc, top, "", top_binding, flat, 0, top.line)
     return flat
 
 
-def _walk(doc: Document, comp, path: str, binding: dict[str, Binding], flat: Flat, depth: int) -> None:
+def _walk(doc: Document, comp, path: str, binding: dict[str, Binding], flat: Flat, depth: int,
+          line: int) -> None:
+    """Instantiate ``comp`` at ``path`` (bound at ``line``), its sub-instances below it."""
     if depth > MAX_DEPTH:
         raise InputError(f"binds nested deeper than {MAX_DEPTH} (a cycle?)", doc.file, line=comp.line)
     # unmapped params are local to this instance
@@ -150,7 +153,7 @@ def _walk(doc: Document, comp, path: str, binding: dict[str, Binding], flat: Fla
             gname = f"{path}.{p.name}" if path else p.name
             binding[p.name] = Binding(name=gname)
             if p.type == "real":
-                flat.globals.setdefault(gname, p.dynamics)
+                _new_local(flat, gname, p.dynamics, doc.file, line)
     if isinstance(comp, Base):
         if len(flat.instances) >= MAX_INSTANCES:
             raise InputError(f"more than {MAX_INSTANCES} component instances", doc.file, line=comp.line)
@@ -176,7 +179,18 @@ def _walk(doc: Document, comp, path: str, binding: dict[str, Binding], flat: Fla
             if m.key in child_binding:
                 raise InputError(f"bind '{bind.name}': param '{m.key}' mapped twice", doc.file, line=m.line)
             child_binding[m.key] = _resolve_map(m, binding, path, child.params[m.key].type, doc.file)
-        _walk(doc, child, child_path, child_binding, flat, depth + 1)
+        _walk(doc, child, child_path, child_binding, flat, depth + 1, bind.line)
+
+
+def _new_local(flat: Flat, name: str, dynamics: str, file: str, line: int) -> None:
+    """Register the local variable ``name`` (``path.param``) of a new instance. Instance names
+    are unique in their network and have no dot (:mod:`.components`), so the only name it can
+    meet is a dotted param of the system itself (``T.k``): one variable would then stand for
+    two, silently; that is bad input at the bind's line."""
+    if name in flat.globals:
+        raise InputError(f"the local variable '{name}' of this instance has the name of a param of the "
+                         f"system '{flat.system}' (two variables under one name)", file, line=line)
+    flat.globals[name] = dynamics
 
 
 def _written(comp: Base, name: str) -> tuple[str, int] | None:

@@ -15,7 +15,9 @@ SpaceEx idiom) is a state with flow 0 in every location.
 
 Initial set (SpaceEx semantics): the cfg's ``initially`` intersected with the invariant of the
 initial location; without ``loc()`` the initial locations are the location combinations whose
-invariant meets the set (an LP), entered from a timeless start mode when there are several.
+invariant meets the set (an LP), entered from a timeless start mode when there are several,
+each with the set as its own aliases define it. Relations on time-varying inputs alone are
+dropped with a note, unless they hold nowhere in the inputs' ranges (an empty set: bad input).
 
 Sizes. The composition bounds the texts to read (:mod:`.compose`); once the variables are
 known, at most ``MAX_VARIABLES`` states and inputs and ``MAX_MATRIX_ENTRIES`` entries of the
@@ -31,6 +33,7 @@ variable, so a typo would silently change the initial set or forbid every state.
 
 from __future__ import annotations
 
+import keyword
 import re
 from dataclasses import dataclass, field
 
@@ -49,6 +52,9 @@ from reach.model.spaceex.formula import (Const, FormulaError, Loc, Relation, Tok
                                          is_primed_name, names_in, parse_formula, to_python)
 
 RESERVED = set(FUNCTIONS) | set(CONSTANTS) | {"true", "false", "loc"}
+# names a SpaceEx model may give a variable (lambda, in, if, None) that the expression parser,
+# which reads Python syntax, cannot take as names: renamed like RESERVED ones (lambda -> lambda_)
+KEYWORDS = set(keyword.kwlist)
 MAX_MATRIX_ENTRIES = 25_000_000
 _NAME = re.compile(r"(?<![\w.])[A-Za-z_][\w.]*")     # a (dotted) name in a written relation
 
@@ -135,7 +141,9 @@ def _joined(tokens) -> str:
 
 
 def yaml_names(used: list[str]) -> dict[str, str]:
-    """Identifiers for global names: the last dotted part if unique, else the path with ``_``."""
+    """Identifiers for global names: the last dotted part if unique, else the path with ``_``;
+    a name the written model cannot use (a function or constant such as ``pi``, a Python
+    keyword such as ``lambda``) gets a ``_`` appended (``pi_``, ``lambda_``)."""
     last = {}
     for g in used:
         last.setdefault(g.split(".")[-1], []).append(g)
@@ -146,7 +154,7 @@ def yaml_names(used: list[str]) -> dict[str, str]:
         name = re.sub(r"\W", "_", name)
         if not name.isidentifier() or name.startswith("_"):
             name = "v_" + name.lstrip("_")
-        while name in RESERVED or name in taken:
+        while name in RESERVED or name in KEYWORDS or name in taken:
             name += "_"
         out[g] = name
         taken.add(name)
@@ -337,11 +345,7 @@ class DocumentBuilder(Converter):
             assign = {}
             for part in tr.assignments:
                 for rel, _ in self.parse(part, "assignment").relations:
-                    lhs = rel.parts[0]
-                    var = _only_name(lhs) or is_primed_name(lhs)
-                    if len(rel.ops) != 1 or rel.ops[0] not in (":=", "==", "=") or var is None:
-                        raise InputError(f"construct '{self._show(rel)}' is not supported (expected x := "
-                                         "expression)", self.file, self.field_of(part, "assignment"), part.text.line)
+                    var = self._reset_target(rel, part)
                     if var in assign:
                         raise InputError(f"'{var}' assigned twice", self.file, self.field_of(part, "assignment"),
                                          part.text.line)
@@ -354,6 +358,25 @@ class DocumentBuilder(Converter):
             parts = g.split(".")
             for k in range(len(parts)):
                 self.suffixes.setdefault(".".join(parts[k:]), []).append(g)
+
+    def _reset_target(self, rel: Relation, part: Part) -> str:
+        """The variable a relation of an assignment resets. SpaceEx reads an assignment as a
+        relation between the values before the jump (unprimed names) and after it (primed):
+        ``x' == e`` and its shorthand ``x := e`` are resets (also ``x = e``, as the published
+        Platoon files write ``t=0``). ``x == e`` relates values before the jump: a condition on
+        when the jump may happen, which belongs in the guard; it is refused, not read as a reset."""
+        lhs, field = rel.parts[0], self.field_of(part, "assignment")
+        op = rel.ops[0] if len(rel.ops) == 1 else None
+        name, primed = _only_name(lhs), is_primed_name(lhs)
+        if op == "==" and name is not None:
+            raise InputError(f"'{self._show(rel)}' constrains the state before the jump (unprimed names are "
+                             f"the values before it): put it in the guard, or write {name}' == ... or "
+                             f"{name} := ... for a reset", self.file, field, part.text.line)
+        var = primed if op == "==" else name or primed
+        if op not in (":=", "==", "=") or var is None:
+            raise InputError(f"construct '{self._show(rel)}' is not supported (expected x := "
+                             "expression)", self.file, field, part.text.line)
+        return var
 
     def _show(self, rel: Relation) -> str:
         text = " ".join(_joined(p) + (f" {rel.ops[i]}" if i < len(rel.ops) else "")
@@ -756,11 +779,12 @@ class DocumentBuilder(Converter):
         time-varying inputs alone (``u == 0``: a value at one instant changes no run, since the
         input is any signal in its range), which are noted (``notes.ignored``)."""
         varying = self._varying()
-        texts = []
+        texts, on_inputs = [], []
         for a in (a for a in atoms if isinstance(a, Relation)):
             own = self.cfg_relation(a, key, "initially")
             names = {n for _, t in own for n in _NAME.findall(t)}
             if names and names <= varying.keys():
+                on_inputs += own
                 note = (f"{self.cfg.file}:{self.cfg.line('initially')}: initially: "
                         f"'{' and '.join(t for _, t in own)}' ignored: {', '.join(sorted(names))} "
                         "is a time-varying input, any signal in its range (its value at one instant "
@@ -769,7 +793,31 @@ class DocumentBuilder(Converter):
                     self.ignored.append(note)
                 continue
             texts += own
+        self._inputs_can_start(on_inputs)
         return texts
+
+    def _inputs_can_start(self, texts) -> None:
+        """The initial relations on time-varying inputs alone must hold somewhere in the
+        inputs' ranges, or the initial set is empty (no run exists), which is bad input as an
+        initial set 'false' is; when they can hold, they change no run and are dropped."""
+        if not texts:
+            return
+        varying = self._varying()
+        symbols = [sympy.Symbol(name, real=True) for name in varying]
+        table = {s.name: s for s in symbols}
+        relations = [(k, _difference(t, k)) for k, t in texts]
+        for name, v in varying.items():
+            lo, hi, _ = self.inputs[v]
+            relations += [("<=", f"({name}) - ({hi})"), ("<=", f"({lo}) - ({name})")]
+        rows = linear_rows(relations, table, symbols)
+        if rows is not None and not feasible(rows, len(symbols)):
+            ranges = ", ".join(f"{name} in [{self.inputs[v][0]:g}, {self.inputs[v][1]:g}]"
+                               for name, v in varying.items() if any(name in _NAME.findall(t) for _, t in texts))
+            written = " and ".join(t for _, t in texts)
+            written = written if len(written) <= 80 else written[:77] + "..."
+            raise InputError(f"initially: the initial set is empty: '{written}' "
+                             f"holds nowhere in the time-varying inputs' ranges ({ranges})",
+                             self.cfg.file, line=self.cfg.line("initially"))
 
     def _no_input_in_initially(self, texts) -> None:
         """A time-varying input (a real with no flow, bounded by invariants) takes any value in
@@ -829,15 +877,28 @@ class DocumentBuilder(Converter):
     def _start_mode(self, choice, atoms) -> dict:
         """Several initial locations: a timeless mode ``start`` holding the cfg's set, with an
         urgent jump into each location whose (linear) invariant it meets. Properties do not
-        look at ``start``: its states are checked where they land."""
+        look at ``start``: its states are checked where they land.
+
+        The cfg's set is read in each location with that location's aliases (SpaceEx intersects
+        ``initially`` with each location's invariant, where an equality ``y == x`` defines
+        ``y``). Where they give the same texts everywhere (the usual case), ``start`` holds
+        them. Where they differ (``y == x`` in A, ``y == -x`` in B), ``start`` holds a box around
+        all of them and each jump's guard also holds that location's own reading, so a state
+        enters a location only from that location's initial set."""
         start = Identifiers(set(self.mode_of.values()) | set(self.extra_modes))("start")
         self.extra_modes[start] = {"flow": False}
         self.lines[("modes", start)] = (self.cfg.file, self.cfg.line("initially"))
-        texts = self._initial_texts(atoms, choice[0][0])
+        own = {key: self._initial_texts(atoms, key) for key, _ in choice}
+        first = own[choice[0][0]]
+        if all(texts == first for texts in own.values()):
+            texts, entry = first, {key: [] for key in own}
+        else:
+            texts = [t for t in first if all(t in other for other in own.values())] + self._hull(choice)
+            entry = {key: self.as_constraints(own[key]) for key in own}
         names = Identifiers(self.transitions_out)
         # a simulator takes the first enabled urgent jump: locations where time passes first
         for key, _ in sorted(choice, key=lambda c: c[0] in self.timeless):
-            guard = []
+            guard = list(entry[key])
             for j, (rel, line) in enumerate(self.invariants[key]):
                 if j not in self.dropped[key]:
                     guard += self.as_constraints(self.relation_texts(rel, key, line))
@@ -846,6 +907,35 @@ class DocumentBuilder(Converter):
                                           **({"guard": guard} if guard else {})}
             self.lines[("transitions", name)] = (self.cfg.file, self.cfg.line("initially"))
         return {"mode": start, "constraints": [t for _, t in texts]}
+
+    def _hull(self, choice) -> list[tuple[str, str]]:
+        """Bounds ``("<=", "x >= lo")`` of a box holding every candidate's initial set (the cfg's
+        relations and the linear invariant of its location, as ``choice`` holds them), by LP per
+        state, widened by a hair so the solver's rounding cannot cut a state off (the jumps'
+        guards then keep each location's own set). A set that is not linear cannot be
+        bounded so: bad input asking for the initial location."""
+        symbols = [sympy.Symbol(self.yaml[g], real=True) for g in self.states + list(self.inputs)]
+        table = {s.name: s for s in symbols}
+        bounds = [("<=", f"({self.yaml[v]}) - ({hi})") for v, (lo, hi, _) in self.inputs.items()] + \
+                 [("<=", f"({lo}) - ({self.yaml[v]})") for v, (lo, hi, _) in self.inputs.items()]
+        low, high = np.full(len(self.states), np.inf), np.full(len(self.states), -np.inf)
+        for key, texts in choice:
+            rows = linear_rows([(k, _difference(t, k)) for k, t in texts] + bounds, table, symbols)
+            if rows is None:
+                raise InputError("initially: construct not supported: a name the initial set reads is defined "
+                                 "differently in the initial locations and the set is not linear there; give "
+                                 "the initial location with loc(...) == ...", self.cfg.file,
+                                 line=self.cfg.line("initially"))
+            for i in range(len(self.states)):
+                lo, hi = _extent(rows, i, len(symbols))
+                low[i], high[i] = min(low[i], lo), max(high[i], hi)
+        out = []
+        for i, s in enumerate(self.states):
+            if np.isfinite(low[i]):
+                out.append(("<=", f"{self.yaml[s]} >= {low[i] - 1e-9 * max(1.0, abs(low[i])):.12g}"))
+            if np.isfinite(high[i]):
+                out.append(("<=", f"{self.yaml[s]} <= {high[i] + 1e-9 * max(1.0, abs(high[i])):.12g}"))
+        return out
 
     def forbidden_doc(self):
         terms = self.cfg_formula("forbidden")
@@ -897,6 +987,20 @@ class DocumentBuilder(Converter):
             for k, p in enumerate(props, start=1):
                 p["id"] = f"{pid}-{k}"
         return {"properties": props}, plines, pid
+
+
+def _extent(rows, i: int, n: int) -> tuple[float, float]:
+    """``(min, max)`` of coordinate ``i`` over the rows ``(A, b, E, f)`` (infinite where
+    unbounded, or where the solver gives no answer: a wider box only costs time)."""
+    A, b, E, f = rows
+    args = dict(A_ub=A if len(b) else None, b_ub=b if len(b) else None,
+                A_eq=E if len(f) else None, b_eq=f if len(f) else None)
+    e = np.eye(n)[i]
+    try:
+        lo, hi = lp.minimize(e, **args), lp.maximize(e, **args)
+    except lp.LPError:
+        return -np.inf, np.inf
+    return (lo.value if lo.optimal else -np.inf), (hi.value if hi.optimal else np.inf)
 
 
 def _written(rel) -> str:
