@@ -1071,12 +1071,13 @@ class _Powers:
     """``[I, step, step^2, ...]`` up to ``limit`` entries, computed as far as they are asked for.
 
     Segments between disturbance kicks need only a few powers; a model with many modes and a
-    long horizon would otherwise hold ``modes x steps`` matrices.
+    long horizon would otherwise hold ``modes x steps`` matrices, and a replay of a large model,
+    which steps by ``step`` alone, would form 64 powers of a 274 x 274 matrix for nothing.
     """
 
     def __init__(self, step: np.ndarray, limit: int):
         self.step, self.limit = step, limit
-        self.table = _powers(step, min(limit, 64))
+        self.table = _powers(step, min(limit, 2))
 
     def __getitem__(self, index):
         stop = index.stop if isinstance(index, slice) else (index[0] if isinstance(index, tuple) else index)
