@@ -158,7 +158,12 @@ def value_sources(model: HybridAutomaton) -> np.ndarray:
     :func:`reach.model.constraints.row_magnitudes`."""
     index = {symbol: i for i, symbol in enumerate(model.symbols)}
     reads = np.eye(model.n, dtype=bool)
-    exprs = [(i, f) for m in model.modes.values() for i, f in enumerate(m.flow)]
+    exprs = []
+    for m in model.modes.values():
+        if m.linear is not None:            # x' = A x + b reads the states of A's nonzero columns
+            reads |= m.linear[0] != 0
+        else:
+            exprs += list(enumerate(m.flow))
     exprs += [(i, e) for tr in model.transitions for i, e in tr.reset.items()]
     for i, expr in exprs:
         for symbol in sympy.sympify(expr).free_symbols:
