@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from reach.backends.montecarlo import BACKEND as MONTECARLO
+from reach.backends.star import BACKEND as STAR
 from reach.backends.montecarlo.replays import replay
 from reach.model.simulate import Simulator
 from reach.result import Status
@@ -94,3 +95,49 @@ def test_monte_carlo_finds_the_violation_only_the_earliest_switch_reaches(tmp_pa
     cex = result.counterexample
     rep = replay(model, props["early_hot"], cex.initial_state, cex.switch_time, cex.dt, cex.input_signal)
     assert rep.violated and rep.time < 8.1
+
+
+# a network's synchronised jump ``e`` (``x >= 1``) and a local one (``x >= 0.5``) that both hold
+# at t = 1: ``B__bad`` is reached only by taking the two at one instant or the second later
+TWO_AT_ONCE = ("""
+    name: two_at_once
+    state: [x]
+    modes:
+      A__q0: {flow: {x: "1"}}
+      A__bad: {flow: {x: "1"}}
+      B__bad: {flow: {x: "1"}}
+      B__q0: {flow: {x: "1"}}
+    transitions:
+      e: {from: A__q0, to: A__bad, guard: ["x >= 1"]}
+      A__q0_to_B__q0: {from: A__q0, to: B__q0, guard: ["x >= 0.5"]}
+      A__bad_to_B__bad: {from: A__bad, to: B__bad, guard: ["x >= 0.5"]}
+      e_2: {from: B__q0, to: B__bad, guard: ["-x >= 1"]}
+    initial: {mode: A__q0, box: {x: [0, 0]}}
+    horizon: 3
+""", """
+    properties:
+      - {id: never, kind: safety, modes: [B__bad], require: ["x <= -100"]}
+""")
+
+
+def test_may_transitions_enabled_together_are_taken_at_one_piece_start(tmp_path):
+    """A switch asked for at t = 1 (and nowhere else) takes ``e`` (the first enabled) and then
+    ``A__bad -> B__bad`` at that instant (before: one jump per piece start, so the run stayed in
+    ``A__bad``)."""
+    model, _ = load_files(tmp_path, *TWO_AT_ONCE)
+    switch = np.zeros((1, 4), dtype=bool)
+    switch[0, 1] = True
+    traj = Simulator(model).run(np.array([[0.0]]), record=True, signal=(1.0, np.zeros((1, 4, 0)), switch))
+    assert traj.transitions[0] == ["e", "A__bad_to_B__bad"]
+    t, mode, _ = traj.path[0]
+    assert t[np.flatnonzero(mode == list(model.modes).index("B__bad"))[0]] == 1.0
+
+
+def test_star_replays_a_witness_of_two_may_jumps_at_one_instant(tmp_path):
+    """star's witness jumps twice at t = 1; its replay asks for a switch there and now follows
+    both (before: UNKNOWN after the finer passes, "no witness replayed")."""
+    model, props = load_files(tmp_path, *TWO_AT_ONCE)
+    result = STAR.check(model, props["never"], {"finer_retry": False})
+    assert result.status is Status.UNSAFE
+    cex = result.counterexample
+    assert replay(model, props["never"], cex.initial_state, cex.switch_time, cex.dt, cex.input_signal).violated

@@ -840,21 +840,41 @@ class Simulator:
 
     def _take_may(self, rows: np.ndarray, runs: _Runs) -> None:
         """Each run of ``rows`` (at a piece start) takes an enabled may-transition with a
-        general guard, if it has one, and then what it must take at once. The guard must hold
-        up to rounding only, margins at most ``SWITCH_TOLERANCE (1 + m)`` per row (a few units in
-        the last place: ``x' = 1`` from 0 is 1 - 1e-16 at t = 1 by the flow's exponential, and a
-        switch asked for at ``x >= 1`` there is meant), not the looser ``INVARIANT_TOLERANCE``:
-        a switch asked for at an instant is no event that located the guard, so a wider
-        tolerance would let a run jump where the guard has not yet been met."""
-        modes = runs.mode[rows].copy()             # the modes before any of these runs jumps: one
-        for m_index in np.unique(modes):           # switch each, whatever the batch holds
-            name = self.mode_names[m_index]
-            sel = rows[modes == m_index]
-            if self.exits[name] and sel.size:
+        general guard, if it has one, and then what it must take at once; then again from
+        where it landed, at the same instant, as long as one is enabled that does not bring it
+        back to a mode and state it has been in at this instant (a network's synchronised jump
+        and a local one that both hold there, ``e`` then ``A -> B``, are taken together; two
+        guards that hold everywhere, ``a -> b`` and ``b -> a``, give one jump, not a cycle).
+        The guard must hold up to rounding only, margins at most ``SWITCH_TOLERANCE (1 + m)``
+        per row (a few units in the last place: ``x' = 1`` from 0 is 1 - 1e-16 at t = 1 by the
+        flow's exponential, and a switch asked for at ``x >= 1`` there is meant), not the looser
+        ``INVARIANT_TOLERANCE``: a switch asked for at an instant is no event that located the
+        guard, so a wider tolerance would let a run jump where the guard has not yet been met."""
+        count = len(self.mode_names)
+        seen = np.full((rows.size, count, runs.X.shape[1]), np.nan)    # (run, mode): its state there
+        slot = np.full(runs.X.shape[0], -1)
+        slot[rows] = np.arange(rows.size)
+        for _ in range(MAX_JUMPS_AT_INSTANT):
+            rows = rows[np.isnan(runs.blocked_at[rows])]
+            if not rows.size:
+                return
+            moved = []
+            modes = runs.mode[rows].copy()         # the modes before any of these runs jumps
+            for m_index in np.unique(modes):
+                name = self.mode_names[m_index]
+                sel = rows[modes == m_index]
+                if not self.exits[name]:
+                    continue
+                seen[slot[sel], m_index] = runs.X[sel]
                 _, enabled = self._enabled(self.exits[name], runs.X[sel], tolerance=SWITCH_TOLERANCE)
+                for j, (tr, _) in enumerate(self.exits[name]):
+                    after = self.resets[tr.name](runs.X[sel]) if tr.name in self.resets else runs.X[sel]
+                    enabled[:, j] &= ~np.all(seen[slot[sel], self.mode_names.index(tr.target)] == after, axis=1)
                 before = runs.X[sel].copy()
                 jumped = self._jump(sel, self.exits[name], enabled, runs)
                 self._urgent_now(jumped, runs, m_index, before[np.isin(sel, jumped)])
+                moved.append(jumped)
+            rows = np.concatenate(moved) if moved else rows[:0]
 
     def _event(self, rows: np.ndarray, Xe: np.ndarray, times: np.ndarray, options: list,
                winner: np.ndarray | None, runs: _Runs) -> None:
