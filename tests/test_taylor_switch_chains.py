@@ -51,7 +51,7 @@ properties:
 
 @pytest.mark.parametrize("guard, why", [
     ('["x <= 1", "x >= 1"]', "is an equality (x <= 1 and x >= 1)"),
-    ("[]", "has no guard"),
+    ("[]", "left at once by 't0', an urgent transition without guard"),
 ])
 def test_guards_entered_without_crossing_are_refused_with_a_reason(tmp_path, guard, why):
     model, props = load_files(tmp_path, SWITCHED.format(guard=guard), PROPS)

@@ -247,6 +247,7 @@ class _Builder:
         for timeless in self.timeless:
             modes[timeless].timeless = True
         transitions = self.read_transitions(modes)
+        self.leave_at_once(modes, transitions)
         initial = self.read_initial_set(modes, bounded)
         horizon = self.number(self.need("horizon"), self.where("horizon"), dimension=TIME, what="the horizon")
         if horizon <= 0:
@@ -640,6 +641,19 @@ class _Builder:
                                 f"'{u.name}' is a bounded input: it has no flow")
                         flow[u.name] = 0
         return out
+
+    @staticmethod
+    def leave_at_once(modes, transitions) -> None:
+        """A mode left by an urgent transition whose guard always holds (none written; SpaceEx
+        ``asap`` with the guard ``true``) lets no time pass: a run takes that jump, or another
+        one enabled, at the instant it enters, or is blocked there, which is what a mode with
+        ``flow: false`` means. It is marked so (flow zero), and every back-end treats it as one
+        instant instead of following a flow that no run follows."""
+        for tr in transitions:
+            mode = modes[tr.source]
+            if tr.urgent and not tr.guard and tr.window is None and not mode.timeless:
+                mode.timeless = True
+                mode.flow = [sympy.Integer(0)] * len(mode.flow)
 
     def read_initial_set(self, modes, bounded: list[BoundedInput]) -> InitialSet:
         """A box (the classic form) or a polytope ``box ∩ constraints``; bounded inputs start

@@ -235,14 +235,16 @@ def unsupported_switch(model) -> str | None:
     meets it at an instant, and crosses no face into it) switch otherwise."""
     for name, mode in model.modes.items():
         if mode.timeless:
-            return (f"no time passes in mode '{name}' (flow false): taylor follows runs that leave a mode "
+            # a mode left by an urgent transition without guard is read as one too (the loader)
+            at_once = next((tr.name for tr in model.transitions if tr.source == name and tr.urgent and not tr.guard),
+                           None)
+            why = "flow false" if at_once is None else f"flow false, or left at once by '{at_once}', an urgent " \
+                                                       "transition without guard"
+            return (f"no time passes in mode '{name}' ({why}): taylor follows runs that leave a mode "
                     "by crossing into a guard, not instantaneous switches (star and montecarlo do)")
     for tr in model.transitions:
         if not tr.urgent:
             continue
-        if not tr.guard:
-            return (f"the urgent transition '{tr.name}' has no guard (it fires on entering '{tr.source}'): "
-                    "taylor follows runs that leave a mode by crossing into a guard (star and montecarlo do)")
         pair = _equality(tr.guard, model.symbols)
         if pair is not None:
             return (f"the guard of '{tr.name}' is an equality ({pair[0].text} and {pair[1].text}): a run meets "
