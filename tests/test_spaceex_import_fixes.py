@@ -336,3 +336,291 @@ def test_variables_named_like_python_keywords_import_and_check(tmp_path, name, f
     assert verdict(xml, cfg) == truth
     model, _, _ = load_spaceex(xml, cfg)
     assert model.state == [f"{name}_", "y"]
+
+
+# ====================================================================== third round (S1-S6)
+# S1: a const param that a flow or an assignment changes
+CONST = f'''  <component id="sys">
+    {REAL.format("x")}
+    <param name="k" type="real" local="false" d1="1" d2="1" dynamics="const"/>
+    <location id="1" name="A">
+      <flow>FLOW_A</flow>
+    </location>
+    <location id="2" name="B">
+      <flow>FLOW_B</flow>
+    </location>
+    <transition source="1" target="2">
+      <guard>x &gt;= 1</guard>
+      ASSIGN
+    </transition>
+  </component>
+'''
+CONST_CFG = 'system = "sys"\ninitially = "x == 0 & k == 1 & loc(sys) == A"\ntime-horizon = 3\nforbidden = "k >= 1.5"\n'
+DECLARED = "component 'sys': {}: 'k' is declared dynamics=\"const\" (line 5) and cannot change: {} (SpaceEx keeps " \
+           "a constant through flows and jumps)"
+
+
+@pytest.mark.parametrize("flow_a, flow_b, assign, message", [
+    ("x' == 1 &amp; k' == 1", "x' == 1", "", "7: " + DECLARED.format(
+        "location 'A': flow", "the flow k' == 1 contradicts it, only k' == 0 agrees")),
+    ("x' == 1", "x' == 1 &amp; k' == -x", "", "10: " + DECLARED.format(
+        "location 'B': flow", "the flow k' == - x contradicts it, only k' == 0 agrees")),
+    ("x' == 1 &amp; k' == 0", "x' == 1 &amp; k' == 0", "<assignment>k := 5</assignment>", "14: " + DECLARED.format(
+        "transition A -> B: assignment", "the assignment to k contradicts it")),
+    ("x' == 1", "x' == 1", "<assignment>k := 5</assignment>", "14: " + DECLARED.format(
+        "transition A -> B: assignment", "the assignment to k contradicts it")),
+])
+def test_a_flow_or_assignment_that_changes_a_const_param_is_refused(tmp_path, capsys, flow_a, flow_b, assign,
+                                                                    message):
+    """SpaceEx keeps a ``dynamics="const"`` param constant (k' == 0 in flows, k' == k in jumps),
+    so k stays 1 and k >= 1.5 is never reached. The flow k' == 1 was read as a clock (UNSAFE at
+    t = 0.5), the reset k := 5 next to k' == 0 as a reset (UNSAFE at t = 1), and the reset
+    alone was refused with a message that did not mention const."""
+    body = CONST.replace("FLOW_A", flow_a).replace("FLOW_B", flow_b).replace("ASSIGN", assign)
+    xml, cfg = write(tmp_path, body, CONST_CFG)
+    assert refusal(xml, cfg, capsys) == f"{xml}:{message}"
+
+
+def test_a_const_param_whose_flow_is_zero_stays_accepted(tmp_path):
+    body = CONST.replace("FLOW_A", "x' == k &amp; k' == 0").replace("FLOW_B", "x' == 1 &amp; k' == 0")
+    xml, cfg = write(tmp_path, body.replace("ASSIGN", "<assignment>x := 0</assignment>"), CONST_CFG)
+    assert verdict(xml, cfg) == "SAFE"
+
+
+CONST_MAP = f'''  <component id="C">
+    {REAL.format("x")}
+    {REAL.format("v")}
+    <location id="1" name="A">
+      <flow>x' == v &amp; v' == 1</flow>
+    </location>
+  </component>
+  <component id="sys">
+    {REAL.format("x")}
+    <param name="g" type="real" local="false" d1="1" d2="1" dynamics="const"/>
+    <bind component="C" as="c">
+      <map key="x">x</map>
+      <map key="v">g</map>
+    </bind>
+  </component>
+'''
+
+
+def test_a_flow_on_a_variable_mapped_onto_a_const_param_is_refused_naming_the_bind(tmp_path, capsys):
+    """The child's v (flow v' == 1) is the system's const g: g grew (UNSAFE at t = 0.5)."""
+    xml, cfg = write(tmp_path, CONST_MAP, 'system = "sys"\ninitially = "x == 0 & g == 1"\ntime-horizon = 3\n'
+                                          'forbidden = "g >= 1.5"\n')
+    assert refusal(xml, cfg, capsys) == (
+        f"{xml}:7: component 'C': location 'A': flow: 'v' is mapped by bind 'c' (line 13) to 'g', declared "
+        "dynamics=\"const\" (line 12), and cannot change: the flow v' == 1 contradicts it, only v' == 0 agrees "
+        "(SpaceEx keeps a constant through flows and jumps)")
+
+
+# ------------------------------------------------------------------ S2: strict empty initial set
+STILL = f'''  <component id="sys">
+    {REAL.format("x")}
+    <location id="1" name="A">
+      INVARIANT<flow>x' == 0</flow>
+    </location>
+  </component>
+'''
+
+
+@pytest.mark.parametrize("initially", ["x > 1 & x < 1", "x > 1 & x <= 1", "x == 1 & x > 1", "1 < x & x < 1"])
+def test_an_initial_set_empty_once_its_strict_bounds_are_kept_is_refused(tmp_path, capsys, initially):
+    """No point has x > 1 and x < 1: no run exists. The set was closed into x = 1, and x >= 0.5
+    gave a counterexample whose initial state lies outside the written set."""
+    xml, cfg = write(tmp_path, STILL.replace("INVARIANT", ""),
+                     f'system = "sys"\ninitially = "{initially}"\ntime-horizon = 1\nforbidden = "x >= 0.5"\n')
+    assert refusal(xml, cfg, capsys) == (f"{cfg}:2: initially: the initial set is empty (its constraints exclude "
+                                         "each other once its strict bounds are kept strict: x > 1 & x <= 1 "
+                                         "holds nowhere)")
+
+
+@pytest.mark.parametrize("invariant, initially, forbidden, truth", [
+    ("", "x > 1 & x <= 2", "x >= 2.5", "SAFE"),
+    ("", "x > 1 & x < 1.5", "x >= 1.2", "UNSAFE"),
+    ("<invariant>x &lt; 1</invariant>", "x == 1", "x >= 0.5", "UNSAFE"),   # the invariant is read closed
+])
+def test_a_strict_initial_set_with_points_is_read_as_its_closure(tmp_path, invariant, initially, forbidden, truth):
+    xml, cfg = write(tmp_path, STILL.replace("INVARIANT", invariant),
+                     f'system = "sys"\ninitially = "{initially}"\ntime-horizon = 1\nforbidden = "{forbidden}"\n')
+    assert verdict(xml, cfg) == truth
+
+
+def test_a_strict_initial_term_on_an_input_outside_its_open_range_is_refused(tmp_path, capsys):
+    """u > 1 holds nowhere in u's range [-1, 1]; it was ignored as if u = 1 could hold."""
+    xml, cfg = write(tmp_path, RAMP, 'system = "sys"\ninitially = "x == 0 & u > 1"\ntime-horizon = 2\n'
+                                     'forbidden = "x >= 1.5"\n')
+    assert refusal(xml, cfg, capsys) == (f"{cfg}:2: initially: the initial set is empty: 'u > 1' holds nowhere "
+                                         "in the time-varying inputs' ranges (u in [-1, 1])")
+
+
+# ------------------------------------------------------------------ S3: duplicate location names
+DUPNAME = f'''  <component id="sys">
+    {REAL.format("x")}
+    <location id="1" name="A">
+      <flow>x' == 1</flow>
+    </location>
+    <location id="2" name="B">
+      <flow>x' == 0</flow>
+    </location>
+    <location id="3" name="SECOND">
+      <flow>x' == -1</flow>
+    </location>
+    <transition source="1" target="2">
+      <guard>x &gt;= 1</guard>
+    </transition>
+    <transition source="2" target="3">
+      <guard>x &gt;= 1</guard>
+    </transition>
+  </component>
+'''
+DUPNAME_CFG = 'system = "sys"\ninitially = "x == 0 & loc(sys) == A"\ntime-horizon = 2\nforbidden = "x <= -0.5"\n'
+
+
+def test_a_repeated_location_name_is_refused_at_its_line(tmp_path, capsys):
+    """loc(sys) == A meant both locations named A, and the run started in the second one as
+    well (UNSAFE at t = 0.5); SpaceEx's editor renames a repeat, so A is the first only (SAFE)."""
+    xml, cfg = write(tmp_path, DUPNAME.replace("SECOND", "A"), DUPNAME_CFG)
+    assert refusal(xml, cfg, capsys) == (
+        f"{xml}:11: component 'sys': duplicate location name 'A' (location id '1' at line 5 has it too); loc() in "
+        "the cfg names a location by its name: give each location its own")
+
+
+def test_distinct_location_names_give_the_first_locations_run(tmp_path):
+    """From A at x = 0: B at t = 1 with x = 1, A2 at once, x falls back to 0 at t = 2."""
+    xml, cfg = write(tmp_path, DUPNAME.replace("SECOND", "A2"), DUPNAME_CFG)
+    assert verdict(xml, cfg) == "SAFE"
+
+
+# ------------------------------------------------------------------ S4: where an alias is defined
+DEFINED = f'''  <component id="sys">
+    {REAL.format("x")}
+    {REAL.format("y")}
+    <location id="1" name="A">
+      <invariant>DEFINITION</invariant>
+      <flow>x' == 1</flow>
+    </location>
+    <location id="2" name="B">
+      <flow>x' == 1</flow>
+    </location>
+    <transition source="1" target="2">
+      <guard>y &gt;= 1</guard>
+    </transition>
+  </component>
+'''
+
+
+@pytest.mark.parametrize("definition, construct", [
+    ("y == x'", "a derivative x' outside the left side of a flow"),
+    ("y == foo(x)", "function 'foo'"),
+])
+@pytest.mark.parametrize("forbidden", ["y >= 5 & loc(sys) == A", "x >= 5"])
+def test_an_error_in_an_aliass_definition_is_reported_at_the_definition(tmp_path, capsys, definition, construct,
+                                                                        forbidden):
+    """The definition is the invariant at line 7. The message named the use: the guard's line
+    14, or the cfg's forbidden line 3 paired with the XML's file name."""
+    xml, cfg = write(tmp_path, DEFINED.replace("DEFINITION", definition),
+                     f'system = "sys"\ninitially = "x == 0 & loc(sys) == A"\nforbidden = "{forbidden}"\n'
+                     'time-horizon = 1\n')
+    assert refusal(xml, cfg, capsys) == (f"{xml}:7: component 'sys': location 'A': invariant: construct not "
+                                         f"supported: {construct}")
+
+
+def test_an_error_in_a_cfg_relation_names_the_cfg(tmp_path, capsys):
+    xml, cfg = write(tmp_path, DEFINED.replace("DEFINITION", "y == 2*x"),
+                     'system = "sys"\ninitially = "x == 0 & loc(sys) == A"\nforbidden = "foo(x) >= 5"\n'
+                     'time-horizon = 1\n')
+    assert refusal(xml, cfg, capsys) == f"{cfg}:3: forbidden: construct not supported: function 'foo'"
+
+
+# ------------------------------------------------------------------ S5: an alias defined in some locations
+PARTLY = f'''  <component id="P">
+    {REAL.format("x")}
+    {REAL.format("y")}
+    <location id="1" name="A">
+      <invariant>y == 2*x</invariant>
+      <flow>x' == 1</flow>
+    </location>
+    <location id="2" name="C">
+      <flow>x' == 1</flow>
+    </location>
+    <transition source="1" target="2">
+      <guard>x &gt;= 1</guard>
+    </transition>
+  </component>
+  <component id="Q">
+    {REAL.format("y")}
+    {REAL.format("c")}
+    <location id="1" name="q0">
+      <flow>c' == 0</flow>
+    </location>
+    <location id="2" name="bad">
+      <flow>c' == 0</flow>
+    </location>
+    <transition source="1" target="2">
+      <guard>y &gt;= 3</guard>
+    </transition>
+  </component>
+  <component id="sys">
+    {REAL.format("x")}
+    {REAL.format("y")}
+    {REAL.format("c")}
+    <bind component="P" as="p"><map key="x">x</map><map key="y">y</map></bind>
+    <bind component="Q" as="q"><map key="y">y</map><map key="c">c</map></bind>
+  </component>
+'''
+
+
+def test_an_alias_read_where_it_is_not_defined_is_refused_at_the_reading_text(tmp_path, capsys):
+    """y == 2 x in A only; Q's guard reads y in (C, q0), where nothing defines it. The message
+    pointed at the definition (line 7) and said y was not defined by an equality."""
+    xml, cfg = write(tmp_path, PARTLY, 'system = "sys"\ninitially = "x == 0 & c == 0 & loc(p) == A & '
+                                       'loc(q) == q0"\nforbidden = "loc(q) == bad"\ntime-horizon = 1.2\n')
+    assert refusal(xml, cfg, capsys) == (
+        f"{xml}:27: component 'Q': transition q0 -> bad: guard: 'y' has no flow and is defined by an equality in "
+        "location 'p.A, q.q0' (line 7) but not in 'p.C, q.q0', where this guard reads it (it would be free there, "
+        "any value at any instant: not supported)")
+
+
+# ------------------------------------------------------------------ S6: the start jump and iter-max
+TWO = f'''  <component id="sys">
+    {REAL.format("x")}
+    {REAL.format("y")}
+    <location id="1" name="A">
+      <flow>x' == 1 &amp; y' == 0</flow>
+    </location>
+    <location id="2" name="B">
+      <flow>x' == -1 &amp; y' == 0</flow>
+    </location>
+    <location id="3" name="C">
+      <invariant>x &gt;= 0.5</invariant>
+      <flow>x' == 1 &amp; y' == 1</flow>
+    </location>
+    TRANSITION
+  </component>
+'''
+
+
+JUMP_AC = '<transition source="1" target="3"><guard>x &gt;= 0.5</guard></transition>'
+
+
+@pytest.mark.parametrize("jump, loc, forbidden, iters, truth", [
+    ("", "", "x <= -0.5", 0, "UNSAFE"),             # in B at t = 0.5, no jump in the model
+    ("", "", "x <= -1.5", 0, "SAFE"),
+    ("", "& loc(sys) == B", "x <= -0.5", 0, "UNSAFE"),
+    (JUMP_AC, "", "y >= 0.2", 0, "UNKNOWN"),        # needs the model's jump A -> C (y >= 0.2 at t = 0.7)
+    (JUMP_AC, "", "y >= 0.2", 1, "UNSAFE"),
+    (JUMP_AC, "", "y >= 0.6", 1, "SAFE"),           # y is at most 0.5 at the horizon
+])
+def test_the_start_jump_does_not_count_against_iter_max(tmp_path, jump, loc, forbidden, iters, truth):
+    """Two initial locations (no loc(); C's invariant excludes x = 0) add a start mode and its
+    urgent jumps; star counted that jump against iter-max, so iter-max = 0 left a model with no
+    transition at all UNKNOWN. The cfg's bound still holds for the model's own jumps (A -> C)."""
+    xml, cfg = write(tmp_path, TWO.replace("TRANSITION", jump),
+                     f'system = "sys"\ninitially = "x == 0 & y == 0 {loc}"\ntime-horizon = 1\n'
+                     f'forbidden = "{forbidden}"\niter-max = {iters}\n')
+    assert verdict(xml, cfg) == truth
+    model, _, docs = load_spaceex(xml, cfg)
+    assert model.hints["iter-max"] == iters + (0 if loc else 1)
+    assert ("iter-max-start" in docs.model["notes"]) == (not loc)

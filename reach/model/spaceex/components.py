@@ -175,6 +175,14 @@ def _component(node: Node, cid: str, file: str) -> Base | Network:
             loc = _location(child, file, where)
             if loc.id in locations:
                 raise _error(file, child, f"{where}: duplicate location id '{loc.id}'")
+            first = next((other for other in locations.values() if other.name == loc.name), None)
+            if first is not None:
+                # the cfg names locations, not ids: loc(c) == A would mean both, silently (SpaceEx's
+                # editor renames a repeat, so there it means the first one only)
+                shown = printable(loc.name)[:60]
+                raise _error(file, child, f"{where}: duplicate location name '{shown}' (location id "
+                             f"'{printable(first.id)[:20]}' at line {first.line} has it too); loc() in the cfg "
+                             "names a location by its name: give each location its own")
             locations[loc.id] = loc
         elif child.tag == "transition":
             transitions.append(_transition(child, file, where))

@@ -54,6 +54,7 @@ class Instance:
     path: str
     component: Base
     binding: dict[str, Binding]        # param name -> binding
+    line: int | None = None            # the line of its bind (of the system's component for the system itself)
 
     def label(self, local: str) -> str:
         b = self.binding.get(local)
@@ -112,6 +113,7 @@ class Flat:
     file: str                           # the XML file
     system: str                         # the analysed component's id
     line: int                           # and its line
+    declared: dict[str, int] = field(default_factory=dict)   # global real name -> its param's line
     locations: dict[tuple, ProductLocation] = field(default_factory=dict)
     transitions: list[ProductTransition] = field(default_factory=list)
 
@@ -136,7 +138,8 @@ def instantiate(doc: Document, system: str, line: int | None, cfg_file: str | No
     for p in top.params.values():
         if p.type == "real":
             globals_[p.name] = p.dynamics
-    flat = Flat([], globals_, doc.file, system, top.line)
+    flat = Flat([], globals_, doc.file, system, top.line,
+                declared={p.name: p.line for p in top.params.values() if p.type == "real"})
     top_binding = {p.name: Binding(name=p.name) for p in top.params.values()}
     _walk(doc, top, "", top_binding, flat, 0, top.line)
     return flat
@@ -154,6 +157,7 @@ def _walk(doc: Document, comp, path: str, binding: dict[str, Binding], flat: Fla
             binding[p.name] = Binding(name=gname)
             if p.type == "real":
                 _new_local(flat, gname, p.dynamics, doc.file, line)
+                flat.declared[gname] = p.line
     if isinstance(comp, Base):
         if len(flat.instances) >= MAX_INSTANCES:
             raise InputError(f"more than {MAX_INSTANCES} component instances", doc.file, line=comp.line)
@@ -164,7 +168,7 @@ def _walk(doc: Document, comp, path: str, binding: dict[str, Binding], flat: Fla
                                  f"(at instance '{path}'), but its {written[0]} sets it (only a variable that no "
                                  "flow or assignment sets, an input, may be fixed to a number)",
                                  doc.file, line=written[1])
-        flat.instances.append(Instance(path, comp, binding))
+        flat.instances.append(Instance(path, comp, binding, line))
         return
     for bind in comp.binds:
         if bind.component not in doc.components:

@@ -18,6 +18,12 @@ initial location; without ``loc()`` the initial locations are the location combi
 invariant meets the set (an LP), entered from a timeless start mode when there are several,
 each with the set as its own aliases define it. Relations on time-varying inputs alone are
 dropped with a note, unless they hold nowhere in the inputs' ranges (an empty set: bad input).
+The set's strict bounds are kept strict to decide whether it is empty (``x > 1 & x < 1`` is, bad
+input), and a set that is not empty is then read as its closure, as invariants and guards are.
+
+Constants. A ``dynamics="const"`` param keeps its value: a flow other than ``k' == 0`` or an
+assignment that sets it (in its component, or through a bind mapping a variable onto it) is
+bad input at its line.
 
 Sizes. The composition bounds the texts to read (:mod:`.compose`); once the variables are
 known, at most ``MAX_VARIABLES`` states and inputs and ``MAX_MATRIX_ENTRIES`` entries of the
@@ -233,6 +239,53 @@ def feasible(rows, n) -> bool:
     return point is not None
 
 
+def _strict(text: str) -> bool:
+    """Whether a rendered comparison ``a op b`` is strict (``<`` or ``>``; rendered expressions
+    hold no comparison of their own, so the first operator found is the relation's)."""
+    for op in (" <= ", " < ", " >= ", " > "):
+        if op in text:
+            return op in (" < ", " > ")
+    return False
+
+
+#: a strict initial set whose open part leaves no ball of this radius is read as empty
+OPEN_SLACK = 1e-9
+
+
+def open_nonempty(texts: list[tuple[str, str]], closed: int, names, symbols, extra=()) -> bool:
+    """Whether the relations ``texts`` (``(kind, "a op b")``, as :meth:`relation_texts` gives
+    them) have a common point with their strict ones kept strict: ``texts[:closed]`` are read
+    as written (the cfg's ``initially``), the rest as their closure (invariants, as SpaceEx
+    reads them), and ``extra`` (``(kind, "lhs - rhs")``, closed) is added. An LP maximises a
+    common slack ``s <= 1`` of the strict rows (each row normalised, so ``s`` is a distance):
+    the open set is empty when ``s`` cannot exceed :data:`OPEN_SLACK` (``x > 1 & x < 1``,
+    whose closure is the point 1). True where the LP cannot say (a nonlinear set, a solver
+    without an answer): keeping a set that is in fact empty only costs time."""
+    relations = [(k, _difference(t, k)) for k, t in texts] + list(extra)
+    rows = linear_rows(relations, names, symbols)
+    if rows is None:
+        return True
+    if not feasible(rows, len(symbols)):
+        return False
+    strict = [i < closed and k != "==" and _strict(t) for i, (k, t) in enumerate(texts)]
+    strict += [False] * len(extra)
+    mask = np.array([flag for (k, _), flag in zip(relations, strict) if k != "=="], bool)
+    if not mask.any():
+        return True
+    A, b, E, f = rows
+    norms = np.linalg.norm(A, axis=1)
+    slack = np.where(mask, np.where(norms > 0, norms, 1.0), 0.0)
+    n = len(symbols)
+    A2 = np.vstack([np.hstack([A, slack[:, None]]), np.eye(n + 1)[-1:]])
+    b2 = np.append(b, 1.0)
+    E2 = np.hstack([E, np.zeros((len(f), 1))]) if len(f) else None
+    try:
+        res = lp.maximize(np.eye(n + 1)[-1], A2, b2, A_eq=E2, b_eq=f if len(f) else None)
+    except lp.LPError:
+        return True
+    return not res.infeasible and not (res.optimal and res.value <= OPEN_SLACK)
+
+
 # ---------------------------------------------------------------------- the documents
 @dataclass
 class Documents:
@@ -309,6 +362,11 @@ class DocumentBuilder(Converter):
     # -------------------------------------------------------------- reading
     def read_locations(self):
         self.flows, self.invariants, self.timeless = {}, {}, set()
+        self.invariant_fields: dict[tuple, list[str]] = {}      # where each invariant relation is written
+        # (name, location key) -> (what, field, line): the first text read in that location
+        # (or on a jump from it) that reads the name, for a message about a name that means
+        # nothing there
+        self.read_at: dict[tuple, tuple[str, str, int]] = {}
         for key, loc in self.flat.locations.items():
             flows = {}
             for part in loc.flows:
@@ -323,16 +381,25 @@ class DocumentBuilder(Converter):
                     if var in flows:
                         raise InputError(f"two derivatives given for '{var}' in location '{self.flat.label(key)}'",
                                          self.file, self.field_of(part, "flow"), part.text.line)
+                    rhs = _joined(rel.parts[1])
+                    rhs = rhs if len(rhs) <= 40 else rhs[:37] + "..."
+                    self._refuse_change_of_const(var, part, "flow", lambda local: f"the flow {local}' == "
+                                                 f"{rhs} contradicts it, only {local}' == 0 agrees", rel.parts[1])
                     flows[var] = (rel.parts[1], part.text.line)
+                    self._reads(rel.parts[1:], key, part, "flow")
             self.flows[key] = flows
-            invariant = []
+            invariant, fields = [], []
             for part in loc.invariants:
                 atoms = self.parse(part, "invariant")
                 if atoms.false:
                     raise InputError("construct 'false' (an empty location) is not supported", self.file,
                                      self.field_of(part, "invariant"), part.text.line)
                 invariant += [(rel, part.text.line) for rel, _ in atoms.relations]
+                fields += [self.field_of(part, "invariant")] * len(atoms.relations)
+                for rel, _ in atoms.relations:
+                    self._reads(rel.parts, key, part, "invariant")
             self.invariants[key] = invariant
+            self.invariant_fields[key] = fields
         self.guards, self.assignments = [], []
         for tr in self.flat.transitions:
             guard = []
@@ -342,14 +409,19 @@ class DocumentBuilder(Converter):
                     guard = None
                     break
                 guard += [(rel, part.text.line) for rel, _ in atoms.relations]
+                for rel, _ in atoms.relations:
+                    self._reads(rel.parts, tr.source, part, "guard")
             assign = {}
             for part in tr.assignments:
                 for rel, _ in self.parse(part, "assignment").relations:
                     var = self._reset_target(rel, part)
+                    self._refuse_change_of_const(var, part, "assignment",
+                                                 lambda local: f"the assignment to {local} contradicts it")
                     if var in assign:
                         raise InputError(f"'{var}' assigned twice", self.file, self.field_of(part, "assignment"),
                                          part.text.line)
                     assign[var] = (rel.parts[1], part.text.line)
+                    self._reads(rel.parts[1:], tr.source, part, "assignment")
             self.guards.append(guard)
             self.assignments.append(assign)
         # every global name under itself and each of its dotted suffixes (p.first.z: first.z, z)
@@ -358,6 +430,46 @@ class DocumentBuilder(Converter):
             parts = g.split(".")
             for k in range(len(parts)):
                 self.suffixes.setdefault(".".join(parts[k:]), []).append(g)
+
+    def _reads(self, parts, key, part: Part, what: str) -> None:
+        """Note the names the token lists ``parts`` of ``part`` read in location ``key``."""
+        for tokens in parts:
+            for name in names_in(tokens):
+                self.read_at.setdefault((name, key), (what, self.field_of(part, what), part.text.line))
+
+    def _refuse_change_of_const(self, var: str, part: Part, what: str, change, rate=None) -> None:
+        """Refuse a flow or assignment ``change`` of ``part`` that sets the variable ``var``
+        (global) if a ``dynamics="const"`` param stands for it: the param of the component
+        that writes it, or the param it is mapped onto by a bind (named with its line). SpaceEx
+        keeps a constant through flows (``k' == 0``) and jumps (``k' == k``); reading the
+        file's own change instead would turn the constant into a clock or a resettable state,
+        and the file contradicts itself either way: bad input at the change's line.
+        ``change(local)`` says what the change is, in the component's own name for it; a flow
+        gives its ``rate`` (tokens), and the rate 0 is no change."""
+        instance = part.instance
+        locals_ = [n for n, b in instance.binding.items() if b.name == var] or [var]
+        local = locals_[0]
+        declared = next((p for n in locals_ if (p := instance.component.params.get(n)) is not None
+                         and p.dynamics == "const"), None)
+        if declared is not None:
+            local = declared.name
+            why = f"'{local}' is declared dynamics=\"const\" (line {declared.line}) and"
+        elif self.flat.globals.get(var) == "const":
+            bind = (f"bind '{instance.path}' (line {instance.line})" if instance.path
+                    else f"component '{self.flat.system}'")
+            why = (f"'{local}' is mapped by {bind} to '{var}', declared dynamics=\"const\" "
+                   f"(line {self.flat.declared.get(var, '?')}), and")
+        else:
+            return
+        if rate is not None:
+            try:
+                if _numeric(rate) == 0:
+                    return
+            except FormulaError:        # a function the import lacks: reported where the flow is read
+                return
+        raise InputError(f"{why} cannot change: {change(local)} (SpaceEx keeps a constant through flows "
+                         "and jumps)",
+                         self.file, self.field_of(part, what), part.text.line)
 
     def _reset_target(self, rel: Relation, part: Part) -> str:
         """The variable a relation of an assignment resets. SpaceEx reads an assignment as a
@@ -419,6 +531,8 @@ class DocumentBuilder(Converter):
                         self.flows[key][var] = ([Token("num", "0")], line)
                 states.add(var)
         self.aliases: dict[tuple, dict[str, list]] = {key: {} for key in self.flat.locations}
+        # where each alias is defined: (line, field) of its equality, for messages about it
+        self.alias_at: dict[tuple, dict[str, tuple[int, str]]] = {key: {} for key in self.flat.locations}
         self.inputs: dict[str, tuple[float, float, bool]] = {}
         self.dropped: dict[tuple, set[int]] = {key: set() for key in self.flat.locations}
         for var in sorted(set(used_where) - states):
@@ -457,16 +571,28 @@ class DocumentBuilder(Converter):
             for j, (rel, line) in enumerate(self.invariants[key]):
                 e = _alias_of(rel, var)
                 if e is not None and key not in aliased:
-                    aliased[key] = e
+                    aliased[key] = (e, (line, self.invariant_fields[key][j]))
                     self.dropped[key].add(j)
                     continue
                 b = _bound_of(rel, var)
                 if b is not None:
                     bounds.setdefault(key, []).append((j, b))
         if aliased and set(aliased) == set(where):
-            for key, e in aliased.items():
+            for key, (e, at) in aliased.items():
                 self.aliases[key][var] = e
+                self.alias_at[key][var] = at
             return
+        if aliased:
+            # an alias in some locations, read in another that does not define it: there it is
+            # free (SpaceEx: any value at any instant); said at the reading text, naming both
+            missing = next(key for key in where if key not in aliased)
+            defined = next(iter(aliased))
+            def_line = aliased[defined][1][0]
+            what, field, at = self.read_at.get((var, missing), ("text", None, self.flat.locations[missing].line))
+            raise InputError(f"'{var}' has no flow and is defined by an equality in location "
+                             f"'{self.flat.label(defined)}' (line {def_line}) but not in "
+                             f"'{self.flat.label(missing)}', where this {what} reads it (it would be free "
+                             "there, any value at any instant: not supported)", self.file, field, at)
         uses_outside_flows = any(
             var in names_in(p) and j not in {i for i, _ in bounds.get(key, [])}
             for key in where for j, (rel, _) in enumerate(self.invariants[key]) for p in rel.parts)
@@ -542,28 +668,38 @@ class DocumentBuilder(Converter):
         return None
 
     # -------------------------------------------------------------- rendering
-    def render(self, tokens, key, line: int | None, depth: int = 0) -> str:
+    def render(self, tokens, key, line: int | None, depth: int = 0, file: str | None = None,
+               field: str | None = None) -> str:
+        """``tokens`` as an expression of the written model in location ``key``, each alias
+        replaced by its definition there. A problem is reported where its text is written: at
+        ``file`` (the XML unless given; the cfg for its own relations) and ``line``, and inside
+        an alias's definition at the defining invariant's line, not where the alias is read."""
+        file = file or self.file
+
         def rename(g: str) -> str:
             if key is not None and g in self.aliases.get(key, {}):
+                at, where = self.alias_at[key][g]
                 if depth > 8:
-                    raise InputError(f"aliases nest too deeply at '{g}'", self.file, line=line)
-                return "(" + self.render(self.aliases[key][g], key, line, depth + 1) + ")"
+                    raise InputError(f"aliases nest too deeply at '{g}'", self.file, where, at)
+                return "(" + self.render(self.aliases[key][g], key, at, depth + 1, self.file, where) + ")"
             if g in self.yaml:
                 return self.yaml[g]
             raise InputError(f"'{g}' is used where it has no value (no flow, bound or definition)",
-                             self.file, line=line)
+                             file, field, line)
         try:
             return to_python(tokens, rename)
         except FormulaError as exc:
-            raise InputError(f"construct not supported: {exc}", self.file, line=line) from None
+            raise InputError(f"construct not supported: {exc}", file, field, line) from None
 
-    def relation_texts(self, rel: Relation, key, line) -> list[tuple[str, str]]:
-        """``[(kind, text)]``: ``("<=", "a <= b")`` per comparison, ``("==", "a == b")``."""
+    def relation_texts(self, rel: Relation, key, line, file: str | None = None,
+                       field: str | None = None) -> list[tuple[str, str]]:
+        """``[(kind, text)]``: ``("<=", "a <= b")`` per comparison, ``("==", "a == b")``
+        (``file`` and ``field``: where ``rel`` is written, for messages; the XML by default)."""
         out = []
         for lhs, op, rhs in _pairs(rel):
-            a, b = self.render(lhs, key, line), self.render(rhs, key, line)
+            a, b = self.render(lhs, key, line, 0, file, field), self.render(rhs, key, line, 0, file, field)
             if op in (":=",):
-                raise InputError("construct ':=' outside an assignment", self.file, line=line)
+                raise InputError("construct ':=' outside an assignment", file or self.file, field, line)
             out.append(("==", f"{a} == {b}") if op in ("==", "=") else ("<=", f"{a} {op} {b}"))
         return out
 
@@ -653,6 +789,16 @@ class DocumentBuilder(Converter):
                 notes[key] = cfg.number(key)
                 if why := hint_problem(key, notes[key]):
                     raise InputError(f"{key}: {why}, got '{cfg.text(key)}'", cfg.file, line=cfg.line(key))
+        if self.extra_modes and notes.get("iter-max", -1) >= 0:
+            # iter-max bounds the jumps of the SpaceEx model; the urgent jump out of the timeless
+            # start mode added above (several initial locations) is not one of them, but star
+            # counts every jump of a path against the bound it reads from notes (max_jumps). One
+            # more keeps the cfg's bound on the model's own jumps: with iter-max = 0 a run may
+            # still enter its initial location, and no model jump is allowed after it
+            notes["iter-max"] = notes["iter-max"] + 1
+            notes["iter-max-start"] = (f"iter-max is the cfg's {cfg.text('iter-max')} plus one: the jump out of "
+                                       f"'{next(iter(self.extra_modes))}' into an initial location is counted "
+                                       "by star but is not a jump of the SpaceEx model")
         blocked = blocked_labels(self.flat)
         if blocked:
             notes["blocked"] = blocked
@@ -767,7 +913,8 @@ class DocumentBuilder(Converter):
         resolved = {n: self.resolve(n, key, where_key) for p in parts for n in names_in(p)}
         parts = [[Token("name", resolved[t.text]) if t.kind == "name" and t.text in resolved else t for t in p]
                  for p in parts]
-        return self.relation_texts(Relation(parts, rel.ops), key, self.cfg.line(where_key))
+        return self.relation_texts(Relation(parts, rel.ops), key, self.cfg.line(where_key), self.cfg.file,
+                                   where_key)
 
 
     def _varying(self) -> dict[str, str]:
@@ -805,12 +952,11 @@ class DocumentBuilder(Converter):
         varying = self._varying()
         symbols = [sympy.Symbol(name, real=True) for name in varying]
         table = {s.name: s for s in symbols}
-        relations = [(k, _difference(t, k)) for k, t in texts]
+        ranges = []
         for name, v in varying.items():
             lo, hi, _ = self.inputs[v]
-            relations += [("<=", f"({name}) - ({hi})"), ("<=", f"({lo}) - ({name})")]
-        rows = linear_rows(relations, table, symbols)
-        if rows is not None and not feasible(rows, len(symbols)):
+            ranges += [("<=", f"({name}) - ({hi})"), ("<=", f"({lo}) - ({name})")]
+        if not open_nonempty(texts, len(texts), table, symbols, ranges):
             ranges = ", ".join(f"{name} in [{self.inputs[v][0]:g}, {self.inputs[v][1]:g}]"
                                for name, v in varying.items() if any(name in _NAME.findall(t) for _, t in texts))
             written = " and ".join(t for _, t in texts)
@@ -848,25 +994,30 @@ class DocumentBuilder(Converter):
                              line=self.cfg.line("initially"))
         symbols = [sympy.Symbol(self.yaml[g], real=True) for g in self.states + list(self.inputs)]
         table = {s.name: s for s in symbols}
-        choice, feasible_alone = [], False
+        # strict bounds of initially are kept strict here (an empty open set is bad input, not
+        # its closure's boundary: x > 1 & x < 1 is no point, not x = 1); a non-empty one is
+        # then read as its closure, as invariants and guards are
+        choice, alone = [], []
         for key in candidates:
             texts = self._initial_texts(atoms, key)
             self._no_input_in_initially(texts)
-            alone = linear_rows([(k, _difference(t, k)) for k, t in texts], table, symbols)
-            feasible_alone = feasible_alone or alone is None or feasible(alone, len(symbols))
+            written = len(texts)
+            alone.append(list(texts))
             for j, (rel, line) in enumerate(self.invariants[key]):
                 if j not in self.dropped[key]:
                     inv = self.relation_texts(rel, key, line)
                     if linear_rows([(k, _difference(t, k)) for k, t in inv], table, symbols) is not None:
                         texts += inv
-            rows = linear_rows([(k, _difference(t, k)) for k, t in texts], table, symbols)
             bounds = [("<=", f"({self.yaml[v]}) - ({hi})") for v, (lo, hi, _) in self.inputs.items()] + \
                      [("<=", f"({lo}) - ({self.yaml[v]})") for v, (lo, hi, _) in self.inputs.items()]
-            if rows is None or feasible(linear_rows([(k, _difference(t, k)) for k, t in texts] + bounds,
-                                                    table, symbols), len(symbols)):
+            if open_nonempty(texts, written, table, symbols, bounds):
                 choice.append((key, texts))
         if not choice:
-            what = "meets no location's invariant" if feasible_alone else "is empty (its constraints exclude each other)"
+            what = ("meets no location's invariant" if any(open_nonempty(t, len(t), table, symbols) for t in alone)
+                    else "is empty (its constraints exclude each other)"
+                    if not any(open_nonempty(t, 0, table, symbols) for t in alone)
+                    else "is empty (its constraints exclude each other once its strict bounds are kept "
+                         "strict: x > 1 & x <= 1 holds nowhere)")
             raise InputError(f"initially: the initial set {what}", self.cfg.file, line=self.cfg.line("initially"))
         self.lines[("initial",)] = (self.cfg.file, self.cfg.line("initially"))
         if len(choice) > 1:
