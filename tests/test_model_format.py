@@ -383,3 +383,24 @@ def test_a_property_file_given_as_the_model_says_so(tmp_path, capsys):
     err = bad_input(["check", str(tmp_path / "p.yaml"), str(tmp_path / "m.yaml"), "-b", "star"], capsys)
     assert err == f"reach: {tmp_path / 'p.yaml'}:1: properties: this is a property file, not a model " \
                   "(give the model first, then the property file)", err
+
+
+@pytest.mark.parametrize("constraints, empty", [
+    (["x > 1", "x < 1", "y == 0"], True),            # closure {1}: no point of the written set
+    (["x > 1", "x <= 1", "y == 0"], True),
+    (["x + y > 2", "x + y < 2", "x >= 0", "y >= 0", "x <= 5", "y <= 5"], True),
+    (["x > 1", "x < 1.5", "x + y == 2", "y >= 0"], False),     # points: read as the closure
+    (["x >= 1", "x <= 1", "y > 0", "y < 1"], False),
+])
+def test_strict_initial_constraints_that_leave_no_point_are_bad_input(tmp_path, constraints, empty):
+    """Strict bounds are read closed once the set has points (the closure's bounds); where they
+    leave none, every run would start outside the written set: bad input at the constraints."""
+    path = tmp_path / "m.yaml"
+    path.write_text("name: s\nstate: [x, y]\nmodes: {a: {flow: {x: 1, y: 0}}}\n"
+                    f"initial: {{mode: a, constraints: {json.dumps(constraints)}}}\nhorizon: 1\n")
+    if empty:
+        with pytest.raises(InputError, match="initial set is empty: its strict constraints"):
+            load_model(path)
+    else:
+        model = load_model(path)
+        assert np.all(model.initial.low <= model.initial.high)

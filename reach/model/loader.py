@@ -673,7 +673,7 @@ class _Builder:
         if not isinstance(raw.get("mode"), str) or raw["mode"] not in modes:
             raise not_a_mode(raw.get("mode"), self.where("initial", "mode"))
         n = len(self.state)
-        rows, rhs, eq_rows, eq_rhs = [], [], [], []
+        rows, rhs, eq_rows, eq_rhs, strict = [], [], [], [], []
         box = raw.get("box", {})
         if not isinstance(box, dict):
             raise self.where("initial", "box").error("expected {var: [low, high] or value}")
@@ -705,9 +705,12 @@ class _Builder:
                     raise w.error("a bounded input starts anywhere in its range; do not constrain it here")
                 (eq_rows if kind == "==" else rows).append(coeffs[0])
                 (eq_rhs if kind == "==" else rhs).append(-coeffs[1])
+                if kind != "==":
+                    strict.append((len(rows) - 1, text) if kind == "<" else None)
         P = LinearSet(np.array(rows, float).reshape(-1, n), np.array(rhs, float),
                       np.array(eq_rows, float).reshape(-1, n), np.array(eq_rhs, float))
         low, high = _bounding_box(P, self.state, self.where("initial"))
+        _open_part(P, [s for s in strict if s is not None], self.where("initial", "constraints"))
         axis_aligned = all(np.count_nonzero(r) <= 1 for r in np.vstack([P.A, P.E]))
         return InitialSet(raw["mode"], low, high, None if axis_aligned else P)
 
@@ -730,7 +733,8 @@ class _Builder:
 
 def _linear_relations(text, names, where: Where, units, dims=None):
     """``lhs == rhs`` as ``[("==", lhs - rhs)]``; any other comparison (chains too) as
-    ``[("<=", g), ...]`` with ``g <= 0`` (strictness is dropped: the set is closed)."""
+    ``[("<=", g), ...]`` with ``g <= 0``, ``("<", g)`` where it is strict (the set is read as its
+    closure once :func:`_open_part` finds it not empty)."""
     stripped = str(text).strip()
     try:
         tree = ast.parse(stripped, mode="eval").body
@@ -741,8 +745,37 @@ def _linear_relations(text, names, where: Where, units, dims=None):
         rhs = ast.get_source_segment(stripped, tree.comparators[0])
         g = parse_expr(f"({lhs}) - ({rhs})", names, where, units, dims)
         return [("==", sympy.expand(g))]
-    return [("<=", c.g) for c in from_comparisons(parse_comparison(stripped, names, where, units, dims),
-                                                   stripped, where)]
+    return [("<" if c.strict else "<=", c.g)
+            for c in from_comparisons(parse_comparison(stripped, names, where, units, dims), stripped, where)]
+
+
+#: strict initial constraints whose open set leaves no ball of this radius leave no point
+OPEN_SLACK = 1e-9
+
+
+def _open_part(P: LinearSet, strict: list[tuple[int, str]], where: Where) -> None:
+    """Bad input where the strict rows of ``P`` (``(row, text)``) leave it no point: the largest
+    common slack ``s <= 1`` of those rows (each normalised, so ``s`` is a distance; the others
+    as written) is at most :data:`OPEN_SLACK` (``x > 1`` and ``x < 1``, whose closure is the
+    point 1, where every run would start outside the written set). A set with points is then
+    read as its closure, as invariants and guards are."""
+    if not strict:
+        return
+    n = P.A.shape[1]
+    slack = np.zeros(P.A.shape[0])
+    for i, _ in strict:
+        slack[i] = max(np.linalg.norm(P.A[i]), 1e-300)
+    A = np.vstack([np.hstack([P.A, slack[:, None]]), np.eye(n + 1)[-1:]])
+    b = np.append(P.b, 1.0)
+    E = np.hstack([P.E, np.zeros((P.E.shape[0], 1))]) if P.E.shape[0] else None
+    try:
+        res = lp.maximize(np.eye(n + 1)[-1], A, b, A_eq=E, b_eq=P.f if P.E.shape[0] else None)
+    except lp.LPError:
+        return                              # (no answer: read as the closure, as before)
+    if res.infeasible or (res.optimal and res.value <= OPEN_SLACK):
+        texts = ", ".join(sorted({t for _, t in strict}))
+        raise where.error(f"the initial set is empty: its strict constraints ({texts[:80]}) leave no point "
+                          "(a set with points is read as its closure)")
 
 
 def _bounding_box(P: LinearSet, state: list[str], where: Where):
