@@ -404,3 +404,28 @@ def test_strict_initial_constraints_that_leave_no_point_are_bad_input(tmp_path, 
     else:
         model = load_model(path)
         assert np.all(model.initial.low <= model.initial.high)
+
+
+@pytest.mark.parametrize("invariant, box, outcome", [
+    (["th >= 0", "th <= -1"], "[0, 1]", "refused"),           # an empty invariant: no run starts
+    (["th >= 0"], "[-2, -1]", "refused"),                     # the box on the wrong side
+    (["th >= 0"], "[-1, 1.2]", "lint"),                       # partly outside: those states start no run
+    (["th >= 0"], "[0, 1.2]", "clean"),
+])
+def test_an_initial_set_outside_its_modes_invariant(tmp_path, invariant, box, outcome):
+    """No initial state in the initial mode's invariant is bad input (every property would hold
+    for want of runs); a set partly outside is a lint that names the broken row."""
+    from reach.model.lint import initial_outside
+    path = tmp_path / "m.yaml"
+    path.write_text("name: s\nstate: [th]\n"
+                    f"modes: {{swing: {{flow: {{th: -1}}, invariant: {json.dumps(invariant)}}}}}\n"
+                    f"initial: {{mode: swing, box: {{th: {box}}}}}\nhorizon: 1\n")
+    if outcome == "refused":
+        with pytest.raises(InputError, match="no state of the initial set lies in the invariant of its mode 'swing'"):
+            load_model(path)
+        return
+    finding = initial_outside(load_model(path))
+    if outcome == "lint":
+        assert finding is not None and "(th >= 0 fails there)" in finding
+    else:
+        assert finding is None

@@ -257,11 +257,41 @@ def zero_dwell_cycles(model) -> tuple[list, bool]:
     return found, True
 
 
+def initial_outside(model) -> str | None:
+    """A finding where part of the initial set lies outside its mode's (linear) invariant: the
+    rows some initial state breaks (the largest ``h x - g`` over the set, by LP, beyond 1e-9 of
+    the row's scale). Those states start no run (the simulator blocks them at 0, star cuts the
+    set by the invariant), which a model rarely means; none of them lying inside is bad input
+    (:meth:`reach.model.loader._Builder.check_initial_invariant`)."""
+    from reach import lp
+    from reach.model.loader import initial_and_invariant
+
+    rows = initial_and_invariant(model)
+    if rows is None:
+        return None
+    A, b, E, f = rows
+    mode = model.modes[model.initial.mode]
+    H, g = (np.asarray(a, float) for a in mode.invariant_halfspaces)
+    A_set, b_set = A[len(g):], b[len(g):]
+    broken = []
+    for row, bound, constraint in zip(H.reshape(len(g), -1), g.reshape(-1), mode.invariant):
+        try:
+            res = lp.maximize(row, A_set, b_set, A_eq=E if E.shape[0] else None, b_eq=f if E.shape[0] else None)
+        except lp.LPError:
+            continue
+        if res.optimal and res.value - bound > 1e-9 * (1.0 + abs(bound) + np.abs(row).sum()):
+            broken.append(constraint.text)
+    if not broken:
+        return None
+    return (f"{model.file}: initial: part of the initial set lies outside the invariant of mode "
+            f"'{mode.name}' ({', '.join(broken)[:100]} fails there): those states start no run")
+
+
 def lint(model) -> list[str]:
     """All findings for ``model``, one line each (empty when the model is clean)."""
+    findings = [found] if (found := initial_outside(model)) else []
     cycles, complete = zero_dwell_cycles(model)
     cycles = sorted(cycles, key=lambda found: len(found[0]))
-    findings = []
     for cycle, names, state in cycles[:MAX_REPORTED]:
         at = ("" if state is None else ", and its jumps " + ", ".join(names)
               + " can all be taken twice round at one instant from "

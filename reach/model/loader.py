@@ -273,7 +273,28 @@ class _Builder:
             horizon=horizon, disturbance=self.read_disturbance(horizon), clocks=clocks, bounded_inputs=bounded,
             dimensions=None if self.dims is None else self.dims.system, hints=self.read_hints())
         self.check_bounded_inputs(model)
+        self.check_initial_invariant(model)
         return model
+
+    def check_initial_invariant(self, model: HybridAutomaton) -> None:
+        """Bad input where no state of the initial set lies in the initial mode's (linear)
+        invariant: no run starts, so every property would hold for want of runs (an empty
+        invariant, ``th >= 0`` and ``th <= -1``, or a box on the wrong side of it). A set partly
+        outside it is a lint (:func:`reach.model.lint.initial_outside`): those states start no run."""
+        mode = model.modes[model.initial.mode]
+        rows = initial_and_invariant(model)
+        if rows is None:
+            return
+        A, b, E, f = rows
+        try:
+            point = lp.feasible_point(A, b, A_eq=E if E.shape[0] else None, b_eq=f if E.shape[0] else None)
+        except lp.LPError:
+            return
+        if point is None:
+            texts = ", ".join(c.text for c in mode.invariant)
+            raise self.where("initial").error(
+                f"no state of the initial set lies in the invariant of its mode '{mode.name}' "
+                f"({texts[:100]}): no run would start, and every property would hold for want of runs")
 
     def read_units(self) -> UnitSystem:
         value = self.data.get("units", {})
@@ -776,6 +797,25 @@ def _open_part(P: LinearSet, strict: list[tuple[int, str]], where: Where) -> Non
         texts = ", ".join(sorted({t for _, t in strict}))
         raise where.error(f"the initial set is empty: its strict constraints ({texts[:80]}) leave no point "
                           "(a set with points is read as its closure)")
+
+
+def initial_and_invariant(model: HybridAutomaton):
+    """``(A, b, E, f)``: the initial set (its box, or its polytope) and the linear invariant of
+    its mode, ``A x <= b, E x = f``; None where that invariant is not linear or is empty."""
+    mode = model.modes[model.initial.mode]
+    halfspaces = mode.invariant_halfspaces
+    if halfspaces is None or not len(halfspaces[1]):
+        return None
+    H, g = (np.asarray(a, float) for a in halfspaces)
+    n, init = model.n, model.initial
+    A = [H.reshape(-1, n), -np.eye(n), np.eye(n)]
+    b = [g.reshape(-1), -init.low, init.high]
+    E, f = np.zeros((0, n)), np.zeros(0)
+    if init.polytope is not None:
+        A.append(init.polytope.A)
+        b.append(init.polytope.b)
+        E, f = init.polytope.E, init.polytope.f
+    return np.vstack(A), np.concatenate(b), E, f
 
 
 def _bounding_box(P: LinearSet, state: list[str], where: Where):

@@ -248,6 +248,13 @@ def _strict(text: str) -> bool:
     return False
 
 
+def _closed(texts: list[tuple[str, str]]) -> list[tuple[str, str]]:
+    """Rendered comparisons with strict ones made non-strict (``x < 1`` -> ``x <= 1``): an
+    invariant, as SpaceEx reads it (closed), where it joins the initial set's constraints."""
+    return [(k, t.replace(" < ", " <= ", 1) if " < " in t else t.replace(" > ", " >= ", 1) if " > " in t else t)
+            for k, t in texts]
+
+
 #: a strict initial set whose open part leaves no ball of this radius is read as empty
 OPEN_SLACK = 1e-9
 
@@ -1007,7 +1014,7 @@ class DocumentBuilder(Converter):
                 if j not in self.dropped[key]:
                     inv = self.relation_texts(rel, key, line)
                     if linear_rows([(k, _difference(t, k)) for k, t in inv], table, symbols) is not None:
-                        texts += inv
+                        texts += _closed(inv)
             bounds = [("<=", f"({self.yaml[v]}) - ({hi})") for v, (lo, hi, _) in self.inputs.items()] + \
                      [("<=", f"({lo}) - ({self.yaml[v]})") for v, (lo, hi, _) in self.inputs.items()]
             if open_nonempty(texts, written, table, symbols, bounds):
