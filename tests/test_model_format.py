@@ -429,3 +429,24 @@ def test_an_initial_set_outside_its_modes_invariant(tmp_path, invariant, box, ou
         assert finding is not None and "(th >= 0 fails there)" in finding
     else:
         assert finding is None
+
+
+def test_the_readme_tank_example_checks_as_it_says(tmp_path):
+    """The README's first model and properties, as written: star proves ``level`` (the
+    invariants keep 2 <= h <= 8; the reset adds 0.5 at h <= 3) and ``early_full`` (filling from
+    h <= 3, ``h = 10 - (10 - h0) e^{-t/10}`` reaches 8 at ``t >= 10 ln 3.5 = 12.53 > 12``)."""
+    from pathlib import Path
+
+    from reach.backends.star import BACKEND as STAR
+    from reach.result import Status
+    from reach.spec import bind, load_properties
+    text = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    section = text.split("## Model and property files in brief")[1]
+    model_text, props_text = (part.split("```")[0] for part in section.split("```yaml")[1:3])
+    (tmp_path / "tank.yaml").write_text(model_text)
+    (tmp_path / "tank_props.yaml").write_text(props_text)
+    model = load_model(tmp_path / "tank.yaml")
+    props = {p.id: bind(p, model) for p in load_properties(tmp_path / "tank_props.yaml")}
+    assert 10 * np.log(3.5) > 12
+    for pid in ("level", "early_full"):
+        assert STAR.check(model, props[pid], {}).status is Status.SAFE
