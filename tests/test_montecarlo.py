@@ -45,10 +45,12 @@ def test_safe_instance_is_unknown_with_an_upper_bound_never_safe():
 
 
 def test_the_time_budget_stops_the_sampling_the_search_and_the_optimiser():
-    """``max_seconds`` bounds the whole check: with a budget spent before the i.i.d. runs begin
-    only the structured runs are simulated, there is no search generation and no optimiser
-    run, the answer stays UNKNOWN, the violation bound counts the runs actually sampled (none:
-    1), and the note names the budget and how many runs it left unsampled."""
+    """``max_seconds`` bounds the whole check: with a budget spent before the runs begin the
+    structured runs stop where they are (cut, named in the note: before, they ran to the
+    horizon whatever the budget, 80 s against 20 on a chattering model), no i.i.d. run is
+    simulated, there is no search generation and no optimiser run, the answer stays UNKNOWN,
+    the violation bound counts the runs actually sampled (none: 1), and the note names the
+    budget and how many runs it left unsampled."""
     opts = {**FAST, "search_rounds": 3, "generations": 2, "population": 10, "polish": 5}
     (free,) = check_files("models/SRA01.yaml", "properties/rendezvous.yaml", "montecarlo", opts, only=["los"])
     (cut,) = check_files("models/SRA01.yaml", "properties/rendezvous.yaml", "montecarlo",
@@ -59,6 +61,8 @@ def test_the_time_budget_stops_the_sampling_the_search_and_the_optimiser():
     assert free.details["random_runs"] == 200 and cut.details["random_runs"] == 0
     assert cut.details["violation_probability_upper_95"] == 1.0
     assert "option max_seconds" in cut.details["note"] and "after 0 of 200 random runs" in cut.details["note"]
+    assert cut.details["cut_runs"] == cut.details["structured_runs"] and "cut short" in cut.details["note"]
+    assert "cut_runs" not in free.details
     assert free.details["closest_depth"] <= cut.details["closest_depth"]
 
 

@@ -99,3 +99,19 @@ def test_an_equality_guard_on_the_invariant_boundary_is_taken_there(tmp_path):
         assert np.all(np.isnan(traj.blocked_at))
         expected = 1.0 + np.mod(x0 - 1.0 + 4.3, 1.0)
         np.testing.assert_allclose(traj.final_state[:, 0], expected, atol=1e-6)
+
+
+def test_a_deadline_stops_the_runs_under_way_where_they_are(tmp_path):
+    """A ``deadline`` already past: every run stops at its start, counted as blocked and cut;
+    none given: they run to the horizon."""
+    import time
+
+    path = tmp_path / "m.yaml"
+    path.write_text("name: d\nstate: [x]\nmodes: {a: {flow: {x: 1}, invariant: ['x <= 100']}}\ninitial: {mode: a, box: {x: [0, 1]}}\n"
+                    "horizon: 2\n")
+    sim = Simulator(load_model(path))
+    X = np.array([[0.0], [0.5], [1.0]])
+    stopped = sim.run(X, deadline=time.time() - 1.0)
+    assert stopped.cut == 3 and np.all(stopped.blocked_at == 0.0) and np.array_equal(stopped.final_state, X)
+    free = sim.run(X)
+    assert free.cut == 0 and np.all(np.isnan(free.blocked_at)) and np.allclose(free.final_state, X + 2.0)

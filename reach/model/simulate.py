@@ -60,6 +60,8 @@ widen its tolerance.
 from __future__ import annotations
 
 import functools
+import math
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -237,6 +239,7 @@ class Trajectories:
     branched: np.ndarray                        # jumps of each run at which several transitions were enabled
     path: dict = field(default_factory=dict)    # run -> (t (K,), mode (K,), x (K, n)) if recorded
     transitions: dict = field(default_factory=dict)     # run -> [transition name, ...] if recorded
+    cut: int = 0                                # runs stopped by the caller's deadline (among the blocked)
 
 
 @dataclass(frozen=True)
@@ -529,7 +532,8 @@ class Simulator:
 
     # --------------------------------------------------------------- runs
     def run(self, x0: np.ndarray, switch_times: np.ndarray | None = None, record: bool = False,
-            observers=(), kicks=None, signal=None, branches: Branches | None = None) -> Trajectories:
+            observers=(), kicks=None, signal=None, branches: Branches | None = None,
+            deadline: float = math.inf) -> Trajectories:
         """Simulate runs from ``x0`` (N, n) with window switch instants ``switch_times`` (N,).
 
         ``observers``: callables ``f(t, X, mode_index, rows)`` (``t`` per row) called with the
@@ -544,6 +548,9 @@ class Simulator:
         guard's entry, where it is enabled there: the earliest switch, as the
         invariant's exit is the latest. ``branches``: which
         of several enabled transitions each run takes (:class:`Branches`; the first by default).
+        ``deadline`` (a ``time.time()`` instant: a time budget): the runs still under way when it
+        passes stop where they are, counted as blocked there and in ``Trajectories.cut`` (one
+        linear mode without events steps every run at once to the horizon and is not cut).
         """
         X = np.array(x0, dtype=float).reshape(-1, self.n).copy()
         N = X.shape[0]
@@ -599,10 +606,14 @@ class Simulator:
         horizon = self.model.horizon
         cell = np.full(N, -1.0)                # grid cell of each run's time at the last pass
         burst = np.zeros(N, dtype=int)         # passes without leaving that cell
+        cut = 0
         while True:
             active = np.flatnonzero((t < horizon - 1e-12) & np.isnan(blocked_at))
             if active.size == 0:
                 self._urgent_now(np.flatnonzero(np.isnan(blocked_at)), runs)    # jumps due at the horizon
+                break
+            if time.time() > deadline:         # the caller's time budget: stop the runs under way
+                blocked_at[active], cut = t[active], active.size
                 break
             now = np.floor(t[active] / self.dt)
             stuck = now == cell[active]
@@ -627,7 +638,9 @@ class Simulator:
                 rows = active[mode[active] == m_index]
                 if rows.size:
                     self._segment(name, rows, runs, next_kick)
-        return self._trajectories(runs, recorder)
+        traj = self._trajectories(runs, recorder)
+        traj.cut = cut
+        return traj
 
     @staticmethod
     def _trajectories(runs: _Runs, recorder) -> Trajectories:

@@ -153,6 +153,8 @@ class MonteCarloBackend:
         sampled = X.shape[0] - n_structured
         monitors = [SafetyMonitor.merged(model, p, [q[0][i] for q in parts]) for i, p in enumerate(props)]
         blocked = sum(q[1] for q in parts)
+        cut = sum(q[3] for q in parts)              # runs the time budget stopped under way
+        cut_random = sum(q[3] for q in parts[1:])   # (parts[0]: the structured runs)
         branching = choice is not None and sum(q[2] for q in parts) > 0    # a choice met, not only possible
         runs = []
         if opts.keep_sets:
@@ -172,15 +174,20 @@ class MonteCarloBackend:
             fails = int(np.count_nonzero(np.isfinite(monitor.violation_time[n_structured:])))
             undefined = int(np.count_nonzero(np.isnan(monitor.min_depth[n_structured:])))
             details["violating_runs"] = fails
-            details["violation_probability_upper_95"] = clopper_pearson_upper(fails, sampled - undefined)
+            # a run cut short by the budget was not watched to the horizon: not counted as clean
+            details["violation_probability_upper_95"] = clopper_pearson_upper(fails, sampled - undefined - cut_random)
             if undefined:                   # NaN states: sqrt of a negative level, a division by zero
                 details["undefined_runs"] = undefined
                 details["undefined"] = (f"{undefined} of {sampled} random runs reached states where the model's "
                                         f"flow is not a real number (NaN): the model leaves its domain there (an "
                                         f"invariant can keep it in); the violation bound counts the other runs")
-            if sampled < opts.samples:
+            if sampled < opts.samples or cut:
                 details["note"] = (f"time budget of {opts.max_seconds:.3g} s (option max_seconds) ended the "
-                                   f"sampling after {sampled} of {opts.samples} random runs")
+                                   f"sampling after {sampled} of {opts.samples} random runs"
+                                   + (f", {cut} of the runs simulated cut short before the horizon (left out "
+                                      "of the violation bound)" if cut else ""))
+            if cut:
+                details["cut_runs"] = int(cut)
             found = monitor.first_violation()
             found = None if found is None else (0, found)
             monitors_of = partial(SafetyMonitor, model, prop)

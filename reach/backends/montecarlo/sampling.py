@@ -192,10 +192,12 @@ SAMPLE_BLOCK = 1000     # i.i.d. runs always simulated together: the unit of bat
 def _simulate_rounds(model, props, sim, opts: Options, X, tau, signal, choice, n_structured: int, kicks,
                      deadline: float = math.inf) -> tuple[list, np.ndarray]:
     """Simulate the structured runs (in this process) and the i.i.d. ones, monitoring every
-    property; ``([(monitor arrays per property, blocked runs, runs that met a choice)], rows)``:
-    the parts in the order of ``rows``, the indices of the runs simulated. No block of i.i.d.
-    runs starts after ``deadline`` (a ``time.time()`` instant, which worker processes share):
-    those simulated are the structured ones and a leading part of each batch's blocks.
+    property; ``([(monitor arrays per property, blocked runs, runs that met a choice, runs cut
+    by the deadline)], rows)``: the parts in the order of ``rows``, the indices of the runs
+    simulated. No block of i.i.d. runs starts after ``deadline`` (a ``time.time()`` instant,
+    which worker processes share), and the runs under way when it passes stop there (counted
+    as blocked and as cut): those simulated are the structured ones and a leading part of each
+    batch's blocks.
 
     The i.i.d. runs are simulated in blocks of :data:`SAMPLE_BLOCK`, each block on its own
     (disturbance kicks from ``SeedSequence(seed, spawn_key=(k,))`` for block ``k``): a run's
@@ -210,7 +212,7 @@ def _simulate_rounds(model, props, sim, opts: Options, X, tau, signal, choice, n
     monitors = [SafetyMonitor(model, p, n_structured) for p in props]
     Xs, taus, signals, choices = rows(0, n_structured)
     traj = sim.run(Xs, taus, observers=monitors, kicks=kicks, signal=signals,
-                   branches=None if choices is None else Branches(values=choices))
+                   branches=None if choices is None else Branches(values=choices), deadline=deadline)
     parts = [([m.arrays() for m in monitors], *_counts(traj))]
     starts = list(range(n_structured, X.shape[0], SAMPLE_BLOCK))
     blocks = [(k,) + rows(a, min(a + SAMPLE_BLOCK, X.shape[0])) for k, a in enumerate(starts)]
@@ -259,14 +261,15 @@ def simulate_blocks(model, props, dt, seed, blocks, deadline: float = math.inf) 
             kicks = _kicks(model, np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(k,))))
             monitors = [SafetyMonitor(model, p, X.shape[0]) for p in props]
             traj = sim.run(X, tau, observers=monitors, kicks=kicks, signal=signal,
-                           branches=None if choice is None else Branches(values=choice))
+                           branches=None if choice is None else Branches(values=choice), deadline=deadline)
             out.append(([m.arrays() for m in monitors], *_counts(traj)))
     return out
 
 
 def _counts(traj) -> tuple:
-    """``(blocked runs, runs that met several enabled transitions at a jump)``."""
-    return int(np.count_nonzero(np.isfinite(traj.blocked_at))), int(np.count_nonzero(traj.branched))
+    """``(blocked runs, runs that met several enabled transitions at a jump, runs cut by the
+    deadline)``."""
+    return int(np.count_nonzero(np.isfinite(traj.blocked_at))), int(np.count_nonzero(traj.branched)), traj.cut
 
 
 def _kicks(model: HybridAutomaton, rng):
