@@ -202,3 +202,22 @@ def test_sets_cut_short_by_a_violation_are_said_to_be_partial(tmp_path, draw):
         ax, _ = draw(model, [props[pid]], results, "t", "x")
         said = [t for t in legend_texts(ax) if "stopped at the violation" in t]
         assert bool(said) == partial and cut_short(results, {"star": {"run": None}}) == said
+
+
+
+def test_sets_of_an_undecided_check_are_said_to_be_maybe_partial():
+    """An UNKNOWN check with sets (a budget or a cell refinement stopped it) may not have drawn
+    all that is reachable, and the legend says so (before, only an UNSAFE check said its sets
+    were cut short); one without sets, or a SAFE one, gets no such line."""
+    from reach.plotting.reach_sets import cut_short
+    from reach.result import Result, Status
+
+    def star(status, sets):
+        return Result("star", "m", "low", status, sets=sets)
+
+    drawn = {"star": {"run": None}}
+    assert cut_short({"star": [star(Status.UNKNOWN, ["a piece"])]}, drawn) == [
+        "star: sets up to where its check of low stopped undecided (maybe not all that is reachable)"]
+    assert cut_short({"star": [star(Status.UNKNOWN, [])]}, drawn) == []
+    assert cut_short({"star": [star(Status.SAFE, ["a piece"])]}, drawn) == []
+    assert cut_short({"montecarlo": [star(Status.UNKNOWN, ["a run"])]}, {"montecarlo": {"run": None}}) == []

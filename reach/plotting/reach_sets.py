@@ -422,14 +422,20 @@ def nothing_drawn(model, results_by_backend: dict, drawn: dict, bound_props) -> 
 
 def cut_short(results_by_backend: dict, drawn: dict) -> list[str]:
     """A legend line per exploring back-end (not Monte Carlo, whose runs are whole) whose drawn
-    sets end where its check stopped at a violation (UNSAFE): what is drawn is not all that is
-    reachable."""
+    sets end where its check stopped: at a violation (UNSAFE), what is drawn is not all that is
+    reachable; undecided (UNKNOWN: a budget, a cell refinement could not clear), it may not be."""
     out = []
     for backend, results in results_by_backend.items():
+        if backend == "montecarlo" or not drawn.get(backend):
+            continue
         stopped = [r.property for r in results if r.status == Status.UNSAFE and r.sets]
-        if backend != "montecarlo" and stopped and drawn.get(backend):
+        undecided = [r.property for r in results if r.status == Status.UNKNOWN and r.sets]
+        if stopped:
             out.append(f"{backend}: sets only up to where its check of {', '.join(stopped)} stopped at the "
                        f"violation (not all that is reachable)")
+        if undecided:
+            out.append(f"{backend}: sets up to where its check of {', '.join(undecided)} stopped undecided "
+                       f"(maybe not all that is reachable)")
     return out
 
 
