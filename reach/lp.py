@@ -230,6 +230,32 @@ def feasible_point(A_ub=None, b_ub=None, *, A_eq=None, b_eq=None, bounds=None, n
     return res.x if res.optimal else None
 
 
+#: strict rows whose common slack cannot exceed this (a distance) leave no point
+OPEN_SLACK = 1e-9
+
+
+def strictly_feasible(A_ub, b_ub, strict, *, A_eq=None, b_eq=None) -> bool | None:
+    """Whether ``A_ub x <= b_ub, A_eq x = b_eq`` has a point with the rows marked ``strict``
+    held strictly: the largest common slack ``s <= 1`` of those rows (each scaled by its norm,
+    so ``s`` is a distance from their hyperplanes) must exceed :data:`OPEN_SLACK`
+    (``x > 1, x < 1`` has none, though its closure is the point 1). None where the solver
+    gives no answer."""
+    A_ub, b_ub = np.asarray(A_ub, float), np.asarray(b_ub, float)
+    n = A_ub.shape[1]
+    norms = np.linalg.norm(A_ub, axis=1)
+    slack = np.where(np.asarray(strict, bool), np.where(norms > 0, norms, 1.0), 0.0)
+    A = np.vstack([np.hstack([A_ub, slack[:, None]]), np.eye(n + 1)[-1:]])
+    b = np.append(b_ub, 1.0)
+    E = None if A_eq is None or not len(A_eq) else np.hstack([A_eq, np.zeros((len(A_eq), 1))])
+    try:
+        res = maximize(np.eye(n + 1)[-1], A, b, A_eq=E, b_eq=None if E is None else b_eq)
+    except LPError:
+        return None
+    if res.infeasible:
+        return False
+    return None if not res.optimal else res.value > OPEN_SLACK
+
+
 def maximize_many(C, A_ub, b_ub, bounds) -> np.ndarray:
     """``max_x C_k . x`` over ``{A_ub x <= b_ub, lo <= x <= hi}`` for every row ``C_k``:
     one HiGHS model, re-solved from the previous basis with each objective (the polyhedron

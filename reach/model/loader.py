@@ -770,30 +770,16 @@ def _linear_relations(text, names, where: Where, units, dims=None):
             for c in from_comparisons(parse_comparison(stripped, names, where, units, dims), stripped, where)]
 
 
-#: strict initial constraints whose open set leaves no ball of this radius leave no point
-OPEN_SLACK = 1e-9
-
-
 def _open_part(P: LinearSet, strict: list[tuple[int, str]], where: Where) -> None:
-    """Bad input where the strict rows of ``P`` (``(row, text)``) leave it no point: the largest
-    common slack ``s <= 1`` of those rows (each normalised, so ``s`` is a distance; the others
-    as written) is at most :data:`OPEN_SLACK` (``x > 1`` and ``x < 1``, whose closure is the
-    point 1, where every run would start outside the written set). A set with points is then
-    read as its closure, as invariants and guards are."""
+    """Bad input where the strict rows of ``P`` (``(row, text)``) leave it no point
+    (:func:`reach.lp.strictly_feasible`: ``x > 1`` and ``x < 1``, whose closure is the point 1,
+    where every run would start outside the written set). A set with points, or one the solver
+    cannot decide, is then read as its closure, as invariants and guards are."""
     if not strict:
         return
-    n = P.A.shape[1]
-    slack = np.zeros(P.A.shape[0])
-    for i, _ in strict:
-        slack[i] = max(np.linalg.norm(P.A[i]), 1e-300)
-    A = np.vstack([np.hstack([P.A, slack[:, None]]), np.eye(n + 1)[-1:]])
-    b = np.append(P.b, 1.0)
-    E = np.hstack([P.E, np.zeros((P.E.shape[0], 1))]) if P.E.shape[0] else None
-    try:
-        res = lp.maximize(np.eye(n + 1)[-1], A, b, A_eq=E, b_eq=P.f if P.E.shape[0] else None)
-    except lp.LPError:
-        return                              # (no answer: read as the closure, as before)
-    if res.infeasible or (res.optimal and res.value <= OPEN_SLACK):
+    marked = np.zeros(P.A.shape[0], bool)
+    marked[[i for i, _ in strict]] = True
+    if lp.strictly_feasible(P.A, P.b, marked, A_eq=P.E, b_eq=P.f) is False:
         texts = ", ".join(sorted({t for _, t in strict}))
         raise where.error(f"the initial set is empty: its strict constraints ({texts[:80]}) leave no point "
                           "(a set with points is read as its closure)")

@@ -831,11 +831,7 @@ class Simulator:
                 sel = rows[modes == m_index]
                 options = self.instant[name]
                 guards, enabled = self._enabled(options, runs.X[sel], tolerance=0.0)
-                back = np.zeros_like(enabled)
-                for j, (tr, _) in enumerate(options):
-                    before = seen[slot[sel], self.mode_names.index(tr.target)]
-                    after = self.resets[tr.name](runs.X[sel]) if tr.name in self.resets else runs.X[sel]
-                    back[:, j] = np.all(before == after, axis=1)
+                back = self._back(options, runs.X[sel], seen[slot[sel]])
                 enabled &= ~back
                 urgent = len(self.urgent[name])
                 must = np.full(sel.size, name in self.timeless) | (guards & ~back)[:, :urgent].any(axis=1)
@@ -850,6 +846,16 @@ class Simulator:
                     moved.append(jumped)
             rows = np.concatenate(moved) if moved else rows[:0]
         runs.blocked_at[rows] = runs.t[rows]
+
+    def _back(self, options: list, X: np.ndarray, seen: np.ndarray) -> np.ndarray:
+        """``(R, T)``: where option ``j`` (``(tr, guard)``) would bring run ``r`` at ``X[r]`` to
+        a mode and state it has already been in at this instant (``seen[r, mode]``, NaN where
+        it has not been in that mode): the jump that would close a cycle of jumps at one instant."""
+        back = np.zeros((X.shape[0], len(options)), dtype=bool)
+        for j, (tr, _) in enumerate(options):
+            after = self.resets[tr.name](X) if tr.name in self.resets else X
+            back[:, j] = np.all(seen[:, self.mode_names.index(tr.target)] == after, axis=1)
+        return back
 
     def _take_may(self, rows: np.ndarray, runs: _Runs) -> None:
         """Each run of ``rows`` (at a piece start) takes an enabled may-transition with a
@@ -880,9 +886,7 @@ class Simulator:
                     continue
                 seen[slot[sel], m_index] = runs.X[sel]
                 _, enabled = self._enabled(self.exits[name], runs.X[sel], tolerance=SWITCH_TOLERANCE)
-                for j, (tr, _) in enumerate(self.exits[name]):
-                    after = self.resets[tr.name](runs.X[sel]) if tr.name in self.resets else runs.X[sel]
-                    enabled[:, j] &= ~np.all(seen[slot[sel], self.mode_names.index(tr.target)] == after, axis=1)
+                enabled &= ~self._back(self.exits[name], runs.X[sel], seen[slot[sel]])
                 before = runs.X[sel].copy()
                 jumped = self._jump(sel, self.exits[name], enabled, runs)
                 self._urgent_now(jumped, runs, m_index, before[np.isin(sel, jumped)])

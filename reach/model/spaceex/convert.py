@@ -255,19 +255,14 @@ def _closed(texts: list[tuple[str, str]]) -> list[tuple[str, str]]:
             for k, t in texts]
 
 
-#: a strict initial set whose open part leaves no ball of this radius is read as empty
-OPEN_SLACK = 1e-9
-
-
 def open_nonempty(texts: list[tuple[str, str]], closed: int, names, symbols, extra=()) -> bool:
     """Whether the relations ``texts`` (``(kind, "a op b")``, as :meth:`relation_texts` gives
     them) have a common point with their strict ones kept strict: ``texts[:closed]`` are read
     as written (the cfg's ``initially``), the rest as their closure (invariants, as SpaceEx
-    reads them), and ``extra`` (``(kind, "lhs - rhs")``, closed) is added. An LP maximises a
-    common slack ``s <= 1`` of the strict rows (each row normalised, so ``s`` is a distance):
-    the open set is empty when ``s`` cannot exceed :data:`OPEN_SLACK` (``x > 1 & x < 1``,
-    whose closure is the point 1). True where the LP cannot say (a nonlinear set, a solver
-    without an answer): keeping a set that is in fact empty only costs time."""
+    reads them), and ``extra`` (``(kind, "lhs - rhs")``, closed) is added
+    (:func:`reach.lp.strictly_feasible`: ``x > 1 & x < 1``, whose closure is the point 1, has
+    none). True where that cannot be said (a nonlinear set, a solver without an answer):
+    keeping a set that is in fact empty only costs time."""
     relations = [(k, _difference(t, k)) for k, t in texts] + list(extra)
     rows = linear_rows(relations, names, symbols)
     if rows is None:
@@ -280,17 +275,7 @@ def open_nonempty(texts: list[tuple[str, str]], closed: int, names, symbols, ext
     if not mask.any():
         return True
     A, b, E, f = rows
-    norms = np.linalg.norm(A, axis=1)
-    slack = np.where(mask, np.where(norms > 0, norms, 1.0), 0.0)
-    n = len(symbols)
-    A2 = np.vstack([np.hstack([A, slack[:, None]]), np.eye(n + 1)[-1:]])
-    b2 = np.append(b, 1.0)
-    E2 = np.hstack([E, np.zeros((len(f), 1))]) if len(f) else None
-    try:
-        res = lp.maximize(np.eye(n + 1)[-1], A2, b2, A_eq=E2, b_eq=f if len(f) else None)
-    except lp.LPError:
-        return True
-    return not res.infeasible and not (res.optimal and res.value <= OPEN_SLACK)
+    return lp.strictly_feasible(A, b, mask, A_eq=E, b_eq=f) is not False
 
 
 # ---------------------------------------------------------------------- the documents
