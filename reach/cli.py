@@ -88,7 +88,7 @@ def cmd_check(args) -> int:
     options = _parse_options(args.option, args.backend)
     validate_options(args.backend, options)
     model, props = load_bound(find_model(args.model), args.properties, args.property)
-    for finding in model.lints:             # after every input is read: bad input is one line
+    for finding in model.warnings:          # after every input is read: bad input is one line
         print(printable(f"warning: {finding}"), file=sys.stderr)
     results = check_model(backend, model, props, options)
     bound = {p.id: p for p in props}
@@ -143,7 +143,7 @@ def cmd_check_spaceex(args) -> int:
     _verbose(args)
     results, model, docs, bound = check_spaceex(args.model, args.properties, args.backend,
                                                 _parse_options(args.option, args.backend))
-    for finding in _import_findings(docs) + model.lints:
+    for finding in _import_findings(docs) + model.warnings:
         print(printable(f"warning: {finding}"), file=sys.stderr)
     saved = {}
     for r in results:

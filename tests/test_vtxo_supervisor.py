@@ -146,15 +146,21 @@ def test_shipped_models_lint_clean_except_the_zeno_variant():
     (whose boundary-layer guards meet, so the lint names a state where a cycle can be taken at
     one instant) is non-Zeno by the lint's conditions; the hysteresis thermostat is clean because
     its guards T >= 21 and T <= 19 cannot hold together."""
+    def zeno(model):
+        return [line for line in model.lints if "zero-dwell" in line]
+
     flagged = set()
     for path in sorted(Path("models").glob("*.yaml")):
-        if not path.name.startswith("_") and load_model(path).lints:
+        if not path.name.startswith("_") and zeno(load_model(path)):
             flagged.add(path.name)
     assert "vtxo_supervisor_zeno.yaml" in flagged
     assert flagged <= {"vtxo_supervisor_zeno.yaml", "vtxo_formation_smc.yaml"}
     for name in ("SRA01", "SRA02", "SRA08", "SRNA01", "SRU01", "vtxo_supervisor", "thermostat",
                  "vtxo_supervisor_tmin", "vtxo_supervisor_short_cas"):
-        assert not load_model(f"models/{name}.yaml").lints, name
+        assert not zeno(load_model(f"models/{name}.yaml")), name
+    # the supervisor's `next` is left through eight guards on id bands that cover co = T_orb
+    # together: no invariant face lint either
+    assert not load_model(MODEL).lints
 
 
 def test_a_reset_off_its_own_guard_is_no_zero_dwell_cycle(tmp_path):

@@ -278,7 +278,14 @@ class HybridAutomaton:
 
     @cached_property
     def lints(self) -> list[str]:
-        """Structural findings (not errors), one line each: zero-dwell cycles, see
+        """Structural findings (not errors), one line each: an initial set partly outside its
+        invariant, invariant faces where runs stop, zero-dwell cycles, see
         :mod:`reach.model.lint`. Computed on first use."""
         from reach.model.lint import lint
         return lint(self)
+
+    @cached_property
+    def warnings(self) -> list[str]:
+        """The findings a check warns of (:func:`reach.model.lint.lint` with ``check``)."""
+        from reach.model.lint import lint
+        return lint(self, check=True)

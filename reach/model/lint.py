@@ -36,6 +36,25 @@ separated by a positive distance that a continuous flow crosses only in positive
 bounded region: no zero-dwell run goes round it. When it is not empty, the finding names a state
 where every jump of the cycle, twice over, can happen at once, so a reader can check it.
 
+Invariant faces where no transition is enabled
+----------------------------------------------
+A run ends where it would leave its mode's invariant with no transition enabled (the
+automaton's semantics): what happens after is not checked, and a SAFE says nothing about it.
+A model rarely means that. For a mode with a linear invariant ``H x <= g`` and each row ``i``,
+the *exit face* is where a run can reach that row's boundary from inside, the flow pointing
+out (for an affine flow ``x' = A x + b``; the whole face for a nonlinear one):
+
+    H x <= g,  H_i x = g_i,  H_i (A x + b) > 0,   bounded inputs within their ranges
+
+The face is covered when the outgoing transitions' linear guards hold on all of it together (a
+transition without guard covers everything): the face minus a guard is the union of the pieces
+where one of its rows fails strictly, each searched against the remaining guards, and a piece
+left with a point (a positive slack in its strict rows) is a part no transition leaves from.
+Such a face is reported, with whether some guard meets it at all (a run there may still leave).
+(A run that only touches the boundary, its flow along it, goes on: hence the strict ``>``.)
+A row that bounds the global clock from above, alone or with constants (``t <= 20``, SpaceEx's
+``t <= stoptime``), is an end of time the model sets itself and is not reported.
+
 Each finding is one line naming the file, the field and the mode cycle (the shortest
 :data:`MAX_REPORTED` cycles, then a count)::
 
@@ -56,6 +75,9 @@ MAX_CYCLES = 20_000
 
 #: report at most this many offending cycles per model (the shortest), then a count
 MAX_REPORTED = 10
+
+#: LPs per invariant face in the search for a part of it that no guard covers
+MAX_PIECES = 200
 
 
 def edge_signature(model, transition) -> tuple[dict, dict]:
@@ -287,9 +309,104 @@ def initial_outside(model) -> str | None:
             f"'{mode.name}' ({', '.join(broken)[:100]} fails there): those states start no run")
 
 
-def lint(model) -> list[str]:
-    """All findings for ``model``, one line each (empty when the model is clean)."""
+def _exit_face(mode, row: int, H, g, low, high):
+    """``(A, b, E, f, strict)``: the exit face ``A x <= b, E x = f`` of invariant row ``row`` of
+    ``mode`` (module docstring) with the states' ``low <= x <= high`` where finite; ``strict``
+    marks the row of the flow pointing out, which must hold strictly (a run that only touches
+    the boundary, the flow along it, goes on)."""
+    n = H.shape[1]
+    finite_low, finite_high = np.isfinite(low), np.isfinite(high)
+    A = np.vstack([H, -np.eye(n)[finite_low], np.eye(n)[finite_high]])
+    b = np.concatenate([g, -low[finite_low], high[finite_high]])
+    strict = np.zeros(len(b), bool)
+    if mode.linear is not None:                 # the flow points out of the row: -H_i (A x + b) < 0
+        flow, drift = mode.linear
+        A = np.vstack([A, -(H[row] @ flow)])
+        b = np.append(b, H[row] @ drift)
+        strict = np.append(strict, True)
+    return A, b, H[row:row + 1], g[row:row + 1], strict
+
+
+def blocking_faces(model) -> list[tuple[str, bool]]:
+    """Findings for invariant rows whose exit face no single outgoing guard covers: runs that
+    reach it stop there (module docstring), each with whether some guard meets the face
+    (``partly``). Modes with a nonlinear invariant or where no time passes are passed over; a
+    nonlinear guard counts as covering (it cannot be told). One finding per mode and kind, naming
+    the rows."""
+    from reach import lp
+
+    n, findings = model.n, []
+    low, high = np.full(n, -np.inf), np.full(n, np.inf)
+    for u in model.bounded_inputs:
+        low[u.index], high[u.index] = u.low, u.high
+    clock = model.global_clock
+    reset = {j for tr in model.transitions for j in tr.reset}
+    fixed = {j for j in range(n) if j not in reset and all(m.flow[j] == 0 for m in model.modes.values())}
+    for name, mode in model.modes.items():
+        halves = mode.invariant_halfspaces
+        if mode.timeless or halves is None or not len(halves[1]):
+            continue
+        H, g = (np.asarray(a, float).reshape(len(halves[1]), n) if i == 0 else np.asarray(a, float).reshape(-1)
+                for i, a in enumerate(halves))
+        guards = []
+        for tr in model.outgoing(name):
+            found = model.guard_halfspaces(tr)
+            guards.append(None if found is None else (np.asarray(found[0], float).reshape(-1, n),
+                                                      np.asarray(found[1], float).reshape(-1)))
+        if any(guard is None or not len(guard[1]) for guard in guards):
+            continue                            # a guard that always holds, or one not told
+        blocked, partial = [], []
+        for i, constraint in enumerate(mode.invariant):
+            nz = set(np.flatnonzero(H[i]).tolist())
+            if clock in nz and H[i, clock] > 0 and nz - {clock} <= fixed:
+                continue                        # an end of time the model sets itself
+            A, b, E, f, strict = _exit_face(mode, i, H, g, low, high)
+            try:
+                if not _uncovered(A, b, strict, E, f, guards, [MAX_PIECES]):
+                    continue
+                meets = any(lp.feasible_point(np.vstack([A, G]), np.concatenate([b, c]), A_eq=E, b_eq=f) is not None
+                            for G, c in guards)
+            except lp.LPError:
+                continue
+            rows = partial if meets else blocked
+            if constraint.text not in rows:
+                rows.append(constraint.text)
+        for rows, meets in ((blocked, False), (partial, True)):
+            if rows:
+                where = ("no transition out of it is enabled on part of that boundary" if meets else
+                         "no transition out of it is enabled there")
+                listed = ", ".join(rows)
+                findings.append((f"{model.file}: modes.{name}.invariant: runs of mode '{name}' that reach "
+                                 f"the boundary of {listed if len(listed) < 160 else listed[:157] + '...'} "
+                                 f"stop there ({where}): nothing after is checked", meets))
+    return findings
+
+
+def _uncovered(A, b, strict, E, f, guards, budget: list[int]) -> bool:
+    """Whether ``{A x <= b (rows marked strict held strictly), E x = f}`` has a point in none of
+    the linear ``guards``: the set minus the first guard is the union of the pieces where one
+    of its rows fails strictly, each searched against the rest (an LP per piece,
+    :func:`reach.lp.strictly_feasible`). ``budget`` (one count, shared) caps the LPs; past it, or
+    where the solver gives no answer, the set counts as covered (no finding)."""
+    from reach import lp
+
+    if budget[0] <= 0:
+        return False
+    budget[0] -= 1
+    if not lp.strictly_feasible(A, b, strict, A_eq=E, b_eq=f):
+        return False
+    if not guards:
+        return True
+    (G, c), rest = guards[0], guards[1:]
+    return any(_uncovered(np.vstack([A, -row]), np.append(b, -bound), np.append(strict, True), E, f,
+                          rest, budget) for row, bound in zip(G, c))
+
+def lint(model, check: bool = False) -> list[str]:
+    """All findings for ``model``, one line each (empty when the model is clean). ``check``:
+    those worth a warning before a check, where invariant faces that a guard meets in part (a
+    rendezvous mode left only through its entry window) are left to ``reach lint``."""
     findings = [found] if (found := initial_outside(model)) else []
+    findings += [text for text, partly in blocking_faces(model) if not (check and partly)]
     cycles, complete = zero_dwell_cycles(model)
     cycles = sorted(cycles, key=lambda found: len(found[0]))
     for cycle, names, state in cycles[:MAX_REPORTED]:
