@@ -319,12 +319,15 @@ def line(result, prop, model) -> str:
 
 def json_row(result, prop, model, counterexample_file: str | None = None) -> dict:
     """The ``--json`` row: the result's own keys, its figures in the requirement's units under
-    ``report``, and no inline trajectory when the counterexample file holds it."""
+    ``report``, the model's warnings (:attr:`HybridAutomaton.warnings`) under ``model_warnings``
+    where it has any, and no inline trajectory when the counterexample file holds it."""
     from reach.checking import violated
 
     row = {"property": result.property, "status": result.status.value.lower(), "seconds": result.seconds}
     row.update(result.to_dict())
     row["violated"] = violated(result)      # also a probability wholly below its threshold (no run)
+    if getattr(model, "warnings", None):    # what a check warns of on stderr (runs an invariant stops)
+        row["model_warnings"] = list(model.warnings)
     if prop is not None:
         row["report"] = _plain(figures(result, prop, model))
     if counterexample_file is not None:

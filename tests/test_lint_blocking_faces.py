@@ -5,6 +5,8 @@ faces (a sampled point of an exit face in no guard must be reported; no report, 
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import yaml
 from hypothesis import given, settings
@@ -48,6 +50,9 @@ def test_a_run_stopped_by_its_invariant_is_reported_and_warned_of_on_check(tmp_p
     assert code == 3
     assert "warning:" in out.err and "x <= 5 stop there" in out.err
     assert "runs stopped before the horizon" in out.out
+    code = cli(["check", str(tmp_path / "m.yaml"), str(tmp_path / "p.yaml"), "-b", "star", "--json"])
+    (row,) = json.loads(capsys.readouterr().out)
+    assert code == 0 and row["status"] == "safe" and row["model_warnings"] == model.warnings
 
 
 def test_a_guard_on_the_face_clears_it(tmp_path):
