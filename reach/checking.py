@@ -116,8 +116,10 @@ def check_model(backend, model, bound: list, options: dict | None = None) -> lis
             continue
         if isinstance(prop, BoundSafety) and prop.empty:
             results[id(prop)] = Result(backend.name, model.name, prop.id, Status.SAFE, details={
-                "argument": "the unsafe set is empty: every piece has a constant constraint that no state meets "
-                            "(a SpaceEx forbidden = false, a requirement such as 0 <= 1); nothing was explored"})
+                "argument": "the unsafe set is empty: no piece of it lies in a mode of the model (a SpaceEx "
+                            "forbidden set naming only location combinations the composition never reaches), "
+                            "or every piece has a constant constraint that no state meets (forbidden = false, "
+                            "a requirement such as 0 <= 1); nothing was explored"})
             continue
         reason = input_reason(backend, model) or backend.supports(model, prop)
         if reason is not None:

@@ -176,11 +176,13 @@ def _term_hit(docs, model, cex) -> str:
 
 
 def cmd_import(args) -> int:
-    from reach.model.spaceex import documents, write_yaml
+    """Write the YAML model (and properties) of a SpaceEx model, once the automaton they
+    describe has been built from them: a model its own loader would refuse is bad input here."""
+    from reach.model.spaceex import load_spaceex, write_yaml
 
-    docs = documents(args.model, args.config)
+    model, _, docs = load_spaceex(args.model, args.config)
     model_file, prop_file = write_yaml(docs, args.out)
-    for finding in _import_findings(docs):
+    for finding in _import_findings(docs) + model.warnings:
         print(printable(f"warning: {finding}"), file=sys.stderr)
     print(f"wrote {model_file}" + (f" and {prop_file}" if prop_file else " (the cfg forbids nothing)"))
     return 0

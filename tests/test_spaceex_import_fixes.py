@@ -624,3 +624,83 @@ def test_the_start_jump_does_not_count_against_iter_max(tmp_path, jump, loc, for
     model, _, docs = load_spaceex(xml, cfg)
     assert model.hints["iter-max"] == iters + (0 if loc else 1)
     assert ("iter-max-start" in docs.model["notes"]) == (not loc)
+
+
+# ------------------------------------------------------ published forms refused before (round 3)
+OSCILLATOR = f'''  <component id="sys">
+    {REAL.format("x")}
+    {REAL.format("v")}
+    {REAL.format("u")}
+    <location id="1" name="run">
+      <invariant>{{bound}}</invariant>
+      <flow>x' == v &amp; v' == -x + u</flow>
+    </location>
+  </component>
+'''
+
+
+@pytest.mark.parametrize("bound", ["-u &lt;= 0.5 &amp; u &lt;= 0.5", "2*u &gt;= -1 &amp; u &lt;= 0.5",
+                                   "-0.5 &lt;= u &lt;= 0.5", "u/2 &gt;= -0.25 &amp; -u &gt;= -0.5"])
+def test_an_input_bounded_through_a_multiple_of_itself_is_an_input(tmp_path, bound):
+    """``-u <= 0.5`` (JuliaReach's platoon writes ``-aL <= 9``) bounds u by a number as
+    ``-0.5 <= u`` does. x'' = -x + u from rest with |u| <= 0.5: x(t) = int_0^t sin(t - s) u(s) ds
+    is at most 0.5 int_0^t |sin r| dr = 0.5 (1 - cos t) for t <= pi, so over a horizon of 3 the
+    largest x is 0.5 (1 - cos 3) = 0.99500 (u = 0.5 throughout): x >= 0.99 is reached, 1.01 never."""
+    body = OSCILLATOR.format(bound=bound)
+    model, _, _ = load_spaceex(*write(tmp_path, body, 'system = sys\ninitially = "x == 0 & v == 0"\n'
+                                      'forbidden = "x >= 1.01"\ntime-horizon = 3\n'))
+    (u,) = model.bounded_inputs
+    assert (u.name, u.low, u.high, u.varying) == ("u", -0.5, 0.5, True)
+    assert verdict(*write(tmp_path, body, 'system = sys\ninitially = "x == 0 & v == 0"\nforbidden = "x >= 1.01"\n'
+                                      'time-horizon = 3\n', "safe")) == "SAFE"
+    assert verdict(*write(tmp_path, body, 'system = sys\ninitially = "x == 0 & v == 0"\nforbidden = "x >= 0.99"\n'
+                                      'time-horizon = 3\n', "unsafe")) == "UNSAFE"
+
+
+@pytest.mark.parametrize("initially, forbidden", [
+    ("((x == 0)) & v == 0", "x >= 0.99"),
+    ("(((x == 0) & (v == 0)))", "((x >= 0.99))"),
+    ("x == 0 & v == 0", "((x >= 1.01)) | ((v >= 5))"),
+])
+def test_redundant_parentheses_around_relations_are_read(tmp_path, initially, forbidden):
+    """``((x == 1))`` (ARCH-COMP HPWC's Fischer cfg writes ``((loc(aut0) == k0 & true))``) is the
+    relation inside; an arithmetic group ``((x + 1))*2`` stays a term."""
+    body = OSCILLATOR.format(bound="-0.5 &lt;= u &lt;= 0.5")
+    truth = "SAFE" if "1.01" in forbidden else "UNSAFE"
+    assert verdict(*write(tmp_path, body, f'system = sys\ninitially = "{initially}"\nforbidden = "{forbidden}"\n'
+                                      'time-horizon = 3\n')) == truth
+    term = body.replace("v' == -x + u", "v' == -((x + 1))*2/2 + 1 + u")
+    assert verdict(*write(tmp_path, term, f'system = sys\ninitially = "{initially}"\nforbidden = "{forbidden}"\n'
+                                      'time-horizon = 3\n', "term")) == truth
+
+
+def test_import_refuses_what_its_own_loader_would(tmp_path, capsys):
+    """``reach import`` builds the automaton before writing: a nonlinear initial set is bad input
+    at the cfg's line there too, and nothing is written."""
+    body = OSCILLATOR.format(bound="-0.5 &lt;= u &lt;= 0.5")
+    xml, cfg = write(tmp_path, body, 'system = sys\ninitially = "x*x + v*v <= 1"\nforbidden = "x >= 2"\n'
+                                     'time-horizon = 3\n')
+    assert main(["import", str(xml), str(cfg), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"{cfg}:2:" in err[0] and "not linear" in err[0]
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_purely_discrete_system_and_an_unbounded_horizon_are_named(tmp_path, capsys):
+    """Every location ``flow false`` with an assignment (the Dutch railway network): the message
+    is the purely discrete one, not the assignment's; SpaceEx's ``time-horizon = -1`` says what
+    -1 means there."""
+    discrete = f'''  <component id="sys">
+    {REAL.format("x")}
+    <location id="1" name="a"><flow>false</flow></location>
+    <location id="2" name="b"><flow>false</flow></location>
+    <transition source="1" target="2"><assignment>x := x + 1</assignment></transition>
+  </component>
+'''
+    xml, cfg = write(tmp_path, discrete, 'system = sys\ninitially = "x == 0"\nforbidden = "x >= 2"\ntime-horizon = 3\n')
+    assert "purely discrete automaton is not supported" in refusal(xml, cfg, capsys)
+    body = OSCILLATOR.format(bound="-0.5 &lt;= u &lt;= 0.5")
+    xml, cfg = write(tmp_path, body, 'system = sys\ninitially = "x == 0 & v == 0"\nforbidden = "x >= 2"\n'
+                                     'time-horizon = -1\n', "unbounded")
+    line = refusal(xml, cfg, capsys)
+    assert line.startswith(f"{cfg}:4: time-horizon:") and "SpaceEx's -1" in line

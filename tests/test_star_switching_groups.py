@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from scipy.linalg import expm
 
+from model_files import load_files
 from reach.backends.star import BACKEND
 from reach.backends.star.switching import SwitchingModel, switching_groups
 from reach.model import load_model
@@ -198,3 +199,42 @@ horizon: 2
 """
     assert _check(tmp_path, model, "[a, b]", "['x <= 2.1', 'x >= -2.1']").status is Status.SAFE
     assert _check(tmp_path, model, "[a, b]", "['x <= 1.9']").status is not Status.SAFE
+
+
+#: an axis whose rate damping may drop out and return at any instant: nom x'' = -x - 0.5 x',
+#: fail x'' = -x + 0.1 x' (undamped, slightly unstable)
+DROPOUT = """
+name: dropout
+state: [x, v]
+modes:
+  nom: {flow: {x: v, v: "-x - 0.5*v"}}
+  fail: {flow: {x: v, v: "-x + 0.1*v"}}
+transitions:
+  - {from: nom, to: fail}
+  - {from: fail, to: nom}
+initial: {mode: nom, box: {x: [0.9, 1.0], v: [-0.1, 0.1]}}
+horizon: 10
+"""
+
+
+def test_an_undecided_inclusion_is_explored_mode_by_mode_and_its_witness_switches(tmp_path):
+    """Dropping to `fail` at t = 0 and staying there drives x below -0.9 from every initial
+    state (closed form: e^{A_fail t} x0 on a fine grid); the inclusion's witnesses replay runs
+    that never switch and are undecided, so star explores the group mode by mode: UNSAFE with
+    a replayed run through `fail`. A bound no run reaches stays SAFE."""
+    A_fail = np.array([[0.0, 1.0], [-1.0, 0.1]])
+    ts = np.linspace(0, 10, 4001)
+    corners = [np.array([x, v]) for x in (0.9, 1.0) for v in (-0.1, 0.1)]
+    lowest = max(min((expm(A_fail * t) @ x0)[0] for t in ts) for x0 in corners)
+    assert lowest < -0.95                   # every corner (and so every state) goes below -0.95
+    model, props = load_files(tmp_path, DROPOUT, """
+        properties:
+          - {id: low, kind: safety, modes: [nom, fail], require: ["x >= -0.9"]}
+          - {id: wide, kind: safety, modes: [nom, fail], require: ["x >= -10"]}
+    """)
+    low = BACKEND.check(model, props["low"], {})
+    assert low.status is Status.UNSAFE
+    assert "explored mode by mode" in low.details["semantics"]
+    cex = low.counterexample
+    assert cex.transitions and cex.violation_state[0] < -0.9     # a run that switched, below -0.9
+    assert BACKEND.check(model, props["wide"], {}).status is Status.SAFE

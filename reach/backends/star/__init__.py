@@ -400,9 +400,28 @@ class StarBackend:
             result = check_switching(model, prop, opt, lambda data, blocks: self._explore(
                 model, prop, opt, start, data, blocks))
             if result.status is Status.UNKNOWN and opt.switching_hull and not opt.discrete_time:
-                return _with_hull(model, prop, opt, result, start)
+                result = _with_hull(model, prop, opt, result, start)
+            if result.status is Status.UNKNOWN:
+                return self._mode_by_mode(model, prop, opt, result, start)
             return result
         return self._explore(model, prop, opt, start)
+
+    def _mode_by_mode(self, model, prop, opt, undecided: Result, start) -> Result:
+        """After the switching inclusion (and its hull) left ``undecided``: the group's modes
+        explored one by one, as ``-o switching=false`` does, with what is left of the time
+        budget. The inclusion's witnesses replay only runs that never switch; mode by mode, a
+        witness names its switches (a group whose other member violates at once: UNSAFE,
+        replayed). A verdict of this pass is returned; otherwise ``undecided``."""
+        if opt.max_seconds is not None and time.perf_counter() - start >= opt.max_seconds:
+            return undecided
+        result = self._explore(model, prop, replace(opt, switching=False), start)
+        if result.status is Status.UNKNOWN:
+            undecided.seconds = result.seconds
+            undecided.details["mode_by_mode"] = result.details.get("reason", "")
+            return undecided
+        result.details["semantics"] += (f"; explored mode by mode: the switching inclusion was undecided "
+                                        f"({undecided.details.get('reason', '')})")
+        return result
 
     def _explore(self, model, prop, opt, start, data=None, linearise=None) -> Result:
         """One exploration and its Result (``data``, ``linearise``: see :class:`_Explorer`)."""

@@ -63,6 +63,7 @@ from reach.backends.taylor.keys import picklable
 from reach.backends.taylor.nominal import NominalFailure
 from reach.backends.taylor import units
 from reach.backends.taylor.problem import EventProblem, global_clock, unsupported_switch
+from reach.model.lint import blocking_faces
 from reach.backends.taylor.units import expand_boxes, sweep_box
 from reach.result import Result, Status
 from reach.backends.taylor.safety import check_safety, margins, witness
@@ -381,6 +382,10 @@ class TaylorBackend:
                 "perturbed runs leave the initial mode through the nominal run's guard face",
                 "the integration error of the flow is negligible",
             ]
+            if blocking_faces(model):
+                details["assumptions"].append(
+                    "runs go on past an invariant boundary where no transition is enabled (reach lint "
+                    "names it), though the automaton stops them there: the bound may hold values no run reaches")
             details["why_not_safe"] = "the remainder is estimated; remainder: rigorous proves bounds"
             gaps = sorted({r["gap"] for r in rows if "gap" in r})
             if gaps:

@@ -143,6 +143,44 @@ class ModeCode:
             self._returns[came.name] = out
         return self._returns[came.name]
 
+    def alive(self, box: np.ndarray, leaving: bool = True) -> bool:
+        """Whether every state of ``box`` (``(n, 2)`` bounds) keeps its run going: inside the
+        mode's invariant, or (``leaving``), on the part of the box beyond an invariant row,
+        inside one urgent guard, which the run leaves by (an LP over the box cut by that row).
+        A run elsewhere outside the invariant has stopped before (the automaton blocks it).
+        False where that cannot be shown: a nonlinear invariant or guard, an unbounded box."""
+        mode = self.model.modes[self.name]
+        if not mode.invariant:
+            return True
+        halves = mode.invariant_halfspaces
+        if halves is None or not np.all(np.isfinite(box)):
+            return False
+        n = self.model.n
+        H, g = np.asarray(halves[0], float).reshape(-1, n), np.asarray(halves[1], float).reshape(-1)
+        center, radius = box.mean(axis=1), 0.5 * (box[:, 1] - box[:, 0])
+        beyond = [r for r in range(len(g)) if H[r] @ center + np.abs(H[r]) @ radius > g[r]]
+        if beyond and not leaving:
+            return False
+        return all(self._leaves_beyond(H[r], g[r], box) for r in beyond)
+
+    def _leaves_beyond(self, row, bound, box) -> bool:
+        """Whether one urgent exit's linear guard holds on all of ``box`` cut by ``row x >= bound``."""
+        from reach import lp
+
+        bounds = (box[:, 0], box[:, 1])
+        for ex in self.exits:
+            guard = self.model.guard_halfspaces(ex.transition)
+            if guard is None:
+                continue
+            G, c = np.asarray(guard[0], float).reshape(-1, self.model.n), np.asarray(guard[1], float).reshape(-1)
+            try:
+                if all((res := lp.maximize(r, -row[None, :], [-bound], bounds=bounds)).optimal
+                       and res.value <= b + 1e-9 * (1.0 + abs(b)) for r, b in zip(G, c)):
+                    return True
+            except lp.LPError:
+                continue
+        return False
+
     def may_enter(self, ex: Exit, X) -> bool:
         """Whether the guard of ``ex`` may hold for some deviation of the Taylor models ``X``."""
         return all(face(X).bound()[0] <= 0 for face in ex.faces)
@@ -618,8 +656,13 @@ class EventProblem:
                 return _unbounded(str(err))
             stretches += 1
             steps, error = steps + len(enc.steps), max(error, float(np.max(enc.error_box)))
-            # the start counts for the inner end only if no run can switch at t = 0
-            certified = hop == 0 and code.inside(start, False) is None
+            # the start counts for the inner end only if no run can switch at t = 0; a run
+            # may stop where the invariant ends it with no urgent exit (ModeCode.alive): the
+            # inner end then stops where that may first happen, and no branch after is sure
+            entered = np.array([x.bound() for x in start], dtype=float)
+            sure = sure and code.alive(entered, leaving=False)
+            certified = hop == 0 and code.inside(start, False) is None and sure
+            blocked = not sure
             if code.q is not None and hop > 0 and sure:
                 lo, hi = code.q(start).bound()
                 inner = max(inner, lo if sign > 0 else -hi)
@@ -630,6 +673,8 @@ class EventProblem:
             returning = dict(code.returns(came)) if came is not None else {}
             for k in range(len(enc.steps)):
                 X = enc.tm(k)
+                if not blocked and not code.alive(np.array([x.bound() for x in X], dtype=float)):
+                    blocked, certified = True, False
                 returning = self._returning(returning, X)
                 if kept is not None:
                     kept.append(_step_box(mode, X, enc.steps[k], t_earliest, self.clock))
@@ -688,7 +733,7 @@ class EventProblem:
                 # no run enters before this stretch's earliest start plus the window's start
                 earliest = max(box[self.clock, 0], t_earliest + enc.steps[first[i]].t0)
                 branches.append((ex.transition.target, start_box, start_error, earliest, hop + 1,
-                                 sure and len(possible) == 1 and ex is exit_taken, ex.transition))
+                                 not blocked and len(possible) == 1 and ex is exit_taken, ex.transition))
         bound = (inner, outer) if sign > 0 else (-outer, -inner)
         out = {"bound": tuple(float(v) for v in bound), "steps": steps, "error": error,
                "stretches": stretches}

@@ -305,29 +305,39 @@ def _numeric(tokens) -> float | None:
     return number_of(to_python(tokens, lambda n: n))
 
 
+PURELY_DISCRETE = ("the system has no continuous variable (a variable with a flow; every location's flow "
+                   "is 'false' or empty): a purely discrete automaton is not supported")
+
+
 def _bound_of(rel: Relation, var: str):
-    """``(lo, hi)`` if ``rel`` only bounds ``var`` by numbers (a chain like ``a <= var <= b``)."""
+    """``(lo, hi)`` if ``rel`` only bounds ``var`` by numbers: each comparison of the chain is
+    affine in ``var`` alone (``a <= var <= b``, ``-var <= 9``, ``2*var >= -1``)."""
     if any(set(names_in(p)) - {var} for p in rel.parts) or not any(names_in(p) for p in rel.parts):
         return None
+    symbol = sympy.Symbol("bounded_var", real=True)
+
+    def rename(name: str) -> str:
+        return "bounded_var" if name == var else name
+
     lo, hi = -np.inf, np.inf
     for lhs, op, rhs in _pairs(rel):
         if op not in ("<=", "<", ">=", ">"):
             return None
         if op in (">=", ">"):
             lhs, rhs = rhs, lhs
-        a, b = _only_name(lhs), _only_name(rhs)
-        if a == var and b is None:
-            value = _numeric(rhs)
-            if value is None:
-                return None
-            hi = min(hi, value)
-        elif b == var and a is None:
-            value = _numeric(lhs)
-            if value is None:
-                return None
-            lo = max(lo, value)
-        else:
+        try:
+            g = parse_expr(f"({to_python(lhs, rename)}) - ({to_python(rhs, rename)})",
+                           {"bounded_var": symbol}, Where())
+        except InputError:
             return None
+        coeffs = affine_coefficients(sympy.expand(g), [symbol])        # a var + c <= 0
+        if coeffs is None or coeffs[0][0] == 0 or not np.isfinite(coeffs[1]):
+            return None
+        a, c = float(coeffs[0][0]), float(coeffs[1])
+        if a > 0:
+            hi = min(hi, -c / a)
+        else:
+            lo = max(lo, -c / a)
     return lo, hi
 
 
@@ -493,6 +503,8 @@ class DocumentBuilder(Converter):
         states = set()
         for flows in self.flows.values():
             states |= set(flows)
+        if not states:
+            raise self.flat.error(PURELY_DISCRETE)
         used_where: dict[str, set] = {}
         for key in self.flat.locations:
             for rel, _ in self.invariants[key]:
@@ -720,8 +732,7 @@ class DocumentBuilder(Converter):
         cfg_names = {g for r in cfg_rel for p in r.parts for n in names_in(p) for g in self.lookup(n)}
         self.classify(cfg_names)
         if not self.states:
-            raise self.flat.error("the system has no continuous variable (a variable with a flow): a purely "
-                                  "discrete automaton is not supported")
+            raise self.flat.error(PURELY_DISCRETE)
         self.check_size()
         self.yaml = yaml_names(self.states + list(self.inputs))
         modes = Identifiers()
@@ -773,6 +784,10 @@ class DocumentBuilder(Converter):
         horizon = cfg.number("time-horizon")
         if horizon is None:
             raise cfg.missing("time-horizon")
+        if horizon < 0:                     # SpaceEx: -1 explores until a fixpoint, unbounded
+            raise InputError(f"time-horizon = {horizon:g}: an unbounded horizon (SpaceEx's -1, up to a "
+                             "fixpoint) is not supported; give a positive time", cfg.file,
+                             "time-horizon", cfg.line("time-horizon"))
         data["horizon"] = horizon
         lines[("horizon",)] = (cfg.file, cfg.line("time-horizon"))
         notes = {"source": self.file, "config": cfg.file}

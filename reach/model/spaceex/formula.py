@@ -143,21 +143,35 @@ class _Parser:
         nxt = self.peek(k)
         return nxt is None or nxt.text in ("&", "&&", "|", "||", ")")
 
-    def _group_is_formula(self) -> bool:
-        """Does the parenthesis at the cursor enclose a formula (not an arithmetic term)?"""
+    def _group_is_formula(self, start: int | None = None) -> bool:
+        """Does the parenthesis at the cursor (or at ``start``) enclose a formula (not an
+        arithmetic term)? A group holding just another group, ``((x == 1))``, is one if that
+        inner group is."""
+        start = self.i if start is None else start
         depth = 0
-        for j in range(self.i, len(self.t)):
+        for j in range(start, len(self.t)):
             text = self.t[j].text
             if text == "(":
                 depth += 1
             elif text == ")":
                 depth -= 1
                 if depth == 0:
-                    return False
+                    inner = start + 1
+                    return self.t[inner].text == "(" and self._closing(inner) == j - 1 and \
+                        self._group_is_formula(inner)
             elif depth == 1 and (text in COMPARISONS or text in ("&", "&&", "|", "||")
                                  or (self.t[j].kind == "name" and text in ("true", "false", "loc"))):
                 return True
         raise FormulaError("unbalanced parentheses")
+
+    def _closing(self, start: int) -> int | None:
+        """The index of the parenthesis closing the one at ``start``, or None."""
+        depth = 0
+        for j in range(start, len(self.t)):
+            depth += {"(": 1, ")": -1}.get(self.t[j].text, 0)
+            if depth == 0:
+                return j
+        return None
 
     def relation(self) -> Relation:
         parts, ops, current, depth = [], [], [], 0
