@@ -148,7 +148,7 @@ def cmd_check_spaceex(args) -> int:
     saved = {}
     for r in results:
         if r.counterexample is not None and args.counterexamples:
-            model_file, prop_file = write_yaml(docs, args.counterexamples)
+            model_file, prop_file = write_yaml(docs, args.counterexamples, "--counterexamples")
             cex = r.counterexample
             cex.model_file, cex.property_file = str(model_file), str(prop_file)
             # the YAML property file names each forbidden term; replay the one that was hit
@@ -302,7 +302,8 @@ def _figure_path(out: str | None, default: Path) -> Path:
     if path.is_dir():
         raise InputError(f"{printable(path)} is a folder (give a file name such as {printable(path / default.name)})",
                          field="--out")
-    formats = Figure().canvas.get_supported_filetypes()
+    # pgf needs a LaTeX installation (xelatex) to write: not one the tool can rely on
+    formats = {k: v for k, v in Figure().canvas.get_supported_filetypes().items() if k != "pgf"}
     if path.suffix.lstrip(".").lower() not in formats:
         raise InputError(f"unknown picture format '{path.suffix or '(none)'}'; use one of "
                          f"{', '.join('.' + f for f in sorted(formats))}", field="--out")

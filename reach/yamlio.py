@@ -33,6 +33,10 @@ class Doc:
         return Where(file, _field(path) or "", line)
 
 
+#: a YAML integer beyond this (a 401-digit literal) has no double value: bad input at its line
+MAX_INTEGER = 10 ** 308
+
+
 def _convert(node, loader, path, lines, file, budget):
     budget[0] += 1
     if not node.tag.startswith("tag:yaml.org,2002:") or "python" in node.tag:
@@ -61,7 +65,11 @@ def _convert(node, loader, path, lines, file, budget):
         return out
     if isinstance(node, yaml.SequenceNode):
         return [_convert(v, loader, path + (i,), lines, file, budget) for i, v in enumerate(node.value)]
-    return loader.construct_object(node)
+    value = loader.construct_object(node)
+    if isinstance(value, int) and not isinstance(value, bool) and abs(value) > MAX_INTEGER:
+        raise InputError(f"the number {printable(node.value)[:40]}... is beyond double precision", file,
+                         _field(path), node.start_mark.line + 1)
+    return value
 
 
 def parse_text(text: str, file: str) -> Doc:

@@ -16,7 +16,7 @@ from reach.executors import make_executor
 from reach.bench.suite import load_suite
 from reach.bench.tables import markdown_table
 from reach.errors import InputError
-from reach.paths import few, writable_folder
+from reach.paths import few, printable, writable_folder
 
 
 def run_unit(model_path: str, property_path: str, backend: str, options: dict) -> list[dict]:
@@ -33,10 +33,19 @@ def run_unit(model_path: str, property_path: str, backend: str, options: dict) -
 def _read_inputs(instances) -> None:
     """Load every chosen instance's model and bind its property file, before any unit runs: a
     malformed one is bad input (exit 2, its file, line and field), not a unit error that the
-    cross-checks would count as a failure (exit 1)."""
+    cross-checks would count as a failure (exit 1); so is an expected verdict of a property the
+    file does not have (it would never be checked)."""
     from reach.checking import load_bound
-    for model, properties in dict.fromkeys((str(i.model), str(i.properties)) for i in instances):
-        load_bound(model, properties)
+    ids: dict[tuple, set] = {}
+    for inst in instances:
+        key = (str(inst.model), str(inst.properties))
+        if key not in ids:
+            ids[key] = {p.id for p in load_bound(*key)[1]}
+        unknown = sorted(set(inst.expect) - ids[key])
+        if unknown:                             # an expectation that would never be checked
+            raise InputError(f"instance '{inst.id}' expects a verdict of '{unknown[0]}', which is no property "
+                             f"of {printable(inst.properties)} (it has {', '.join(sorted(ids[key]))[:200]})",
+                             field=f"instances.{inst.id}.expect")
 
 
 def plot_models(instances, folder: Path, stream, executor) -> list[str]:

@@ -55,7 +55,7 @@ import sympy
 
 from reach import lp
 from reach.errors import InputError, Where, not_a_mode
-from reach.paths import printable
+from reach.paths import printable, within
 from reach.model.automaton import (MAX_VARIABLES, BoundedInput, Controller, Disturbance, HybridAutomaton, InitialSet,
                                    LinearSet, Mode, Transition)
 from reach.model.constraints import affine_coefficients, from_comparisons
@@ -101,7 +101,9 @@ def bad_name(name) -> str | None:
 
 
 def read_with_templates(path: Path, depth: int = 0, chain=()) -> Doc:
-    """The YAML document with its ``extends`` chain merged in."""
+    """The YAML document with its ``extends`` chain merged in. Templates are read only from the
+    folder of the model file first named or the working folder (or below them): a model handed
+    to reach cannot make it read, and quote in an error, a YAML file anywhere else."""
     doc = load(path)
     if not isinstance(doc.data, dict):
         raise InputError("a model file must be a mapping", doc.file, line=1)
@@ -124,6 +126,10 @@ def read_with_templates(path: Path, depth: int = 0, chain=()) -> Doc:
         raise where.error("'extends' forms a cycle or is nested too deeply")
     if parent_path.suffix.lower() not in (".yaml", ".yml"):
         raise where.error(f"'{printable(parent)}' is not a .yaml or .yml file (a template is a model file)")
+    root = (chain[0] if chain else path.resolve()).parent
+    if not within(parent_path, [root, Path.cwd()]):     # nor are its contents quoted in an error
+        raise where.error(f"'{printable(parent)}' lies outside the folder of the model file and the working "
+                          f"folder: a template is read only from there (as a suite's files)")
     base = read_with_templates(parent_path, depth + 1, chain + (path.resolve(),))
     merged = merge(base, doc)
     merged.data.pop("extends", None)

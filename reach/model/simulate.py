@@ -104,21 +104,24 @@ def _blas_controller():
     return ThreadpoolController()
 
 
-def check_size(model: HybridAutomaton, dt: float, runs: int = 0, given: bool = True) -> None:
+def check_size(model: HybridAutomaton, dt: float, runs: int = 0, given: bool = True, option: str = "dt") -> None:
     """Refuse (InputError) a grid or a batch of runs that would not fit: more than
     :data:`MAX_STEPS` steps, or an estimate of the one-step matrix powers of the linear modes
     plus ``runs`` runs' arrays above :data:`MEMORY_BUDGET`. The powers of a mode are at most
     :data:`POWERS_HELD` (:class:`_Powers` holds those asked for, and a segment asks for at most
     ``MAX_WINDOW + 1``), whatever the number of steps. ``given``: ``dt`` is the option's (else
-    the model's default, and the message names the model's field that set it)."""
+    the model's default, and the message names the model's field that set it; ``option`` names
+    the option that gave it)."""
     from reach.errors import InputError
 
     if given:
-        file, step_field = None, "options.dt"
+        file, step_field = None, f"options.{option}"
     else:                               # the model's own grid: its disturbance step, or its horizon
         file, step_field = model.file, "disturbance.step" if model.disturbance is not None else "horizon"
     if not np.isfinite(dt) or dt <= 0:
         raise InputError(f"the simulator step must be a positive number, got {dt}", file, step_field)
+    if given and dt > model.horizon:    # a replay refuses such a run (check_run): so does the check
+        raise InputError(f"the simulator step {dt:g} is longer than the horizon {model.horizon:g}", file, step_field)
     steps = model.horizon / dt
     if steps > MAX_STEPS:
         raise InputError(f"{model.name}: horizon {model.horizon:g} / step {dt:g} = {steps:.3g} grid steps; at "

@@ -195,7 +195,7 @@ from reach.backends.star.options import (DEFAULT_PASS_SHARE, DEPTH_LP_TOLERANCE,
 from reach.backends.star.switching import SwitchingModel, check_switching
 from reach.backends.star.transitions import _LinearModel, _unsafe_pieces
 from reach.backends.star.witnesses import witness_details
-from reach.model.simulate import single_threaded
+from reach.model.simulate import check_size, single_threaded
 from reach.result import Result, Status
 from reach.sets import Star
 from reach.spec.properties import BoundSafety
@@ -236,6 +236,11 @@ def _with_budget(options, opt: StarOptions, share: float):
 JOINT_SHARE = 0.25
 
 
+#: why a check whose matrices hold inf or NaN cannot go on
+OVERFLOW = ("numbers beyond double precision: a flow or its linearisation overflows (terms such as "
+            "1e300*h*h or exp(700*h))")
+
+
 class StarBackend:
     name = NAME
     varying_inputs = True           # time-varying bounded inputs: the input set per step
@@ -243,10 +248,13 @@ class StarBackend:
     def supports(self, model, prop) -> str | None:
         if getattr(prop, "kind", None) != "safety":
             return f"the star back-end checks safety properties only (got '{getattr(prop, 'kind', '?')}')"
-        if not _LinearModel.of(model).linear:
-            reason = LinearisedModel.of(model).reason
-            if reason is not None:
-                return reason
+        try:
+            if not _LinearModel.of(model).linear:
+                reason = LinearisedModel.of(model).reason
+                if reason is not None:
+                    return reason
+        except np.linalg.LinAlgError as failure:        # inf or NaN in a flow's matrices
+            return f"{OVERFLOW} ({failure})"
         if model.disturbance is not None:
             return "stochastic disturbance: the star back-end is deterministic (use fsr or montecarlo)"
         for mode in prop.modes:
@@ -263,6 +271,9 @@ class StarBackend:
                 return self._check_with_retry(model, prop, options)
             except MemoryError:         # past the memory guard (an allocation larger than its margin)
                 pass
+            except np.linalg.LinAlgError as failure:    # inf or NaN in a matrix: an overflowing flow
+                return Result(NAME, model.name, prop.id, Status.UNKNOWN, time.perf_counter() - start,
+                              details={"reason": f"{OVERFLOW} ({failure}); nothing concluded"})
         # out of the handler, the failed search's frames are freed: the next property has them
         return Result(NAME, model.name, prop.id, Status.UNKNOWN, time.perf_counter() - start,
                       details={"reason": "out of memory: an allocation failed (nothing concluded; a coarser "
@@ -305,6 +316,8 @@ class StarBackend:
         if reason is not None:
             return Result(NAME, model.name, prop.id, Status.UNSUPPORTED, details={"reason": reason})
         opt = StarOptions.from_dict(options)
+        if opt.replay_dt is not None:           # bad input now, not a replay that fails later
+            check_size(model, opt.replay_dt, option="replay_dt")
         shared = first_share(model, options, opt)
         first = self._check_aggregating(model, prop, options, shared, start)
         spent = time.perf_counter() - start

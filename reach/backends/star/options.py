@@ -173,8 +173,8 @@ class StarOptions:
     max_coefficients: int = 2_000
     max_deaggregations: int = 50
     max_nested_refinements: int = ranged(3, 0)
-    touch_tolerance: float = 1e-9
-    replay_dt: float | None = None
+    touch_tolerance: float = ranged(1e-9, 0.0, 1e-3, open_low=True)
+    replay_dt: float | None = ranged(None, 0.0, open_low=True)
     keep_sets: bool = False
     linearise_cells: int | None = ranged(None, 1)
     linearise_inflations: int = ranged(8, 1)

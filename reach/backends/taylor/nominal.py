@@ -172,6 +172,11 @@ class _Run:
         self.t, self.y, self.y_old, self.F, self.stopped = [t0], y0, [], [], False
 
 
+#: accepted and rejected steps of one batch at most (the suite's runs take under 500): past them
+#: the nominal run fails
+MAX_STEPS = 20_000
+
+
 def dop853(fun, t0: np.ndarray, y0: np.ndarray, t_end: np.ndarray, rtol: float, atol: np.ndarray,
            first_step: np.ndarray | None = None, dense: bool = False, stops: list | None = None) -> list[_Run]:
     """Adaptive DOP853 of the rows of ``y0`` from ``t0`` to ``t_end`` (module docstring): a
@@ -188,7 +193,12 @@ def dop853(fun, t0: np.ndarray, y0: np.ndarray, t_end: np.ndarray, rtol: float, 
     active = t < t_end
     retry = np.zeros(n_runs, dtype=bool)
     K = np.empty((n_runs, STAGES + 1 + len(A_EXTRA), n))          # run b's stages are K[b]
+    steps = 0
     while active.any():
+        steps += 1
+        if steps > MAX_STEPS:                   # sin(1e300 x): steps at the spacing of the numbers
+            raise NominalFailure(f"the nominal run failed: more than {MAX_STEPS} steps (a flow that "
+                                 "oscillates or changes faster than the horizon can be followed)")
         idx = np.flatnonzero(active)
         ti, yi, ha = t[idx], y[idx], h_abs[idx]
         min_step = 10 * np.abs(np.nextafter(ti, np.inf) - ti)

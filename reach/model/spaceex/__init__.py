@@ -70,17 +70,23 @@ def load_spaceex(xml_path, cfg_path=None):
     return model, props, docs
 
 
-def write_yaml(docs: Documents, out_dir) -> tuple[Path, Path | None]:
+def write_yaml(docs: Documents, out_dir, option: str = "--out") -> tuple[Path, Path | None]:
     """Write ``out_dir/models/NAME.yaml`` and ``out_dir/properties/NAME.yaml`` (if the cfg
-    forbids anything); NAME is the cfg's file name, sanitised."""
+    forbids anything); NAME is the cfg's file name, sanitised. The folder ``out_dir`` is the
+    user's (``option`` names it); ``models`` and ``properties`` below it are the tool's, and one
+    that is a symbolic link is bad input (a write through it would land wherever it points)."""
     import yaml
 
-    from reach.paths import safe_name, writable_file
+    from reach.errors import InputError
+    from reach.paths import printable, safe_name, writable_file
 
     safe = safe_name(str(docs.model["name"]), "model")
     out = Path(out_dir)
-    model_path = writable_file(out / "models" / f"{safe}.yaml", "--out")     # both checked before
-    prop_path = None if docs.properties is None else writable_file(out / "properties" / f"{safe}.yaml", "--out")
+    for sub in ("models", "properties"):
+        if (out / sub).is_symlink():
+            raise InputError(f"{printable(out / sub)} is a symbolic link: not written through", field=option)
+    model_path = writable_file(out / "models" / f"{safe}.yaml", option)     # both checked before
+    prop_path = None if docs.properties is None else writable_file(out / "properties" / f"{safe}.yaml", option)
     header = f"# {docs.model['description']}\n"
     model_path.write_text(header + yaml.safe_dump(docs.model, sort_keys=False, width=120))
     if prop_path is not None:

@@ -1,0 +1,86 @@
+"""Inputs read and outputs written only in their places, and overflowing numbers as answers,
+not crashes: a template outside the model's and the working folder, a symbolic link where the
+import writes its models/ folder, a suite expectation of a property that does not exist, a
+flow too large for double precision (star), a flow taylor's nominal run cannot follow."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import yaml
+
+from reach.cli import main
+
+ROOT = Path(__file__).resolve().parent.parent
+TANK = (ROOT / "tests/data/tank.yaml").read_text()
+LEVEL = ROOT / "tests/data/tank_level.yaml"
+
+
+def test_a_template_outside_the_model_and_working_folders_is_not_read(tmp_path, capsys, monkeypatch):
+    """The foreign file's contents never reach the message; a template beside the model is read."""
+    foreign = tmp_path / "foreign"
+    foreign.mkdir()
+    (foreign / "secret.yaml").write_text('state: ["sk-live-ABCDEF123"]\n')
+    work, models = tmp_path / "work", tmp_path / "models"
+    work.mkdir()
+    models.mkdir()
+    (models / "m.yaml").write_text(f"extends: {foreign / 'secret.yaml'}\nname: m\n")
+    monkeypatch.chdir(work)
+    assert main(["check", str(models / "m.yaml"), str(LEVEL), "-b", "star"]) == 2
+    err = capsys.readouterr().err
+    assert "lies outside the folder of the model file and the working folder" in err and "sk-live" not in err
+    (models / "_base.yaml").write_text(TANK)
+    (models / "child.yaml").write_text("extends: _base.yaml\nname: child\n")
+    assert main(["check", str(models / "child.yaml"), str(LEVEL), "-b", "star"]) in (0, 1, 3)
+
+
+def test_a_linked_models_folder_below_an_absolute_out_is_not_written_through(tmp_path, capsys):
+    victim, out = tmp_path / "victim", tmp_path / "imp"
+    victim.mkdir()
+    out.mkdir()
+    os.symlink(victim, out / "models")
+    xml = ROOT / "models/spaceex/BouncingBall/bball.xml"
+    cfg = ROOT / "models/spaceex/BouncingBall/bball-height.cfg"
+    assert main(["import", str(xml), str(cfg), "--out", str(out.resolve())]) == 2
+    assert "models is a symbolic link: not written through" in capsys.readouterr().err
+    assert list(victim.iterdir()) == []
+
+
+def test_a_suite_expecting_a_property_the_file_lacks_is_bad_input(tmp_path, capsys):
+    (tmp_path / "tank.yaml").write_text(TANK)
+    (tmp_path / "level.yaml").write_text(LEVEL.read_text())
+    suite = {"backends": {"star": {}},
+             "instances": [{"id": "T", "model": "tank.yaml", "properties": "level.yaml", "expect": {"nosuch": "safe"}}]}
+    (tmp_path / "suite.yaml").write_text(yaml.safe_dump(suite))
+    assert main(["bench", "--suite", str(tmp_path / "suite.yaml"), "--out", str(tmp_path / "out"), "-j", "1"]) == 2
+    assert "expects a verdict of 'nosuch', which is no property" in capsys.readouterr().err
+
+
+def overflowing(tmp_path, flow: str) -> Path:
+    """A one-state model whose flow is ``flow`` and its property file ``p.yaml`` (h <= 2)."""
+    doc = {"name": "over", "state": ["h"], "horizon": 10,
+           "modes": {"fill": {"flow": {"h": flow}}}, "initial": {"mode": "fill", "box": {"h": [0.9, 1.0]}}}
+    (tmp_path / "p.yaml").write_text(yaml.safe_dump(
+        {"properties": [{"id": "level", "kind": "safety", "modes": ["fill"], "require": ["h <= 2"]}]}))
+    path = tmp_path / "m.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    return path
+
+
+def test_a_flow_beyond_double_precision_is_undecided_not_a_crash(tmp_path, capsys):
+    """star: UNSUPPORTED naming the overflow (exit 3, no 'internal error')."""
+    path = overflowing(tmp_path, "1e300*h*h + 0.01")
+    assert main(["check", str(path), str(tmp_path / "p.yaml"), "-b", "star"]) == 3
+    out = capsys.readouterr()
+    assert "numbers beyond double precision" in out.out and "internal error" not in out.err
+
+
+def test_taylors_nominal_run_gives_up_on_a_flow_it_cannot_follow(tmp_path, capsys):
+    """sin(1e300 h) needs steps at the spacing of the numbers: the nominal run stops after its
+    step budget (UNKNOWN naming it) instead of running on past any time budget."""
+    from reach.backends.taylor.nominal import MAX_STEPS
+
+    path = overflowing(tmp_path, "0.02 - 0.01*h + sin(1e300*h)")
+    assert main(["check", str(path), str(tmp_path / "p.yaml"), "-b", "taylor"]) == 3
+    assert f"more than {MAX_STEPS} steps" in capsys.readouterr().out
