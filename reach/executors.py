@@ -72,13 +72,31 @@ class LocalExecutor:
             for i, args in enumerate(arg_list):
                 yield i, guarded(fn, args, time_limit)
             return
-        with ProcessPoolExecutor(max_workers=self.jobs, initializer=_worker_start) as pool:
+        pool = ProcessPoolExecutor(max_workers=self.jobs, initializer=_worker_start)
+        try:
             futures = {pool.submit(guarded, fn, args, time_limit): i for i, args in enumerate(arg_list)}
             pending = set(futures)
             while pending:
                 done, pending = wait(pending, return_when=FIRST_COMPLETED)
                 for f in done:
                     yield futures[f], f.result()
+        except BaseException:                   # Ctrl-C, an error, the caller stopping early
+            stop_workers(pool)
+            raise
+        pool.shutdown(wait=True)
+
+
+def stop_workers(pool: ProcessPoolExecutor) -> None:
+    """End ``pool`` now: its queued units cancelled and its worker processes terminated (a
+    plain shutdown waits for the units under way, minutes of a Monte Carlo batch after a
+    Ctrl-C)."""
+    processes = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes:
+        if process.is_alive():
+            process.terminate()
+    for process in processes:
+        process.join(timeout=5)
 
 
 def check_address(scheduler, field: str) -> None:

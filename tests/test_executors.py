@@ -134,3 +134,35 @@ def test_local_workers_end_with_a_killed_parent():
     for p in survivors:
         os.kill(p, signal.SIGKILL)
     assert not survivors
+
+
+def _spin(seconds):
+    """A unit that computes for ``seconds`` (a Monte Carlo batch would)."""
+    import time as clock
+    end = clock.time() + seconds
+    while clock.time() < end:
+        pass
+    return seconds
+
+
+def _interrupt(signum, frame):
+    raise KeyboardInterrupt
+
+
+def test_an_interrupt_ends_the_workers_at_once():
+    """Ctrl-C while the pool runs (a SIGALRM raising KeyboardInterrupt after 1 s, in wait())
+    ends its workers at once: the pool does not wait for the units under way (60 s each)."""
+    import signal
+    import time as clock
+
+    executor = LocalExecutor(jobs=2)
+    previous = signal.signal(signal.SIGALRM, _interrupt)
+    begin = clock.time()
+    try:
+        signal.setitimer(signal.ITIMER_REAL, 1.0)
+        with pytest.raises(KeyboardInterrupt):
+            list(executor.map_unordered(_spin, [(60.0,), (60.0,), (60.0,)]))
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+    assert clock.time() - begin < 30
