@@ -71,3 +71,34 @@ def test_runs_leaving_through_an_urgent_guard_keep_their_proof(tmp_path):
     result = TAYLOR.check(model, props["reach_near"], {"remainder": "rigorous"})
     assert result.status is Status.SAFE
     assert not any("invariant boundary" in a for a in result.details["assumptions"])
+
+
+#: the hand-over to B needs B's invariant y <= 0.5 after the jump; y stays near 0.9, so the jump
+#: is never enabled and every run stops at x = 1 (t <= 1 of a 5 s horizon)
+HANDOVER = """
+    name: handover
+    state: [x, y]
+    modes:
+      A:
+        flow: {x: 1, y: "-0.1*y"}
+        invariant: ["x <= 1"]
+      B:
+        flow: {x: 1, y: "-0.1*y"}
+        invariant: ["y <= 0.5"]
+    transitions:
+      hand: {from: A, to: B, guard: ["x >= 1"], urgent: true}
+    initial: {mode: A, box: {x: [0, 0.2], y: [0.9, 1.0]}}
+    horizon: 5
+"""
+
+
+def test_a_jump_its_target_invariant_disables_does_not_carry_the_proof(tmp_path):
+    """y(1) >= 0.9 e^{-0.1} = 0.81 > 0.5 when x reaches 1: no run enters B, every run ends at
+    x = 1; max x >= 3 fails (UNSAFE, replayed), where following the jump would reach x = 5."""
+    assert 0.9 * np.exp(-0.1) > 0.5
+    model, props = load_files(tmp_path, HANDOVER, """
+        properties:
+          - {id: reach3, kind: event, modes: [A, B], maximize: x, require: ">= 3"}
+    """)
+    result = TAYLOR.check(model, props["reach3"], {"remainder": "rigorous"})
+    assert result.status is Status.UNSAFE and result.counterexample.violation_mode == "A"

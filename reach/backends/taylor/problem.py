@@ -28,6 +28,7 @@ from __future__ import annotations
 
 from collections import OrderedDict
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import sympy
@@ -66,6 +67,28 @@ class Exit:
     margins: object          # numpy margins of the guard, (N, n) -> (N, k)
     faces: list              # compiled g_j for DA / Taylor models
     reset: object | None     # compiled reset (all states) or None
+
+
+def enabling_rows(model, transition):
+    """``(G, c)``: where ``transition`` is enabled, ``G x <= c``: its guard, and its target's
+    invariant at the reset state (``H (R x + r) <= h`` for an affine reset ``x+ = R x + r``);
+    None if either is not linear."""
+    n = model.n
+    guard = model.guard_halfspaces(transition)
+    target = model.modes[transition.target].invariant_halfspaces
+    if guard is None or target is None:
+        return None
+    G, c = np.asarray(guard[0], float).reshape(-1, n), np.asarray(guard[1], float).reshape(-1)
+    H, h = np.asarray(target[0], float).reshape(-1, n), np.asarray(target[1], float).reshape(-1)
+    if not len(h):
+        return G, c
+    R, r = np.eye(n), np.zeros(n)
+    for i, expr in transition.reset.items():
+        coeffs = affine_coefficients(expr, model.symbols)
+        if coeffs is None:
+            return None
+        R[i], r[i] = coeffs
+    return np.vstack([G, H @ R]), np.concatenate([c, h - H @ r])
 
 
 class ModeCode:
@@ -143,11 +166,13 @@ class ModeCode:
             self._returns[came.name] = out
         return self._returns[came.name]
 
-    def alive(self, box: np.ndarray, leaving: bool = True) -> bool:
-        """Whether every state of ``box`` (``(n, 2)`` bounds) keeps its run going: inside the
-        mode's invariant, or (``leaving``), on the part of the box beyond an invariant row,
-        inside one urgent guard, which the run leaves by (an LP over the box cut by that row).
-        A run elsewhere outside the invariant has stopped before (the automaton blocks it).
+    def alive(self, box: np.ndarray) -> bool:
+        """Whether no run with its states in ``box`` (``(n, 2)`` bounds, a step's enclosure) can
+        stop there. A run stops only on its invariant's boundary, where the flow points out
+        (``H_r x = g_r``, ``H_r f(x) >= 0``) and no transition is enabled; so for each row the box
+        may break, the part of the box on that face with the flow out (an affine flow: rows of
+        an LP; a nonlinear one: the part beyond the face) must lie where one urgent exit is
+        enabled: its guard, and its target's invariant at the reset state (:func:`enabling_rows`).
         False where that cannot be shown: a nonlinear invariant or guard, an unbounded box."""
         mode = self.model.modes[self.name]
         if not mode.invariant:
@@ -157,25 +182,47 @@ class ModeCode:
             return False
         n = self.model.n
         H, g = np.asarray(halves[0], float).reshape(-1, n), np.asarray(halves[1], float).reshape(-1)
+        box = box.copy()                        # states no flow or jump changes keep their initial range
+        fixed = self._fixed
+        box[fixed, 0] = np.maximum(box[fixed, 0], self.model.initial.low[fixed])
+        box[fixed, 1] = np.minimum(box[fixed, 1], self.model.initial.high[fixed])
         center, radius = box.mean(axis=1), 0.5 * (box[:, 1] - box[:, 0])
         beyond = [r for r in range(len(g)) if H[r] @ center + np.abs(H[r]) @ radius > g[r]]
-        if beyond and not leaving:
-            return False
-        return all(self._leaves_beyond(H[r], g[r], box) for r in beyond)
+        return all(self._leaves_at(H[r], g[r], box) for r in beyond)
 
-    def _leaves_beyond(self, row, bound, box) -> bool:
-        """Whether one urgent exit's linear guard holds on all of ``box`` cut by ``row x >= bound``."""
+    @cached_property
+    def _fixed(self) -> np.ndarray:
+        """The states with flow 0 in every mode that no jump resets (parameters, a switch time)."""
+        model = self.model
+        reset = {i for tr in model.transitions for i in tr.reset}
+        return np.array([i for i in range(model.n) if i not in reset
+                         and all(m.flow[i] == 0 for m in model.modes.values())], dtype=int)
+
+    def _leaves_at(self, row, bound, box) -> bool:
+        """Whether the runs of ``box`` that may stop on the face ``row x = bound`` (the flow
+        pointing out) all have an urgent exit enabled there (LPs over the box)."""
         from reach import lp
 
+        linear = self.model.modes[self.name].linear
+        if linear is not None:                  # on the face, flow out: row x = bound, -row (A x + b) <= 0
+            A, b = linear
+            A_ub, b_ub, A_eq, b_eq = -(row @ A)[None, :], [row @ b], row[None, :], [bound]
+        else:                                   # the part of the box beyond the face
+            A_ub, b_ub, A_eq, b_eq = -row[None, :], [-bound], None, None
         bounds = (box[:, 0], box[:, 1])
+        try:
+            if lp.feasible_point(A_ub, b_ub, A_eq=A_eq, b_eq=b_eq, bounds=bounds) is None:
+                return True                     # no run reaches that face moving out
+        except lp.LPError:
+            return False
+        size = np.abs(box).max(axis=1)          # a row's rounding scale: the magnitudes it combines
         for ex in self.exits:
-            guard = self.model.guard_halfspaces(ex.transition)
-            if guard is None:
+            rows = enabling_rows(self.model, ex.transition)
+            if rows is None:
                 continue
-            G, c = np.asarray(guard[0], float).reshape(-1, self.model.n), np.asarray(guard[1], float).reshape(-1)
             try:
-                if all((res := lp.maximize(r, -row[None, :], [-bound], bounds=bounds)).optimal
-                       and res.value <= b + 1e-9 * (1.0 + abs(b)) for r, b in zip(G, c)):
+                if all((res := lp.maximize(r, A_ub, b_ub, A_eq=A_eq, b_eq=b_eq, bounds=bounds)).optimal
+                       and res.value <= c + 1e-9 * (1.0 + abs(c) + np.abs(r) @ size) for r, c in zip(*rows)):
                     return True
             except lp.LPError:
                 continue
@@ -657,11 +704,9 @@ class EventProblem:
             stretches += 1
             steps, error = steps + len(enc.steps), max(error, float(np.max(enc.error_box)))
             # the start counts for the inner end only if no run can switch at t = 0; a run
-            # may stop where the invariant ends it with no urgent exit (ModeCode.alive): the
-            # inner end then stops where that may first happen, and no branch after is sure
-            entered = np.array([x.bound() for x in start], dtype=float)
-            sure = sure and code.alive(entered, leaving=False)
-            certified = hop == 0 and code.inside(start, False) is None and sure
+            # may stop where the invariant ends it with no urgent exit enabled (ModeCode.alive):
+            # the inner end then stops where that may first happen, and no branch after is sure
+            certified = hop == 0 and code.inside(start, False) is None
             blocked = not sure
             if code.q is not None and hop > 0 and sure:
                 lo, hi = code.q(start).bound()
