@@ -211,16 +211,16 @@ def summary(result, prop, model) -> str:
 
 
 def cmd_lint(args) -> int:
-    """Lint model files (a directory: every ``*.yaml`` in it except ``_`` templates); exit 1
-    if anything is found."""
+    """Lint model files (a directory: every ``*.yaml`` in it except ``_`` templates and symbolic
+    links); exit 1 if anything is found."""
     from reach.model import load_model
 
     files = []
     for name in args.models:
         path = Path(name)
         if path.is_dir():                   # its models: property files are passed over
-            files.extend(sorted(p for p in path.glob("*.yaml")
-                                if not p.name.startswith("_") and not _is_property_file(p)))
+            files.extend(sorted(p for p in path.glob("*.yaml")      # a link may point anywhere: not read
+                                if not p.name.startswith("_") and not p.is_symlink() and not _is_property_file(p)))
         else:
             files.append(find_model(name))
     findings = [line for f in files for line in load_model(f).lints]
@@ -544,6 +544,10 @@ def build_parser() -> argparse.ArgumentParser:
 BAD_PATH_ERRORS = {errno.ENAMETOOLONG, errno.ENOENT, errno.ENOTDIR, errno.EISDIR, errno.EACCES, errno.ELOOP}
 
 
+#: characters of a bad-input line at most (the file, line and field come first)
+MAX_MESSAGE = 2000
+
+
 def main(argv=None) -> int:
     """Run one command; every failure becomes one line on stderr and an exit code of the contract."""
     args = build_parser().parse_args(argv)
@@ -554,7 +558,10 @@ def main(argv=None) -> int:
     try:
         return args.func(args)
     except InputError as exc:
-        print(printable(f"reach: {exc}"), file=sys.stderr)
+        line = printable(f"reach: {exc}")
+        if len(line) > MAX_MESSAGE:             # a name of megabytes quoted whole
+            line = line[:MAX_MESSAGE - 3] + "..."
+        print(line, file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("reach: interrupted", file=sys.stderr)

@@ -84,3 +84,20 @@ def test_taylors_nominal_run_gives_up_on_a_flow_it_cannot_follow(tmp_path, capsy
     path = overflowing(tmp_path, "0.02 - 0.01*h + sin(1e300*h)")
     assert main(["check", str(path), str(tmp_path / "p.yaml"), "-b", "taylor"]) == 3
     assert f"more than {MAX_STEPS} steps" in capsys.readouterr().out
+
+
+def test_a_bad_input_line_is_cut_at_two_thousand_characters(tmp_path, capsys):
+    """A property naming a mode of 10000 characters is refused quoting it, in one readable line."""
+    (tmp_path / "p.yaml").write_text(yaml.safe_dump({"properties": [
+        {"id": "long", "kind": "safety", "modes": ["a" * 10000], "require": ["h <= 2[m]"]}]}))
+    (tmp_path / "m.yaml").write_text(TANK)
+    assert main(["check", str(tmp_path / "m.yaml"), str(tmp_path / "p.yaml"), "-b", "star"]) == 2
+    (line,) = capsys.readouterr().err.splitlines()
+    assert len(line) == 2000 and line.endswith("...") and "p.yaml:" in line
+
+
+def test_lint_of_a_folder_does_not_read_through_links(tmp_path, capsys):
+    (tmp_path / "tank.yaml").write_text(TANK)
+    os.symlink("/etc/passwd", tmp_path / "pw.yaml")
+    assert main(["lint", str(tmp_path)]) == 0
+    assert "no findings (1 model)" in capsys.readouterr().out
