@@ -101,3 +101,13 @@ def test_lint_of_a_folder_does_not_read_through_links(tmp_path, capsys):
     os.symlink("/etc/passwd", tmp_path / "pw.yaml")
     assert main(["lint", str(tmp_path)]) == 0
     assert "no findings (1 model)" in capsys.readouterr().out
+
+
+def test_a_suite_option_out_of_range_is_named(tmp_path, capsys):
+    (tmp_path / "tank.yaml").write_text(TANK)
+    (tmp_path / "level.yaml").write_text(LEVEL.read_text())
+    suite = {"backends": {"star": {"step": -1}},
+             "instances": [{"id": "T", "model": "tank.yaml", "properties": "level.yaml"}]}
+    (tmp_path / "suite.yaml").write_text(yaml.safe_dump(suite))
+    assert main(["bench", "--suite", str(tmp_path / "suite.yaml"), "--out", str(tmp_path / "out"), "-j", "1"]) == 2
+    assert "backends.star: step: expected a number > 0, got -1" in capsys.readouterr().err

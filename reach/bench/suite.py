@@ -114,5 +114,8 @@ def _valid_options(doc, backend: str, options, path: tuple) -> None:
     a bad one is bad input at its line in the suite, before anything runs."""
     try:
         validate_options(backend, options)
-    except InputError as exc:
-        raise doc.where(*path).error(exc.message) from None
+    except InputError as exc:                   # named as in the suite: backends.star.step
+        option = (exc.field or "").rsplit(".", 1)[-1]
+        where = doc.where(*path)
+        message = f"{option}: {exc.message}" if option and option in options else exc.message
+        raise where.error(message) from None
