@@ -7,6 +7,7 @@ in each docstring; a refusal must be one line naming the file, the line and the 
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from reach.checking import check_spaceex
@@ -704,3 +705,28 @@ def test_a_purely_discrete_system_and_an_unbounded_horizon_are_named(tmp_path, c
                                      'time-horizon = -1\n', "unbounded")
     line = refusal(xml, cfg, capsys)
     assert line.startswith(f"{cfg}:4: time-horizon:") and "SpaceEx's -1" in line
+
+
+CIRCLE = f'''  <component id="circle">
+    {REAL.format("x")}
+    {REAL.format("y")}
+    <param name="hop" type="label" local="false"/>
+    <location id="1" name="p"><invariant>y &gt;= 0</invariant><flow>x' == -y &amp; y' == x</flow></location>
+    <location id="2" name="n"><invariant>y &lt;= 0</invariant><flow>x' == -y &amp; y' == x</flow></location>
+    <transition source="1" target="2"><label>hop</label><guard>y &lt;= 0</guard></transition>
+    <transition source="2" target="1"><label>hop</label><guard>y &gt;= 0</guard></transition>
+  </component>
+'''
+
+
+@pytest.mark.parametrize("forbidden, truth", [("y <= -0.75", "UNSAFE"), ("y <= -0.76", "UNKNOWN")])
+def test_a_path_past_iter_max_is_left_and_the_others_followed(tmp_path, forbidden, truth):
+    """(x, y) = (1, 0) in p or n, rotating: y = sin t. With iter-max 1 (two jumps with the start
+    jump) the path start -> p -> n (at t = pi) reaches y = sin 4 = -0.7568 by the horizon 4: a
+    violation of y <= -0.75 within the bound is UNSAFE even though the path start -> n -> p ...
+    goes past the bound; y <= -0.76 is met by no path within it, and the deeper ones are not
+    followed: UNKNOWN, not SAFE."""
+    assert -0.76 < np.sin(4.0) < -0.75
+    xml, cfg = write(tmp_path, CIRCLE, f'system = circle\ninitially = "x == 1 & y == 0"\nforbidden = "{forbidden}"\n'
+                                       'time-horizon = 4\niter-max = 1\n')
+    assert verdict(xml, cfg) == truth

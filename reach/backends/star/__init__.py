@@ -70,7 +70,8 @@ are explored as one differential inclusion per group, ``x' = A_m x + b_m + w`` w
 members' differences bounded over a box the block stays in (:mod:`.switching`), instead of a
 possible switch at every cell of every chain (option ``switching``).
 
-Jumps. ``max_jumps`` bounds the jumps along a path (none by default). When the model may
+Jumps. ``max_jumps`` bounds the jumps along a path (none by default): a path past it is not
+followed, the others are (a violation within the bound is UNSAFE; otherwise UNKNOWN). When the model may
 have a zero-dwell cycle (:mod:`reach.model.lint`), a path may take at most ``STALL_JUMPS``
 jumps while its earliest clock advances by less than one time step; beyond, UNKNOWN (a
 Zeno-like run cannot be followed to the horizon). Any other model may take ``CHATTER_JUMPS``
@@ -448,6 +449,8 @@ class StarBackend:
                                             f"piece after refinement; no witness replayed (a smaller "
                                             f"step, -o step={explorer.h / 10:.3g}, may decide it)",
                             witness=explorer.unresolved[0], imprecise=True)
+            if explorer.too_deep:                   # no violation within the bound, none proved past it
+                raise _Stop(Status.UNKNOWN, explorer.too_deep)
             if opt.discrete_time:
                 raise _Stop(Status.UNKNOWN, "no violation at the grid points (discrete time: "
                                             "behaviour between grid points is not checked)")

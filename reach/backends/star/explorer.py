@@ -221,6 +221,7 @@ class _Explorer:
                              f"cells; at most {MAX_CELLS:.0e} (use a larger step)", field="options.star.step")
         self.flows, self.invariants, self.jumps = dict(data.flows), data.invariants, data.fired
         self.max_jumps = np.inf if options.max_jumps is None else options.max_jumps
+        self.too_deep: str | None = None        # why a path past max_jumps was not followed
         self.stall_limit = STALL_JUMPS if data.zero_dwell else CHATTER_JUMPS
         self.aggregate_after = None if self.sweep else options.aggregate_after
         self.last_progress = self.started = time.perf_counter()
@@ -530,9 +531,10 @@ class _Explorer:
         star, point = self._start(star, guess, direction)
         if star is None:
             return
-        if path.jumps > self.max_jumps:
-            raise _Stop(Status.UNKNOWN, f"more than {self.max_jumps} discrete jumps on a path "
-                                        f"(option max_jumps; a SpaceEx cfg's iter-max sets it)")
+        if path.jumps > self.max_jumps:         # not followed; the other paths still are (a
+            self.too_deep = (f"more than {self.max_jumps} discrete jumps on a path "    # violation
+                             f"(option max_jumps; a SpaceEx cfg's iter-max sets it)")  # within them
+            return                                                                      # is UNSAFE)
         if path.stalled > self.stall_limit:
             cause = "possible zero-dwell cycle" if self.data.zero_dwell else "switching faster than the step resolves"
             raise _Stop(Status.UNKNOWN, f"{path.stalled} jumps within one time step ({cause})", imprecise=True)
