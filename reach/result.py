@@ -110,8 +110,10 @@ class Counterexample:
         file = printable(str(path))
         text = read_text(path, (".json",), "counterexample file")
         try:
-            data = json.loads(text)
-        except (json.JSONDecodeError, RecursionError, ValueError) as exc:
+            data = json.loads(text.removeprefix("\ufeff"))        # a byte-order mark an editor added
+        except json.JSONDecodeError as exc:
+            raise InputError(f"not a counterexample file: invalid JSON ({exc.msg})", file, line=exc.lineno) from None
+        except (RecursionError, ValueError) as exc:
             raise InputError(f"not a counterexample file: invalid JSON ({exc.__class__.__name__})", file) from None
         if not isinstance(data, dict):
             raise InputError("not a counterexample file (expected a JSON object)", file)

@@ -111,3 +111,17 @@ def test_a_suite_option_out_of_range_is_named(tmp_path, capsys):
     (tmp_path / "suite.yaml").write_text(yaml.safe_dump(suite))
     assert main(["bench", "--suite", str(tmp_path / "suite.yaml"), "--out", str(tmp_path / "out"), "-j", "1"]) == 2
     assert "backends.star: step: expected a number > 0, got -1" in capsys.readouterr().err
+
+
+def test_a_counterexample_with_a_byte_order_mark_replays(tmp_path, capsys):
+    """An editor's UTF-8 byte-order mark in front of a saved counterexample is not part of it."""
+    model = tmp_path / "tank.yaml"
+    model.write_text(TANK)
+    folder = tmp_path / "cex"
+    assert main(["check", str(model), str(LEVEL), "-b", "montecarlo", "-p", "tight",
+                 "--counterexamples", str(folder)]) == 1
+    (saved,) = folder.glob("*.json")
+    saved.write_text("\ufeff" + saved.read_text(), encoding="utf-8")
+    capsys.readouterr()
+    assert main(["replay", str(saved)]) == 1
+    assert "violates 'tight'" in capsys.readouterr().out
