@@ -237,6 +237,9 @@ def _with_budget(options, opt: StarOptions, share: float):
 JOINT_SHARE = 0.25
 
 
+#: the least time the mode-by-mode pass after an undecided switching inclusion has (seconds)
+MODE_BY_MODE_SECONDS = 5.0
+
 #: why a check whose matrices hold inf or NaN cannot go on
 OVERFLOW = ("numbers beyond double precision: a flow or its linearisation overflows (terms such as "
             "1e300*h*h or exp(700*h))")
@@ -425,10 +428,16 @@ class StarBackend:
         explored one by one, as ``-o switching=false`` does, with what is left of the time
         budget. The inclusion's witnesses replay only runs that never switch; mode by mode, a
         witness names its switches (a group whose other member violates at once: UNSAFE,
-        replayed). A verdict of this pass is returned; otherwise ``undecided``."""
-        if opt.max_seconds is not None and time.perf_counter() - start >= opt.max_seconds:
-            return undecided
-        result = self._explore(model, prop, replace(opt, switching=False), start)
+        replayed). A verdict of this pass is returned; otherwise ``undecided``. The pass is a
+        try: it has as long as the inclusion took, at least :data:`MODE_BY_MODE_SECONDS`, within
+        ``max_seconds`` (mode by mode, a group over a long horizon is a switch per cell)."""
+        spent = time.perf_counter() - start
+        limit = spent + max(MODE_BY_MODE_SECONDS, spent)
+        if opt.max_seconds is not None:
+            if spent >= opt.max_seconds:
+                return undecided
+            limit = min(limit, opt.max_seconds)
+        result = self._explore(model, prop, replace(opt, switching=False, max_seconds=limit), start)
         if result.status is Status.UNKNOWN:
             undecided.seconds = result.seconds
             undecided.details["mode_by_mode"] = result.details.get("reason", "")
