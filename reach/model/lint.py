@@ -138,13 +138,19 @@ def linear_jump(model, transition):
     hs = _halfspaces(list(transition.guard) + list(model.modes[transition.source].invariant), symbols)
     if hs is None:
         return None
+    reset = affine_reset(model, transition)
+    return None if reset is None else (hs[0], hs[1], *reset)
+
+
+def affine_reset(model, transition):
+    """``(R, r)`` with the transition's reset ``x+ = R x + r``; None if it is not affine."""
     R, r = np.eye(model.n), np.zeros(model.n)
     for i, expr in transition.reset.items():
-        coeffs = affine_coefficients(expr, symbols)
+        coeffs = affine_coefficients(expr, model.symbols)
         if coeffs is None:
             return None
         R[i], r[i] = coeffs
-    return hs[0], hs[1], R, r
+    return R, r
 
 
 def fixed_ranges(model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -340,14 +346,12 @@ def blocking_faces(model) -> list[tuple[str, bool]]:
     for u in model.bounded_inputs:
         low[u.index], high[u.index] = u.low, u.high
     clock = model.global_clock
-    reset = {j for tr in model.transitions for j in tr.reset}
-    fixed = {j for j in range(n) if j not in reset and all(m.flow[j] == 0 for m in model.modes.values())}
+    fixed = set(fixed_ranges(model)[0].tolist())
     for name, mode in model.modes.items():
         halves = mode.invariant_halfspaces
         if mode.timeless or halves is None or not len(halves[1]):
             continue
-        H, g = (np.asarray(a, float).reshape(len(halves[1]), n) if i == 0 else np.asarray(a, float).reshape(-1)
-                for i, a in enumerate(halves))
+        H, g = np.asarray(halves[0], float).reshape(-1, n), np.asarray(halves[1], float).reshape(-1)
         guards = []
         for tr in model.outgoing(name):
             found = model.guard_halfspaces(tr)

@@ -47,6 +47,7 @@ from reach.backends.taylor.tm import TM
 from reach.backends.taylor.tm_flowpipe import stretch_from_box
 from reach.backends.taylor.verified import ROUNDING, at_sigma, crossing, enclose_stretch, sigma_in
 from reach.model.constraints import affine_coefficients, lambdify_margins, opposite_pairs
+from reach.model.lint import affine_reset, fixed_ranges
 from reach.spec.properties import BoundEvent
 
 MAX_SWITCHES = 8
@@ -82,12 +83,10 @@ def enabling_rows(model, transition):
     H, h = np.asarray(target[0], float).reshape(-1, n), np.asarray(target[1], float).reshape(-1)
     if not len(h):
         return G, c
-    R, r = np.eye(n), np.zeros(n)
-    for i, expr in transition.reset.items():
-        coeffs = affine_coefficients(expr, model.symbols)
-        if coeffs is None:
-            return None
-        R[i], r[i] = coeffs
+    reset = affine_reset(model, transition)
+    if reset is None:
+        return None
+    R, r = reset
     return np.vstack([G, H @ R]), np.concatenate([c, h - H @ r])
 
 
@@ -183,20 +182,18 @@ class ModeCode:
         n = self.model.n
         H, g = np.asarray(halves[0], float).reshape(-1, n), np.asarray(halves[1], float).reshape(-1)
         box = box.copy()                        # states no flow or jump changes keep their initial range
-        fixed = self._fixed
-        box[fixed, 0] = np.maximum(box[fixed, 0], self.model.initial.low[fixed])
-        box[fixed, 1] = np.minimum(box[fixed, 1], self.model.initial.high[fixed])
+        fixed, low, high = self._fixed
+        box[fixed, 0] = np.maximum(box[fixed, 0], low)
+        box[fixed, 1] = np.minimum(box[fixed, 1], high)
         center, radius = box.mean(axis=1), 0.5 * (box[:, 1] - box[:, 0])
         beyond = [r for r in range(len(g)) if H[r] @ center + np.abs(H[r]) @ radius > g[r]]
         return all(self._leaves_at(H[r], g[r], box) for r in beyond)
 
     @cached_property
-    def _fixed(self) -> np.ndarray:
-        """The states with flow 0 in every mode that no jump resets (parameters, a switch time)."""
-        model = self.model
-        reset = {i for tr in model.transitions for i in tr.reset}
-        return np.array([i for i in range(model.n) if i not in reset
-                         and all(m.flow[i] == 0 for m in model.modes.values())], dtype=int)
+    def _fixed(self) -> tuple:
+        """``(index, low, high)`` of the states no run changes (parameters, a switch time) and
+        their initial ranges (:func:`reach.model.lint.fixed_ranges`)."""
+        return fixed_ranges(self.model)
 
     def _leaves_at(self, row, bound, box) -> bool:
         """Whether the runs of ``box`` that may stop on the face ``row x = bound`` (the flow
