@@ -4,8 +4,11 @@ Profiles (``HYPOTHESIS_PROFILE`` picks one; default ``ci`` when ``CI`` is set, e
 
 * ``ci``: derandomised (each test's examples follow from its own source, so a CI run is
   repeatable), no example database, no deadline, failing examples printed with their blob;
-* ``dev``: random exploration from one seed for the whole run, printed in the report header;
-  ``HYPOTHESIS_SEED=N`` repeats a run.
+* ``dev``: random exploration from one seed for the whole run (every test worker takes the
+  same one), printed in the report header; ``HYPOTHESIS_SEED=N`` repeats a run.
+
+The tests run on one worker process per core (pytest-xdist, ``-n auto`` in pyproject.toml);
+``-n 0`` runs them in this process.
 
 Every test also runs under pytest-timeout (``[tool.pytest.ini_options]`` in pyproject.toml),
 so a hang fails with the stacks of all threads instead of stalling the suite.
@@ -26,6 +29,8 @@ settings.register_profile("dev", deadline=None, print_blob=True)
 PROFILE = os.environ.get("HYPOTHESIS_PROFILE") or ("ci" if os.environ.get("CI") else "dev")
 settings.load_profile(PROFILE)
 SEED = None if settings.default.derandomize else int(os.environ.get("HYPOTHESIS_SEED") or random.getrandbits(32))
+if SEED is not None:             # the test workers (pytest-xdist) start after this and take the same seed
+    os.environ["HYPOTHESIS_SEED"] = str(SEED)
 
 
 def hypothesis_line() -> str:
