@@ -138,3 +138,29 @@ def test_findings_agree_with_sampled_faces(tmp_path_factory, a, b, cut):
         # the lint works with strict slack: a gap narrower than the grid could still be real,
         # but none of these cuts leave one (their ends sit on the grid)
         assert not face_reported
+
+
+def test_a_jump_into_a_target_whose_invariant_fails_after_it_leaves_the_face_open(tmp_path, capsys):
+    """x' = 1, y' = 1 under x <= 5, left at x >= 5 for `out`, whose invariant y <= 3 fails after
+    the jump for the runs from y in [4, 5]: the jump is not taken (the automaton's semantics),
+    so those runs stop at x = 5 -- the simulator's runs do -- and the lint names the target's
+    row. A reset y := 0 makes the row hold after every jump: no finding; nor where the mode keeps
+    y (whether it holds was settled before the mode, a matter of reachability)."""
+    flow = {"x": 1, "y": 1, "t": 1}
+    tr = {"from": "go", "to": "out", "guard": ["x >= 5"], "urgent": True}
+    doc = one_mode(["x <= 5"], flow, [tr], box={"x": [0, 1], "y": [0, 5], "t": 0}, state=("x", "y", "t"))
+    doc["modes"]["out"]["invariant"] = ["y <= 3"]
+    model = write(tmp_path, doc)
+    (finding, partly), = blocking_faces(model)
+    assert partly and "boundary of x <= 5" in finding and "'out': y <= 3" in finding
+    assert model.warnings == []                   # a guard meets the face: `reach lint` only
+    (tmp_path / "p.yaml").write_text(yaml.safe_dump(
+        {"properties": [{"id": "ymax", "kind": "safety", "modes": ["go", "out"], "require": ["y <= 20"]}]}))
+    code = cli(["check", str(tmp_path / "m.yaml"), str(tmp_path / "p.yaml"), "-b", "montecarlo",
+                "-o", "samples=200", "-o", "optimise=false"])
+    assert code == 3 and "runs stopped before the horizon" in capsys.readouterr().out
+    doc["transitions"][0]["reset"] = {"y": 0}
+    assert blocking_faces(write(tmp_path, doc, "reset")) == []
+    doc["transitions"][0].pop("reset")
+    doc["modes"]["go"]["flow"]["y"] = 0     # y held since the mode was entered: reachability's matter
+    assert blocking_faces(write(tmp_path, doc, "kept")) == []

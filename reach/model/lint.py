@@ -46,11 +46,19 @@ out (for an affine flow ``x' = A x + b``; the whole face for a nonlinear one):
 
     H x <= g,  H_i x = g_i,  H_i (A x + b) > 0,   bounded inputs within their ranges
 
-The face is covered when the outgoing transitions' linear guards hold on all of it together (a
-transition without guard covers everything): the face minus a guard is the union of the pieces
-where one of its rows fails strictly, each searched against the remaining guards, and a piece
-left with a point (a positive slack in its strict rows) is a part no transition leaves from.
-Such a face is reported, with whether some guard meets it at all (a run there may still leave).
+The face is covered when the outgoing transitions are enabled on all of it together (a
+transition without guard into a mode without invariant covers everything). A transition is
+enabled where its guard holds and its target's invariant holds at the reset state
+(:func:`enabling_rows`: ``H (R x + r) <= h`` for an affine reset; a nonlinear reset or target
+invariant leaves the guard alone, a nonlinear guard counts as covering): a hand-over into a
+mode whose invariant fails after it does not happen. Only the target's rows that read a state
+the mode's flow moves or the jump resets count: a row on states the mode keeps (a budget
+``rem >= 0`` spent elsewhere) held or failed since the mode was entered, which reachability,
+not the face, decides. The face minus an enabled set is the union
+of the pieces where one of its rows fails strictly, each searched against the remaining sets,
+and a piece left with a point (a positive slack in its strict rows) is a part no transition
+leaves from. Such a face is reported, with whether some enabled set meets it at all (a run
+there may still leave).
 (A run that only touches the boundary, its flow along it, goes on: hence the strict ``>``.)
 A row that bounds the global clock from above, alone or with constants (``t <= 20``, SpaceEx's
 ``t <= stoptime``), is an end of time the model sets itself and is not reported.
@@ -151,6 +159,30 @@ def affine_reset(model, transition):
             return None
         R[i], r[i] = coeffs
     return R, r
+
+
+def enabling_rows(model, transition, reading=None):
+    """``(G, c)``: where ``transition`` is enabled, ``G x <= c``: its guard, and its target's
+    invariant at the reset state (``H (R x + r) <= h`` for an affine reset ``x+ = R x + r``);
+    None if either is not linear. ``reading``: keep only the target's rows that read one of
+    these states (all rows when None)."""
+    n = model.n
+    guard = model.guard_halfspaces(transition)
+    target = model.modes[transition.target].invariant_halfspaces
+    if guard is None or target is None:
+        return None
+    G, c = np.asarray(guard[0], float).reshape(-1, n), np.asarray(guard[1], float).reshape(-1)
+    H, h = np.asarray(target[0], float).reshape(-1, n), np.asarray(target[1], float).reshape(-1)
+    if reading is not None:
+        keep = np.any(H[:, sorted(reading)] != 0, axis=1) if reading else np.zeros(len(h), bool)
+        H, h = H[keep], h[keep]
+    if not len(h):
+        return G, c
+    reset = affine_reset(model, transition)
+    if reset is None:
+        return None
+    R, r = reset
+    return np.vstack([G, H @ R]), np.concatenate([c, h - H @ r])
 
 
 def fixed_ranges(model) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -334,10 +366,10 @@ def _exit_face(mode, row: int, H, g, low, high):
 
 
 def blocking_faces(model) -> list[tuple[str, bool]]:
-    """Findings for invariant rows whose exit face no single outgoing guard covers: runs that
-    reach it stop there (module docstring), each with whether some guard meets the face
-    (``partly``). Modes with a nonlinear invariant or where no time passes are passed over; a
-    nonlinear guard counts as covering (it cannot be told). One finding per mode and kind, naming
+    """Findings for invariant rows whose exit face the outgoing transitions' enabled sets do not
+    cover: runs that reach it stop there (module docstring), each with whether some enabled set
+    meets the face (``partly``). Modes with a nonlinear invariant or where no time passes are
+    passed over; a nonlinear guard counts as covering (it cannot be told). One finding per mode and kind, naming
     the rows."""
     from reach import lp
 
@@ -352,14 +384,22 @@ def blocking_faces(model) -> list[tuple[str, bool]]:
         if mode.timeless or halves is None or not len(halves[1]):
             continue
         H, g = np.asarray(halves[0], float).reshape(-1, n), np.asarray(halves[1], float).reshape(-1)
-        guards = []
+        guards, plain, targets = [], [], []
         for tr in model.outgoing(name):
-            found = model.guard_halfspaces(tr)
-            guards.append(None if found is None else (np.asarray(found[0], float).reshape(-1, n),
-                                                      np.asarray(found[1], float).reshape(-1)))
+            moved = {i for i, rate in enumerate(mode.flow) if rate != 0} | set(tr.reset)
+            found, guard = enabling_rows(model, tr, moved), model.guard_halfspaces(tr)
+            guards.append(_rows(found or guard, n))
+            plain.append(_rows(guard, n))
+            if found is not None and guard is not None and len(found[1]) > len(guard[1]):
+                read = {model.symbols[i] for i in moved}
+                after = {model.symbols[i]: e for i, e in tr.reset.items()}
+                texts = [c.text for c in model.modes[tr.target].invariant
+                         if sympy.sympify(c.g).subs(after, simultaneous=True).free_symbols & read]
+                if texts:
+                    targets.append(f"'{tr.target}': {', '.join(dict.fromkeys(texts))}")
         if any(guard is None or not len(guard[1]) for guard in guards):
-            continue                            # a guard that always holds, or one not told
-        blocked, partial = [], []
+            continue                            # a transition always enabled, or one not told
+        blocked, partial, by_target = [], [], False
         for i, constraint in enumerate(mode.invariant):
             nz = set(np.flatnonzero(H[i]).tolist())
             if clock in nz and H[i, clock] > 0 and nz - {clock} <= fixed:
@@ -375,15 +415,27 @@ def blocking_faces(model) -> list[tuple[str, bool]]:
             rows = partial if meets else blocked
             if constraint.text not in rows:
                 rows.append(constraint.text)
+            if targets and not by_target and all(G is not None for G in plain):
+                by_target = not _uncovered(A, b, strict, E, f, plain, [MAX_PIECES])
         for rows, meets in ((blocked, False), (partial, True)):
             if rows:
                 where = ("no transition out of it is enabled on part of that boundary" if meets else
                          "no transition out of it is enabled there")
+                if by_target:
+                    where += (f": the guards hold there, but a jump needs its target's invariant after it, "
+                              f"{'; '.join(targets)}")
                 listed = ", ".join(rows)
                 findings.append((f"{model.file}: modes.{name}.invariant: runs of mode '{name}' that reach "
                                  f"the boundary of {listed if len(listed) < 160 else listed[:157] + '...'} "
                                  f"stop there ({where}): nothing after is checked", meets))
     return findings
+
+
+def _rows(found, n: int):
+    """``(G, c)`` of half-spaces as float arrays of ``n`` columns; None stays None."""
+    if found is None:
+        return None
+    return np.asarray(found[0], float).reshape(-1, n), np.asarray(found[1], float).reshape(-1)
 
 
 def _uncovered(A, b, strict, E, f, guards, budget: list[int]) -> bool:

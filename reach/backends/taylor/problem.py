@@ -47,7 +47,7 @@ from reach.backends.taylor.tm import TM
 from reach.backends.taylor.tm_flowpipe import stretch_from_box
 from reach.backends.taylor.verified import ROUNDING, at_sigma, crossing, enclose_stretch, sigma_in
 from reach.model.constraints import affine_coefficients, lambdify_margins, opposite_pairs
-from reach.model.lint import affine_reset, fixed_ranges
+from reach.model.lint import enabling_rows, fixed_ranges
 from reach.spec.properties import BoundEvent
 
 MAX_SWITCHES = 8
@@ -68,26 +68,6 @@ class Exit:
     margins: object          # numpy margins of the guard, (N, n) -> (N, k)
     faces: list              # compiled g_j for DA / Taylor models
     reset: object | None     # compiled reset (all states) or None
-
-
-def enabling_rows(model, transition):
-    """``(G, c)``: where ``transition`` is enabled, ``G x <= c``: its guard, and its target's
-    invariant at the reset state (``H (R x + r) <= h`` for an affine reset ``x+ = R x + r``);
-    None if either is not linear."""
-    n = model.n
-    guard = model.guard_halfspaces(transition)
-    target = model.modes[transition.target].invariant_halfspaces
-    if guard is None or target is None:
-        return None
-    G, c = np.asarray(guard[0], float).reshape(-1, n), np.asarray(guard[1], float).reshape(-1)
-    H, h = np.asarray(target[0], float).reshape(-1, n), np.asarray(target[1], float).reshape(-1)
-    if not len(h):
-        return G, c
-    reset = affine_reset(model, transition)
-    if reset is None:
-        return None
-    R, r = reset
-    return np.vstack([G, H @ R]), np.concatenate([c, h - H @ r])
 
 
 class ModeCode:
