@@ -306,6 +306,8 @@ def line(result, prop, model) -> str:
         parts.append(f"{d['blocked_runs']} of {total} runs stopped before the horizon and were watched "
                      f"up to there only (no transition allowed, or too many jumps in one step of "
                      f"{number(d['dt'])}: a smaller -o dt may carry them on)")
+    if result.status == Status.SAFE and d.get("stopped_runs"):
+        parts.append(str(d["stopped_runs"]))
     if result.status != Status.UNSAFE and d.get("note") and d["note"] != f.get("margin_note"):
         parts.append(str(d["note"]))
     if "method" in d:

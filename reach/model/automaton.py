@@ -277,6 +277,13 @@ class HybridAutomaton:
         return [t for t in self.transitions if t.source == mode]
 
     @cached_property
+    def stop_faces(self) -> list:
+        """The invariant rows where runs may stop with no transition enabled, with the parts
+        of their faces (:func:`reach.model.lint.stop_faces`). Computed on first use."""
+        from reach.model.lint import stop_faces
+        return stop_faces(self)
+
+    @cached_property
     def lints(self) -> list[str]:
         """Structural findings (not errors), one line each: an initial set partly outside its
         invariant, invariant faces where runs stop, zero-dwell cycles, see

@@ -72,6 +72,7 @@ Each finding is one line naming the file, the field and the mode cycle (the shor
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 
 import numpy as np
 import sympy
@@ -365,15 +366,29 @@ def _exit_face(mode, row: int, H, g, low, high):
     return A, b, H[row:row + 1], g[row:row + 1], strict
 
 
-def blocking_faces(model) -> list[tuple[str, bool]]:
-    """Findings for invariant rows whose exit face the outgoing transitions' enabled sets do not
-    cover: runs that reach it stop there (module docstring), each with whether some enabled set
-    meets the face (``partly``). Modes with a nonlinear invariant or where no time passes are
-    passed over; a nonlinear guard counts as covering (it cannot be told). One finding per mode and kind, naming
-    the rows."""
+@dataclass
+class StopFace:
+    """An invariant row ``text`` of ``mode`` whose exit face the outgoing transitions' enabled
+    sets do not cover (module docstring). ``partly``: some enabled set meets the face;
+    ``pieces``: the parts of the face no transition leaves from, each ``(A, b, strict, E, f)``
+    (``A x <= b`` with the rows ``strict`` held strictly, ``E x = f``), all of them unless the
+    LP budget ran out; ``targets``: where the guards alone cover the face, the target
+    invariant rows that refuse the jumps there."""
+
+    mode: str
+    text: str
+    partly: bool
+    pieces: list
+    targets: list[str]
+
+
+def stop_faces(model) -> list[StopFace]:
+    """Every invariant row whose exit face the outgoing transitions' enabled sets do not cover:
+    runs that reach it stop there (module docstring). Modes with a nonlinear invariant or where
+    no time passes are passed over; a nonlinear guard counts as covering (it cannot be told)."""
     from reach import lp
 
-    n, findings = model.n, []
+    n, faces = model.n, []
     low, high = np.full(n, -np.inf), np.full(n, np.inf)
     for u in model.bounded_inputs:
         low[u.index], high[u.index] = u.low, u.high
@@ -399,35 +414,47 @@ def blocking_faces(model) -> list[tuple[str, bool]]:
                     targets.append(f"'{tr.target}': {', '.join(dict.fromkeys(texts))}")
         if any(guard is None or not len(guard[1]) for guard in guards):
             continue                            # a transition always enabled, or one not told
-        blocked, partial, by_target = [], [], False
+        seen = set()
         for i, constraint in enumerate(mode.invariant):
             nz = set(np.flatnonzero(H[i]).tolist())
-            if clock in nz and H[i, clock] > 0 and nz - {clock} <= fixed:
+            if constraint.text in seen or (clock in nz and H[i, clock] > 0 and nz - {clock} <= fixed):
                 continue                        # an end of time the model sets itself
             A, b, E, f, strict = _exit_face(mode, i, H, g, low, high)
+            pieces = []
             try:
-                if not _uncovered(A, b, strict, E, f, guards, [MAX_PIECES]):
+                _open_pieces(A, b, strict, E, f, guards, [MAX_PIECES], pieces)
+                if not pieces:
                     continue
                 meets = any(lp.feasible_point(np.vstack([A, G]), np.concatenate([b, c]), A_eq=E, b_eq=f) is not None
                             for G, c in guards)
+                by_target = bool(targets) and all(G is not None for G in plain) and \
+                    not _uncovered(A, b, strict, E, f, plain, [MAX_PIECES])
             except lp.LPError:
                 continue
-            rows = partial if meets else blocked
-            if constraint.text not in rows:
-                rows.append(constraint.text)
-            if targets and not by_target and all(G is not None for G in plain):
-                by_target = not _uncovered(A, b, strict, E, f, plain, [MAX_PIECES])
-        for rows, meets in ((blocked, False), (partial, True)):
-            if rows:
-                where = ("no transition out of it is enabled on part of that boundary" if meets else
-                         "no transition out of it is enabled there")
-                if by_target:
-                    where += (f": the guards hold there, but a jump needs its target's invariant after it, "
-                              f"{'; '.join(targets)}")
-                listed = ", ".join(rows)
-                findings.append((f"{model.file}: modes.{name}.invariant: runs of mode '{name}' that reach "
-                                 f"the boundary of {listed if len(listed) < 160 else listed[:157] + '...'} "
-                                 f"stop there ({where}): nothing after is checked", meets))
+            seen.add(constraint.text)
+            faces.append(StopFace(name, constraint.text, meets, pieces, targets if by_target else []))
+    return faces
+
+
+def blocking_faces(model) -> list[tuple[str, bool]]:
+    """Findings for invariant rows whose exit face the outgoing transitions' enabled sets do not
+    cover (:func:`stop_faces`, the model's ``stop_faces``), each with whether some enabled set
+    meets the face (``partly``). One finding per mode and kind, naming the rows."""
+    findings = []
+    for name in model.modes:
+        for meets in (False, True):
+            group = [face for face in model.stop_faces if face.mode == name and face.partly == meets]
+            if not group:
+                continue
+            where = ("no transition out of it is enabled on part of that boundary" if meets else
+                     "no transition out of it is enabled there")
+            targets = list(dict.fromkeys(t for face in group for t in face.targets))
+            if targets:
+                where += f": the guards hold there, but a jump needs its target's invariant after it, {'; '.join(targets)}"
+            listed = ", ".join(face.text for face in group)
+            findings.append((f"{model.file}: modes.{name}.invariant: runs of mode '{name}' that reach "
+                             f"the boundary of {listed if len(listed) < 160 else listed[:157] + '...'} "
+                             f"stop there ({where}): nothing after is checked", meets))
     return findings
 
 
@@ -440,22 +467,34 @@ def _rows(found, n: int):
 
 def _uncovered(A, b, strict, E, f, guards, budget: list[int]) -> bool:
     """Whether ``{A x <= b (rows marked strict held strictly), E x = f}`` has a point in none of
-    the linear ``guards``: the set minus the first guard is the union of the pieces where one
-    of its rows fails strictly, each searched against the rest (an LP per piece,
-    :func:`reach.lp.strictly_feasible`). ``budget`` (one count, shared) caps the LPs; past it, or
-    where the solver gives no answer, the set counts as covered (no finding)."""
+    the linear ``guards`` (:func:`_open_pieces`, stopping at the first part found)."""
+    pieces = []
+    _open_pieces(A, b, strict, E, f, guards, budget, pieces, first=True)
+    return bool(pieces)
+
+
+def _open_pieces(A, b, strict, E, f, guards, budget: list[int], pieces: list, first: bool = False) -> None:
+    """The parts of ``{A x <= b (rows marked strict held strictly), E x = f}`` in none of the
+    linear ``guards``, appended to ``pieces`` as ``(A, b, strict, E, f)``: the set minus the
+    first guard is the union of the pieces where one of its rows fails strictly, each searched
+    against the rest (an LP per piece, :func:`reach.lp.strictly_feasible`). ``budget`` (one
+    count, shared) caps the LPs; past it, or where the solver gives no answer, a piece counts
+    as covered. ``first``: stop at the first part found."""
     from reach import lp
 
-    if budget[0] <= 0:
-        return False
+    if budget[0] <= 0 or (first and pieces):
+        return
     budget[0] -= 1
     if not lp.strictly_feasible(A, b, strict, A_eq=E, b_eq=f):
-        return False
+        return
     if not guards:
-        return True
+        pieces.append((A, b, strict, E, f))
+        return
     (G, c), rest = guards[0], guards[1:]
-    return any(_uncovered(np.vstack([A, -row]), np.append(b, -bound), np.append(strict, True), E, f,
-                          rest, budget) for row, bound in zip(G, c))
+    for row, bound in zip(G, c):
+        _open_pieces(np.vstack([A, -row]), np.append(b, -bound), np.append(strict, True), E, f, rest, budget,
+                     pieces, first)
+
 
 def lint(model, check: bool = False) -> list[str]:
     """All findings for ``model``, one line each (empty when the model is clean). ``check``:

@@ -193,6 +193,7 @@ from reach.backends.star.linearise import LinearisedModel, check_linearised
 from reach.backends.star.options import (DEFAULT_PASS_SHARE, DEPTH_LP_TOLERANCE, FINER_FACTOR,
                                          FINER_MAX_SECONDS, FINER_PASSES, FINER_SECONDS, NAME, StarOptions,
                                          aggregating_retry, finer_retry, first_share, inputs_retry)
+from reach.backends.star.stops import sampled_stops
 from reach.backends.star.switching import SwitchingModel, check_switching
 from reach.backends.star.transitions import _LinearModel, _unsafe_pieces
 from reach.backends.star.witnesses import witness_details
@@ -493,6 +494,8 @@ class StarBackend:
                 f"followed past them, which only adds behaviour; an invariant saying where the mode is "
                 f"left is always cut)")
         details.update(_run_details(explorer))
+        if explorer.stopped and status is Status.SAFE:
+            details.update(sampled_stops(model, explorer.stopped, max(1.0, 0.25 * (time.perf_counter() - start))))
         LOG.info("%s / %s: %s after %d stars, %d cells, %d LPs, %d aggregates", model.name, prop.id,
                  status.value, explorer.stats.chains,
                  explorer.stats.cells, explorer.stats.lps, explorer.stats.aggregated)

@@ -20,6 +20,7 @@ from reach.backends.star.options import (CHATTER_JUMPS, ERROR_RATIO, INSTANT_STE
                                          MAX_CELLS, MAX_CHAIN_BYTES, MEMORY_FRACTION, MEMORY_PERIOD, NAME,
                                          PROGRESS_SECONDS, STALL_JUMPS, TIGHT_RATIO, StarOptions)
 from reach.backends.star.returns import entry_rows, rising, undone
+from reach.backends.star.stops import meets, stop_pieces
 from reach.backends.star.switching import group_pieces
 from reach.backends.star.transitions import (_LinearModel, _modes_leading_to, _Piece,
                                              _unsafe_pieces, kept_rows, misses)
@@ -244,6 +245,8 @@ class _Explorer:
         self.pieces = self._reachable_pieces(group_pieces(self.pieces, getattr(data, "groups", ())))
         self.covered = Covered(self.clock, time_invariant(model)) if applies(model) and not options.keep_sets \
             else None
+        self.stops = stop_pieces(model, data.widen)         # see _note_stops
+        self.stopped: dict[tuple[str, str], float] = {}
         self.relevant = _modes_leading_to(model, set(self.pieces))
         self.horizon = min(self.horizon, max(self._last_unsafe_instant(), 0.0))
         self._guard_rows: dict[str, np.ndarray] = {}       # per mode, see _transient
@@ -694,6 +697,9 @@ class _Explorer:
                            inputs.since[j], inputs.carried[j],
                            None if inputs.directed is None else (inputs.directed[0], inputs.directed[1][j]),
                            error=known, returns=first)
+        if mode in self.stops and not self.opt.discrete_time:
+            self._note_stops(mode, grid_star, centers, bases, box, error, dev, cells,
+                             None if curvature is None else curvature, inputs)
         if collect is None:
             self._aggregate_pending(mode, pending)
         if handoff and ended_inside:
@@ -1125,6 +1131,36 @@ class _Explorer:
         if mid is not None:
             self._cell(mode, mid, half, path, depth + 1, mid_point, pending, spread, since + half,
                        carried, directed, skip=skip)
+
+    def _note_stops(self, mode: str, grid_star, centers, bases, box, error, dev, cells, curvature, inputs):
+        """Record the invariant faces of ``mode`` where runs may stop (:mod:`.stops`) that a
+        cell of the chain meets, each with the earliest clock of a cell meeting it. A cell is
+        looked at only where its bound along the face's row (grid stars at both ends, plus the
+        cell's error and the grid points' input box ``dev``) reaches the face; then its
+        segment, as :meth:`_cell` builds it, decides by one LP."""
+        H = np.vstack([piece[4] for piece in self.stops[mode]])             # the face rows E
+        f = np.concatenate([piece[5] for piece in self.stops[mode]])
+        upper = _chain_bounds(centers, bases, box, H)
+        if dev is not None:
+            upper = upper + dev[:upper.shape[0]] @ np.abs(H).T
+        for j in cells:
+            reach_ = np.maximum(upper[j], upper[j + 1]) + np.abs(H) @ error[j]
+            near = reach_ >= f - 1e-9 * (1.0 + np.abs(f))
+            if not np.any(near):
+                continue
+            spread = None if inputs is None else inputs.cell[j]
+            directed = None if inputs is None or inputs.directed is None else (inputs.directed[0],
+                                                                                inputs.directed[1][j])
+            seg, _ = self._segment(mode, grid_star(j), self.h, spread, directed,
+                                   None if curvature is None else curvature[j])
+            start = float(-seg.support_bounds(-self.clock_row[None])[0])
+            for k in np.flatnonzero(near):
+                text, *piece = self.stops[mode][k]
+                if self.stopped.get((mode, text), np.inf) <= start:
+                    continue
+                self._lp_budget()
+                if meets(seg, *piece, error=error[j]):
+                    self.stopped[(mode, text)] = start
 
     def _returns(self, mode: str, start: Star, path: _Path) -> tuple:
         """``(jump, rows)`` for each jump of ``mode`` that may return the runs of a chain's
