@@ -24,13 +24,17 @@ class Doc:
         self.file = file
 
     def where(self, *path) -> Where:
-        file, line = self.lines.get(tuple(path), (self.file, None))
-        if line is None:  # nearest ancestor with a known line
+        """The file, field and line of ``path`` (or of its nearest ancestor with a known line).
+        An entry of ``lines`` may name the field itself as a third item: a document converted
+        from another format (a SpaceEx cfg's ``forbidden``) names the field its user wrote."""
+        entry = self.lines.get(tuple(path), (self.file, None))
+        if entry[1] is None:  # nearest ancestor with a known line
             for k in range(len(path) - 1, -1, -1):
                 if tuple(path[:k]) in self.lines:
-                    file, line = self.lines[tuple(path[:k])]
+                    entry = self.lines[tuple(path[:k])]
                     break
-        return Where(file, _field(path) or "", line)
+        file, line = entry[:2]
+        return Where(file, entry[2] if len(entry) > 2 else _field(path) or "", line)
 
 
 #: a YAML integer beyond this (a 401-digit literal) has no double value: bad input at its line

@@ -789,7 +789,7 @@ class DocumentBuilder(Converter):
                              "fixpoint) is not supported; give a positive time", cfg.file,
                              "time-horizon", cfg.line("time-horizon"))
         data["horizon"] = horizon
-        lines[("horizon",)] = (cfg.file, cfg.line("time-horizon"))
+        lines[("horizon",)] = (cfg.file, cfg.line("time-horizon"), "time-horizon")
         notes = {"source": self.file, "config": cfg.file}
         for key in ("sampling-time", "iter-max"):
             if cfg.text(key) is not None:
@@ -1026,7 +1026,7 @@ class DocumentBuilder(Converter):
                     else "is empty (its constraints exclude each other once its strict bounds are kept "
                          "strict: x > 1 & x <= 1 holds nowhere)")
             raise InputError(f"initially: the initial set {what}", self.cfg.file, line=self.cfg.line("initially"))
-        self.lines[("initial",)] = (self.cfg.file, self.cfg.line("initially"))
+        self.lines[("initial",)] = (self.cfg.file, self.cfg.line("initially"), "initially")
         if len(choice) > 1:
             return self._start_mode(choice, atoms)
         key, texts = choice[0]
@@ -1131,14 +1131,14 @@ class DocumentBuilder(Converter):
             else:
                 prop["require"] = ["0 <= -1"]         # the whole of these modes is forbidden
             props.append(prop)
-            plines[("properties", k)] = (self.cfg.file, line)
+            plines[("properties", k)] = (self.cfg.file, line, "forbidden")
         if not props and terms:             # every term false, or on locations the product never has
             props.append({"id": pid, "kind": "safety", "modes": list(dict.fromkeys(self.mode_of.values())),
                           "description": f"forbidden = {printable(self.cfg.text('forbidden'))[:200]} (empty: "
                                          "no term names a location combination of the product, or each "
                                          "is false)",
                           "require": ["0 <= 1"]})     # nothing is forbidden anywhere
-            plines[("properties", 0)] = (self.cfg.file, line)
+            plines[("properties", 0)] = (self.cfg.file, line, "forbidden")
         if not props:
             return None, {}, pid
         if len(props) > 1:
