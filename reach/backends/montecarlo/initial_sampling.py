@@ -11,9 +11,14 @@ hull: ``x = x0 + N z`` with ``E x0 = f`` and ``N`` an orthonormal basis of ``nul
 * *uniform interior*: by rejection from the bounding box where ``P`` fills at least
   :data:`MIN_ACCEPTANCE` of the box, equalities only on coordinates the box pins (``t == 0``):
   exactly uniform, a few products per sample (the ISS's initial box cut by its outputs'
-  ranges); else by hit-and-run (Smith 1984): from an interior point, a uniform random
-  direction, a uniform point on the chord through ``P``; chains are run in parallel and only
-  their state after a burn-in of ``30 d + 50`` steps is kept (one chain per sample).
+  ranges); else by hit-and-run (Smith 1984): from an interior point, a random direction, a
+  uniform point on the chord through ``P``; chains are run in parallel and only their state
+  after a burn-in of ``30 d + 50`` steps is kept (one chain per sample). The directions are
+  normal with the extreme points' covariance (hit-and-run in coordinates where ``P`` is about
+  round: a thin strip is crossed along its length as fast as across), and the coordinates are
+  those of ``P``'s own affine hull: the equalities, and the inequalities that pin a direction
+  (a box side of width 0, two opposite rows, an inequality that holds with equality all over
+  ``P``), across which a chord has length 0 and a chain would never move.
 
 Time-varying inputs ``u(t) in [lo, hi]`` are sampled as piecewise-constant signals with pieces of
 length ``step``: constant at each corner of the input box, bang-bang signals (each piece at a
@@ -56,19 +61,60 @@ class PolytopeSampler:
     def __init__(self, P: LinearSet, low: np.ndarray, high: np.ndarray):
         self.P = P
         self.low, self.high = np.asarray(low, float), np.asarray(high, float)
-        n = P.A.shape[1]
-        if P.E.shape[0]:
-            x0, *_ = np.linalg.lstsq(P.E, P.f, rcond=None)
-            self.N = scipy.linalg.null_space(P.E)
+        self.drawn_by = None                      # how the last uniform() drew its points (law())
+        E, f = P.E, P.f
+        pinned = _pinned_rows(P.A, P.b)          # a x <= b with -a x <= -b: a x == b
+        if pinned.size:
+            E, f = np.vstack([E, P.A[pinned]]), np.concatenate([f, P.b[pinned]])
+        self._hull(E, f)
+        if self.d and self._radius() <= TOL * (1.0 + np.abs(self.h).max(initial=0.0)):
+            implicit = self._implicit_rows()    # flat without a pinned pair (x <= y, y <= x)
+            if implicit.size:
+                self._hull(np.vstack([E, P.A[implicit]]), np.concatenate([f, P.b[implicit]]))
+
+    def _hull(self, E, f):
+        """Coordinates ``x = x0 + N z`` of the affine hull ``E x = f`` and the rows ``G z <= h``
+        of ``A x <= b`` in them (rows constant on the hull dropped). The hull must be the
+        polytope's own: where the inequalities pin a direction too (a box side ``t: 0``, an
+        implicit equality), a hit-and-run chord across it has length 0 and a chain never moves."""
+        P, n = self.P, self.P.A.shape[1]
+        if E.shape[0]:
+            x0, *_ = np.linalg.lstsq(E, f, rcond=None)
+            self.N = scipy.linalg.null_space(E)
         else:
-            x0, self.N = (low + high) / 2, np.eye(n)
+            x0, self.N = (self.low + self.high) / 2, np.eye(n)
         self.x0 = x0
         self.G = P.A @ self.N                     # constraints G z <= h in hull coordinates
         self.h = P.b - P.A @ x0
         keep = np.linalg.norm(self.G, axis=1) > TOL  # rows constant on the hull
         self.G, self.h = self.G[keep], self.h[keep]
         self.d = self.N.shape[1]
-        self.drawn_by = None                      # how the last uniform() drew its points (law())
+        self.__dict__.pop("vertices", None)
+        self.__dict__.pop("centre_z", None)
+
+    def _radius(self) -> float:
+        """The radius of the largest ball in ``G z <= h`` (Chebyshev LP); 0 if none is found."""
+        norms = np.linalg.norm(self.G, axis=1)
+        c = np.zeros(self.d + 1)
+        c[-1] = 1.0
+        res = lp.maximize(c, np.hstack([self.G, norms[:, None]]), self.h,
+                          bounds=[(None, None)] * self.d + [(0, None)])
+        return float(res.x[-1]) if res.optimal else 0.0
+
+    def _implicit_rows(self) -> np.ndarray:
+        """The rows of ``A x <= b`` that hold with equality all over ``P`` (an LP each: their
+        least value on ``P`` is their bound)."""
+        P = self.P
+        args = dict(A_eq=P.E if P.E.shape[0] else None, b_eq=P.f if P.E.shape[0] else None)
+        found = []
+        for i, (row, bound) in enumerate(zip(P.A, P.b)):
+            try:
+                res = lp.minimize(row, P.A, P.b, **args)
+            except lp.LPError:
+                continue
+            if res.optimal and bound - res.value <= TOL * (1.0 + abs(bound)):
+                found.append(i)
+        return np.array(found, dtype=int)
 
     def to_x(self, Z: np.ndarray) -> np.ndarray:
         return self.x0 + Z @ self.N.T
@@ -201,8 +247,24 @@ class PolytopeSampler:
                 return np.concatenate(kept)[:count]
         return None
 
+    @cached_property
+    def _rounding(self) -> np.ndarray:
+        """``L`` with ``L L^T`` the covariance of the extreme points (plus a small multiple of
+        the identity): hit-and-run directions ``L g``, ``g`` standard normal, are isotropic in
+        coordinates where the polytope is about round, so a chain crosses a thin strip's length
+        as fast as its width. Any fixed law of directions that gives ``u`` and ``-u`` the same
+        density keeps the uniform law stationary (each step is uniform on a chord of a line
+        drawn independently of where on it the point lies)."""
+        V = self.vertices
+        C = np.cov(V.T).reshape(self.d, self.d) if V.shape[0] > 1 else np.zeros((self.d, self.d))
+        C = C + (1e-9 * np.trace(C) / self.d + 1e-300) * np.eye(self.d)
+        try:
+            return np.linalg.cholesky(C)
+        except np.linalg.LinAlgError:
+            return np.eye(self.d)
+
     def _step(self, Z, rng):
-        u = rng.normal(size=Z.shape)
+        u = rng.normal(size=Z.shape) @ self._rounding.T
         u /= np.linalg.norm(u, axis=1, keepdims=True)
         Gu = u @ self.G.T                               # (N, k)
         slack = self.h[None, :] - Z @ self.G.T          # >= 0
@@ -225,6 +287,21 @@ class PolytopeSampler:
             lam = np.min(np.where(GD > TOL, slack[None, :] / GD, np.inf), axis=1, initial=np.inf)
         lam = np.clip(lam, 0.0, 1.0) * (1 - 1e-12)
         return self.to_x(c + lam[:, None] * D)
+
+
+def _pinned_rows(A, b) -> np.ndarray:
+    """Rows ``i`` of ``A x <= b`` with an opposite row ``j`` (``A_j = -c A_i``, ``c > 0``) and
+    ``b_i + b_j / c`` at most rounding: together they say ``A_i x == b_i`` (a box side of width
+    0, ``t: 0``)."""
+    A, b = np.asarray(A, float), np.asarray(b, float)
+    if not A.shape[0]:
+        return np.zeros(0, dtype=int)
+    norms = np.linalg.norm(A, axis=1)
+    ok = norms > TOL
+    U = np.where(ok[:, None], A / np.where(ok, norms, 1.0)[:, None], 0.0)
+    c = np.where(ok, b / np.where(ok, norms, 1.0), np.inf)
+    opposite = (U @ U.T <= -1 + 1e-12) & (c[:, None] + c[None, :] <= TOL * (1.0 + np.abs(c)[:, None]))
+    return np.flatnonzero(np.any(opposite, axis=1) & ok)
 
 
 def _unique(Z: np.ndarray) -> np.ndarray:
