@@ -539,13 +539,15 @@ def test_an_error_in_a_cfg_relation_names_the_cfg(tmp_path, capsys):
     ("forbidden", "x >= 1e999", 3, "forbidden: number is not finite"),
     ("initially", "x == 0 & y <= 1e999 & loc(sys) == A", 2, "initially: number is not finite"),
     ("time-horizon", "1e999", 4, "time-horizon: expected a finite number"),
+    ("iter-max", "-5", 5, "iter-max: expected a whole number, -1 for no bound, got '-5'"),
+    ("iter-max", "2.5", 5, "iter-max: expected a whole number, -1 for no bound, got '2.5'"),
 ])
-def test_a_number_without_a_double_in_the_cfg_names_the_cfgs_field(tmp_path, capsys, key, value, line, message):
-    """An overflowing literal in the cfg is bad input at the cfg's line and field, as its
+def test_a_bad_number_in_the_cfg_names_the_cfgs_field(tmp_path, capsys, key, value, line, message):
+    """An overflowing literal or a bad iter-max in the cfg is bad input at the cfg's line and field, as its
     user wrote them (not the converted document's ``properties[0].avoid[0]``)."""
     fields = {"system": '"sys"', "initially": '"x == 0 & loc(sys) == A"', "forbidden": '"x >= 5"',
               "time-horizon": "1"}
-    fields[key] = value if key == "time-horizon" else f'"{value}"'
+    fields[key] = value if key in ("time-horizon", "iter-max") else f'"{value}"'
     xml, cfg = write(tmp_path, DEFINED.replace("DEFINITION", "y == 2*x"),
                      "".join(f"{k} = {v}\n" for k, v in fields.items()))
     assert refusal(xml, cfg, capsys) == f"{cfg}:{line}: {message}"

@@ -77,13 +77,13 @@ MAX_HORIZON = 1e12             # model time units: beyond, grid steps of horizon
 
 def hint_problem(key: str, value) -> str | None:
     """What is wrong with a SpaceEx cfg hint's value (``sampling-time``: a positive time;
-    ``iter-max``: a whole number, negative for no bound), or None."""
+    ``iter-max``: a whole number, -1 for no bound), or None."""
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
         return "expected a number"
     if key == "sampling-time" and value <= 0:
         return "expected a positive time"
-    if key == "iter-max" and value != int(value):
-        return "expected a whole number"
+    if key == "iter-max" and (value != int(value) or value < -1):
+        return "expected a whole number, -1 for no bound"
     return None
 
 
@@ -551,7 +551,7 @@ class _Builder:
         return InitialSet(raw["mode"], low, high)
 
     def read_hints(self) -> dict:
-        """A SpaceEx cfg's ``iter-max`` (an integer; negative: no bound) kept in ``notes`` by the
+        """A SpaceEx cfg's ``iter-max`` (an integer; -1: no bound) kept in ``notes`` by the
         import: an analysis hint, so that the imported model is checked as the SpaceEx files are
         (:func:`reach.backends.star.options.cfg_hints`). ``sampling-time`` (a positive time) is
         checked as the cfg's is but sets nothing. Notes in prose, or other keys, are the reader's

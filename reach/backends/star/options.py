@@ -195,7 +195,7 @@ class StarOptions:
 
 def cfg_hints(notes: dict, options: dict | None) -> dict:
     """Star options from a SpaceEx cfg (``notes`` of the imported model) where the user set
-    none: ``iter-max`` (when not negative: SpaceEx's "no bound") becomes ``max_jumps``, so a path
+    none: ``iter-max`` (when not -1: SpaceEx's "no bound") becomes ``max_jumps``, so a path
     with more jumps ends the check in UNKNOWN, never in SAFE. ``sampling-time`` is SpaceEx's step
     for its own discrete-time scheme and sets nothing here: star covers the time between its grid
     points, splits the cells that need it and retries finer steps when undecided, and on 14 cfgs
