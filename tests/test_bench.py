@@ -175,3 +175,29 @@ instances:
         t.join()
     report = json.loads((tmp_path / "out" / "results.json").read_text())
     assert {r["instance"] for r in report["rows"]} == {"one", "two"}
+
+
+def test_a_filtered_run_is_gated_on_its_own_instances_only(tmp_path):
+    """An earlier run left a note on `thermo` (its expected-safe band unproved by Monte Carlo);
+    a run filtered to `clean` (nothing expected, nothing to note) exits 0: the kept rows'
+    checks are written to the report, not gated on. Run on `thermo` again, it exits 3."""
+    root = __import__("pathlib").Path.cwd()
+    suite = tmp_path / "suite.yaml"
+    suite.write_text(f"""backends:
+  montecarlo: {{samples: 5, search_rounds: 0, optimise: false}}
+instances:
+  - id: thermo
+    model: {root}/models/thermostat.yaml
+    properties: {root}/properties/thermostat.yaml
+    expect: {{band: safe}}
+  - id: clean
+    model: {root}/models/thermostat.yaml
+    properties: {root}/properties/thermostat.yaml
+""")
+    out = tmp_path / "out"
+    with open(tmp_path / "log.txt", "w") as stream:
+        assert run_suite(suite, out=out, jobs=1, stream=stream) == 3
+        assert run_suite(suite, out=out, jobs=1, stream=stream, instances=["clean"]) == 0
+        report = json.loads((out / "results.json").read_text())
+        assert [c["instance"] for c in report["cross_checks"]] == ["thermo"]   # still reported
+        assert run_suite(suite, out=out, jobs=1, stream=stream, instances=["thermo"]) == 3

@@ -9,7 +9,9 @@ Failures (``reach bench`` exits 1):
   safe is expected); an error or time-out.
 Notes (``reach bench`` exits 3 when there is one and no failure: undecided): an expected
 verdict that no back-end reached, an expected-unsafe property that no back-end falsified or an
-expected-safe one that none proved.
+expected-safe one that none proved. Each check names its instance: a filtered run's exit code
+counts only the checks of the instances it ran (rows kept from earlier runs are checked and
+reported, not gated on).
 """
 
 from __future__ import annotations
@@ -34,17 +36,19 @@ def _replays(row) -> bool:
 
 
 def cross_check(rows: list[dict]) -> list[dict]:
-    checks = []
+    checks, current = [], {"instance": None}
 
     def add(level, message):
-        checks.append({"level": level, "message": message})
+        checks.append({"level": level, "message": message, "instance": current["instance"]})
 
     by_key = defaultdict(list)
     for r in rows:
         by_key[(r["instance"], r["property"])].append(r)
         if r["status"] in ("error", "timeout"):
+            current["instance"] = r["instance"]
             add("fail", f"{r['instance']} with {r['backend']}: {r['status']}: {r['details'].get('error', '')}")
     for (inst, prop), group in by_key.items():
+        current["instance"] = inst
         if prop == "*":
             continue
         replayed = []
