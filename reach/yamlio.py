@@ -69,7 +69,12 @@ def _convert(node, loader, path, lines, file, budget):
         return out
     if isinstance(node, yaml.SequenceNode):
         return [_convert(v, loader, path + (i,), lines, file, budget) for i, v in enumerate(node.value)]
-    value = loader.construct_object(node)
+    try:
+        value = loader.construct_object(node)
+    except (ValueError, TypeError, OverflowError) as exc:    # an int of more than 4300 digits
+        reason = "a number too long to read" if node.tag.endswith(":int") else type(exc).__name__
+        raise InputError(f"invalid YAML: {reason} ({printable(node.value)[:40]}...)", file, _field(path),
+                         node.start_mark.line + 1) from None
     if isinstance(value, int) and not isinstance(value, bool) and abs(value) > MAX_INTEGER:
         raise InputError(f"the number {printable(node.value)[:40]}... is beyond double precision", file,
                          _field(path), node.start_mark.line + 1)

@@ -125,3 +125,15 @@ def test_a_counterexample_with_a_byte_order_mark_replays(tmp_path, capsys):
     capsys.readouterr()
     assert main(["replay", str(saved)]) == 1
     assert "violates 'tight'" in capsys.readouterr().out
+
+
+def test_an_integer_too_long_to_read_is_bad_input_at_its_line(tmp_path, capsys):
+    """A 5000-digit integer is past Python's int conversion limit (4300 digits): bad input at
+    its line and field, not a bare 'ValueError'."""
+    text = (Path("tests/data/tank.yaml").read_text().replace("horizon:", "horizon_was:")
+            + "horizon: " + "9" * 5000 + "\n")
+    (tmp_path / "m.yaml").write_text(text)
+    line = text.count("\n")
+    assert main(["check", str(tmp_path / "m.yaml"), "tests/data/tank_level.yaml", "-b", "star"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"m.yaml:{line}: horizon: invalid YAML: a number too long to read" in err[0]
