@@ -4,8 +4,8 @@ cannot leave their folder.
 * :func:`read_text` opens only regular files (not ``/dev/zero``, a FIFO or a directory) of at
   most ``MAX_BYTES``, with an allowed suffix, and refuses text with NUL bytes. Its errors name the
   file and never quote its content.
-* :func:`safe_name` turns a model or property name into one file-name component: letters,
-  digits, ``.``, ``-`` and ``_`` only, no leading dot, at most 80 characters, so
+* :func:`safe_name` turns a model or property name into one file-name component: letters and
+  digits of any script, ``.``, ``-`` and ``_`` only, no leading dot, at most 80 characters, so
   ``name: "../../x"`` writes ``x`` inside the output folder, never outside it.
 * :func:`printable` escapes control characters of a user's name for terminal output.
 """
@@ -70,7 +70,7 @@ def _line_of(data: bytes, offset: int) -> int:
     return data.count(b"\n", 0, offset) + 1
 
 
-_UNSAFE_CHARS = re.compile(r"[^A-Za-z0-9._-]+")
+_UNSAFE_CHARS = re.compile(r"[^\w.-]+")
 
 
 def safe_name(name, fallback: str = "unnamed") -> str:

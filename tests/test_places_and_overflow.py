@@ -137,3 +137,12 @@ def test_an_integer_too_long_to_read_is_bad_input_at_its_line(tmp_path, capsys):
     assert main(["check", str(tmp_path / "m.yaml"), "tests/data/tank_level.yaml", "-b", "star"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and f"m.yaml:{line}: horizon: invalid YAML: a number too long to read" in err[0]
+
+
+def test_file_names_keep_letters_of_any_script_and_never_a_path():
+    """A model named in another script keeps its name in the files written from it; a separator
+    or a leading dot never survives (the name stays one component inside its folder)."""
+    from reach.paths import safe_name
+    assert safe_name("水槽") == "水槽"
+    assert safe_name("../../x") == "x" and safe_name("a/b") == "a_b" and safe_name("ｘ／y") == "ｘ_y"
+    assert safe_name(".hidden") == "hidden" and safe_name("///") == "unnamed"

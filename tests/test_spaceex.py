@@ -686,7 +686,7 @@ def test_an_alias_longer_than_a_page_imports_and_checks(tmp_path):
 
 
 @pytest.mark.parametrize("line, message", [("sampling-time = -1", "sampling-time: expected a positive time, got '-1'"),
-                                           ("iter-max = 2.5", "iter-max: expected a whole number, got '2.5'")])
+                                           ("iter-max = 2.5", "iter-max: expected a whole number, -1 for no bound, got '2.5'")])
 @pytest.mark.parametrize("command", ["check", "import"])
 def test_bad_cfg_hints_are_bad_input_at_their_cfg_line(tmp_path, capsys, line, message, command):
     xml, cfg = write(tmp_path, BALL, 'system = ball\ninitially = "loc(ball)==air & x == 1 & v == 0"\n'

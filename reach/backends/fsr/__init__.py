@@ -387,8 +387,9 @@ class FsrBackend:
 
     def supports(self, model, prop) -> str | None:
         if not isinstance(prop, (BoundReach, BoundReachAvoid)):
-            return (f"fsr computes reach and reach-avoid probabilities; {article(prop.kind)} property is "
-                    "for the star, taylor or montecarlo back-ends")
+            others = "the taylor or montecarlo back-ends" if prop.kind == "event" else \
+                "the star, taylor or montecarlo back-ends"
+            return f"fsr computes reach and reach-avoid probabilities; {article(prop.kind)} property is for {others}"
         if model.disturbance is None:
             return ("deterministic model (no disturbance): there is no distribution to integrate; "
                     "use the star or taylor back-end")

@@ -784,10 +784,13 @@ class DocumentBuilder(Converter):
         horizon = cfg.number("time-horizon")
         if horizon is None:
             raise cfg.missing("time-horizon")
-        if horizon < 0:                     # SpaceEx: -1 explores until a fixpoint, unbounded
-            raise InputError(f"time-horizon = {horizon:g}: an unbounded horizon (SpaceEx's -1, up to a "
+        if horizon == -1:                   # SpaceEx: -1 explores until a fixpoint, unbounded
+            raise InputError("time-horizon = -1: an unbounded horizon (SpaceEx's -1, up to a "
                              "fixpoint) is not supported; give a positive time", cfg.file,
                              "time-horizon", cfg.line("time-horizon"))
+        if horizon < 0:
+            raise InputError(f"time-horizon = {horizon:g}: expected a positive time (or SpaceEx's -1, "
+                             "which reach does not support)", cfg.file, "time-horizon", cfg.line("time-horizon"))
         data["horizon"] = horizon
         lines[("horizon",)] = (cfg.file, cfg.line("time-horizon"), "time-horizon")
         notes = {"source": self.file, "config": cfg.file}
