@@ -553,6 +553,27 @@ def test_a_bad_number_in_the_cfg_names_the_cfgs_field(tmp_path, capsys, key, val
     assert refusal(xml, cfg, capsys) == f"{cfg}:{line}: {message}"
 
 
+def test_a_map_to_a_number_without_a_double_is_refused_at_the_map(tmp_path, capsys):
+    """``<map key="k">1e999</map>``: bad input at the map's line, not where a flow reads k."""
+    body = f'''  <component id="base">
+    {REAL.format("x")}
+    <param name="k" type="real" local="false" d1="1" d2="1" dynamics="const"/>
+    <location id="1" name="A">
+      <flow>x' == k</flow>
+    </location>
+  </component>
+  <component id="sys">
+    {REAL.format("x")}
+    <bind component="base" as="b">
+      <map key="x">x</map>
+      <map key="k">1e999</map>
+    </bind>
+  </component>
+'''
+    xml, cfg = write(tmp_path, body, 'system = "sys"\ninitially = "x == 0"\nforbidden = "x >= 5"\ntime-horizon = 1\n')
+    assert refusal(xml, cfg, capsys) == f"{xml}:14: map 'k': the number 1e999 is not finite"
+
+
 # ------------------------------------------------------------------ S5: an alias defined in some locations
 PARTLY = f'''  <component id="P">
     {REAL.format("x")}

@@ -216,6 +216,8 @@ def _resolve_map(m, binding, path, ptype, file) -> Binding:
     if _NUMBER.match(value):
         if ptype == "label":
             raise InputError(f"map '{m.key}': a label cannot be mapped to a number", file, line=m.line)
+        if not math.isfinite(float(value)):
+            raise InputError(f"map '{m.key}': the number {value} is not finite", file, line=m.line)
         return Binding(number=value)
     if value in binding:
         return binding[value]
