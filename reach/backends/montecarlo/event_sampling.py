@@ -184,8 +184,15 @@ def replay_event(model: HybridAutomaton, prop: BoundEvent, initial_state, dt: fl
     """Simulate one run (under the input ``signal``, its pieces on the grid of ``dt``; choosing
     among transitions enabled together by ``branches``) on the simulator's per-segment path and
     evaluate the event property along it; the transitions it took are recorded (the caller
-    records the signal)."""
+    records the signal). A state outside a polytopic initial set starts no run of the model:
+    no violation (``value`` nan)."""
     x0 = np.asarray(initial_state, dtype=float).reshape(1, -1)
+    init = model.initial
+    if not init.is_box:                     # a run from outside the initial polytope is no run of the model
+        from reach.backends.montecarlo.initial_sampling import PolytopeSampler
+        if not PolytopeSampler(init.polytope, init.low, init.high).contains(x0)[0]:
+            return EventReplay(False, float("nan"), float("nan"), "", np.full(model.n, np.nan), x0[0],
+                               float(dt or 0.0), float("-inf"))
     monitor, traj, step = sample_extrema(model, prop, x0, dt, record=True, branches=branches, signal=signal,
                                          general=True)
     names = list(model.modes)
