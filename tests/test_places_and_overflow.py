@@ -146,3 +146,21 @@ def test_file_names_keep_letters_of_any_script_and_never_a_path():
     assert safe_name("水槽") == "水槽"
     assert safe_name("../../x") == "x" and safe_name("a/b") == "a_b" and safe_name("ｘ／y") == "ｘ_y"
     assert safe_name(".hidden") == "hidden" and safe_name("///") == "unnamed"
+
+
+def test_taylors_expansion_of_a_stiff_flow_stops_at_the_budget(tmp_path, capsys):
+    """x' = -1000 (x - 1) + y^2 over 24 s: thousands of DA steps per run. The expansion looks at
+    the budget as it steps, so the check ends near max_seconds, UNKNOWN naming the budget (it
+    ran past 180 s with max_seconds=20)."""
+    import time
+    model = {"name": "stiff", "state": ["x", "y", "t"], "horizon": 24,
+             "modes": {"go": {"flow": {"x": "-1000*(x - 1) + y**2", "y": 0, "t": 1}}},
+             "initial": {"mode": "go", "box": {"x": [0, 0.5], "y": [0, 0.01], "t": 0}}}
+    (tmp_path / "m.yaml").write_text(yaml.safe_dump(model))
+    (tmp_path / "p.yaml").write_text(yaml.safe_dump(
+        {"properties": [{"id": "low", "kind": "safety", "modes": ["go"], "require": ["x <= 0.9"]}]}))
+    start = time.perf_counter()
+    assert main(["check", str(tmp_path / "m.yaml"), str(tmp_path / "p.yaml"), "-b", "taylor",
+                 "-o", "max_seconds=3"]) == 3
+    assert "time budget of 3 s (option max_seconds) exhausted" in capsys.readouterr().out
+    assert time.perf_counter() - start < 60

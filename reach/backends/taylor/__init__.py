@@ -208,7 +208,7 @@ class TaylorBackend:
             workers = max(1, min(opts.jobs, len(full) // MIN_SHARE))
             chunks = [list(part) for part in np.array_split(np.arange(len(full)), workers)]
             parts = run_units(expand_boxes, [(model, prop, opts.order, expand_order, opts.integration_tol,
-                                              [full[i] for i in chunk]) for chunk in chunks])
+                                              [full[i] for i in chunk], deadline) for chunk in chunks])
             return [result for part in parts for result in part]
 
         def measure(result):

@@ -28,12 +28,30 @@ to rounding (the nominal runs, whose step control would amplify it, are bit for 
 
 from __future__ import annotations
 
+from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass
 
 import numpy as np
 
 from reach.backends.taylor.da import DA
+from reach.backends.taylor.deadline import NONE, Deadline, OutOfTime
 from reach.backends.taylor.flow import rk8
+
+#: the budget of the check this context works for (:func:`within`); the DA propagations look at
+#: it every :data:`CHECK_EVERY` steps, so a stiff flow's thousands of steps stop at the budget
+_DEADLINE: ContextVar[Deadline] = ContextVar("taylor_deadline", default=NONE)
+CHECK_EVERY = 16
+
+
+@contextmanager
+def within(deadline: Deadline):
+    """Run the propagations of this context under ``deadline`` (OutOfTime past it)."""
+    token = _DEADLINE.set(deadline)
+    try:
+        yield
+    finally:
+        _DEADLINE.reset(token)
 
 # runs stepped together: a SIREN network (5 sine layers of 32 neurons, order 4 in 2 variables)
 # costs 22-26 us per run in batches of 16 to 96 once the allocator keeps freed blocks
@@ -67,7 +85,8 @@ class Propagation:
 
 def propagate_batch(requests: list[Propagation]) -> list[list]:
     """The requests (same flow, same algebra, same state size) stepped as one batch; a run leaves
-    the batch after its last step (the runs are taken longest first, so the batch is a prefix)."""
+    the batch after its last step (the runs are taken longest first, so the batch is a prefix).
+    OutOfTime past the budget of the context (:func:`within`)."""
     alg = next(v.alg for v in requests[0].x if isinstance(v, DA))
     n = len(requests[0].x)
     order = sorted(range(len(requests)), key=lambda b: -len(requests[b].steps))
@@ -79,7 +98,10 @@ def propagate_batch(requests: list[Propagation]) -> list[list]:
     for b, r in enumerate(runs):
         H[b, :len(r.steps)] = r.steps
     out = [None] * len(runs)
+    deadline = _DEADLINE.get()
     for k in range(lengths[0] + 1):
+        if k % CHECK_EVERY == 0 and deadline.passed():
+            raise OutOfTime(deadline.text)
         active = int(np.sum(lengths > k))
         for b in range(active, len(x[0].c)):       # runs whose steps are done
             out[order[b]] = [DA(alg, xi.c[b]) for xi in x]

@@ -18,6 +18,7 @@ from functools import lru_cache
 from reach.backends.taylor.bound import truncate
 from reach.backends.taylor.deadline import NONE, Deadline
 from reach.backends.taylor.keys import fingerprint
+from reach.backends.taylor.lockstep import within
 from reach.backends.taylor.problem import Candidates, EventProblem
 from reach.model.simulate import single_threaded
 
@@ -40,10 +41,12 @@ def expand_box(model, prop, order: int, expand_order: int, tol: float, center, h
     return _truncated(maps, order, expand_order), maps
 
 
-def expand_boxes(model, prop, order: int, expand_order: int, tol: float, boxes: list) -> list:
-    """:func:`expand_box` of each ``(center, half_width)`` in ``boxes``, expanded as one batch."""
+def expand_boxes(model, prop, order: int, expand_order: int, tol: float, boxes: list,
+                 deadline: Deadline = NONE) -> list:
+    """:func:`expand_box` of each ``(center, half_width)`` in ``boxes``, expanded as one batch
+    (OutOfTime past the ``deadline``)."""
     keep_freed_memory()
-    with single_threaded():
+    with single_threaded(), within(deadline):
         batch = problem(model, prop).candidates_batch(boxes, expand_order, tol)
     return [(_truncated(maps, order, expand_order), maps) for maps in batch]
 
