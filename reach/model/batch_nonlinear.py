@@ -109,7 +109,7 @@ class NonlinearTable:
         self.rows = ExtendedRows(self.L)
         self.name, self.sim, self.mode = name, sim, sim.model.modes[name]
         self.flow = SplitFlow(self.mode.flow, sim.model.symbols)
-        self.steps = RK4Blocks(self.flow, sim.dt, sim.substeps)
+        self.steps = RK4Blocks(self.flow, sim.dt, sim.mode_substeps.get(name, sim.substeps))
 
     def weights(self, extra: list) -> tuple:
         """``(L_ext, offsets)``: the rows ``L`` with the observers' rows ``extra`` appended

@@ -180,7 +180,8 @@ class MonteCarloBackend:
                 details["undefined_runs"] = undefined
                 details["undefined"] = (f"{undefined} of {sampled} random runs reached states where the model's "
                                         f"flow is not a real number (NaN): the model leaves its domain there (an "
-                                        f"invariant can keep it in); the violation bound counts the other runs")
+                                        f"invariant can keep it in), or the RK4 steps of a nonlinear flow diverged "
+                                        f"(a stiff flow: a smaller -o dt); the violation bound counts the other runs")
             if sampled < opts.samples or cut:
                 details["note"] = (f"time budget of {opts.max_seconds:.3g} s (option max_seconds) ended the "
                                    f"sampling after {sampled} of {opts.samples} random runs"

@@ -1,0 +1,65 @@
+"""Stiff nonlinear flows in the simulator (reach.model.simulate.stiff_substeps) and in replays
+(reach.backends.montecarlo.replays.replay): explicit RK4 past its stability region grows
+without bound, which must never make a violation. Held against the closed form of
+x' = -1000 (x - 1) (+ y^2, y fixed), whose runs relax monotonically to 1 + y^2 / 1000."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import yaml
+
+import reach.model.simulate as simulate
+from reach.backends.montecarlo.replays import replay
+from reach.cli import main as cli
+from reach.model import load_model
+from reach.spec import bind, load_properties
+
+
+def files(tmp_path, low=1.5, high=2.0, bound=2.5):
+    model = {"name": "relax", "state": ["x", "y", "t"], "horizon": 24,
+             "modes": {"go": {"flow": {"x": "-1000*(x - 1) + y**2", "y": 0, "t": 1}}},
+             "initial": {"mode": "go", "box": {"x": [low, high], "y": [0, 0.01], "t": 0}}}
+    props = {"properties": [{"id": "xmax", "kind": "safety", "modes": ["go"], "require": [f"x <= {bound}"]}]}
+    (tmp_path / "m.yaml").write_text(yaml.safe_dump(model))
+    (tmp_path / "p.yaml").write_text(yaml.safe_dump(props))
+    return tmp_path / "m.yaml", tmp_path / "p.yaml"
+
+
+def test_the_substeps_keep_rk4_stable_on_a_stiff_flow(tmp_path):
+    """The Jacobian's spectral radius is 1000 at every state: at the default step 0.01 the
+    substeps give h * 1000 <= 1.5, and the simulated runs agree with the closed form."""
+    m, _ = files(tmp_path)
+    model = load_model(m)
+    sim = simulate.Simulator(model)
+    assert sim.mode_substeps["go"] >= np.ceil(sim.dt * 1000 / simulate.STABLE_STEP)
+    x0 = np.array([[1.75, 0.005, 0.0], [2.0, 0.01, 0.0]])
+    y = sim.propagate("go", x0, 0.5)
+    exact = 1 + x0[:, 1] ** 2 / 1000 + (x0[:, 0] - 1 - x0[:, 1] ** 2 / 1000) * np.exp(-1000 * 0.5)
+    assert np.allclose(y[:, 0], exact, rtol=0, atol=1e-9)
+
+
+def test_monte_carlo_finds_no_violation_a_stiff_flow_does_not_make(tmp_path, capsys):
+    """x <= 2.5 from x0 <= 2 holds (x falls to 1): it was UNSAFE, 1000 of 1000 runs, from RK4
+    steps of h * 1000 = 5."""
+    m, p = files(tmp_path)
+    code = cli(["check", str(m), str(p), "-b", "montecarlo", "-o", "samples=200", "-o", "optimise=false", "--json"])
+    (row,) = json.loads(capsys.readouterr().out)
+    assert code == 3 and row["status"] == "unknown" and row["details"]["violating_runs"] == 0
+
+
+def test_a_violation_only_the_coarse_integration_makes_does_not_replay(tmp_path, monkeypatch):
+    """With the substeps left at 2 (a stiffness the estimate missed), the coarse replay from
+    x0 = 1.75 "violates" x <= 2.5 at t = 0.01; a quarter of the step does not, so the replay
+    is no violation and says why."""
+    m, p = files(tmp_path)
+    monkeypatch.setattr(simulate, "stiff_substeps", lambda model, mode, dt, substeps: substeps)
+    model = load_model(m)
+    prop = bind(load_properties(p)[0], model)
+    from reach.backends.montecarlo.replays import _replay_simulator, _replay_with
+    coarse = _replay_with(model, prop, [1.75, 0.005, 0.0], None, _replay_simulator(model, None, None), None, None)
+    assert coarse.violated and coarse.time <= 0.02           # what the unstable steps make
+    rep = replay(model, prop, [1.75, 0.005, 0.0], None)
+    assert not rep.violated
+    assert "comes from the integration of a nonlinear flow" in rep.trajectory["note"]
