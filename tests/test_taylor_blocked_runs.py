@@ -102,3 +102,18 @@ def test_a_jump_its_target_invariant_disables_does_not_carry_the_proof(tmp_path)
     """)
     result = TAYLOR.check(model, props["reach3"], {"remainder": "rigorous"})
     assert result.status is Status.UNSAFE and result.counterexample.violation_mode == "A"
+
+
+def test_a_safety_estimate_past_a_stop_says_so_in_its_line(tmp_path):
+    """t <= 5 on the slew: every run stops at th = 2 by t = 2.23, so it holds; the estimate
+    follows the flow on to t = 10 and cannot tell. The safety result carries the event's
+    assumption and shows it in its line (it named nothing)."""
+    from reach.report import line
+    model, props = load_files(tmp_path, STUCK, """
+    properties:
+      - {id: th_cap, kind: safety, modes: [slew], require: ["t <= 5"]}
+""")
+    result = TAYLOR.check(model, props["th_cap"], {})
+    assert result.status is Status.UNKNOWN
+    assert "invariant boundary where no transition is enabled" in result.details["note"]
+    assert "invariant boundary where no transition is enabled" in line(result, props["th_cap"], model)

@@ -124,6 +124,11 @@ def _clocked(model, prop: BoundEvent):
     return clocked, replace(prop, symbols=clocked.symbols)
 
 
+#: the estimate's assumption where runs may stop at an invariant (shown in the verdict's line)
+PAST_STOPS = ("the estimate follows the runs on past an invariant boundary where no transition is enabled "
+              "(reach lint names it), though the automaton stops them there: it may hold values no run reaches")
+
+
 class TaylorBackend:
     name = "taylor"
 
@@ -383,14 +388,14 @@ class TaylorBackend:
                 "the integration error of the flow is negligible",
             ]
             if blocking_faces(model):
-                details["assumptions"].append(
-                    "runs go on past an invariant boundary where no transition is enabled (reach lint "
-                    "names it), though the automaton stops them there: the bound may hold values no run reaches")
+                details["assumptions"].append(PAST_STOPS)
             details["why_not_safe"] = "the remainder is estimated; remainder: rigorous proves bounds"
             gaps = sorted({r["gap"] for r in rows if "gap" in r})
             if gaps:
                 details["note"] = (f"the candidates miss part of the run ({gaps[0]}): the bound's "
                                    f"{'upper' if prop.sense == 'max' else 'lower'} end is open")
+            if PAST_STOPS in details["assumptions"]:
+                details["note"] = "; ".join(filter(None, [details.get("note"), PAST_STOPS]))
             status, coverage = Status.UNKNOWN, 0.0
         return Result(self.name, model.name, prop.id, status, bound=(lo, hi), coverage=coverage,
                       details=details, sets=kept_sets)

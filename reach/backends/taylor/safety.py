@@ -129,6 +129,7 @@ def check_safety(backend, model, prop: BoundSafety, opts, deadline):
     or implied by invariants; otherwise UNKNOWN with the margin bounds (estimated ones say so)
     and, for the first margin left open, why."""
     rows, statuses, lows, highs, counterexample = [], [], [], [], None
+    assumptions = []            # each estimated margin's (details.assumptions)
     sets: list = []             # keep_sets: the enclosures of the first margin's sweeps (the same flow for each)
     for part in margins(model, prop):
         if part.event is None:
@@ -146,6 +147,7 @@ def check_safety(backend, model, prop: BoundSafety, opts, deadline):
                 counterexample = witness(model, prop, search)
                 if counterexample is not None:      # the replayed run decides; its estimate is shown
                     result = search
+        assumptions.append(result.details.get("assumptions", []))
         lo, hi = result.bound
         lows.append(lo)
         highs.append(hi)
@@ -157,10 +159,16 @@ def check_safety(backend, model, prop: BoundSafety, opts, deadline):
                      **({"avoid": True} if part.avoid else {}),
                      **({"why": d.get("reason") or d.get("note")} if d.get("reason") or d.get("note") else {})})
     status = Status.SAFE if all(s == Status.SAFE for s in statuses) else Status.UNKNOWN
+    assumed = list(dict.fromkeys(text for group in assumptions for text in group))
     if counterexample is not None:
         status = Status.UNSAFE
     details = {"constraints": rows,
                "method": "margin of every unsafe piece bounded along the run (min over the listed modes)"}
+    if assumed and status != Status.SAFE:
+        details["assumptions"] = assumed
+        stops = [a for a in assumed if "no transition is enabled" in a]
+        if stops:
+            details["note"] = stops[0]
     if lows:
         lo, hi = min(lows), min(highs)
         details["margin_bound"] = [lo, hi]
