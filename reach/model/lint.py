@@ -73,6 +73,7 @@ Each finding is one line naming the file, the field and the mode cycle (the shor
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import sympy
@@ -370,16 +371,24 @@ def _exit_face(mode, row: int, H, g, low, high):
 class StopFace:
     """An invariant row ``text`` of ``mode`` whose exit face the outgoing transitions' enabled
     sets do not cover (module docstring). ``partly``: some enabled set meets the face;
-    ``pieces``: the parts of the face no transition leaves from, each ``(A, b, strict, E, f)``
-    (``A x <= b`` with the rows ``strict`` held strictly, ``E x = f``), all of them unless the
-    LP budget ran out; ``targets``: where the guards alone cover the face, the target
-    invariant rows that refuse the jumps there."""
+    ``targets``: where the guards alone cover the face, the target invariant rows that refuse
+    the jumps there; ``face``: ``(A, b, strict, E, f)``, the exit face (``A x <= b`` with the
+    rows ``strict`` held strictly, ``E x = f``), and ``guards`` the enabled sets."""
 
     mode: str
     text: str
     partly: bool
-    pieces: list
     targets: list[str]
+    face: tuple
+    guards: list
+
+    @cached_property
+    def pieces(self) -> list:
+        """The parts of the face no transition leaves from, each ``(A, b, strict, E, f)``, all
+        of them unless the LP budget runs out (found on first use: the lint needs only one)."""
+        found: list = []
+        _open_pieces(*self.face, self.guards, [MAX_PIECES], found)
+        return found
 
 
 def stop_faces(model) -> list[StopFace]:
@@ -420,10 +429,8 @@ def stop_faces(model) -> list[StopFace]:
             if constraint.text in seen or (clock in nz and H[i, clock] > 0 and nz - {clock} <= fixed):
                 continue                        # an end of time the model sets itself
             A, b, E, f, strict = _exit_face(mode, i, H, g, low, high)
-            pieces = []
             try:
-                _open_pieces(A, b, strict, E, f, guards, [MAX_PIECES], pieces)
-                if not pieces:
+                if not _uncovered(A, b, strict, E, f, guards, [MAX_PIECES]):
                     continue
                 meets = any(lp.feasible_point(np.vstack([A, G]), np.concatenate([b, c]), A_eq=E, b_eq=f) is not None
                             for G, c in guards)
@@ -432,7 +439,8 @@ def stop_faces(model) -> list[StopFace]:
             except lp.LPError:
                 continue
             seen.add(constraint.text)
-            faces.append(StopFace(name, constraint.text, meets, pieces, targets if by_target else []))
+            faces.append(StopFace(name, constraint.text, meets, targets if by_target else [], (A, b, strict, E, f),
+                                  guards))
     return faces
 
 

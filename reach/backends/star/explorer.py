@@ -20,7 +20,7 @@ from reach.backends.star.options import (CHATTER_JUMPS, ERROR_RATIO, INSTANT_STE
                                          MAX_CELLS, MAX_CHAIN_BYTES, MEMORY_FRACTION, MEMORY_PERIOD, NAME,
                                          PROGRESS_SECONDS, STALL_JUMPS, TIGHT_RATIO, StarOptions)
 from reach.backends.star.returns import entry_rows, rising, undone
-from reach.backends.star.stops import meets, stop_pieces
+from reach.backends.star.stops import meets, stop_pieces, stop_rows
 from reach.backends.star.switching import group_pieces
 from reach.backends.star.transitions import (_LinearModel, _modes_leading_to, _Piece,
                                              _unsafe_pieces, kept_rows, misses)
@@ -245,7 +245,8 @@ class _Explorer:
         self.pieces = self._reachable_pieces(group_pieces(self.pieces, getattr(data, "groups", ())))
         self.covered = Covered(self.clock, time_invariant(model)) if applies(model) and not options.keep_sets \
             else None
-        self.stops = stop_pieces(model, data.widen)         # see _note_stops
+        self.stops = stop_rows(model, data.widen)           # see _note_stops
+        self._stop_pieces: dict[int, list] = {}             # per face, its parts (found on first use)
         self.stopped: dict[tuple[str, str], float] = {}
         self.relevant = _modes_leading_to(model, set(self.pieces))
         self.horizon = min(self.horizon, max(self._last_unsafe_instant(), 0.0))
@@ -1138,8 +1139,8 @@ class _Explorer:
         looked at only where its bound along the face's row (grid stars at both ends, plus the
         cell's error and the grid points' input box ``dev``) reaches the face; then its
         segment, as :meth:`_cell` builds it, decides by one LP."""
-        H = np.vstack([piece[4] for piece in self.stops[mode]])             # the face rows E
-        f = np.concatenate([piece[5] for piece in self.stops[mode]])
+        H = np.vstack([E for _, E, _ in self.stops[mode]])                  # the face rows E
+        f = np.concatenate([g for _, _, g in self.stops[mode]])
         upper = _chain_bounds(centers, bases, box, H)
         if dev is not None:
             upper = upper + dev[:upper.shape[0]] @ np.abs(H).T
@@ -1155,12 +1156,16 @@ class _Explorer:
                                    None if curvature is None else curvature[j])
             start = float(-seg.support_bounds(-self.clock_row[None])[0])
             for k in np.flatnonzero(near):
-                text, *piece = self.stops[mode][k]
-                if self.stopped.get((mode, text), np.inf) <= start:
+                face = self.stops[mode][k][0]
+                if self.stopped.get((mode, face.text), np.inf) <= start:
                     continue
-                self._lp_budget()
-                if meets(seg, *piece, error=error[j]):
-                    self.stopped[(mode, text)] = start
+                if id(face) not in self._stop_pieces:
+                    self._stop_pieces[id(face)] = stop_pieces(face, self.data.widen)
+                for piece in self._stop_pieces[id(face)]:
+                    self._lp_budget()
+                    if meets(seg, *piece, error=error[j]):
+                        self.stopped[(mode, face.text)] = start
+                        break
 
     def _returns(self, mode: str, start: Star, path: _Path) -> tuple:
         """``(jump, rows)`` for each jump of ``mode`` that may return the runs of a chain's

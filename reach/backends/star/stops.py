@@ -31,17 +31,20 @@ from reach import lp
 from reach.sets import Star
 
 
-def stop_pieces(model, widen) -> dict[str, list[tuple]]:
-    """Per mode, ``(text, A, b, strict, E, f)`` for each part of an invariant face where runs
-    stop (:attr:`HybridAutomaton.stop_faces`), over the explored states (``widen`` adds the
-    added clock's zero column to rows over the model's states)."""
+def stop_rows(model, widen) -> dict[str, list[tuple]]:
+    """Per mode, ``(face, E, f)`` for each invariant row where runs may stop
+    (:attr:`HybridAutomaton.stop_faces`), the face's row ``E x = f`` over the explored states
+    (``widen`` adds the added clock's zero column to rows over the model's states)."""
     out: dict[str, list[tuple]] = {}
     for face in model.stop_faces:
-        for A, b, strict, E, f in face.pieces:
-            A, b = widen(A, b)
-            E, f = widen(E, f)
-            out.setdefault(face.mode, []).append((face.text, A, b, strict, E, f))
+        out.setdefault(face.mode, []).append((face, *widen(*face.face[3:])))
     return out
+
+
+def stop_pieces(face, widen) -> list[tuple]:
+    """The parts of ``face`` where no transition is enabled (its ``pieces``, found on first
+    use), each ``(A, b, strict, E, f)`` over the explored states."""
+    return [(*widen(A, b), strict, *widen(E, f)) for A, b, strict, E, f in face.pieces]
 
 
 def meets(seg: Star, A, b, strict, E, f, error=None) -> bool:
