@@ -376,7 +376,8 @@ class TaylorBackend:
                               key=lambda why: (not deadline.cut(why), why))
                 details["note"] = (f"the bound is open on {1 - meets - violates:.0%} of the box"
                                    + (f" ({'; '.join(whys[:2])})" if whys else "")
-                                   + ("" if deadline.passed() or not len(u) else
+                                   + ("" if deadline.passed() or not len(u) or (whys and all(
+                                       "mode switches" in why for why in whys)) else
                                       f"; -o refine={opts.refine + 2} halves the subdomains that hold it open"))
         else:
             details["assumptions"] = [
