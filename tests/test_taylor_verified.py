@@ -349,3 +349,23 @@ def test_a_long_crossing_window_in_a_stiff_mode_falls_back_to_the_step_hull():
     lo, _ = rig.details["margin_bound"]
     assert rig.status is not Status.UNSAFE
     assert -100.0 < lo <= mc.details["closest_depth"]
+
+
+def test_no_refine_hint_where_only_the_switch_count_holds_the_bound_open(tmp_path):
+    """A ball bouncing for 20 s switches more than taylor follows: the bound is open for that
+    reason alone, which halving subdomains cannot change, so no -o refine hint is given."""
+    import yaml
+
+    from reach.model import load_model
+    from reach.spec import bind, load_properties
+    (tmp_path / "m.yaml").write_text(yaml.safe_dump(
+        {"name": "ball", "state": ["x", "v", "t"], "horizon": 20,
+         "modes": {"fall": {"flow": {"x": "v", "v": -9.81, "t": 1}, "invariant": ["x >= 0"]}},
+         "transitions": [{"from": "fall", "to": "fall", "guard": ["x <= 0", "v <= 0"], "reset": {"v": "-0.8*v"},
+                          "urgent": True}],
+         "initial": {"mode": "fall", "box": {"x": [10, 10.2], "v": 0, "t": 0}}}))
+    (tmp_path / "p.yaml").write_text(yaml.safe_dump(
+        {"properties": [{"id": "vmax", "kind": "event", "modes": ["fall"], "maximize": "v", "require": "<= 20"}]}))
+    model = load_model(tmp_path / "m.yaml")
+    result = BACKEND.check(model, bind(load_properties(tmp_path / "p.yaml")[0], model), {"remainder": "rigorous"})
+    assert "mode switches" in result.details["note"] and "-o refine" not in result.details["note"]
