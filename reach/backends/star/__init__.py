@@ -193,6 +193,7 @@ from reach.backends.star.linearise import LinearisedModel, check_linearised
 from reach.backends.star.options import (DEFAULT_PASS_SHARE, DEPTH_LP_TOLERANCE, FINER_FACTOR,
                                          FINER_MAX_SECONDS, FINER_PASSES, FINER_SECONDS, NAME, StarOptions,
                                          aggregating_retry, finer_retry, first_share, inputs_retry)
+from reach.backends.star.polygons import SIDES
 from reach.backends.star.stops import sampled_stops
 from reach.backends.star.switching import SwitchingModel, check_switching
 from reach.backends.star.transitions import _LinearModel, _unsafe_pieces
@@ -599,6 +600,9 @@ def _run_details(explorer: _Explorer) -> dict:
                       f"replace ({s.deaggregated} refined back into their members)")
     if explorer.data.added_clock:
         soundness += "; the model has no global clock: one was added (rate 1, 0 initially, never reset)"
+    if any("as polygons of" in p.label for pieces in explorer.pieces.values() for p in pieces or ()):
+        soundness += (f"; each quadratic requirement's unsafe set replaced by polygons of {SIDES} sides that "
+                      f"hold it (within 3e-4 of its radius), witnesses replayed on the exact requirement")
     if explorer.covered is not None and explorer.covered.pruned and explorer.covered.shift:
         soundness += (f"; {explorer.covered.pruned} aggregates not explored: their states lie in an earlier "
                       "aggregate of the same mode entered no later, and the automaton does not depend "

@@ -12,7 +12,8 @@ import numpy as np
 
 from reach import lp
 from reach.backends.star.flowpipe import AffineFlow
-from reach.model.constraints import affine_coefficients
+from reach.backends.star.polygons import SIDES, polygon_pieces
+from reach.model.constraints import affine_coefficients, halfspaces
 from reach.sets import Box, Star
 from reach.sets.hpolytope import HPolytope
 
@@ -62,13 +63,15 @@ def _cached(obj, build):
 
 
 def _unsafe_pieces(prop) -> dict[str, list[_Piece] | None]:
-    """The property's unsafe pieces per mode, rows normalised (None for a nonlinear mode)."""
+    """The property's unsafe pieces per mode, rows normalised; a piece with quadratic
+    constraints is replaced by polygons that hold it (:mod:`.polygons`, closed, labelled so);
+    None for a mode with another nonlinear constraint."""
     def build(prop):
         out = {}
         for mode in prop.modes:
             halfspaces = prop.halfspace_pieces(mode)
             if halfspaces is None:
-                out[mode] = None
+                out[mode] = _polygon_pieces(prop, mode)
                 continue
             out[mode] = []
             for k, ((H, g), constraints) in enumerate(zip(halfspaces, prop.pieces[mode])):
@@ -188,6 +191,22 @@ class _LinearModel:
                 return None
             R[index, :model.n], r[index] = coeffs
         return _Jump(tr.name, tr.target, *_normalised(*self.widen(*guard)), R, r, tr.window)
+
+
+def _polygon_pieces(prop, mode: str) -> list[_Piece] | None:
+    """The unsafe pieces of ``mode`` with each quadratic constraint's polygons
+    (:func:`.polygons.polygon_pieces`); None if a piece has none."""
+    out = []
+    for k, constraints in enumerate(prop.pieces[mode]):
+        found = polygon_pieces(constraints, prop.symbols)
+        if found is None:
+            return None
+        label = " and ".join(dict.fromkeys(c.text for c in constraints)) or f"piece {k}"
+        exact = halfspaces(constraints, prop.symbols) is not None
+        for H, g in found:
+            out.append(_Piece(*_normalised(H, g), exact and all(c.strict for c in constraints),
+                              label if exact else f"{label} (as polygons of {SIDES} sides)"))
+    return out
 
 
 def _normalised(H, g):
