@@ -164,3 +164,14 @@ def test_a_jump_into_a_target_whose_invariant_fails_after_it_leaves_the_face_ope
     doc["transitions"][0].pop("reset")
     doc["modes"]["go"]["flow"]["y"] = 0     # y held since the mode was entered: reachability's matter
     assert blocking_faces(write(tmp_path, doc, "kept")) == []
+
+
+def test_both_faces_of_an_absolute_bound_are_stop_faces(tmp_path):
+    """abs(x) <= 1 under x' = v, v in [-1, 1] held, with no way out: runs stop at x = 1 and at
+    x = -1. Both faces are kept (star tests each), and the lint names the row once."""
+    doc = one_mode(["abs(x) <= 1"], {"x": "v", "v": 0, "t": 1}, box={"x": [0, 0.5], "v": [-1, 1], "t": 0},
+                   state=("x", "v", "t"))
+    model = write(tmp_path, doc)
+    assert len([f for f in model.stop_faces if f.mode == "go"]) == 2
+    (finding, _), = blocking_faces(model)
+    assert finding.count("abs(x) <= 1") == 1

@@ -77,3 +77,17 @@ def test_a_ring_is_decided_both_ways_on_its_radius(tmp_path, capsys):
     assert f"polygons of {SIDES} sides" in rows["out_safe"]["details"]["semantics"]
     for name in ("out_unsafe", "in_unsafe"):
         assert cli(["replay", rows[name]["counterexample_file"]]) == 1
+
+
+def test_a_small_disc_far_out_keeps_its_radius():
+    """(x - 1e4)^2 + y^2 <= 1e-9: expanded in floats the constant 1e8 - 1e-9 rounds to 1e8 and
+    the disc to a point. The centre and radius are computed exactly, so the polygon holds every
+    point of the disc, and the pieces of its outside hold every point just beyond it."""
+    r2 = sympy.Float(1e-9)
+    disc = Constraint((X - 10 ** 4) ** 2 + Y ** 2 - r2, False, "disc", None)
+    (H, h), = polygon_pieces([disc], [X, Y])
+    theta = np.linspace(0, 2 * np.pi, 2001)
+    rim = np.stack([1e4 + np.sqrt(1e-9) * np.cos(theta), np.sqrt(1e-9) * np.sin(theta)], axis=1)
+    assert np.all(rim @ H.T <= h)
+    beyond = polygon_pieces([Constraint(-((X - 10 ** 4) ** 2 + Y ** 2 - r2), False, "out", None)], [X, Y])
+    assert np.all(inside_union(beyond, 1e4 + (rim - 1e4) * (1 + 1e-7)))

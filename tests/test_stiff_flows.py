@@ -63,3 +63,14 @@ def test_a_violation_only_the_coarse_integration_makes_does_not_replay(tmp_path,
     rep = replay(model, prop, [1.75, 0.005, 0.0], None)
     assert not rep.violated
     assert "comes from the integration of a nonlinear flow" in rep.trajectory["note"]
+
+
+def test_a_kink_at_a_probe_is_no_stiffness(tmp_path):
+    """v' = -sign(v) from v in [-1, 1]: the centre probe sits on the kink, where a difference
+    quotient is a jump over the step (1e7), not a rate. The two steps disagree there, so the
+    substeps stay at 2 (it asked for 10000, and a run took minutes)."""
+    model = {"name": "friction", "state": ["x", "v", "t"], "horizon": 10,
+             "modes": {"run": {"flow": {"x": "v", "v": "-sign(v)", "t": 1}}},
+             "initial": {"mode": "run", "box": {"x": [0, 1], "v": [-1, 1], "t": 0}}}
+    (tmp_path / "k.yaml").write_text(yaml.safe_dump(model))
+    assert simulate.Simulator(load_model(tmp_path / "k.yaml")).mode_substeps == {"run": 2}

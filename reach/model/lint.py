@@ -423,10 +423,9 @@ def stop_faces(model) -> list[StopFace]:
                     targets.append(f"'{tr.target}': {', '.join(dict.fromkeys(texts))}")
         if any(guard is None or not len(guard[1]) for guard in guards):
             continue                            # a transition always enabled, or one not told
-        seen = set()
-        for i, constraint in enumerate(mode.invariant):
+        for i, constraint in enumerate(mode.invariant):   # each row (abs(x) <= 1 has two faces)
             nz = set(np.flatnonzero(H[i]).tolist())
-            if constraint.text in seen or (clock in nz and H[i, clock] > 0 and nz - {clock} <= fixed):
+            if clock in nz and H[i, clock] > 0 and nz - {clock} <= fixed:
                 continue                        # an end of time the model sets itself
             A, b, E, f, strict = _exit_face(mode, i, H, g, low, high)
             try:
@@ -438,7 +437,6 @@ def stop_faces(model) -> list[StopFace]:
                     not _uncovered(A, b, strict, E, f, plain, [MAX_PIECES])
             except lp.LPError:
                 continue
-            seen.add(constraint.text)
             faces.append(StopFace(name, constraint.text, meets, targets if by_target else [], (A, b, strict, E, f),
                                   guards))
     return faces
@@ -459,7 +457,7 @@ def blocking_faces(model) -> list[tuple[str, bool]]:
             targets = list(dict.fromkeys(t for face in group for t in face.targets))
             if targets:
                 where += f": the guards hold there, but a jump needs its target's invariant after it, {'; '.join(targets)}"
-            listed = ", ".join(face.text for face in group)
+            listed = ", ".join(dict.fromkeys(face.text for face in group))
             findings.append((f"{model.file}: modes.{name}.invariant: runs of mode '{name}' that reach "
                              f"the boundary of {listed if len(listed) < 160 else listed[:157] + '...'} "
                              f"stop there ({where}): nothing after is checked", meets))

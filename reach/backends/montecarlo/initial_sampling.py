@@ -93,12 +93,16 @@ class PolytopeSampler:
         self.__dict__.pop("centre_z", None)
 
     def _radius(self) -> float:
-        """The radius of the largest ball in ``G z <= h`` (Chebyshev LP); 0 if none is found."""
+        """The radius of the largest ball in ``G z <= h`` (Chebyshev LP); 0 if none is found,
+        infinite where the solver gives no answer."""
         norms = np.linalg.norm(self.G, axis=1)
         c = np.zeros(self.d + 1)
         c[-1] = 1.0
-        res = lp.maximize(c, np.hstack([self.G, norms[:, None]]), self.h,
-                          bounds=[(None, None)] * self.d + [(0, None)])
+        try:
+            res = lp.maximize(c, np.hstack([self.G, norms[:, None]]), self.h,
+                              bounds=[(None, None)] * self.d + [(0, None)])
+        except lp.LPError:
+            return np.inf                       # no answer: the hull found so far stands
         return float(res.x[-1]) if res.optimal else 0.0
 
     def _implicit_rows(self) -> np.ndarray:

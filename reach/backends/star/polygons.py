@@ -17,7 +17,10 @@ for ``Q`` positive definite (a sign flip makes a negative definite one so):
 
 With :data:`SIDES` = 128 the polygons lie within ``1 / cos(pi / 128) - 1 = 3.0e-4`` of the
 ellipse, relative to its ``Q``-radius ``sqrt(rho)``, however elongated it is. A piece with any other nonlinear constraint, or splitting into more
-than :data:`MAX_PIECES` pieces, has no polygon (the back-end says it is unsupported)."""
+than :data:`MAX_PIECES` pieces, has no polygon (the back-end says it is unsupported). The centre
+and ``rho`` are computed exactly from the constraint's coefficients (a disc of radius 1e-3 at
+1e4 loses its radius to cancellation in floats), then rounded; an ellipse whose ``Q`` has a
+condition number above 1e8 has none either."""
 
 from __future__ import annotations
 
@@ -66,7 +69,8 @@ def _ellipse(g, symbols):
     """``(index, c, Q, rho, inside)`` when ``g`` is a quadratic in two states with a definite
     Hessian: ``{g <= 0}`` is ``(x - c)^T Q (x - c) <= rho`` (inside) or ``>= rho`` (not
     inside), ``Q`` positive definite, over the states ``index``; None otherwise."""
-    expr = sympy.expand(sympy.sympify(g))
+    expr = sympy.sympify(g)
+    expr = sympy.expand(expr.xreplace({f: sympy.Rational(f) for f in expr.atoms(sympy.Float)}))  # exact
     free = expr.free_symbols
     names = [s for s in symbols if s in free]
     if len(names) != 2 or free - set(names):
@@ -77,24 +81,26 @@ def _ellipse(g, symbols):
         return None
     if poly.total_degree() != 2:
         return None
-    coeff = {m: float(v) for m, v in zip(poly.monoms(), poly.coeffs())}
-    Q = np.array([[coeff.get((2, 0), 0.0), coeff.get((1, 1), 0.0) / 2],
-                  [coeff.get((1, 1), 0.0) / 2, coeff.get((0, 2), 0.0)]])
-    q = np.array([coeff.get((1, 0), 0.0), coeff.get((0, 1), 0.0)])
-    c0 = coeff.get((0, 0), 0.0)
-    eig = np.linalg.eigvalsh(Q)
-    if np.all(eig > 0):
-        sign = 1.0
-    elif np.all(eig < 0):
-        sign = -1.0                             # g = -(convex): {g <= 0} is the outside
-    else:
-        return None
+    coeff = {m: sympy.Rational(v) for m, v in zip(poly.monoms(), poly.coeffs())}   # exact binary values
+    zero = sympy.Integer(0)
+    Q = sympy.Matrix([[coeff.get((2, 0), zero), coeff.get((1, 1), zero) / 2],
+                      [coeff.get((1, 1), zero) / 2, coeff.get((0, 2), zero)]])
+    q = sympy.Matrix([coeff.get((1, 0), zero), coeff.get((0, 1), zero)])
+    c0 = coeff.get((0, 0), zero)
+    det, trace = Q.det(), Q.trace()
+    if det <= 0:
+        return None                             # indefinite or degenerate: no ellipse
+    sign = 1 if trace > 0 else -1               # negative definite: {g <= 0} is the outside
     Q, q, c0 = sign * Q, sign * q, sign * c0
-    centre = -np.linalg.solve(Q, q) / 2
-    rho = float(centre @ Q @ centre - c0)
-    if not np.all(np.isfinite(centre)) or not np.isfinite(rho):
+    Qf = np.array(Q.tolist(), dtype=float)
+    if np.linalg.cond(Qf) > 1e8:
+        return None                             # too thin an ellipse for its float factor
+    centre = -Q.inv() * q / 2                   # exact: a small disc far out keeps its radius
+    rho = (centre.T * Q * centre)[0, 0] - c0
+    centre_f, rho_f = np.array(centre.tolist(), dtype=float).reshape(2), float(rho)
+    if not np.all(np.isfinite(centre_f)) or not np.isfinite(rho_f):
         return None
-    return [symbols.index(s) for s in names], centre, Q, rho, sign > 0
+    return [symbols.index(s) for s in names], centre_f, Qf, rho_f, sign > 0
 
 
 def _outer(index, centre, Q, rho, n):

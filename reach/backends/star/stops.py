@@ -28,6 +28,7 @@ import time
 import numpy as np
 
 from reach import lp
+from reach.errors import InputError
 from reach.sets import Star
 
 
@@ -84,8 +85,8 @@ def sampled_stops(model, stopped: dict, seconds: float, count: int = 48, seed: i
         X = np.vstack([X, Xr])
         tau = None if tau is None else np.concatenate([tau, taur])
         runs = Simulator(model).run(X, tau, deadline=time.time() + seconds)
-    except (ValueError, ArithmeticError, np.linalg.LinAlgError):
-        return out
+    except (InputError, ValueError, ArithmeticError, MemoryError, np.linalg.LinAlgError):
+        return out                  # no sample (a grid too fine to simulate): the sets' faces stand
     found: dict[tuple[str, str], list[float]] = {}
     names = list(model.modes)
     for k in np.flatnonzero(np.isfinite(runs.blocked_at) & (runs.blocked_at < model.horizon)):

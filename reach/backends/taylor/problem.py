@@ -450,7 +450,12 @@ class EventProblem:
                             continue        # the rate does not change with time at the entry: no turn
                         span = float(run.nodes[last])
                         if not -1e-9 * max(1.0, span) <= t_e <= span * (1 + 1e-9):
-                            continue        # Newton went to a root off the run (t = 166 of a 2 s run): no turn here
+                            # Newton went to a root off the run (t = 166 of a 2 s run): no candidate;
+                            # from a turn the grid saw, the bound is then open (no silent miss)
+                            if k is not None and out.gap is None:
+                                out.gap = (f"the turning point near t = {t0 + tk:.6g} in mode '{mode}' "
+                                           "could not be located")
+                            continue
                         em = yield from event_map_steps(code.f, code.qdot, X, run.nodes, t_e, order)
                         late = self._time_range(self._event_time(em, t0))[1] > T
                         out.add(f"{mode}:extremum@{t0 + t_e:.6g}", code.q(em.state), partial or late)
