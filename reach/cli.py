@@ -276,13 +276,14 @@ def cmd_replay(args) -> int:
     if cex.transitions is not None and rep.transitions[:len(cex.transitions)] != cex.transitions:
         print(printable(f"note: the run took the transitions {few(rep.transitions, 8, '(none)')}; "
                         f"the file names {few(cex.transitions, 8, '(none)')}"))
+    # why a run that was a violation at its own step is none (a nonlinear flow's finer replay)
+    note = rep.trajectory.get("note") if isinstance(rep.trajectory, dict) and not rep.violated else None
     if isinstance(prop, BoundEvent):        # the extremum along the run against the requirement
         verdict = "replayed" if rep.violated else "NOT replayed"
-        note = (rep.trajectory or {}).get("note") if isinstance(rep.trajectory, dict) else None
         print(printable(f"{verdict}: {model.name} {'violates' if rep.violated else 'satisfies'} '{prop.id}': "
                         f"{prop.sense} {prop.text or 'quantity'} = {quantity(prop, rep.value, 6)} at t={rep.time:.6g} "
                         f"in mode {rep.mode or '(none)'}, required {prop.op} {quantity(prop, prop.value)}"
-                        + (f"; {note}" if note and not rep.violated else "")))
+                        + (f"; {note}" if note else "")))
         return 1 if rep.violated else 3
     if rep.violated:
         there = margin_at(prop, rep.mode, rep.state)
@@ -291,7 +292,6 @@ def cmd_replay(args) -> int:
         print(printable(f"replayed: {model.name} violates '{prop.id}' at t={rep.time:.6g} in mode {rep.mode} "
                         f"({depth}); state {state}"))
         return 1
-    note = (rep.trajectory or {}).get("note") if isinstance(rep.trajectory, dict) else None
     print(printable(f"NOT replayed: {model.name} satisfies '{prop.id}' along this run "
                     f"(closest margin {margin_text(prop, rep.depth)})" + (f"; {note}" if note else "")))
     return 3

@@ -1,6 +1,7 @@
 """The benchmark runner and its cross-checks."""
 
 import json
+from pathlib import Path
 
 import pytest
 
@@ -137,6 +138,21 @@ instances:
         run_suite(suite, out=tmp_path / "out2", jobs=1, backends=["star"])
 
 
+def thermostat_suite(tmp_path, instances: dict):
+    """A suite of thermostat instances on a quick Monte Carlo (``instances``: id -> its
+    ``expect`` as YAML text, or None)."""
+    root = Path.cwd()
+    text = "backends:\n  montecarlo: {samples: 5, search_rounds: 0, optimise: false}\ninstances:\n"
+    for name, expect in instances.items():
+        text += (f"  - id: {name}\n    model: {root}/models/thermostat.yaml\n"
+                 f"    properties: {root}/properties/thermostat.yaml\n")
+        if expect is not None:
+            text += f"    expect: {expect}\n"
+    suite = tmp_path / "suite.yaml"
+    suite.write_text(text)
+    return suite
+
+
 def test_two_filtered_runs_into_one_folder_keep_each_others_rows(tmp_path, monkeypatch):
     """Two filtered runs (one instance each) that finish together into the same --out: each
     merges its rows under a lock, so neither overwrites the other's (both instances' rows end
@@ -153,18 +169,7 @@ def test_two_filtered_runs_into_one_folder_keep_each_others_rows(tmp_path, monke
         time.sleep(0.5)
         return rows
     monkeypatch.setattr(runner, "previous_rows", slow_read)
-    root = __import__("pathlib").Path.cwd()
-    suite = tmp_path / "suite.yaml"
-    suite.write_text(f"""backends:
-  montecarlo: {{samples: 5, search_rounds: 0, optimise: false}}
-instances:
-  - id: one
-    model: {root}/models/thermostat.yaml
-    properties: {root}/properties/thermostat.yaml
-  - id: two
-    model: {root}/models/thermostat.yaml
-    properties: {root}/properties/thermostat.yaml
-""")
+    suite = thermostat_suite(tmp_path, {"one": None, "two": None})
     import io
     threads = [threading.Thread(target=run_suite, args=(suite,),
                                 kwargs={"instances": [i], "out": tmp_path / "out", "jobs": 1, "stream": io.StringIO()})
@@ -181,19 +186,7 @@ def test_a_filtered_run_is_gated_on_its_own_instances_only(tmp_path):
     """An earlier run left a note on `thermo` (its expected-safe band unproved by Monte Carlo);
     a run filtered to `clean` (nothing expected, nothing to note) exits 0: the kept rows'
     checks are written to the report, not gated on. Run on `thermo` again, it exits 3."""
-    root = __import__("pathlib").Path.cwd()
-    suite = tmp_path / "suite.yaml"
-    suite.write_text(f"""backends:
-  montecarlo: {{samples: 5, search_rounds: 0, optimise: false}}
-instances:
-  - id: thermo
-    model: {root}/models/thermostat.yaml
-    properties: {root}/properties/thermostat.yaml
-    expect: {{band: safe}}
-  - id: clean
-    model: {root}/models/thermostat.yaml
-    properties: {root}/properties/thermostat.yaml
-""")
+    suite = thermostat_suite(tmp_path, {"thermo": "{band: safe}", "clean": None})
     out = tmp_path / "out"
     with open(tmp_path / "log.txt", "w") as stream:
         assert run_suite(suite, out=out, jobs=1, stream=stream) == 3

@@ -91,3 +91,16 @@ def test_a_small_disc_far_out_keeps_its_radius():
     assert np.all(rim @ H.T <= h)
     beyond = polygon_pieces([Constraint(-((X - 10 ** 4) ** 2 + Y ** 2 - r2), False, "out", None)], [X, Y])
     assert np.all(inside_union(beyond, 1e4 + (rim - 1e4) * (1 + 1e-7)))
+
+
+def test_a_quadratic_in_three_states_is_unsupported_and_says_where_to_go(tmp_path, capsys):
+    """x^2 + y^2 + z^2 <= 1.01 has no polygon here: star says UNSUPPORTED and which
+    requirements it takes."""
+    (tmp_path / "m.yaml").write_text(yaml.safe_dump(
+        {"name": "still", "state": ["x", "y", "z"], "horizon": 1,
+         "modes": {"go": {"flow": {"x": 0, "y": 0, "z": 0}}},
+         "initial": {"mode": "go", "box": {"x": 0, "y": 0, "z": 0}}}))
+    (tmp_path / "p.yaml").write_text(yaml.safe_dump(
+        {"properties": [{"id": "ball", "kind": "safety", "modes": ["go"], "require": ["x**2 + y**2 + z**2 <= 1.01"]}]}))
+    assert cli(["check", str(tmp_path / "m.yaml"), str(tmp_path / "p.yaml"), "-b", "star"]) == 3
+    assert "quadratics in two states (as polygons); this one is for taylor and montecarlo" in capsys.readouterr().out

@@ -74,7 +74,7 @@ def replay(model: HybridAutomaton, prop: BoundSafety, initial_state, switch_time
         signal = _signal_of(model, input_signal)
         sim = _replay_simulator(model, dt, signal)
         rep = _replay_with(model, prop, initial_state, switch_time, sim, signal, branches)
-        if not rep.violated or all(m in sim.generators or mode.timeless for m, mode in model.modes.items()):
+        if not rep.violated or not sim.mode_substeps:      # every mode flows exactly (or not at all)
             return rep
         try:
             finer = _replay_simulator(model, sim.dt / CONFIRM_FACTOR, signal)

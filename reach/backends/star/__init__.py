@@ -265,7 +265,8 @@ class StarBackend:
             return "stochastic disturbance: the star back-end is deterministic (use fsr or montecarlo)"
         for mode in prop.modes:
             if _unsafe_pieces(prop).get(mode) is None:
-                return f"nonlinear unsafe set in mode '{mode}': needs a polygonal approximation"
+                return (f"nonlinear unsafe set in mode '{mode}': star takes linear requirements and quadratics in "
+                        f"two states (as polygons); this one is for taylor and montecarlo")
         return None
 
     def check(self, model, prop, options=None) -> Result:
