@@ -57,3 +57,20 @@ def test_a_stop_face_no_run_reaches_is_not_named(tmp_path, capsys):
     (row,) = json.loads(capsys.readouterr().out)
     assert row["status"] == "safe" and "stopped_runs" not in row["details"]
     assert "stop_faces_met" not in row["details"]
+
+
+def test_runs_cut_by_the_budget_are_not_named_as_stopped(tmp_path):
+    """Runs the time budget cuts are not runs the model stops: with no time left nothing is
+    sampled (the faces met are named alone), and a simulation cut at once marks every run cut."""
+    import numpy as np
+
+    from reach.backends.star.stops import sampled_stops
+    from reach.model.simulate import Simulator
+
+    m, _ = model_and_property(tmp_path, "y <= 3")
+    model = load_model(m)
+    met = {("go", "x <= 5"): 3.9}
+    assert sampled_stops(model, met, 0.0) == {"stop_faces_met": "mode 'go' at the boundary of x <= 5 (from t = 3.9)"}
+    runs = Simulator(model).run(np.array([[0.0, 0.0, 0.0], [1.0, 5.0, 0.0]]), deadline=0.0)
+    assert runs.cut == 2 and sorted(runs.cut_rows.tolist()) == [0, 1]
+    assert sampled_stops(model, met, 30.0)["stopped_runs"].count("in mode 'go'") == 1   # with time: they stop

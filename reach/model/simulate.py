@@ -301,6 +301,7 @@ class Trajectories:
     path: dict = field(default_factory=dict)    # run -> (t (K,), mode (K,), x (K, n)) if recorded
     transitions: dict = field(default_factory=dict)     # run -> [transition name, ...] if recorded
     cut: int = 0                                # runs stopped by the caller's deadline (among the blocked)
+    cut_rows: np.ndarray = field(default_factory=lambda: np.empty(0, dtype=int))   # which runs those are
 
 
 @dataclass(frozen=True)
@@ -669,14 +670,14 @@ class Simulator:
         horizon = self.model.horizon
         cell = np.full(N, -1.0)                # grid cell of each run's time at the last pass
         burst = np.zeros(N, dtype=int)         # passes without leaving that cell
-        cut = 0
+        cut, cut_rows = 0, np.empty(0, dtype=int)
         while True:
             active = np.flatnonzero((t < horizon - 1e-12) & np.isnan(blocked_at))
             if active.size == 0:
                 self._urgent_now(np.flatnonzero(np.isnan(blocked_at)), runs)    # jumps due at the horizon
                 break
             if time.time() > deadline:         # the caller's time budget: stop the runs under way
-                blocked_at[active], cut = t[active], active.size
+                blocked_at[active], cut, cut_rows = t[active], active.size, active
                 break
             now = np.floor(t[active] / self.dt)
             stuck = now == cell[active]
@@ -702,7 +703,7 @@ class Simulator:
                 if rows.size:
                     self._segment(name, rows, runs, next_kick)
         traj = self._trajectories(runs, recorder)
-        traj.cut = cut
+        traj.cut, traj.cut_rows = cut, cut_rows
         return traj
 
     @staticmethod

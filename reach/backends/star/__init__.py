@@ -497,7 +497,9 @@ class StarBackend:
                 f"left is always cut)")
         details.update(_run_details(explorer))
         if explorer.stopped and status is Status.SAFE:
-            details.update(sampled_stops(model, explorer.stopped, max(1.0, 0.25 * (time.perf_counter() - start))))
+            spent = time.perf_counter() - start
+            left = math.inf if opt.max_seconds is None else opt.max_seconds - spent
+            details.update(sampled_stops(model, explorer.stopped, min(max(1.0, 0.25 * spent), left)))
         LOG.info("%s / %s: %s after %d stars, %d cells, %d LPs, %d aggregates", model.name, prop.id,
                  status.value, explorer.stats.chains,
                  explorer.stats.cells, explorer.stats.lps, explorer.stats.aggregated)

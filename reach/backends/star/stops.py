@@ -70,13 +70,15 @@ def sampled_stops(model, stopped: dict, seconds: float, count: int = 48, seed: i
     """``details`` entries for the faces the sets met (``stopped``: ``(mode, row text)`` to the
     earliest clock of a segment meeting it): ``stopped_runs``, the faces where sampled runs
     stopped (module docstring), and ``stop_faces_met``, those the sets met; the sampling stops
-    after ``seconds``."""
+    after ``seconds`` (none is drawn when that is not positive: the faces met are named alone)."""
     from reach.backends.montecarlo.sampling import random_plan, structured_plan, switch_window
     from reach.model.simulate import Simulator
 
     met = "; ".join(f"mode '{mode}' at the boundary of {text} (from t = {t:.4g})"
                     for (mode, text), t in sorted(stopped.items(), key=lambda item: item[1]))
     out = {"stop_faces_met": met}
+    if seconds <= 0:
+        return out
     rng = np.random.default_rng(seed)
     try:
         window = switch_window(model)
@@ -89,7 +91,9 @@ def sampled_stops(model, stopped: dict, seconds: float, count: int = 48, seed: i
         return out                  # no sample (a grid too fine to simulate): the sets' faces stand
     found: dict[tuple[str, str], list[float]] = {}
     names = list(model.modes)
-    for k in np.flatnonzero(np.isfinite(runs.blocked_at) & (runs.blocked_at < model.horizon)):
+    stopped_here = np.isfinite(runs.blocked_at) & (runs.blocked_at < model.horizon)
+    stopped_here[runs.cut_rows] = False         # cut by the time budget, not stopped by the model
+    for k in np.flatnonzero(stopped_here):
         mode = names[int(runs.final_mode[k])]
         for text in _faces_at(model, mode, runs.final_state[k]):
             if (mode, text) in stopped:
