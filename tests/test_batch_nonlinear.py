@@ -40,7 +40,7 @@ def test_split_flow_equals_the_modes_right_hand_side(seed, mode):
 def test_one_grid_step_is_the_general_paths_rk4():
     sim = Simulator(MODEL)
     X = _states(3, 50)
-    steps = RK4Blocks(SplitFlow(MODEL.modes["approach"].flow, MODEL.symbols), sim.dt, sim.substeps)
+    steps = RK4Blocks(SplitFlow(MODEL.modes["approach"].flow, MODEL.symbols), sim, "approach")
     np.testing.assert_allclose(steps.step(np.ascontiguousarray(X.T)).T, sim.propagate("approach", X, sim.dt),
                                rtol=1e-13, atol=1e-10)
 
@@ -54,7 +54,7 @@ def test_grid_states_against_solve_ivp_over_the_horizon():
     low, high = MODEL.initial.low, MODEL.initial.high
     X0 = np.array([low, high, [low[0], high[1], 0, 0, 0]])
     flow = SplitFlow(MODEL.modes["approach"].flow, MODEL.symbols)
-    S = RK4Blocks(flow, sim.dt, sim.substeps).block(np.ascontiguousarray(X0.T), sim.steps + 1)   # (K, n, R)
+    S = RK4Blocks(flow, sim, "approach").block(np.ascontiguousarray(X0.T), sim.steps + 1)   # (K, n, R)
     grid = np.arange(sim.steps + 1) * sim.dt
     rhs = MODEL.modes["approach"].rhs
     worst = 0.0

@@ -10,6 +10,7 @@ import json
 import numpy as np
 import yaml
 
+import reach.model.batch_nonlinear as batch_nonlinear
 import reach.model.simulate as simulate
 from reach.backends.montecarlo.replays import replay
 from reach.cli import main as cli
@@ -33,7 +34,7 @@ def test_the_substeps_keep_rk4_stable_on_a_stiff_flow(tmp_path):
     m, _ = files(tmp_path)
     model = load_model(m)
     sim = simulate.Simulator(model)
-    assert sim.mode_substeps["go"] >= np.ceil(sim.dt * 1000 / simulate.STABLE_STEP)
+    assert sim.mode_substeps["go"] >= np.ceil(sim.dt * 1000 / batch_nonlinear.STABLE_STEP)
     x0 = np.array([[1.75, 0.005, 0.0], [2.0, 0.01, 0.0]])
     y = sim.propagate("go", x0, 0.5)
     exact = 1 + x0[:, 1] ** 2 / 1000 + (x0[:, 0] - 1 - x0[:, 1] ** 2 / 1000) * np.exp(-1000 * 0.5)
@@ -50,11 +51,12 @@ def test_monte_carlo_finds_no_violation_a_stiff_flow_does_not_make(tmp_path, cap
 
 
 def test_a_violation_only_the_coarse_integration_makes_does_not_replay(tmp_path, monkeypatch):
-    """With the substeps left at 2 (a stiffness the estimate missed), the coarse replay from
+    """With the substeps left at 2 (a stiffness the estimates missed), the coarse replay from
     x0 = 1.75 "violates" x <= 2.5 at t = 0.01; a quarter of the step does not, so the replay
     is no violation and says why."""
     m, p = files(tmp_path)
     monkeypatch.setattr(simulate, "stiff_substeps", lambda model, mode, dt, substeps: substeps)
+    monkeypatch.setattr(simulate.Simulator, "more_substeps", lambda self, mode, *states: False)
     model = load_model(m)
     prop = bind(load_properties(p)[0], model)
     from reach.backends.montecarlo.replays import _replay_simulator, _replay_with
@@ -74,3 +76,54 @@ def test_a_kink_at_a_probe_is_no_stiffness(tmp_path):
              "initial": {"mode": "run", "box": {"x": [0, 1], "v": [-1, 1], "t": 0}}}
     (tmp_path / "k.yaml").write_text(yaml.safe_dump(model))
     assert simulate.Simulator(load_model(tmp_path / "k.yaml")).mode_substeps == {"run": 2}
+
+
+def stiffening(tmp_path, bound: float, horizon: float = 1.0):
+    """x tracks 1 + z at the rate 20000 y, y = z = t: the Jacobian's spectral radius 20000 t is 0
+    where the runs start and grows along them, past RK4's stability at the default steps."""
+    model = {"name": "stiffening", "state": ["x", "y", "z"], "horizon": horizon,
+             "modes": {"m": {"flow": {"x": "-20000*y*tanh(x - 1 - z)", "y": 1, "z": 1}}},
+             "initial": {"mode": "m", "box": {"x": [1.5, 2], "y": [0, 0], "z": [0, 0]}}}
+    props = {"properties": [{"id": "lag", "kind": "safety", "modes": ["m"], "require": [f"x - z >= {bound}"]}]}
+    (tmp_path / "s.yaml").write_text(yaml.safe_dump(model))
+    (tmp_path / "sp.yaml").write_text(yaml.safe_dump(props))
+    return tmp_path / "s.yaml", tmp_path / "sp.yaml"
+
+
+def stiff_reference_minimum(x0: float, horizon: float = 1.0) -> float:
+    """min over [0, horizon] of x - z by an implicit integrator (Radau, rtol 1e-10)."""
+    from scipy.integrate import solve_ivp
+    sol = solve_ivp(lambda t, s: [-20000 * s[1] * np.tanh(s[0] - 1 - s[2]), 1, 1], (0, horizon), [x0, 0, 0],
+                    method="Radau", rtol=1e-10, atol=1e-12, dense_output=True)
+    grid = sol.sol(np.linspace(0, horizon, 20001))
+    return float((grid[0] - grid[2]).min())
+
+
+def test_substeps_follow_a_flow_that_stiffens_along_its_runs(tmp_path, capsys):
+    """Set from the initial states alone, RK4 took 2 substeps, went unstable from t ~ 0.3 and
+    ended near x - z = -3: an UNSAFE of x - z >= 0.9 (1000 of 1000 runs, replayed). The
+    Jacobian is now looked at along the runs: the closest margin is the implicit integrator's."""
+    m, p = stiffening(tmp_path, 0.9)
+    exact = min(stiff_reference_minimum(x0) for x0 in (1.5, 2.0))
+    assert 0.998 < exact < 0.999
+    code = cli(["check", str(m), str(p), "-b", "montecarlo", "-o", "samples=60", "-o", "optimise=false", "--json"])
+    (row,) = json.loads(capsys.readouterr().out)
+    assert code == 3 and row["details"]["violating_runs"] == 0
+    assert abs(row["report"]["closest_margin"] - (exact - 0.9)) < 1e-4
+
+
+def test_a_replay_takes_the_substeps_its_own_states_ask_for(tmp_path, monkeypatch):
+    """With the online look at the Jacobian switched off, the coarse replay and its quarter
+    step both go unstable and "violate" x - z >= 0.9 (the true minimum is 0.9984); the finer
+    run's substeps are then set from the states it visited, and it holds."""
+    m, p = stiffening(tmp_path, 0.9, horizon=2.0)
+    monkeypatch.setattr(simulate.Simulator, "more_substeps", lambda self, mode, *states: False)
+    model = load_model(m)
+    prop = bind(load_properties(p)[0], model)
+    from reach.backends.montecarlo.replays import _replay_simulator, _replay_with
+    for factor in (1, 4):
+        sim = _replay_simulator(model, simulate.default_dt(model) / factor, None)
+        assert _replay_with(model, prop, [2.0, 0.0, 0.0], None, sim, None, None).violated
+    rep = replay(model, prop, [2.0, 0.0, 0.0], None)
+    assert not rep.violated and rep.depth > 0.09
+    assert "comes from the integration of a nonlinear flow" in rep.trajectory["note"]

@@ -23,6 +23,15 @@ whole horizon (measured 3.0e-8; tests/test_batch_nonlinear.py): the scheme is th
 path's, so is its error; no bound is claimed for other flows beyond RK4's order. Guard entries between
 grid points are located as on the general path (``Simulator._first_entry``: bisection on
 RK4 propagation to ``h 2^-40``), for the runs that enter a guard in the block only.
+
+Stability. Explicit RK4 is stable where ``|h lambda| <~ 2.8`` for the eigenvalues ``lambda`` of
+the flow's Jacobian; past it a step grows errors without bound, and a stiff flow makes
+"violations" no run of the model makes. The substeps per grid step keep ``h rho(J) <=
+STABLE_STEP`` (``rho`` the spectral radius, :func:`jacobian_radius`): set from the states the
+runs start from (:func:`reach.model.simulate.stiff_substeps`), and checked again every
+:data:`STIFFNESS_CHECK` grid steps at states the runs reached, where a flow that stiffens along
+its runs gets more substeps and those grid steps are taken again (:class:`RK4Blocks`;
+``Simulator.more_substeps``).
 """
 
 from __future__ import annotations
@@ -64,6 +73,66 @@ class SplitFlow:
         return out
 
 
+#: RK4 is stable on ``h lambda`` out to about 2.8 on both the negative real and the imaginary
+#: axis; substeps keep ``h rho(J)`` below this, with room for the Jacobian to grow between checks
+STABLE_STEP = 1.5
+MAX_SUBSTEPS = 1000             # per grid step: past it, a flow this stiff wants another integrator
+                                # (a violation only the coarse steps make does not replay: replays.py)
+STIFFNESS_CHECK = 16            # grid steps between two estimates of the Jacobian along the runs
+STIFFNESS_PROBES = 8            # runs whose states each estimate looks at
+
+
+def jacobian_radius(rhs, X: np.ndarray) -> float:
+    """The largest spectral radius of the Jacobian of ``rhs`` ((K, n) -> (K, n)) over the finite
+    states among ``X`` (K, n), by finite differences at two steps: an entry they disagree on is a
+    kink of ``sign`` or ``sat`` at the state (a jump, not a rate) and counts as 0. NaN where the
+    flow cannot be evaluated or no state is finite."""
+    X = np.asarray(X, dtype=float)
+    X = X[np.all(np.isfinite(X), axis=1)]
+    if X.shape[0] == 0:
+        return float("nan")
+    K, n = X.shape
+    d = 1e-7 * (1.0 + np.abs(X))                                        # (K, n)
+    # one evaluation of every state moved along every axis by d and by d / 2
+    moved = np.repeat(X[None], 2 * n + 1, axis=0)                       # (2n + 1, K, n)
+    for j in range(n):
+        moved[1 + j, :, j] += d[:, j]
+        moved[1 + n + j, :, j] += d[:, j] / 2
+    with np.errstate(all="ignore"):
+        try:
+            F = np.asarray(rhs(moved.reshape(-1, n)), dtype=float).reshape(2 * n + 1, K, n)
+            full = (F[1:1 + n] - F[0]) / d.T[:, :, None]                # (n, K, n): column j, state, row
+            half = (F[1 + n:] - F[0]) / (d.T[:, :, None] / 2)
+            # a kink (sign, sat, abs at a probe) gives a quotient that doubles with half the
+            # step: a jump, not a rate; only entries the two steps agree on count
+            agree = np.abs(full - half) <= 0.1 * np.maximum(np.abs(full), np.abs(half)) + 1e-9
+            J = np.where(agree, half, 0.0).transpose(1, 2, 0)           # (K, row, column)
+            J = np.where(np.isfinite(J), J, 0.0)
+            return float(np.abs(np.linalg.eigvals(J)).max(initial=0.0))
+        except (ArithmeticError, ValueError, TypeError, np.linalg.LinAlgError):
+            return float("nan")
+
+
+def substeps_for(dt: float, rho: float, least: int) -> int:
+    """RK4 substeps per grid step ``dt`` keeping ``h rho <= STABLE_STEP``: at least ``least``,
+    at most :data:`MAX_SUBSTEPS` (``least`` where ``rho`` is unknown)."""
+    if not np.isfinite(rho) or rho <= 0:
+        return least
+    return int(min(MAX_SUBSTEPS, max(least, np.ceil(dt * rho / STABLE_STEP))))
+
+
+def probe_rows(X: np.ndarray, count: int = STIFFNESS_PROBES) -> np.ndarray:
+    """Up to ``count`` finite rows of ``X`` (K, n), evenly spread (those among ``count`` evenly
+    spread rows, or failing that any)."""
+    step = max(1, X.shape[0] // count)
+    rows = X[::step][:count]
+    rows = rows[np.isfinite(rows).all(axis=1)]
+    if rows.shape[0] or step == 1:
+        return rows
+    finite = X[np.isfinite(X).all(axis=1)]
+    return finite[::max(1, finite.shape[0] // count)][:count]
+
+
 def rk4_step(f, Y: np.ndarray, h) -> np.ndarray:
     """One classical Runge-Kutta step of ``y' = f(y)`` from ``Y`` with step ``h`` (a number, or
     an array broadcasting against ``Y``: one step per run)."""
@@ -75,24 +144,33 @@ def rk4_step(f, Y: np.ndarray, h) -> np.ndarray:
 
 
 class RK4Blocks:
-    """Grid states of a nonlinear mode, a block at a time, by classical RK4 with ``substeps``
-    steps per grid step ``dt`` (the general path's scheme)."""
+    """Grid states of a nonlinear mode, a block at a time, by classical RK4 with the simulator's
+    substeps for the mode per grid step ``dt`` (the general path's scheme), raised where the
+    states reached ask for more (module docstring, Stability)."""
 
-    def __init__(self, flow: SplitFlow, dt: float, substeps: int):
-        self.flow, self.h, self.substeps = flow, dt / substeps, substeps
+    def __init__(self, flow: SplitFlow, sim, name: str):
+        self.flow, self.sim, self.name, self.dt = flow, sim, name, sim.dt
 
     def step(self, Z: np.ndarray) -> np.ndarray:
         """The state one grid step after ``Z`` (n, R)."""
-        for _ in range(self.substeps):
-            Z = rk4_step(self.flow, Z, self.h)
+        substeps = self.sim.mode_substeps.get(self.name, self.sim.substeps)
+        for _ in range(substeps):
+            Z = rk4_step(self.flow, Z, self.dt / substeps)
         return Z
 
     def block(self, Z: np.ndarray, count: int) -> np.ndarray:
-        """``(count, n, R)``: ``Z`` and the states at the next ``count - 1`` grid points."""
+        """``(count, n, R)``: ``Z`` and the states at the next ``count - 1`` grid points; every
+        :data:`STIFFNESS_CHECK` of them the Jacobian at the last is looked at, and where it asks
+        for more substeps those grid steps are taken again with them."""
         out = np.empty((count,) + Z.shape)
         out[0] = Z
-        for j in range(1, count):
-            out[j] = self.step(out[j - 1])
+        j = 1
+        while j < count:
+            j1 = min(count, j + STIFFNESS_CHECK)
+            for k in range(j, j1):
+                out[k] = self.step(out[k - 1])
+            if not self.sim.more_substeps(self.name, out[j - 1].T, out[j1 - 1].T):
+                j = j1
         return out
 
 
@@ -109,7 +187,7 @@ class NonlinearTable:
         self.rows = ExtendedRows(self.L)
         self.name, self.sim, self.mode = name, sim, sim.model.modes[name]
         self.flow = SplitFlow(self.mode.flow, sim.model.symbols)
-        self.steps = RK4Blocks(self.flow, sim.dt, sim.mode_substeps.get(name, sim.substeps))
+        self.steps = RK4Blocks(self.flow, sim, name)
 
     def weights(self, extra: list) -> tuple:
         """``(L_ext, offsets)``: the rows ``L`` with the observers' rows ``extra`` appended

@@ -71,7 +71,8 @@ import sympy
 
 from reach.model import batch
 from reach.model.automaton import HybridAutomaton
-from reach.model.batch_nonlinear import rk4_step
+from reach.model.batch_nonlinear import (STABLE_STEP, STIFFNESS_CHECK, STIFFNESS_PROBES, jacobian_radius, probe_rows,
+                                         rk4_step, substeps_for)
 from reach.model.constraints import affine_coefficients, lambdify_margins, row_magnitudes
 from reach.model.crossing import Crossings
 
@@ -197,22 +198,19 @@ def linear_with(mode, fixed: dict):
     return A, b
 
 
-#: RK4 is stable on ``h lambda`` out to about 2.8 on both the negative real and the imaginary
-#: axis; substeps keep ``h rho(J)`` below this, with room for the Jacobian to grow along a run
-STABLE_STEP = 1.5
-MAX_SUBSTEPS = 1000             # per grid step: past it, a flow this stiff wants another integrator
-                                # (a violation only the coarse steps make does not replay: replays.py)
-
-
-def stiff_substeps(model: HybridAutomaton, mode: str, dt: float, substeps: int) -> int:
+def stiff_substeps(model: HybridAutomaton, mode: str, dt: float, substeps: int, states: np.ndarray | None = None) -> int:
     """RK4 substeps per grid step ``dt`` for a nonlinear ``mode``: at least ``substeps``, and
     enough that ``h rho(J) <= STABLE_STEP`` for the spectral radius of the flow's Jacobian ``J``
-    (finite differences at two steps; an entry they disagree on is a kink of ``sign`` or ``sat``
-    at the probe, no rate) at the initial box's centre, face centres and some corners (the
-    states its runs start from). Explicit RK4 past its stability region grows without bound:
-    ``x' = -1000 (x - 1)`` at ``h = 0.005`` went from 1.75 to 141.9 in one grid step, a
-    "violation" no run of the model makes."""
-    rhs = model.modes[mode].rhs
+    (:mod:`reach.model.batch_nonlinear`, Stability) at ``states``, by default the initial box's centre, face centres
+    and some corners (the states its runs start from). Explicit RK4 past its stability region
+    grows without bound: ``x' = -1000 (x - 1)`` at ``h = 0.005`` went from 1.75 to 141.9 in one
+    grid step, a "violation" no run of the model makes."""
+    return substeps_for(dt, jacobian_radius(model.modes[mode].rhs, _start_probes(model) if states is None else states),
+                        substeps)
+
+
+def _start_probes(model: HybridAutomaton) -> np.ndarray:
+    """The initial box's centre, its face centres (12 coordinates at most) and 8 random corners."""
     low, high = np.asarray(model.initial.low, float), np.asarray(model.initial.high, float)
     finite = np.isfinite(low) & np.isfinite(high)
     centre = np.where(finite, (low + high) / 2, np.where(np.isfinite(low), low, np.where(np.isfinite(high), high, 0.0)))
@@ -228,30 +226,7 @@ def stiff_substeps(model: HybridAutomaton, mode: str, dt: float, substeps: int) 
         p = centre.copy()
         p[free] = np.where(rng.random(free.size) < 0.5, low[free], high[free])
         probes.append(p)
-    X = np.array(probes)
-    n = X.shape[1]
-    with np.errstate(all="ignore"):
-        try:
-            F0 = rhs(X)
-            J = np.zeros((X.shape[0], n, n))
-            for j in range(n):
-                d = 1e-7 * (1.0 + np.abs(X[:, j]))
-                columns = []
-                for step in (d, d / 2):
-                    Xp = X.copy()
-                    Xp[:, j] += step
-                    columns.append((rhs(Xp) - F0) / step[:, None])
-                # a kink (sign, sat, abs at a probe) gives a quotient that doubles with half the
-                # step: a jump, not a rate; only entries the two steps agree on count
-                agree = np.abs(columns[0] - columns[1]) <= 0.1 * np.maximum(np.abs(columns[0]), np.abs(columns[1])) + 1e-9
-                J[:, :, j] = np.where(agree, columns[1], 0.0)
-            J = np.where(np.isfinite(J), J, 0.0)
-            rho = float(np.abs(np.linalg.eigvals(J)).max(initial=0.0))
-        except (ArithmeticError, ValueError, TypeError, np.linalg.LinAlgError):
-            return substeps
-    if not np.isfinite(rho) or rho <= 0:
-        return substeps
-    return int(min(MAX_SUBSTEPS, max(substeps, np.ceil(dt * rho / STABLE_STEP))))
+    return np.array(probes)
 
 
 def default_dt(model: HybridAutomaton) -> float:
@@ -412,6 +387,7 @@ class Simulator:
                 self.window[tr.source] = tr
             else:
                 self.exits[tr.source].append((tr, lambdify_margins(tr.guard, model.symbols)))
+        self.calm = {}                                  # checks of the substeps to pass (more_substeps)
         self.mode_substeps = {m: stiff_substeps(model, m, self.dt, substeps)
                               for m in model.modes if m not in self.generators and not model.modes[m].timeless}
         self.resets = {tr.name: _reset_function(tr, model) for tr in model.transitions if tr.reset}
@@ -422,6 +398,30 @@ class Simulator:
         self.instant = {m: self.urgent[m] + (self.exits[m] if m in self.timeless else []) for m in model.modes}
         #: the most options one jump can have (several enabled at once need Branches to choose)
         self.max_options = max([len(v) for table in (self.instant, self.exits) for v in table.values()] + [1])
+
+    def more_substeps(self, mode: str, *states: np.ndarray) -> bool:
+        """Raise the RK4 substeps of nonlinear ``mode`` where the flow's Jacobian at a few of
+        the ``states`` (arrays (K, n)) the runs reached asks for more than it has
+        (:func:`reach.model.batch_nonlinear.substeps_for`); True if it did: the grid steps
+        that led there were unstable, and are to be taken again. Where ``h rho`` leaves room
+        below ``STABLE_STEP`` the next calls pass without looking: ``k - 1`` of them where it
+        is below ``STABLE_STEP 2^-k`` (at most 7)."""
+        if mode not in self.mode_substeps:
+            return False
+        if self.calm.get(mode, 0) > 0:
+            self.calm[mode] -= 1
+            return False
+        taken = self.mode_substeps[mode]
+        probes = np.concatenate([probe_rows(X, STIFFNESS_PROBES // len(states)) for X in states])
+        rho = jacobian_radius(self.model.modes[mode].rhs, probes)
+        if np.isfinite(rho):
+            room = STABLE_STEP / max(self.dt / taken * rho, 1e-300)
+            self.calm[mode] = int(min(7, max(0, math.floor(math.log2(room)) - 1)))
+        wanted = substeps_for(self.dt, rho, taken)
+        if wanted <= taken:
+            return False
+        self.mode_substeps[mode] = wanted
+        return True
 
     # --------------------------------------------------------------- propagation
     def propagate(self, mode: str, X: np.ndarray, h) -> np.ndarray:
@@ -464,7 +464,8 @@ class Simulator:
         window, and at most ``MAX_WINDOW + 1`` powers). A large model followed by a few runs
         (fewer than ``n - 16``: a replay) steps instead, ``[x_j; 1] = P [x_{j-1}; 1]``: ``N n^2``
         operations per grid point rather than the ``n^3`` of each power. Nonlinear: RK4 steps,
-        checked every 16.
+        checked every :data:`STIFFNESS_CHECK` (events, and the stability of the steps:
+        :meth:`more_substeps`).
         """
         N = Y0.shape[0]
         done = np.zeros(N, dtype=bool)
@@ -487,14 +488,19 @@ class Simulator:
             return np.concatenate(windows, axis=1)
         out = np.empty((N, count, self.n))
         out[:, 0] = Y0
-        checked = 0
-        for j in range(1, count):
-            out[:, j] = self.propagate(mode, out[:, j - 1], self.dt)
-            if met is not None and (j % 16 == 0 or j == count - 1):
-                done |= met(out[:, checked:j + 1], checked)
-                checked = j + 1
+        checked, j = 0, 1
+        while j < count:
+            j1 = min(count, j + STIFFNESS_CHECK)
+            for k in range(j, j1):
+                out[:, k] = self.propagate(mode, out[:, k - 1], self.dt)
+            if self.more_substeps(mode, out[:, j - 1], out[:, j1 - 1]):
+                continue                    # unstable steps: the same grid steps again, with more substeps
+            j = j1
+            if met is not None:
+                done |= met(out[:, checked:j], checked)
+                checked = j
                 if done.all():
-                    return out[:, :j + 1]
+                    return out[:, :j]
         return out
 
     def _stepped(self, mode: str, Z: np.ndarray, first: int, count: int) -> np.ndarray:

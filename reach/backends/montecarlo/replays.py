@@ -23,7 +23,7 @@ from reach.backends.montecarlo.sampling import switch_window
 from reach.errors import InputError
 from reach.model.automaton import HybridAutomaton
 from reach.model.constraints import row_magnitudes
-from reach.model.simulate import MAX_STEPS, Branches, Simulator, single_threaded, value_sources
+from reach.model.simulate import MAX_STEPS, Branches, Simulator, single_threaded, stiff_substeps, value_sources
 from reach.result import Counterexample
 from reach.spec.properties import BoundEvent, BoundSafety
 
@@ -68,8 +68,10 @@ def replay(model: HybridAutomaton, prop: BoundSafety, initial_state, switch_time
     branches.
 
     A violation on a nonlinear mode (integrated by RK4, not exactly) must also show at a quarter
-    of the step (:data:`CONFIRM_FACTOR`): a violation that only the coarser integration makes
-    (an unstable step on a stiff flow) is none, and the replay says so."""
+    of the step (:data:`CONFIRM_FACTOR`), with RK4 substeps stable at every state that finer run
+    visits (:func:`_stable_along`: a flow that stiffens along the run gets them where it does):
+    a violation that only the coarser integration makes (an unstable step on a stiff flow) is
+    none, and the replay says so."""
     with single_threaded():
         signal = _signal_of(model, input_signal)
         sim = _replay_simulator(model, dt, signal)
@@ -80,13 +82,38 @@ def replay(model: HybridAutomaton, prop: BoundSafety, initial_state, switch_time
             finer = _replay_simulator(model, sim.dt / CONFIRM_FACTOR, signal)
         except InputError:                  # too many steps at a quarter of it: the replay stands
             return rep
-        confirmed = _replay_with(model, prop, initial_state, switch_time, finer, signal, branches)
+        confirmed = _stable_along(model, finer, lambda: _replay_with(model, prop, initial_state, switch_time,
+                                                                     finer, signal, branches))
         if confirmed.violated:
             return rep
         confirmed.trajectory = dict(confirmed.trajectory or {})
         confirmed.trajectory["note"] = (f"violated at step {sim.dt:.4g} but not at {finer.dt:.4g}: the violation "
                                         f"comes from the integration of a nonlinear flow, not from the model")
         return confirmed
+
+
+def _stable_along(model: HybridAutomaton, sim: Simulator, run, rounds: int = 3) -> "Replay":
+    """``run()`` on ``sim`` again, with more RK4 substeps in a mode, while the flow's Jacobian at
+    the states the run visited there asks for more than ``sim`` took (:func:`stiff_substeps`;
+    at most ``rounds`` runs more, and :data:`reach.model.simulate.MAX_SUBSTEPS` per step)."""
+    rep = run()
+    for _ in range(rounds):
+        path = rep.trajectory or {}
+        if "x" not in path or not path["x"]:
+            return rep
+        X, modes = np.asarray(path["x"], dtype=float), np.asarray(path["mode"])
+        more = {}
+        for mode, taken in sim.mode_substeps.items():
+            states = X[modes == mode]
+            if states.size:
+                wanted = stiff_substeps(model, mode, sim.dt, taken, states)
+                if wanted > taken:
+                    more[mode] = wanted
+        if not more:
+            return rep
+        sim.mode_substeps.update(more)
+        rep = run()
+    return rep
 
 
 #: a violation on a nonlinear mode is replayed again at this fraction of the step (:func:`replay`)
