@@ -24,6 +24,8 @@ def test_numbers_are_coerced_to_the_field_type():
     ({"max_splits": 1.5}, "options.taylor.max_splits"),
     ({"max_splits": True}, "options.taylor.max_splits"),
     ({"remainder": "exact"}, "options.taylor.remainder"),
+    ({"step_tol": 1000}, "options.taylor.step_tol"),
+    ({"step_tol": 0}, "options.taylor.step_tol"),
     ({"bogus": 1}, "options.taylor.bogus"),
 ])
 def test_bad_taylor_options_name_the_field(options, field):

@@ -261,3 +261,31 @@ def test_a_forbidden_bound_the_rigorous_sweep_leaves_open_is_searched_and_replay
     low, high = result.details["margin_bound"]
     assert low <= 8.1 - peak + 1e-6 and high >= 8.1 - peak - 1e-3      # the estimate holds the truth
     assert BACKEND.check(model, under, RIGOROUS).status != Status.UNSAFE
+
+
+ROTATION = """
+name: rotation
+state: [x, y]
+modes:
+  run:
+    flow: {x: "y", y: "-x"}
+initial: {mode: run, box: {x: [0.9, 1.1], y: [-0.1, 0.1]}}
+horizon: 3
+"""
+
+
+@pytest.mark.parametrize("options", [{}, RIGOROUS])
+def test_a_quantity_the_flow_conserves_keeps_its_entry_value(tmp_path, options):
+    """x^2 + y^2 is constant along a rotation: its rate is 0, so the nominal run turns nowhere
+    (its values differ by rounding only). taylor crashed there (IndexError on the rate's
+    expansion); its bound is now the entry set's range, [0.81, 1.22] (the box's nearest point
+    and corners) widened by the polynomial range only. Estimated remainders prove no margin."""
+    _, props = load_files(tmp_path, ROTATION, """
+        properties:
+          - {id: disc, kind: safety, modes: [run], require: ["x**2 + y**2 <= 1.2322"]}
+          - {id: radius, kind: event, modes: [run], maximize: "x**2 + y**2", require: "<= 1.2322"}
+        """)
+    model = load_model(tmp_path / "model.yaml")
+    assert BACKEND.check(model, props["disc"], options).status is (Status.SAFE if options else Status.UNKNOWN)
+    lo, hi = BACKEND.check(model, props["radius"], options).bound
+    assert lo <= 0.81 and 1.22 <= hi <= 1.2201

@@ -98,7 +98,7 @@ class Options:
     max_splits: int = ranged(6, 0, 30)            # N_max: halvings on the way to one subdomain
     remainder: str = "estimated"    # "estimated" (eq. 28), "next-order" or "rigorous"
     integration_tol: float = ranged(1e-9, 1e-13, 0.1)   # step doubling tolerance on the nominal run (above rounding)
-    step_tol: float = 1e-5          # rigorous mode: largest step defect relative to the rates
+    step_tol: float = ranged(1e-5, 1e-12, 0.1)    # rigorous mode: largest step defect relative to the rates
     refine: int = ranged(0, 0, 12)                # extra halvings of the subdomains that hold the bound open (below)
     jobs: int = ranged(1, 1, 256)                  # local worker processes for ADS boxes and sweeps
     scheduler: object = None        # or a Dask scheduler address (or Client) to run them on

@@ -89,12 +89,14 @@ class ModeCode:
             faces = [_first(compile_expressions([c.g], symbols)) for c in tr.guard]
             self.exits.append(Exit(tr, lambdify_margins(tr.guard, symbols), faces, reset))
         self.q = self.qdot = self.q_numeric = None
+        self.conserved = False          # the quantity's rate is 0 in this mode: it keeps its entry value
         if isinstance(quantity, tuple):           # avoid set: the margin max_j g_j (sweep only)
             parts = compile_expressions(list(quantity), symbols)
             self.q = lambda x: Largest(parts(x))
         elif quantity is not None:
             quantity = sympy.sympify(quantity)
-            rate = sum(sympy.diff(quantity, s) * f for s, f in zip(symbols, mode.flow))
+            rate = sympy.expand(sum(sympy.diff(quantity, s) * f for s, f in zip(symbols, mode.flow)))
+            self.conserved = rate == 0
             self.q = _first(compile_expressions([quantity], symbols))
             self.qdot = _first(compile_expressions([rate], symbols))
             self.q_numeric = _first(compile_numeric([quantity], symbols))
@@ -436,6 +438,7 @@ class EventProblem:
                 to_horizon = run            # the nominal run in the mode, up to its switch or the horizon
                 if code.q is not None:
                     out.add(entry, code.q(X), partial)
+                if code.q is not None and not code.conserved:      # conserved: every value is the entry's
                     values = np.asarray(code.q_numeric(list(grid[: last + 1].T)))
                     turning = list(local_extrema(values, self.prop.sense))
                     if _turns_at_entry(code.qdot(X)):
