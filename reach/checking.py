@@ -97,6 +97,23 @@ def exit_code(results: list[Result]) -> int:
     return 0 if relevant and all(r.status == Status.SAFE for r in relevant) else 3
 
 
+#: why a property with an empty unsafe set holds, whatever the model does
+EMPTY_UNSAFE_SET = ("the unsafe set is empty: no piece of it lies in a mode of the model (a SpaceEx forbidden set "
+                    "naming only location combinations the composition never reaches), or every piece has a "
+                    "constant constraint that no state meets (forbidden = false, a requirement such as 0 <= 1); "
+                    "nothing was explored")
+
+
+def _vacuous(backend, model, prop) -> Result:
+    """SAFE for a property whose unsafe set is empty, by that argument alone; UNKNOWN from
+    montecarlo, which never says SAFE (DESIGN: a sampler proves nothing), with the argument."""
+    if backend.name == "montecarlo":
+        return Result(backend.name, model.name, prop.id, Status.UNKNOWN, details={
+            "reason": f"no run can violate it ({EMPTY_UNSAFE_SET}); montecarlo never says SAFE, a formal "
+                      f"back-end (star, taylor) does here", "violating_runs": 0})
+    return Result(backend.name, model.name, prop.id, Status.SAFE, details={"argument": EMPTY_UNSAFE_SET})
+
+
 def check_model(backend, model, bound: list, options: dict | None = None) -> list[Result]:
     """Check bound properties; back-ends with ``check_many`` share work across properties. For
     star, a SpaceEx cfg's hint that the model keeps (``iter-max``) becomes an option default
@@ -115,11 +132,7 @@ def check_model(backend, model, bound: list, options: dict | None = None) -> lis
             results[id(prop)].details["not_applicable"] = True
             continue
         if isinstance(prop, BoundSafety) and prop.empty:
-            results[id(prop)] = Result(backend.name, model.name, prop.id, Status.SAFE, details={
-                "argument": "the unsafe set is empty: no piece of it lies in a mode of the model (a SpaceEx "
-                            "forbidden set naming only location combinations the composition never reaches), "
-                            "or every piece has a constant constraint that no state meets (forbidden = false, "
-                            "a requirement such as 0 <= 1); nothing was explored"})
+            results[id(prop)] = _vacuous(backend, model, prop)
             continue
         reason = input_reason(backend, model) or backend.supports(model, prop)
         if reason is not None:

@@ -571,7 +571,7 @@ def test_a_map_to_a_number_without_a_double_is_refused_at_the_map(tmp_path, caps
   </component>
 '''
     xml, cfg = write(tmp_path, body, 'system = "sys"\ninitially = "x == 0"\nforbidden = "x >= 5"\ntime-horizon = 1\n')
-    assert refusal(xml, cfg, capsys) == f"{xml}:14: map 'k': the number 1e999 is not finite"
+    assert refusal(xml, cfg, capsys) == f"{xml}:14: bind 'b': map 'k': the number 1e999 is not finite"
 
 
 # ------------------------------------------------------------------ S5: an alias defined in some locations
@@ -769,3 +769,205 @@ def test_a_path_past_iter_max_is_left_and_the_others_followed(tmp_path, forbidde
     xml, cfg = write(tmp_path, CIRCLE, f'system = circle\ninitially = "x == 1 & y == 0"\nforbidden = "{forbidden}"\n'
                                        'time-horizon = 4\niter-max = 1\n')
     assert verdict(xml, cfg) == truth
+
+
+# ------------------------------------------------------------------ S13b: the tester's round 13b
+TWO_MODES = f'''  <component id="sys">
+    {REAL.format("x")}
+    <location id="1" name="A">
+      <invariant>{{inv}}</invariant>
+      <flow>x' == 1</flow>
+    </location>
+    <location id="2" name="B">
+      <flow>x' == 0</flow>
+    </location>
+    <transition source="1" target="2">
+      <guard>{{guard}}</guard>
+    </transition>
+  </component>
+'''
+SAFE_CFG = 'system = sys\ninitially = "x == 0 & loc(sys) == A"\nforbidden = "x >= 5"\ntime-horizon = 3\n'
+DEEP = "(" * 1000 + "x <= 2" + ")" * 1000
+TOO_DEEP = "construct not supported or malformed: too many nested parentheses (more than 200)"
+
+
+@pytest.mark.parametrize("inv, guard, initially, forbidden, at", [
+    ("x &lt;= 2", "x &gt;= 2", "x == 0 & " + DEEP, "x >= 5", "cfg:2: initially"),
+    ("x &lt;= 2", "x &gt;= 2", "x == 0", DEEP, "cfg:3: forbidden"),
+    ("x &lt;= 2", DEEP.replace("<=", "&gt;="), "x == 0", "x >= 5", "xml:13: component 'sys': transition A -> B: guard"),
+    ("x &lt;= 2", DEEP.replace("<=", "&gt;=") + " &amp; x &lt;= 3", "x == 0", "x >= 5",
+     "xml:13: component 'sys': transition A -> B: guard"),
+    (DEEP.replace("<=", "&lt;="), "x &gt;= 2", "x == 0", "x >= 5", "xml:6: component 'sys': location 'A': invariant"),
+])
+def test_parentheses_nested_1000_deep_are_refused_at_their_line(tmp_path, capsys, inv, guard, initially,
+                                                                 forbidden, at):
+    """Before, the formula parser recursed into Python's limit: 'input nested too deeply', with
+    no file, line or field. The depth is now checked before the parser recurses."""
+    body = TWO_MODES.format(inv=inv, guard=guard)
+    xml, cfg = write(tmp_path, body, f'system = sys\ninitially = "{initially}"\nforbidden = "{forbidden}"\n'
+                                     'time-horizon = 3\n')
+    path = {"cfg": cfg, "xml": xml}[at[:3]]
+    assert refusal(xml, cfg, capsys).startswith(f"{path}{at[3:]}: {TOO_DEEP} (in '")
+
+
+def test_parentheses_nested_within_the_limit_are_read(tmp_path):
+    """190 levels of grouped formulas (each level three frames of the recursive parser) load."""
+    guard = "(" * 190 + "x &gt;= 2" + ")" * 190
+    xml, cfg = write(tmp_path, TWO_MODES.format(inv="x &lt;= 2", guard=guard), SAFE_CFG)
+    model, _, docs = load_spaceex(xml, cfg)
+    assert docs.model["transitions"]["A_to_B"]["guard"] == ["x >= 2"]
+
+
+PAIR = f'''  <component id="T">
+    {REAL.format("c")}
+    <param name="tick" type="label" local="false"/>
+    <location id="1" name="w"><invariant>c &lt;= 1</invariant><flow>c' == 1</flow></location>
+    <transition source="1" target="1"><label>tick</label><guard>c &gt;= 1</guard><assignment>c := 0</assignment></transition>
+  </component>
+  <component id="Cnt">
+    {REAL.format("n")}
+    <param name="tick" type="label" local="false"/>
+    <location id="1" name="z"><flow>n' == 0</flow></location>
+    <transition source="1" target="1"><label>tick</label><assignment>n := n + 1</assignment></transition>
+  </component>
+  <component id="sys">
+    {REAL.format("n")}
+    <param name="s" type="label" local="true"/>
+    <bind component="T" as="tm"><map key="tick">s</map></bind>
+    <bind component="Cnt" as="ct"><map key="n">{{target}}</map><map key="tick">s</map></bind>
+  </component>
+'''
+
+
+@pytest.mark.parametrize("target, message", [
+    ("zz.q", "'zz.q': 'zz' is no instance in network 'sys' (its instances: tm, ct)"),
+    ("tm.q", "'tm.q': 'q' is no param of instance 'tm' (component 'T')"),
+    ("tm.tick", "'tm.tick': the bind of 'tm' maps 'tick' to 's' (line 18); map to that instead"),
+    ("tm.c.d", "'tm.c.d': instance 'tm' (component 'T') is a base component's, with no instance 'c'"),
+])
+def test_a_dotted_map_must_name_an_instances_own_param(tmp_path, capsys, target, message):
+    """A dotted name was read as a fresh variable ``zz.q`` whatever it named: the counter's n
+    silently lost its link. It must be a param of an instance of the network that its bind
+    leaves unmapped (the instance's own variable)."""
+    xml, cfg = write(tmp_path, PAIR.format(target=target), 'system = sys\ninitially = "n == 0 & tm.c == 0"\n'
+                                                          'forbidden = "n >= 3"\ntime-horizon = 2\n')
+    assert refusal(xml, cfg, capsys) == f"{xml}:19: bind 'ct': map 'n': {message}"
+
+
+def test_contradictory_loc_terms_in_initially_are_refused_at_the_cfg(tmp_path, capsys):
+    """Before, the empty set of initial locations surfaced as 'the system has no continuous
+    variable' at the XML's component: the wrong file and construct."""
+    xml, cfg = write(tmp_path, TWO_MODES.format(inv="x &lt;= 2", guard="x &gt;= 2"),
+                     'system = sys\ninitially = "x == 0 & loc(sys) == A & loc(sys) == B"\nforbidden = "x >= 5"\n'
+                     'time-horizon = 3\n')
+    assert refusal(xml, cfg, capsys) == (f"{cfg}:2: initially: the initial set is empty (no location of sys "
+                                         "satisfies loc(sys) == A and loc(sys) == B)")
+
+
+GO = '''  <component id="A">
+    {x}
+    <param name="go" type="label" local="false"/>
+    <location id="1" name="a1"><invariant>x &lt;= 2</invariant><flow>x' == 1</flow></location>
+    <location id="2" name="a2"><flow>x' == -1</flow></location>
+    <transition source="1" target="2"><label>go</label><guard>x &gt;= 1</guard></transition>
+  </component>
+  <component id="B">
+    {y}
+    <param name="go" type="label" local="false"/>
+    <location id="1" name="b1"><flow>y' == 2</flow></location>
+    <location id="2" name="b2"><flow>y' == 0.5</flow></location>
+    <transition source="1" target="2"><label>go</label><assignment>y := 0</assignment></transition>
+  </component>
+  <component id="sys">
+    {x}
+    {y}
+    <param name="go" type="label" local="false"/>
+    <bind component="A" as="pa"><map key="x">x</map>{{map_go}}</bind>
+    <bind component="B" as="pb"><map key="y">y</map>{{map_go}}</bind>
+  </component>
+'''.format(x=REAL.format("x"), y=REAL.format("y"))
+GO_CFG = ('system = sys\ninitially = "x==0 & y==0 & loc(pa)==a1 & loc(pb)==b1"\n'
+          'forbidden = "loc(pa)==a2 & loc(pb)==b1"\ntime-horizon = 5\n')
+
+
+def test_an_unmapped_param_named_like_a_network_param_is_warned_about(tmp_path, capsys):
+    """SpaceEx's tools differ on an unmapped non-local param: HyST's flattening makes it local to
+    the instance (FlattenRenameUtils.getRenamings: 'local, use prefix'), CORA's converter keeps
+    its name. The import keeps the local reading, so pa and pb no longer synchronise on 'go';
+    the network's own 'go' is shadowed, and the import says so at each bind."""
+    xml, cfg = write(tmp_path, GO.format(map_go=""), GO_CFG)
+    assert main(["import", str(xml), str(cfg), "--out", str(tmp_path / "out")]) == 0
+    warnings = [line for line in capsys.readouterr().err.splitlines() if "not mapped" in line]
+    assert warnings == [f"warning: {xml}:{line}: bind '{inst}': the label 'go' of component '{comp}' is not "
+                        f"mapped, so it is the instance's own '{inst}.go', not the label 'go' of network 'sys' "
+                        f"(line 20); map it (<map key=\"go\">go</map>) to join them"
+                        for line, inst, comp in ((21, "pa", "A"), (22, "pb", "B"))]
+    xml, cfg = write(tmp_path, GO.format(map_go='<map key="go">go</map>'), GO_CFG, "mapped")
+    assert "ignored" not in load_spaceex(xml, cfg)[2].model["notes"]
+
+
+def test_a_number_of_too_many_digits_is_refused_in_the_projects_words(tmp_path, capsys):
+    """Python's 'Exceeds the limit (4300 digits) for integer string conversion' was quoted."""
+    big = "9" * 5000
+    xml, cfg = write(tmp_path, TWO_MODES.format(inv="x &lt;= 2", guard=f"x &gt;= {big}"), SAFE_CFG)
+    assert refusal(xml, cfg, capsys).startswith(
+        f"{xml}:13: component 'sys': transition A -> B: guard: construct not supported or malformed: the number "
+        f"'{big[:20]}...' has too many digits (5000; at most 4000) (in '")
+    body = f'''  <component id="base">
+    {REAL.format("x")}
+    <param name="k" type="real" local="false" d1="1" d2="1" dynamics="const"/>
+    <location id="1" name="A"><flow>x' == k</flow></location>
+  </component>
+  <component id="sys">
+    {REAL.format("x")}
+    <bind component="base" as="b"><map key="x">x</map><map key="k">{big}</map></bind>
+  </component>
+'''
+    xml, cfg = write(tmp_path, body, 'system = sys\ninitially = "x == 0"\nforbidden = "x >= 5"\ntime-horizon = 1\n',
+                     "map")
+    assert refusal(xml, cfg, capsys) == (f"{xml}:10: bind 'b': map 'k': the number '{big[:20]}...' has too many "
+                                         "digits (5000; at most 4000)")
+
+
+def test_a_real_mapped_to_a_label_is_refused_at_the_map(tmp_path, capsys):
+    """Before, the real became the label's name and the cfg's 'x' took 'no part in the system'."""
+    body = f'''  <component id="h">
+    {REAL.format("x")}
+    <location id="1" name="A"><flow>x' == 1</flow></location>
+  </component>
+  <component id="sys">
+    {REAL.format("x")}
+    <param name="L" type="label" local="false"/>
+    <bind component="h" as="h"><map key="x">L</map></bind>
+  </component>
+'''
+    xml, cfg = write(tmp_path, body, 'system = sys\ninitially = "x == 0"\nforbidden = "x >= 5"\ntime-horizon = 1\n')
+    assert refusal(xml, cfg, capsys) == (f"{xml}:10: bind 'h': map 'x': binds the real 'x' to the label 'L' of "
+                                         "component 'sys' (a real maps to a real, a label to a label)")
+
+
+def test_cfg_names_that_sanitise_to_nothing_import_to_distinct_files(tmp_path, capsys):
+    """'..cfg' and '....cfg' both became 'model.yaml', the second import overwriting the first."""
+    xml, _ = write(tmp_path, TWO_MODES.format(inv="x &lt;= 2", guard="x &gt;= 2"), SAFE_CFG)
+    written = set()
+    for name in ("..cfg", "....cfg"):
+        (tmp_path / name).write_text(SAFE_CFG)
+        assert main(["import", str(xml), str(tmp_path / name), "--out", str(tmp_path / "out")]) == 0
+        written |= {p.name for p in (tmp_path / "out" / "models").iterdir()}
+    assert len(written) == 2 and all(name.startswith("model_") for name in written)
+
+
+def test_a_constant_without_a_value_names_its_param(tmp_path, capsys):
+    body = f'''  <component id="A">
+    {REAL.format("x")}
+    <param name="k" type="real" local="false" d1="1" d2="1" dynamics="const"/>
+    <location id="1" name="a1"><flow>x' == k</flow></location>
+  </component>
+  <component id="sys">
+    {REAL.format("x")}
+    <bind component="A" as="pa"><map key="x">x</map></bind>
+  </component>
+'''
+    xml, cfg = write(tmp_path, body, 'system = sys\ninitially = "x == 0"\nforbidden = "x >= 5"\ntime-horizon = 1\n')
+    assert refusal(xml, cfg, capsys) == (f"{xml}:5: component 'A': param 'k': the constant 'pa.k' has no value "
+                                         "(map it to a number in a bind, or give it one in the cfg's initially)")

@@ -8,6 +8,8 @@
   a violation between grid points is found in continuous time but missed in discrete time.
 """
 
+import re
+
 import numpy as np
 import pytest
 import sympy
@@ -213,3 +215,20 @@ def test_rendezvous_late_abort_hits_the_0p2_box(rendezvous):
     assert result.status is Status.UNSAFE, result.details
     cex = result.counterexample
     assert replay(model, prop, np.array(cex.initial_state), cex.switch_time).violated
+
+
+def test_a_cell_far_longer_than_a_large_flows_time_scale_is_refused_before_its_samples_fill_memory():
+    """A dense 300-state flow (time scale 4.7) over cells of 16667 (a horizon of 1e6 in 60
+    cells) asked for 3540 sub-samples of 300 x 300 matrices: 2.6 GB each for the samples and
+    the chain's products, 10 GB held. The sub-samples are now capped by their bytes as well
+    (SUBSAMPLE_BYTES), with a step that fits named; a step under it is taken."""
+    from reach.backends.star.flowpipe import SUBSAMPLE_BYTES
+
+    n = 300
+    flow = AffineFlow(-0.001 * np.ones((n, n)), np.zeros(n))
+    with pytest.raises(ArithmeticError, match=r"at most (\d+) sub-samples at 300 states.*-o step=") as err:
+        flow.curvature(1e6 / 60)
+    most = int(re.search(r"at most (\d+) sub-samples", str(err.value)).group(1))
+    assert most * 8 * n * n <= SUBSAMPLE_BYTES
+    step = float(re.search(r"-o step=([0-9.e+-]+)", str(err.value)).group(1))
+    assert flow.curvature(step * 0.999)[3] <= most

@@ -402,26 +402,38 @@ class Simulator:
     def more_substeps(self, mode: str, *states: np.ndarray) -> bool:
         """Raise the RK4 substeps of nonlinear ``mode`` where the flow's Jacobian at a few of
         the ``states`` (arrays (K, n)) the runs reached asks for more than it has
-        (:func:`reach.model.batch_nonlinear.substeps_for`); True if it did: the grid steps
-        that led there were unstable, and are to be taken again. Where ``h rho`` leaves room
-        below ``STABLE_STEP`` the next calls pass without looking: ``k - 1`` of them where it
-        is below ``STABLE_STEP 2^-k`` (at most 7)."""
+        (:meth:`wanted_substeps`); True if it did: the grid steps that led there were unstable,
+        and are to be taken again. Where ``h rho`` leaves room below ``STABLE_STEP`` the next
+        calls pass without looking: ``k - 1`` of them where it is below ``STABLE_STEP 2^-k``
+        (at most 7)."""
         if mode not in self.mode_substeps:
             return False
         if self.calm.get(mode, 0) > 0:
             self.calm[mode] -= 1
             return False
         taken = self.mode_substeps[mode]
-        probes = np.concatenate([probe_rows(X, STIFFNESS_PROBES // len(states)) for X in states])
-        rho = jacobian_radius(self.model.modes[mode].rhs, probes)
+        wanted, rho = self.wanted_substeps(
+            mode, np.concatenate([probe_rows(X, STIFFNESS_PROBES // len(states)) for X in states]))
         if np.isfinite(rho):
             room = STABLE_STEP / max(self.dt / taken * rho, 1e-300)
             self.calm[mode] = int(min(7, max(0, math.floor(math.log2(room)) - 1)))
-        wanted = substeps_for(self.dt, rho, taken)
         if wanted <= taken:
             return False
         self.mode_substeps[mode] = wanted
         return True
+
+    def wanted_substeps(self, mode: str, X: np.ndarray) -> tuple[int, float]:
+        """``(substeps, rho)``: the RK4 substeps per grid step that keep ``h rho <= STABLE_STEP``
+        at the states ``X`` of nonlinear ``mode`` (at least those it has), ``rho`` the largest
+        spectral radius of the flow's Jacobian there. Only states the grid resolves count, where
+        one grid step moves the state by less than its own size (``dt |f(x)| <= 1 + |x|``): a
+        run blowing up (``x' = x^2`` near its escape time) asks for ever more substeps, and no
+        number of them follows it."""
+        rhs, taken = self.model.modes[mode].rhs, self.mode_substeps.get(mode, self.substeps)
+        with np.errstate(all="ignore"):
+            moved = self.dt * np.abs(np.asarray(rhs(X), dtype=float)).max(axis=1, initial=0.0)
+        rho = jacobian_radius(rhs, X[moved <= 1.0 + np.abs(X).max(axis=1, initial=0.0)])
+        return substeps_for(self.dt, rho, taken), rho
 
     # --------------------------------------------------------------- propagation
     def propagate(self, mode: str, X: np.ndarray, h) -> np.ndarray:

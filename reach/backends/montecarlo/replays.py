@@ -23,7 +23,8 @@ from reach.backends.montecarlo.sampling import switch_window
 from reach.errors import InputError
 from reach.model.automaton import HybridAutomaton
 from reach.model.constraints import row_magnitudes
-from reach.model.simulate import MAX_STEPS, Branches, Simulator, single_threaded, stiff_substeps, value_sources
+from reach.model.batch_nonlinear import probe_rows
+from reach.model.simulate import MAX_STEPS, Branches, Simulator, single_threaded, value_sources
 from reach.result import Counterexample
 from reach.spec.properties import BoundEvent, BoundSafety
 
@@ -82,7 +83,7 @@ def replay(model: HybridAutomaton, prop: BoundSafety, initial_state, switch_time
             finer = _replay_simulator(model, sim.dt / CONFIRM_FACTOR, signal)
         except InputError:                  # too many steps at a quarter of it: the replay stands
             return rep
-        confirmed = _stable_along(model, finer, lambda: _replay_with(model, prop, initial_state, switch_time,
+        confirmed = _stable_along(finer, lambda: _replay_with(model, prop, initial_state, switch_time,
                                                                      finer, signal, branches))
         if confirmed.violated:
             return rep
@@ -92,10 +93,15 @@ def replay(model: HybridAutomaton, prop: BoundSafety, initial_state, switch_time
         return confirmed
 
 
-def _stable_along(model: HybridAutomaton, sim: Simulator, run, rounds: int = 3) -> "Replay":
+#: a violation on a nonlinear mode is replayed again at this fraction of the step (:func:`replay`)
+CONFIRM_FACTOR = 4
+
+
+def _stable_along(sim: Simulator, run, rounds: int = 3) -> "Replay":
     """``run()`` on ``sim`` again, with more RK4 substeps in a mode, while the flow's Jacobian at
-    the states the run visited there asks for more than ``sim`` took (:func:`stiff_substeps`;
-    at most ``rounds`` runs more, and :data:`reach.model.simulate.MAX_SUBSTEPS` per step)."""
+    the states the run visited there asks for more than ``sim`` took
+    (:meth:`reach.model.simulate.Simulator.wanted_substeps`, at most 1024 of them; at most
+    ``rounds`` runs more, and :data:`reach.model.batch_nonlinear.MAX_SUBSTEPS` per step)."""
     rep = run()
     for _ in range(rounds):
         path = rep.trajectory or {}
@@ -106,7 +112,7 @@ def _stable_along(model: HybridAutomaton, sim: Simulator, run, rounds: int = 3) 
         for mode, taken in sim.mode_substeps.items():
             states = X[modes == mode]
             if states.size:
-                wanted = stiff_substeps(model, mode, sim.dt, taken, states)
+                wanted, _ = sim.wanted_substeps(mode, probe_rows(states, 1024))
                 if wanted > taken:
                     more[mode] = wanted
         if not more:
@@ -114,10 +120,6 @@ def _stable_along(model: HybridAutomaton, sim: Simulator, run, rounds: int = 3) 
         sim.mode_substeps.update(more)
         rep = run()
     return rep
-
-
-#: a violation on a nonlinear mode is replayed again at this fraction of the step (:func:`replay`)
-CONFIRM_FACTOR = 4
 
 
 def _replay_with(model, prop, initial_state, switch_time, sim: Simulator, signal, branches):

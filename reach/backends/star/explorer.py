@@ -646,7 +646,7 @@ class _Explorer:
             exact = list(cells) if self.opt.keep_sets else None
 
             def exact_error(js):
-                return h * h / 8 * _chain_abs_bounds(centers[js], bases[js], box, D, d).max(axis=1) @ F.T
+                return h * h / 8 * _chain_abs_bounds(centers[js], bases[js], box, D, d, self._guards).max(axis=1) @ F.T
 
             if exact is None:
                 loose = h * h / 8 * _hull_abs_bounds(centers[:last], bases[:last], box, D, d).max(axis=1) @ F.T
@@ -851,6 +851,12 @@ class _Explorer:
                                         f"{MEMORY_FRACTION:.0%} of the "
                                         f"{self.memory_limit / MEMORY_FRACTION / 2**30:.0f} GiB this process may hold "
                                         f"(coarser step, fewer coefficients or sooner aggregation)")
+
+    def _guards(self):
+        """The memory and time guards, and a progress line when one is due (long computations
+        on one chain call it between their parts)."""
+        self._memory_guard()
+        self._progress()
 
     def _progress(self):
         """Progress under ``-v`` every :data:`.options.PROGRESS_SECONDS`; without it, one

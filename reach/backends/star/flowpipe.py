@@ -16,6 +16,7 @@ from reach.sets.hpolytope import HPolytope
 #: box (:func:`folded`)
 FOLD_RATIO = 1e-6
 MAX_SUBSAMPLES = 4096        # sub-samples of one cell for its curvature bound (the suite needs at most 56)
+SUBSAMPLE_BYTES = 1 << 28    # and at most this many bytes of their n x n matrices (a 300-state flow: 372)
 
 
 #: sub-cells of the input bound per sub-sample of :meth:`AffineFlow.curvature` (accuracy)
@@ -196,9 +197,11 @@ class AffineFlow:
         """
         if h not in self._curvature:
             ratio = 0.0 if self.rho == 0 else h / np.sqrt(2.0 / self.rho)
-            if not ratio <= MAX_SUBSAMPLES:
+            most = min(MAX_SUBSAMPLES, max(1, SUBSAMPLE_BYTES // (8 * self.n * self.n)))
+            if not ratio <= most:
                 raise ArithmeticError(f"a cell of length {h:.3g} is {ratio:.3g} times the flow's time scale "
-                                      f"(at most {MAX_SUBSAMPLES} sub-samples): set a shorter step")
+                                      f"(at most {most} sub-samples at {self.n} states): set a shorter step, "
+                                      f"-o step={h * most / ratio:.3g} or less")
             q = max(1, int(np.ceil(ratio)))
             delta = h / q
             Phi, psi = self.step(delta)
@@ -326,8 +329,9 @@ def chunk_cells(D, n: int, m: int) -> int:
     return max(1, PRODUCT_BYTES // (8 * D.shape[0] * n * max(m, 1)))
 
 
-def _chain_abs_bounds(center, basis, box, D, d):
-    """``max |D_l x + d_l|`` over each ``Y_j``, per sample ``l`` and component: ``(J, L, n)``.
+def _chain_abs_bounds(center, basis, box, D, d, tick=None):
+    """``max |D_l x + d_l|`` over each ``Y_j``, per sample ``l`` and component: ``(J, L, n)``;
+    ``tick()`` (if given) is called before each chunk (the caller's time and memory guards).
 
     Exact support of each component over the coefficient box (radius ``r``):
     ``|D_l (c_j + V_j m) + d_l| + |D_l V_j| r``. The products ``D_l V_j`` are formed a few
@@ -337,6 +341,8 @@ def _chain_abs_bounds(center, basis, box, D, d):
     step = chunk_cells(D, n, basis.shape[2])
     spread = np.empty((J, L, n))
     for s in range(0, J, step):
+        if tick is not None:
+            tick()
         spread[s:s + step] = np.abs(np.matmul(D[None], basis[s:s + step, None])) @ box.radius
     return _abs_at_centres(center, basis, box, D, d) + spread
 

@@ -51,8 +51,18 @@ def _initial_locations(builder: DocumentBuilder, cfg: Config):
         for atom in term:
             if isinstance(atom, Loc):
                 i = builder.location_of(atom, "initially")
-                allowed[i] = (allowed[i] or {atom.location}) & {atom.location}
+                if allowed[i] is not None and atom.location not in allowed[i]:
+                    raise _contradiction(builder, cfg, i, next(iter(allowed[i])), atom.location)
+                allowed[i] = {atom.location}
     return allowed
+
+
+def _contradiction(builder: DocumentBuilder, cfg: Config, i: int, first: str, second: str) -> InputError:
+    """Two ``loc()`` terms of ``initially`` that put instance ``i`` in two locations at once."""
+    instance = builder.flat.instances[i]
+    name = instance.path or instance.component.id
+    return InputError(f"the initial set is empty (no location of {name} satisfies loc({name}) == {first} "
+                      f"and loc({name}) == {second})", cfg.file, "initially", cfg.line("initially"))
 
 
 def load_spaceex(xml_path, cfg_path=None):
@@ -72,15 +82,16 @@ def load_spaceex(xml_path, cfg_path=None):
 
 def write_yaml(docs: Documents, out_dir, option: str = "--out") -> tuple[Path, Path | None]:
     """Write ``out_dir/models/NAME.yaml`` and ``out_dir/properties/NAME.yaml`` (if the cfg
-    forbids anything); NAME is the cfg's file name, sanitised. The folder ``out_dir`` is the
-    user's (``option`` names it); ``models`` and ``properties`` below it are the tool's, and one
-    that is a symbolic link is bad input (a write through it would land wherever it points)."""
+    forbids anything); NAME is the cfg's file name, sanitised (:func:`_fallback_name` if nothing
+    is left). The folder ``out_dir`` is the user's (``option`` names it); ``models`` and
+    ``properties`` below it are the tool's, and one that is a symbolic link is bad input (a write
+    through it would land wherever it points)."""
     import yaml
 
     from reach.errors import InputError
     from reach.paths import printable, safe_name, writable_file
 
-    safe = safe_name(str(docs.model["name"]), "model")
+    safe = safe_name(str(docs.model["name"]), "") or _fallback_name(str(docs.model["name"]))
     out = Path(out_dir)
     for sub in ("models", "properties"):
         if (out / sub).is_symlink():
@@ -93,3 +104,11 @@ def write_yaml(docs: Documents, out_dir, option: str = "--out") -> tuple[Path, P
         prop_path.write_text(f"# the forbidden set of {docs.model['notes']['config']}\n"
                              + yaml.safe_dump(docs.properties, sort_keys=False, width=120))
     return model_path, prop_path
+
+
+def _fallback_name(name: str) -> str:
+    """The file name for a cfg whose name leaves nothing once made safe (``..cfg``, ``%.cfg``):
+    ``model_`` and the first digits of the name's SHA-256, so two such cfgs write two files."""
+    import hashlib
+
+    return "model_" + hashlib.sha256(name.encode("utf-8", "surrogateescape")).hexdigest()[:12]

@@ -3,8 +3,10 @@
 Instantiation. A component bound as ``as`` inside an instance at path ``P`` gets the path
 ``P.as`` (an ``as`` is unique in its network and has no dot, so two instances never share a
 path, nor their locals a name). Each of its params is bound by the ``map`` of its bind (to a
-number, to a name of the parent's scope, or to a dotted name ``inst.x`` of a sub-instance), or,
-if unmapped, is local to the instance and named ``P.as.param``. Params of the analysed system itself keep their names.
+number, to a name of the parent's scope, or to a dotted name ``inst.x``: a param ``x`` of an
+instance ``inst`` of the same network that its bind leaves unmapped), or, if unmapped, is local
+to the instance and named ``P.as.param`` (with a warning when the network has a param of that
+name: see :func:`_shadowed`). Params of the analysed system itself keep their names.
 A constant, or a variable that no flow or assignment of its component sets (an input), may be
 mapped to a number: it is that number in the instance.
 
@@ -31,7 +33,8 @@ import re
 from dataclasses import dataclass, field
 
 from reach.errors import InputError
-from reach.model.spaceex.components import Base, Document, Location, Text, Transition
+from reach.model.spaceex.components import Base, Bind, Document, Location, Network, Text, Transition
+from reach.model.spaceex.formula import digits_message, too_many_digits
 
 MAX_DEPTH = 16
 MAX_INSTANCES = 256
@@ -114,6 +117,7 @@ class Flat:
     system: str                         # the analysed component's id
     line: int                           # and its line
     declared: dict[str, int] = field(default_factory=dict)   # global real name -> its param's line
+    warnings: list[str] = field(default_factory=list)        # one line each, as the CLI shows them
     locations: dict[tuple, ProductLocation] = field(default_factory=dict)
     transitions: list[ProductTransition] = field(default_factory=list)
 
@@ -176,14 +180,32 @@ def _walk(doc: Document, comp, path: str, binding: dict[str, Binding], flat: Fla
         child = doc.components[bind.component]
         child_path = f"{path}.{bind.name}" if path else bind.name
         child_binding: dict[str, Binding] = {}
+        scope = _Scope(doc, comp, bind, binding, path)
         for m in bind.maps:
             if m.key not in child.params:
-                raise InputError(f"bind '{bind.name}': component '{child.id}' has no param '{m.key}'",
-                                 doc.file, line=m.line)
+                raise scope.error(m, f"component '{child.id}' has no param '{m.key}'")
             if m.key in child_binding:
-                raise InputError(f"bind '{bind.name}': param '{m.key}' mapped twice", doc.file, line=m.line)
-            child_binding[m.key] = _resolve_map(m, binding, path, child.params[m.key].type, doc.file)
+                raise scope.error(m, f"param '{m.key}' mapped twice")
+            child_binding[m.key] = _resolve_map(m, child.params[m.key], scope)
+        flat.warnings += _shadowed(comp, bind, child, child_binding, child_path, doc.file)
         _walk(doc, child, child_path, child_binding, flat, depth + 1, bind.line)
+
+
+def _shadowed(network, bind, child, mapped: dict[str, Binding], path: str, file: str) -> list[str]:
+    """One warning per param of ``child`` that ``bind`` leaves unmapped although ``network``
+    declares a param of the same name. SpaceEx tools differ here (HyST makes the param local to
+    the instance, as this import does; CORA's converter keeps its name, joining the network's),
+    so the reading is kept, and said: a label left so no longer synchronises with the network's."""
+    found = []
+    for p in child.params.values():
+        if p.name in mapped or p.local or p.name not in network.params:
+            continue
+        kind = "label" if network.params[p.name].type == "label" else "variable"
+        found.append(f"{file}:{bind.line}: bind '{bind.name}': the {p.type} '{p.name}' of component "
+                     f"'{child.id}' is not mapped, so it is the instance's own '{path}.{p.name}', not the "
+                     f"{kind} '{p.name}' of network '{network.id}' (line {network.params[p.name].line}); map "
+                     f"it (<map key=\"{p.name}\">{p.name}</map>) to join them")
+    return found
 
 
 def _new_local(flat: Flat, name: str, dynamics: str, file: str, line: int) -> None:
@@ -211,20 +233,74 @@ def _written(comp: Base, name: str) -> tuple[str, int] | None:
     return None
 
 
-def _resolve_map(m, binding, path, ptype, file) -> Binding:
+@dataclass
+class _Scope:
+    """Where a map's value is read: the network ``component`` (bound at ``path``, its params
+    bound by ``binding``), inside its ``bind`` being read."""
+
+    doc: Document
+    component: Network
+    bind: Bind
+    binding: dict[str, Binding]
+    path: str
+
+    def error(self, m, message: str) -> InputError:
+        """Bad input at the map ``m``'s line, naming its bind and key."""
+        return InputError(message, self.doc.file, f"bind '{self.bind.name}': map '{m.key}'", m.line)
+
+
+def _resolve_map(m, param, scope: _Scope) -> Binding:
+    """What the map ``m`` binds ``param`` (a param of the bound component) to: a number, a param
+    of the network, or a param of another of its instances (``inst.x``)."""
     value = m.value
     if _NUMBER.match(value):
-        if ptype == "label":
-            raise InputError(f"map '{m.key}': a label cannot be mapped to a number", file, line=m.line)
+        if param.type == "label":
+            raise scope.error(m, "a label cannot be mapped to a number")
+        if too_many_digits(value):
+            raise scope.error(m, digits_message(value))
         if not math.isfinite(float(value)):
-            raise InputError(f"map '{m.key}': the number {value} is not finite", file, line=m.line)
+            raise scope.error(m, f"the number {value} is not finite")
         return Binding(number=value)
-    if value in binding:
-        return binding[value]
+    if value in scope.binding:
+        declared = scope.component.params.get(value)
+        if declared is not None and declared.type != param.type:
+            raise scope.error(m, f"binds the {param.type} '{param.name}' to the {declared.type} '{value}' of "
+                                 f"component '{scope.component.id}' (a real maps to a real, a label to a label)")
+        return scope.binding[value]
     if re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)+", value):
-        return Binding(name=f"{path}.{value}" if path else value)
-    raise InputError(f"map '{m.key}': construct '{value}' is not supported (a number, or a name in scope)",
-                     file, line=m.line)
+        _check_dotted(m, param, scope)
+        return Binding(name=f"{scope.path}.{value}" if scope.path else value)
+    raise scope.error(m, f"construct '{value}' is not supported (a number, or a name in scope)")
+
+
+def _check_dotted(m, param, scope: _Scope) -> None:
+    """``inst.x`` (``inst.sub.x``) must name an instance bound in the network (in it, in turn)
+    and a param of its component that its bind leaves unmapped: that param is the instance's
+    own variable ``inst.x``; any other name would be a fresh variable, silently unconnected."""
+    *instances, name = m.value.split(".")
+    network, where = scope.component, f"network '{scope.component.id}'"
+    bind = None
+    for inst in instances:
+        if not isinstance(network, Network):
+            raise scope.error(m, f"'{m.value}': {where} is a base component's, with no instance '{inst}'")
+        bind = next((b for b in network.binds if b.name == inst), None)
+        if bind is None:
+            known = ", ".join(b.name for b in network.binds)
+            raise scope.error(m, f"'{m.value}': '{inst}' is no instance in {where} (its instances: {known})")
+        network = scope.doc.components.get(bind.component)
+        if network is None:
+            raise InputError(f"bind '{bind.name}': no component '{bind.component}'", scope.doc.file, line=bind.line)
+        where = f"instance '{inst}' (component '{network.id}')"
+    target = network.params.get(name)
+    if target is None:
+        raise scope.error(m, f"'{m.value}': '{name}' is no param of {where}")
+    mapped = next((x for x in bind.maps if x.key == name), None)
+    if mapped is not None:
+        raise scope.error(m, f"'{m.value}': the bind of '{bind.name}' maps '{name}' to '{mapped.value}' "
+                             f"(line {mapped.line}); map to that instead")
+    if target.type != param.type:
+        raise scope.error(m, f"binds the {param.type} '{param.name}' to the {target.type} '{m.value}' "
+                             "(a real maps to a real, a label to a label)")
 
 
 def compose(flat: Flat, initial_locations: list[set[str] | None]) -> None:

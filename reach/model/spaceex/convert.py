@@ -566,8 +566,7 @@ class DocumentBuilder(Converter):
         line = None
         if self.flat.globals.get(var) == "const":
             raise InputError(f"the constant '{var}' has no value (map it to a number in a bind, or give "
-                             "it one in the cfg's initially)",
-                             self.file, line=self._line_of(var))
+                             "it one in the cfg's initially)", self.file, *self._declared_at(var))
         aliased = {}
         bounds = {}
         where = sorted(where, key=str)      # one order, so that a message names the same line each run
@@ -606,7 +605,8 @@ class DocumentBuilder(Converter):
                 if key not in bounds:
                     raise InputError(f"'{var}' has no flow and is unbounded in location "
                                      f"'{self.flat.label(key)}' (an unbounded input is "
-                                     "not supported)", self.file, line=self.flat.locations[key].line)
+                                     "not supported)", self.file, f"location '{self.flat.label(key)}'",
+                                     self.flat.locations[key].line)
                 lo, hi = -np.inf, np.inf
                 for j, (a, b) in bounds[key]:
                     lo, hi = max(lo, a), min(hi, b)
@@ -631,9 +631,9 @@ class DocumentBuilder(Converter):
                              f"'{printable(_written(self.invariants[key][j][0]))[:80]}' of location "
                              f"'{self.flat.label(key)}' (an input may only be bounded by numbers: not "
                              "supported)", self.file, line=line)
+        field, declared = (None, line) if line else self._declared_at(var)
         raise InputError(f"'{var}' has no flow and is neither bounded by numbers in the invariants nor "
-                         f"defined by an equality (construct not supported)", self.file,
-                         line=line or self._line_of(var))
+                         f"defined by an equality (construct not supported)", self.file, field, declared)
 
     def _maybe_constant_input(self, var: str, cfg_names: set[str]):
         if var in cfg_names or any(var in a for a in self.assignments):
@@ -665,11 +665,16 @@ class DocumentBuilder(Converter):
         self.inputs[var] = (lo, hi, False)
 
     def _line_of(self, var: str) -> int | None:
+        return self._declared_at(var)[1]
+
+    def _declared_at(self, var: str) -> tuple[str | None, int | None]:
+        """The field and line of the param that ``var`` stands for in the first instance that
+        reads it (``component 'A': param 'k'``), or ``(None, None)``."""
         for inst in self.flat.instances:
             for p in inst.component.params.values():
                 if inst.binding.get(p.name) and inst.binding[p.name].name == var:
-                    return p.line
-        return None
+                    return f"component '{inst.component.id}': param '{p.name}'", p.line
+        return None, None
 
     # -------------------------------------------------------------- rendering
     def render(self, tokens, key, line: int | None, depth: int = 0, file: str | None = None,
@@ -812,8 +817,8 @@ class DocumentBuilder(Converter):
         blocked = blocked_labels(self.flat)
         if blocked:
             notes["blocked"] = blocked
-        if self.ignored:
-            notes["ignored"] = list(self.ignored)
+        if self.flat.warnings or self.ignored:      # shown by check and import, one warning a line
+            notes["ignored"] = self.flat.warnings + self.ignored
         data["notes"] = notes
         props, plines, pid = self.forbidden_doc()
         return Documents(data, lines, props, plines, pid)

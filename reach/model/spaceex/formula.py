@@ -24,6 +24,8 @@ from reach.errors import InputError
 from reach.model.expr import FUNCTIONS
 
 MAX_TERMS = 256
+MAX_NESTING = 200       # parentheses within parentheses: Python's own parser allows no more
+MAX_DIGITS = 4000       # digits in one number: Python reads no longer integer (4300 digits)
 _TOKEN = re.compile(r"""
     (?P<num>(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?)
   | (?P<name>[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)*)
@@ -70,9 +72,22 @@ def tokenize(text: str) -> list[Token]:
         if m is None:
             raise FormulaError(f"unexpected character '{text[pos]}'")
         pos = m.end()
+        if m.lastgroup == "num" and too_many_digits(m.group()):
+            raise FormulaError(digits_message(m.group()))
         if m.lastgroup != "space":
             out.append(Token(m.lastgroup, m.group()))
     return out
+
+
+def too_many_digits(number: str) -> bool:
+    """Does ``number`` have more than :data:`MAX_DIGITS` digits? (No double needs them, and the
+    expression parser would refuse it in Python's own words.)"""
+    return sum(c.isdigit() for c in number) > MAX_DIGITS
+
+
+def digits_message(number: str) -> str:
+    digits = sum(c.isdigit() for c in number)
+    return f"the number '{number[:20]}...' has too many digits ({digits}; at most {MAX_DIGITS})"
 
 
 class _Parser:
@@ -211,11 +226,22 @@ def _juxtaposed(left: Token, right: Token) -> bool:
     return ends and begins and not (left.kind == "name" and right.text == "(")
 
 
+def _check_nesting(tokens: list[Token]) -> None:
+    """Parentheses nested more than :data:`MAX_NESTING` deep are refused before the (recursive)
+    parser meets them."""
+    depth = 0
+    for tok in tokens:
+        depth += {"(": 1, ")": -1}.get(tok.text, 0)
+        if depth > MAX_NESTING:
+            raise FormulaError(f"too many nested parentheses (more than {MAX_NESTING})")
+
+
 def parse_formula(text: str) -> list[list]:
     """``text`` in disjunctive normal form: ``[[atom, ...], ...]`` (``[[]]`` for an empty text)."""
     tokens = tokenize(text)
     if not tokens:
         return [[]]
+    _check_nesting(tokens)
     parser = _Parser(tokens)
     terms = parser.formula()
     if parser.peek() is not None:
