@@ -261,8 +261,22 @@ def cmd_replay(args) -> int:
                              args.counterexample, key)
         return path
 
-    model = load_model(named("model_file"))
-    props = [p for p in load_properties(named("property_file")) if p.id == cex.property]
+    def loaded(key: str, loader):
+        """The file under ``key`` loaded; where its text does not load, its line only: the file is
+        the counterexample's choice, not the user's, and a message quoting it would show any YAML
+        file's text (``lint`` or ``check`` on it says what is wrong)."""
+        path = named(key)
+        try:
+            return loader(path)
+        except InputError as exc:
+            if not exc.line:                # the file itself (missing, not a plain file, too large)
+                raise
+            raise InputError(f"the file '{printable(path)}' it names does not load as a reach "
+                             f"{key.split('_')[0]} file (line {exc.line}): reach lint or reach check on it "
+                             f"says why", args.counterexample, key) from None
+
+    model = loaded("model_file", load_model)
+    props = [p for p in loaded("property_file", load_properties) if p.id == cex.property]
     if not props:
         raise InputError(f"property '{cex.property}' is not in {cex.property_file}", args.counterexample, "property")
     try:
@@ -292,9 +306,27 @@ def cmd_replay(args) -> int:
         print(printable(f"replayed: {model.name} violates '{prop.id}' at t={rep.time:.6g} in mode {rep.mode} "
                         f"({depth}); state {state}"))
         return 1
+    left = _left_the_reals(rep.trajectory)
+    if left is not None:
+        why = rep.trajectory.get("note") or ("a flow too stiff for the step, or one that escapes to infinity, "
+                                             "or leaves its domain")
+        print(printable(f"NOT decided: the run of {model.name} left the real numbers (NaN or infinite states; "
+                        f"first recorded at t={left:.6g}), so the replay says nothing of '{prop.id}' from there: "
+                        f"{why}"))
+        return 3
     print(printable(f"NOT replayed: {model.name} satisfies '{prop.id}' along this run "
                     f"(closest margin {margin_text(prop, rep.depth)})" + (f"; {note}" if note else "")))
     return 3
+
+
+def _left_the_reals(trajectory) -> float | None:
+    """The first time a replayed run's state is not finite, or None."""
+    import numpy as np
+
+    if not isinstance(trajectory, dict) or not trajectory.get("x"):
+        return None
+    bad = ~np.all(np.isfinite(np.asarray(trajectory["x"], dtype=float)), axis=1)
+    return float(np.asarray(trajectory["t"], dtype=float)[np.argmax(bad)]) if bad.any() else None
 
 
 def _figure_path(out: str | None, default: Path) -> Path:

@@ -60,6 +60,27 @@ def thinned(trajectory: dict, violation_time: float) -> dict:
             for key, value in trajectory.items()}
 
 
+def _drawable(trajectory) -> bool:
+    """Whether a counterexample file's ``trajectory`` is what :func:`thinned` and the pictures
+    read: an object whose ``t`` (finite numbers), ``mode`` (names) and ``x`` (lists of numbers:
+    a run that left the real numbers is drawn up to there), where given, have one entry per point (the replay simulates the run again; the
+    trajectory only draws it)."""
+    if trajectory is None:
+        return True
+    if not isinstance(trajectory, dict):
+        return False
+    t, mode, x = trajectory.get("t"), trajectory.get("mode"), trajectory.get("x")
+    if t is None:
+        return mode is None and x is None
+    if not isinstance(t, list) or not all(_finite(v) for v in t):
+        return False
+    if mode is not None and not (isinstance(mode, list) and len(mode) == len(t) and all(isinstance(m, str) for m in mode)):
+        return False
+    return x is None or (isinstance(x, list) and len(x) == len(t) and all(
+        isinstance(row, list) and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in row)
+        for row in x))
+
+
 @dataclass
 class Counterexample:
     """A concrete run that violates a property: initial state, abort (switch) time, trajectory.
@@ -134,6 +155,9 @@ class Counterexample:
         for key in ("switch_time", "dt"):
             if data.get(key) is not None and not (_finite(data[key]) and data[key] >= 0):
                 raise InputError("expected a finite number >= 0 or null", file, key)
+        if not _drawable(data.get("trajectory", {})):
+            raise InputError("expected an object of lists t (numbers), mode (names) and x (states), one entry "
+                             "per point", file, "trajectory")
         transitions = data.get("transitions")
         if transitions is not None and not (isinstance(transitions, list)
                                             and all(isinstance(name, str) for name in transitions)):

@@ -50,3 +50,13 @@ def test_cli_reads_exponents_without_a_dot(capsys):
     assert main(args + ["-o", "bogus=2"]) == 2
     assert capsys.readouterr().err.strip() == ("reach: options.star.bogus: unknown star option; known: "
                                                + ", ".join(sorted(StarOptions.__dataclass_fields__)))
+
+
+@pytest.mark.parametrize("name", ["input_cells", "rebase_cells", "linearise_inflations", "max_lps", "max_stars"])
+def test_a_count_past_any_meaning_is_refused_at_its_option(name):
+    """``-o input_cells=1e308`` reached the exploration as a 309-digit integer (UNKNOWN, "Python
+    int too large to convert to C long"): a count without its own bound is at most 1e9."""
+    with pytest.raises(InputError) as err:
+        StarOptions.from_dict({name: 1e308})
+    assert err.value.field == f"options.star.{name}" and "at most 1e+09" in str(err.value)
+    assert getattr(StarOptions.from_dict({name: 10 ** 9}), name) == 10 ** 9

@@ -68,3 +68,56 @@ def test_a_wide_state_is_thinned_to_a_file_replay_reads(tmp_path_factory, width)
     assert path.stat().st_size < MAX_BYTES
     again = Counterexample.load(path)
     assert 100 <= len(again.trajectory["t"]) <= MAX_TRAJECTORY_POINTS
+
+
+def _saved_counterexample(tmp_path, model_file="m.yaml", trajectory=None, flow="-0.5*x"):
+    """A thermostat-like one-state model ``x' = flow`` from x = 1, a property x <= 0.9, and a
+    counterexample file naming them (``model_file`` as written into the file)."""
+    import yaml
+
+    (tmp_path / "m.yaml").write_text(yaml.safe_dump({
+        "name": "m", "state": ["x", "t"], "horizon": 2,
+        "modes": {"a": {"flow": {"x": flow, "t": 1}}}, "initial": {"mode": "a", "box": {"x": [1, 1], "t": 0}}}))
+    (tmp_path / "p.yaml").write_text(yaml.safe_dump(
+        {"properties": [{"id": "low", "kind": "safety", "modes": ["a"], "require": ["x >= 0.9"]}]}))
+    data = {"model": "m", "property": "low", "model_file": model_file, "property_file": "p.yaml",
+            "initial_state": [1.0, 0.0], "switch_time": None, "dt": 0.01}
+    if trajectory is not None:
+        data["trajectory"] = trajectory
+    (tmp_path / "cex.json").write_text(__import__("json").dumps(data))
+    return str(tmp_path / "cex.json")
+
+
+def test_replay_quotes_nothing_of_a_file_the_counterexample_names(tmp_path, capsys):
+    """A counterexample may name any .yaml file: one that is no model is named with its line,
+    and none of its text is shown (a key such as a password hash was quoted whole)."""
+    from reach.cli import main
+
+    (tmp_path / "secrets.yaml").write_text("aws_secret_access_key: AKIAEXAMPLESECRET\n")
+    assert main(["replay", _saved_counterexample(tmp_path, "secrets.yaml")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "model_file" in err and "secrets.yaml" in err
+    assert "aws_secret" not in err and "AKIA" not in err
+    assert main(["replay", _saved_counterexample(tmp_path)]) == 1      # the model itself replays
+
+
+def test_a_trajectory_of_unequal_lists_is_bad_input(tmp_path, capsys):
+    """A trajectory whose mode list is shorter than its times (past the thinning's 4000 points)
+    was an IndexError, exit 3: it is bad input at the field."""
+    from reach.cli import main
+
+    t = [k * 0.001 for k in range(5000)]
+    path = _saved_counterexample(tmp_path, trajectory={"t": t, "mode": ["a"] * 10, "x": [[1.0, v] for v in t]})
+    assert main(["replay", path]) == 2
+    assert "trajectory" in capsys.readouterr().err
+
+
+def test_a_replay_that_leaves_the_real_numbers_decides_nothing(tmp_path, capsys):
+    """x' = -1e12 x needs more than 1000 RK4 substeps per step: the run is not simulated (NaN)
+    and the replay says so, exit 3, naming the step that would take it. It took a minute of
+    1000 substeps and printed "satisfies"."""
+    from reach.cli import main
+
+    assert main(["replay", _saved_counterexample(tmp_path, flow="-1e12*x + 0.001*x**2")]) == 3
+    out = capsys.readouterr().out
+    assert out.startswith("NOT decided") and "too stiff for RK4" in out and "-o dt=1.5e-09" in out

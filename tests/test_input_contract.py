@@ -204,3 +204,16 @@ def test_expanding_aliases_are_refused_at_the_field_they_grow_under(tmp_path):
         assert "YAML nodes" in str(exc) and expanding.startswith(str(exc).split(": ")[1] + ":"), str(exc)
     else:
         raise AssertionError("an alias bomb loaded")
+
+
+def test_a_state_named_like_a_python_keyword_is_refused_where_it_is_declared(tmp_path, capsys):
+    """``lambda`` was accepted as a state name and every expression using it failed to parse;
+    it is refused at the declaration, with the name to write instead."""
+    from reach.cli import main
+
+    (tmp_path / "kw.yaml").write_text("name: kw\nstate: [lambda]\nmodes:\n  a: {flow: {lambda: \"-lambda\"}}\n"
+                                      "initial: {mode: a, box: {lambda: [0, 1]}}\nhorizon: 1\n")
+    assert main(["lint", str(tmp_path / "kw.yaml")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.endswith("kw.yaml:2: state[0]: 'lambda' is a Python keyword, which expressions cannot name "
+                        "(write 'lambda_')")

@@ -127,3 +127,20 @@ def test_a_replay_takes_the_substeps_its_own_states_ask_for(tmp_path, monkeypatc
     rep = replay(model, prop, [2.0, 0.0, 0.0], None)
     assert not rep.violated and rep.depth > 0.09
     assert "comes from the integration of a nonlinear flow" in rep.trajectory["note"]
+
+
+def test_a_mode_too_stiff_for_rk4_is_not_integrated(tmp_path, capsys):
+    """x' = -1e12 x: stable RK4 steps would need 1e9 substeps per grid step. The runs are not
+    integrated at the 1000-substep cap (minutes, past the time budget, and unstable still): they
+    are NaN at once and the result names the mode and a step that takes it."""
+    model = {"name": "rigid", "state": ["x", "y"], "horizon": 10,
+             "modes": {"a": {"flow": {"x": "-1e12*x + 0.001*x**2", "y": 1}}},
+             "initial": {"mode": "a", "box": {"x": [0.5, 1], "y": [0, 0]}}}
+    (tmp_path / "r.yaml").write_text(yaml.safe_dump(model))
+    (tmp_path / "rp.yaml").write_text(yaml.safe_dump(
+        {"properties": [{"id": "yb", "kind": "safety", "modes": ["a"], "require": ["y <= 5"]}]}))
+    sim = simulate.Simulator(load_model(tmp_path / "r.yaml"))
+    assert set(sim.too_stiff) == {"a"} and np.isnan(sim.propagate("a", np.array([[1.0, 0.0]]), sim.dt)).all()
+    code = cli(["check", str(tmp_path / "r.yaml"), str(tmp_path / "rp.yaml"), "-b", "montecarlo", "--json"])
+    (row,) = json.loads(capsys.readouterr().out)
+    assert code == 3 and row["seconds"] < 30 and "mode 'a' is too stiff for RK4" in row["details"]["undefined"]

@@ -16,6 +16,11 @@ from reach.errors import InputError
 _TYPES = {"float": float, "int": int, "bool": bool, "str": str, "None": type(None)}
 
 
+#: an integer option without its own upper bound (cells, stars, LPs, jumps...) is at most this:
+#: past it no count is meant, and a number such as 1e308 does not fit the machine's integers
+MAX_COUNT = 10 ** 9
+
+
 def ranged(default, low=None, high=None, open_low: bool = False):
     """A dataclass field with a range: ``low <= value <= high`` (``low < value`` if open_low)."""
     return field(default=default, metadata={"min": low, "max": high, "open_min": open_low})
@@ -33,6 +38,8 @@ def _range_error(value, spec: dict) -> str | None:
         return f"expected a number {'>' if open_low else '>='} {low:g}, got {value!r}"
     if high is not None and value > high:
         return f"at most {high:g} allowed, got {value!r}"
+    if isinstance(value, int) and high is None and value > MAX_COUNT:
+        return f"at most {MAX_COUNT:g} allowed for a count, got {value:.3g}"
     return None
 
 

@@ -14,8 +14,10 @@ monitoring, guards and invariant on those blocks as for linear modes), with the 
 for every run) and ``g`` the others (one sympy-generated numpy function with common
 subexpressions shared, evaluated on the rows that have any).
 
-Accuracy. The scheme, the step and the grid are the general path's: a grid state differs from
-``Simulator.propagate``'s only by rounding (the affine terms summed in another order), and from
+Accuracy. The scheme, the step and the grid are the general path's: at the same substeps a grid
+state differs from ``Simulator.propagate``'s only by rounding (the affine terms summed in another
+order; where the Jacobian along the runs raised the substeps, see Stability, each path raises them
+where its own runs ask, and both are stable there), and from
 the exact flow by the RK4 truncation error, locally ``O(h^5)`` per step and globally ``O(h^4)``
 on a segment. On SRNA01 (2400 grid steps over 240 min, two substeps) the grid states agree
 with ``scipy.integrate.solve_ivp`` (DOP853, ``rtol = 1e-12``) to ``1e-7 (1 + |x|_inf)`` over the
@@ -31,7 +33,10 @@ STABLE_STEP`` (``rho`` the spectral radius, :func:`jacobian_radius`): set from t
 runs start from (:func:`reach.model.simulate.stiff_substeps`), and checked again every
 :data:`STIFFNESS_CHECK` grid steps at states the runs reached, where a flow that stiffens along
 its runs gets more substeps and those grid steps are taken again (:class:`RK4Blocks`;
-``Simulator.more_substeps``).
+``Simulator.more_substeps``). A mode that would need more than :data:`MAX_SUBSTEPS` is too
+stiff for RK4 at the step (:func:`beyond_rk4`): its runs are not simulated but made NaN at once,
+which the callers report as runs the flow left undefined (:func:`too_stiff_text`), rather than
+integrated unstably at a thousand times the cost.
 """
 
 from __future__ import annotations
@@ -121,6 +126,20 @@ def substeps_for(dt: float, rho: float, least: int) -> int:
     return int(min(MAX_SUBSTEPS, max(least, np.ceil(dt * rho / STABLE_STEP))))
 
 
+def beyond_rk4(dt: float, rho: float) -> bool:
+    """Whether no number of substeps up to :data:`MAX_SUBSTEPS` makes RK4 stable at ``rho``."""
+    return bool(np.isfinite(rho) and dt * rho / STABLE_STEP > MAX_SUBSTEPS)
+
+
+def too_stiff_text(dt: float, modes: dict) -> str:
+    """What a simulation says of the modes ``{name: rho}`` too stiff for RK4 at step ``dt``."""
+    worst = max(modes.values())
+    return (f"mode {', '.join(repr(m) for m in modes)} is too stiff for RK4 at the step {dt:.3g} (the flow's "
+            f"Jacobian has spectral radius {worst:.3g}: stable steps need more than {MAX_SUBSTEPS} substeps); "
+            f"runs there were not simulated (their states are NaN): -o dt={MAX_SUBSTEPS * STABLE_STEP / worst:.3g} "
+            f"or smaller takes them")
+
+
 def probe_rows(X: np.ndarray, count: int = STIFFNESS_PROBES) -> np.ndarray:
     """Up to ``count`` finite rows of ``X`` (K, n), evenly spread (those among ``count`` evenly
     spread rows, or failing that any)."""
@@ -152,7 +171,9 @@ class RK4Blocks:
         self.flow, self.sim, self.name, self.dt = flow, sim, name, sim.dt
 
     def step(self, Z: np.ndarray) -> np.ndarray:
-        """The state one grid step after ``Z`` (n, R)."""
+        """The state one grid step after ``Z`` (n, R); NaN in a mode too stiff for RK4."""
+        if self.name in self.sim.too_stiff:
+            return np.full_like(Z, np.nan)
         substeps = self.sim.mode_substeps.get(self.name, self.sim.substeps)
         for _ in range(substeps):
             Z = rk4_step(self.flow, Z, self.dt / substeps)

@@ -47,6 +47,7 @@ from __future__ import annotations
 
 import ast
 import copy
+import keyword
 import unicodedata
 from pathlib import Path
 
@@ -94,6 +95,8 @@ def bad_name(name) -> str | None:
     name for another one."""
     if not isinstance(name, str) or not name.isidentifier() or name.startswith("_"):
         return f"'{name}' is not a valid name"
+    if keyword.iskeyword(name):
+        return f"'{name}' is a Python keyword, which expressions cannot name (write '{name}_')"
     normal = unicodedata.normalize("NFKC", name)
     if normal != name:
         return f"'{name}' is not a valid name (expressions read it as '{normal}': write that)"

@@ -71,8 +71,8 @@ import sympy
 
 from reach.model import batch
 from reach.model.automaton import HybridAutomaton
-from reach.model.batch_nonlinear import (STABLE_STEP, STIFFNESS_CHECK, STIFFNESS_PROBES, jacobian_radius, probe_rows,
-                                         rk4_step, substeps_for)
+from reach.model.batch_nonlinear import (MAX_SUBSTEPS, STABLE_STEP, STIFFNESS_CHECK, STIFFNESS_PROBES, beyond_rk4,
+                                         jacobian_radius, probe_rows, rk4_step, substeps_for)
 from reach.model.constraints import affine_coefficients, lambdify_margins, row_magnitudes
 from reach.model.crossing import Crossings
 
@@ -390,6 +390,12 @@ class Simulator:
         self.calm = {}                                  # checks of the substeps to pass (more_substeps)
         self.mode_substeps = {m: stiff_substeps(model, m, self.dt, substeps)
                               for m in model.modes if m not in self.generators and not model.modes[m].timeless}
+        self.too_stiff = {}                             # modes RK4 cannot take at this step: their rho
+        for m, count in self.mode_substeps.items():
+            if count >= MAX_SUBSTEPS:
+                rho = jacobian_radius(model.modes[m].rhs, _start_probes(model))
+                if beyond_rk4(self.dt, rho):
+                    self.too_stiff[m] = rho
         self.resets = {tr.name: _reset_function(tr, model) for tr in model.transitions if tr.reset}
         self.sources, self.scales = value_sources(model), {}
         self.timeless = {m for m, mode in model.modes.items() if mode.timeless}
@@ -406,7 +412,7 @@ class Simulator:
         and are to be taken again. Where ``h rho`` leaves room below ``STABLE_STEP`` the next
         calls pass without looking: ``k - 1`` of them where it is below ``STABLE_STEP 2^-k``
         (at most 7)."""
-        if mode not in self.mode_substeps:
+        if mode not in self.mode_substeps or mode in self.too_stiff:
             return False
         if self.calm.get(mode, 0) > 0:
             self.calm[mode] -= 1
@@ -414,6 +420,9 @@ class Simulator:
         taken = self.mode_substeps[mode]
         wanted, rho = self.wanted_substeps(
             mode, np.concatenate([probe_rows(X, STIFFNESS_PROBES // len(states)) for X in states]))
+        if beyond_rk4(self.dt, rho):
+            self.too_stiff[mode] = rho
+            return True                     # the grid steps again: NaN from here (RK4Blocks.step, propagate)
         if np.isfinite(rho):
             room = STABLE_STEP / max(self.dt / taken * rho, 1e-300)
             self.calm[mode] = int(min(7, max(0, math.floor(math.log2(room)) - 1)))
@@ -457,6 +466,8 @@ class Simulator:
             else:
                 E = batched_expm(self.generators[mode], h)
             return np.einsum("kij,kj->ki", E[:, :self.n, :self.n], X) + E[:, :self.n, self.n]
+        if mode in self.too_stiff:
+            return np.full_like(X, np.nan)
         rhs = self.model.modes[mode].rhs
         count = max(1, int(np.ceil(self.mode_substeps.get(mode, self.substeps) * np.max(h) / self.dt)))
         step = (h / count)[:, None]

@@ -73,6 +73,7 @@ from reach.backends.montecarlo.replays import check_run, constant_signal, replay
 from reach.backends.montecarlo.sampling import (SWITCH_PROBABILITY, _kicks, _simulate_rounds, random_plan, run_plan,
                                                 sampled_runs, structured_plan, switch_window)
 from reach.model.automaton import HybridAutomaton
+from reach.model.batch_nonlinear import too_stiff_text
 from reach.model.constraints import NUMERICAL_TOLERANCE, lambdify_margins, row_magnitudes
 from reach.model.simulate import Branches, Simulator, single_threaded
 from reach.result import Result, Status
@@ -181,7 +182,8 @@ class MonteCarloBackend:
                 details["undefined"] = (f"{undefined} of {sampled} random runs reached states where the model's "
                                         f"flow is not a real number (NaN): the model leaves its domain there (an "
                                         f"invariant can keep it in), or the RK4 steps of a nonlinear flow diverged "
-                                        f"(a stiff flow: a smaller -o dt); the violation bound counts the other runs")
+                                        f"(a stiff flow: a smaller -o dt); the violation bound counts the other runs"
+                                        + (f" ({too_stiff_text(sim.dt, sim.too_stiff)})" if sim.too_stiff else ""))
             if sampled < opts.samples or cut:
                 details["note"] = (f"time budget of {opts.max_seconds:.3g} s (option max_seconds) ended the "
                                    f"sampling after {sampled} of {opts.samples} random runs"

@@ -23,7 +23,7 @@ from reach.backends.montecarlo.sampling import switch_window
 from reach.errors import InputError
 from reach.model.automaton import HybridAutomaton
 from reach.model.constraints import row_magnitudes
-from reach.model.batch_nonlinear import probe_rows
+from reach.model.batch_nonlinear import probe_rows, too_stiff_text
 from reach.model.simulate import MAX_STEPS, Branches, Simulator, single_threaded, value_sources
 from reach.result import Counterexample
 from reach.spec.properties import BoundEvent, BoundSafety
@@ -77,6 +77,8 @@ def replay(model: HybridAutomaton, prop: BoundSafety, initial_state, switch_time
         signal = _signal_of(model, input_signal)
         sim = _replay_simulator(model, dt, signal)
         rep = _replay_with(model, prop, initial_state, switch_time, sim, signal, branches)
+        if sim.too_stiff:                   # the run is NaN from where it entered such a mode
+            rep.trajectory = {**(rep.trajectory or {}), "note": too_stiff_text(sim.dt, sim.too_stiff)}
         if not rep.violated or not sim.mode_substeps:      # every mode flows exactly (or not at all)
             return rep
         try:
