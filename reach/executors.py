@@ -20,8 +20,9 @@ PR_SET_PDEATHSIG = 1               # prctl option (linux/prctl.h)
 CONNECT_SECONDS = 10
 
 
-class UnitTimeout(Exception):
-    pass
+class UnitTimeout(BaseException):
+    """A unit's time limit ran out (a BaseException, so that no ``except Exception`` in a
+    back-end takes it for a failure of its own)."""
 
 
 def _alarm(signum, frame):
@@ -29,17 +30,22 @@ def _alarm(signum, frame):
 
 
 def guarded(fn, args, time_limit):
-    """Run ``fn(*args)`` under a time limit; return ``("ok", value)`` or ``("timeout", None)``."""
+    """Run ``fn(*args)`` under a time limit; return ``("ok", value)`` or ``("timeout", None)``.
+    The timer is armed and disarmed inside the guarded region: a limit so short that the alarm
+    comes before ``setitimer`` returns (``--time-limit 1e-6``), or one that runs out while the
+    timer is being disarmed, is a timeout like any other."""
     if time_limit:
         signal.signal(signal.SIGALRM, _alarm)
-        signal.setitimer(signal.ITIMER_REAL, time_limit)
     try:
-        return "ok", fn(*args)
+        try:
+            if time_limit:
+                signal.setitimer(signal.ITIMER_REAL, time_limit)
+            return "ok", fn(*args)
+        finally:
+            if time_limit:
+                signal.setitimer(signal.ITIMER_REAL, 0)
     except UnitTimeout:
         return "timeout", None
-    finally:
-        if time_limit:
-            signal.setitimer(signal.ITIMER_REAL, 0)
 
 
 def _worker_start():

@@ -7,7 +7,8 @@ cannot leave their folder.
 * :func:`safe_name` turns a model or property name into one file-name component: letters and
   digits of any script, ``.``, ``-`` and ``_`` only, no leading dot, at most 80 characters, so
   ``name: "../../x"`` writes ``x`` inside the output folder, never outside it.
-* :func:`printable` escapes control characters of a user's name for terminal output.
+* :func:`printable` escapes control characters (and the Unicode line separators) of a user's name
+  for terminal output and table cells.
 """
 
 from __future__ import annotations
@@ -79,7 +80,7 @@ def safe_name(name, fallback: str = "unnamed") -> str:
     return text[:80] or fallback
 
 
-_CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f]")
+_CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f\u2028\u2029]")       # and the line separators splitlines() splits at
 
 
 def few(names, limit: int = 10, empty: str = "") -> str:
@@ -92,7 +93,8 @@ def few(names, limit: int = 10, empty: str = "") -> str:
 
 
 def printable(text) -> str:
-    """``text`` with control characters shown as escapes (``\\x1b``), for one-line messages."""
+    """``text`` with control characters and line separators shown as escapes (``\\x1b``,
+    ``\\u2028``), for one-line messages."""
     return _CONTROL.sub(lambda m: m.group().encode("unicode_escape").decode("ascii"), str(text))
 
 
@@ -117,11 +119,13 @@ def writable_folder(folder, option: str) -> Path:
     return folder
 
 
-def writable_file(path, option: str) -> Path:
+def writable_file(path, option: str, probe: bool = True) -> Path:
     """``path`` can be written: its folder exists or is made (:func:`writable_folder`), and it is
     not a folder, a read-only file nor a symbolic link (writing would go through it, to wherever
     it points); a file is opened (and removed again if it was new), so that a place that takes
-    no file (``/proc``) is bad input before any computation, not after it."""
+    no file (``/proc``) is bad input before any computation, not after it. ``probe=False`` skips
+    that opening: for a file another process may be creating and locking at the same time (a
+    lock file, which the probe could remove under it)."""
     path = Path(path)
     writable_folder(path.parent, option)
     if path.is_symlink():
@@ -130,6 +134,8 @@ def writable_file(path, option: str) -> Path:
         raise InputError(f"{printable(path)} is a folder (give a file name)", field=option)
     if path.exists() and not os.access(path, os.W_OK):
         raise InputError(f"cannot write {printable(path)}", field=option)
+    if not probe:
+        return path
     existed = path.exists()
     try:                    # a folder the file system will not create files in (/proc), checked now
         with open(path, "ab"):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +16,22 @@ def _pyplot():
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     return plt
+
+
+#: matplotlib's warnings about the layout of a crowded figure (many panels, a legend of a hundred
+#: modes): the picture is written as it stands, and they would be two lines on stderr naming
+#: reach's source, not the user's input
+LAYOUT_WARNINGS = ("Tight layout not applied", "Creating legend with loc=\"best\" can be slow")
+
+
+def _save(fig, out: Path) -> None:
+    """Lay out and write ``fig`` (its folder made), quiet about :data:`LAYOUT_WARNINGS`."""
+    with warnings.catch_warnings():
+        for message in LAYOUT_WARNINGS:
+            warnings.filterwarnings("ignore", message=message, category=UserWarning)
+        fig.tight_layout()
+        out.parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(out, dpi=110)
 
 
 def _clocks(model, traj) -> set[int]:
@@ -108,9 +125,7 @@ def plot_model_runs(model, out: Path, runs: int = 20, seed: int = 0, bound_props
               wrap=True, fontsize=9)
     for ax in flat[len(panels) + 1:]:
         ax.axis("off")
-    fig.tight_layout()
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110)
+    _save(fig, out)
     plt.close(fig)
 
 
@@ -196,9 +211,7 @@ def plot_abort_map(cells, times, window, out: Path, title: str, time_unit: str =
         ax.set_ylabel(f"abort time{unit}")
         ax.set_title("Passive safety margin per cell (centre run) and abort time\n"
                      "(blank: that run does not switch, e.g. the abort guard no longer holds)", fontsize=10)
-    fig.tight_layout()
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110)
+    _save(fig, out)
     plt.close(fig)
 
 
@@ -231,9 +244,7 @@ def plot_timeline(runs, modes: list[str], out: Path, title: str = "", time_unit:
         elif title:
             ax.set_title(title)
     axes[0, 0].legend(loc="lower right", fontsize=8)
-    fig.tight_layout()
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110)
+    _save(fig, out)
     plt.close(fig)
 
 
@@ -278,9 +289,7 @@ def plot_subdomain_map(subdomains, variables: list[str], prop: dict, out: Path, 
                           f"(hatched)", fontsize=10)
     fig.colorbar(plt.cm.ScalarMappable(norm=norm, cmap=cmap), ax=ax,
                  label=f"worst bound of {label} on the subdomain (requirement {op} {value:g})")
-    fig.tight_layout()
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110)
+    _save(fig, out)
     plt.close(fig)
 
 
@@ -355,7 +364,5 @@ def plot_proved_map(subdomains, colours, proved_boxes, attempts, out: Path, titl
         ax.set_ylim(low[1], high[1])
         ax.set_title(f"zoom: x {low[0]:g}..{high[0]:g}, y {low[1]:g}..{high[1]:g} {unit}", fontsize=8)
         ax.tick_params(labelsize=7)
-    fig.tight_layout()
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110)
+    _save(fig, out)
     plt.close(fig)

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import fcntl
 import json
+import math
+import os
 import platform
 import sys
 import time
@@ -16,7 +18,7 @@ from reach.executors import make_executor
 from reach.bench.suite import load_suite
 from reach.bench.tables import markdown_table
 from reach.errors import InputError
-from reach.paths import few, printable, writable_folder
+from reach.paths import few, printable, safe_name, writable_file, writable_folder
 
 
 def run_unit(model_path: str, property_path: str, backend: str, options: dict) -> list[dict]:
@@ -30,22 +32,55 @@ def run_unit(model_path: str, property_path: str, backend: str, options: dict) -
                  "details": {"error": str(exc)}}]
 
 
-def _read_inputs(instances) -> None:
+def _timeout_rows(backend: str, time_limit: float) -> list[dict]:
+    return [{"backend": backend, "property": "*", "status": "timeout", "seconds": time_limit,
+             "details": {"error": f"stopped after {time_limit} s"}}]
+
+
+def _read_inputs(instances) -> tuple[dict[str, str], dict[tuple, set]]:
     """Load every chosen instance's model and bind its property file, before any unit runs: a
     malformed one is bad input (exit 2, its file, line and field), not a unit error that the
     cross-checks would count as a failure (exit 1); so is an expected verdict of a property the
-    file does not have (it would never be checked)."""
+    file does not have (it would never be checked). Returns the models' names (by file) and the
+    property ids of each (model, property file) pair."""
     from reach.checking import load_bound
     ids: dict[tuple, set] = {}
+    names: dict[str, str] = {}
     for inst in instances:
         key = (str(inst.model), str(inst.properties))
         if key not in ids:
-            ids[key] = {p.id for p in load_bound(*key)[1]}
+            model, bound = load_bound(*key)
+            ids[key] = {p.id for p in bound}
+            names[key[0]] = model.name
         unknown = sorted(set(inst.expect) - ids[key])
         if unknown:                             # an expectation that would never be checked
             raise InputError(f"instance '{inst.id}' expects a verdict of '{unknown[0]}', which is no property "
                              f"of {printable(inst.properties)} (it has {', '.join(sorted(ids[key]))[:200]})",
                              field=f"instances.{inst.id}.expect")
+    return names, ids
+
+
+def runs_picture(folder, model_name: str) -> Path:
+    """The sample-run picture of a model in the bench's plots folder (the name results.md links)."""
+    return Path(folder) / f"{safe_name(model_name)}_runs.png"
+
+
+def subdomain_picture(folder, instance: str, prop: str) -> Path:
+    """The subdomain map of a taylor result (:func:`plot_subdomains`)."""
+    return Path(folder) / f"{safe_name(instance)}_{safe_name(prop)}_subdomains.png"
+
+
+def check_outputs(out: Path, units, names: dict[str, str], ids: dict[tuple, set]) -> None:
+    """Every file the run will write, checked before any unit runs: one that is a symbolic link
+    (or a folder, or cannot be written) is bad input naming it (:func:`reach.paths.writable_file`),
+    not a file written through the link after minutes of work. Each is checked again when written."""
+    writable_file(out / ".results.lock", "--out", probe=False)     # another run may hold it now
+    files = [out / "results.json", out / "results.md"]
+    files += [runs_picture(out / "plots", names[str(inst.model)]) for inst, _ in units]
+    files += [subdomain_picture(out / "plots", inst.id, prop) for inst, b in units if b == "taylor"
+              for prop in sorted(ids[(str(inst.model), str(inst.properties))])]
+    for path in dict.fromkeys(files):
+        writable_file(path, "--out")
 
 
 def plot_models(instances, folder: Path, stream, executor) -> list[str]:
@@ -80,7 +115,11 @@ def plot_unit(model_path: str, property_paths: list[str], folder: str) -> str:
                  for p in load_properties(f)]
     except InputError as exc:
         return str(exc)
-    target = Path(folder) / f"{model.name}_runs.png"
+    target = runs_picture(folder, model.name)
+    try:
+        writable_file(target, "--out")
+    except InputError as exc:           # raised again where the run waits for the pictures (exit 2)
+        raise InputError(str(exc)) from None
     plot_model_runs(model, target, runs=12, bound_props=bound)
     return str(target)
 
@@ -94,7 +133,7 @@ def plot_subdomains(rows, folder: Path) -> list[str]:
         d = r.get("details") or {}
         if r.get("backend") != "taylor" or d.get("subdomain_count", 0) < 2 or len(d.get("variables", [])) != 2:
             continue
-        target = folder / f"{r['instance']}_{r['property']}_subdomains.png"
+        target = writable_file(subdomain_picture(folder, r["instance"], r["property"]), "--out")
         requirement = {"op": d["op"], "value": d["value"], "label": r["property"]}
         plot_subdomain_map(d["subdomains"], d["variables"], requirement, target,
                            f"{r['instance']} {r['property']}: {d['subdomain_count']} subdomains, "
@@ -126,21 +165,95 @@ def previous_rows(path: Path, suite_path, rerun: set, instances: set, stream) ->
     return kept, runs
 
 
+#: the largest results file read (``reach compare``, the rows a filtered run keeps): the whole
+#: suite's results.json is some 30 MB, and JSON of small objects takes ~25x its size in memory
+MAX_RESULTS_BYTES = 64 * 2 ** 20
+#: seconds a result row may carry at most (more than 30 years is no measured time)
+MAX_SECONDS = 1e9
+
+
+def _number(value, low: float, high: float) -> bool:
+    """Whether ``value`` is a JSON number (not a boolean) within ``[low, high]``: a 4000-digit
+    integer or ``NaN`` is none, and is compared without converting it to a float."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return False
+    return (math.isfinite(value) if isinstance(value, float) else True) and low <= value <= high
+
+
+def _row_problem(row: dict) -> tuple[str, str] | None:
+    """``(field, what is wrong)`` for the first unusable field of a result row, else None."""
+    if row.get("seconds") is not None and not _number(row["seconds"], 0.0, MAX_SECONDS):
+        return "seconds", f"expected a number of seconds in [0, {MAX_SECONDS:g}]"
+    pair = row.get("probability")
+    if pair is not None and not (isinstance(pair, list) and len(pair) == 2
+                                 and all(_number(v, 0.0, 1.0) for v in pair) and pair[0] <= pair[1]):
+        return "probability", "expected an interval [low, high] within [0, 1]"
+    pair = row.get("bound")
+    if pair is not None and not (isinstance(pair, list) and len(pair) == 2
+                                 and all(_number(v, -float("inf"), float("inf")) or v in (float("inf"), -float("inf"))
+                                         for v in pair)):
+        return "bound", "expected an interval [low, high] of numbers"
+    if row.get("details") is not None and not isinstance(row["details"], dict):
+        return "details", "expected a mapping"
+    for key in ("run", "expected", "model", "source"):
+        if row.get(key) is not None and not isinstance(row[key], str):
+            return key, "expected a string"
+    return None
+
+
 def read_report(path) -> dict:
-    """A results.json (size-capped read); InputError if it is not one."""
+    """A results.json (a read capped at ``MAX_RESULTS_BYTES``); InputError naming the file (and
+    the field) if it is not one: rows need the strings instance, property, backend and status,
+    and their numbers (seconds, probability, bound) must be finite and in range."""
     from reach.paths import read_text
 
+    shown = printable(str(path))
     try:
-        report = json.loads(read_text(path, (".json",), "results file", max_bytes=200_000_000))
+        report = json.loads(read_text(path, (".json",), "results file", max_bytes=MAX_RESULTS_BYTES))
     except (json.JSONDecodeError, RecursionError, ValueError) as exc:
-        raise InputError(f"not a results file: invalid JSON ({exc.__class__.__name__})", str(path)) from None
+        raise InputError(f"not a results file: invalid JSON ({exc.__class__.__name__})", shown) from None
     if not isinstance(report, dict) or not isinstance(report.get("rows"), list) or not all(
             isinstance(r, dict) and {"instance", "property", "backend", "status"} <= set(r)
             and all(isinstance(r[k], str) for k in ("instance", "property", "backend", "status"))
             for r in report["rows"]):
         raise InputError("not a results file (expected rows with instance, property, backend, status)",
-                         str(path))
+                         shown)
+    for i, row in enumerate(report["rows"]):
+        problem = _row_problem(row)
+        if problem is not None:
+            raise InputError(f"{problem[1]} ({_brief(row[problem[0]])})", shown, field=f"rows[{i}].{problem[0]}")
+    runs = report.get("runs")
+    if runs is not None and not (isinstance(runs, list) and all(
+            isinstance(r, dict) and isinstance(r.get("run"), str) and isinstance(r.get("filter", ""), str)
+            and _number(r.get("wall_seconds", 0.0), 0.0, MAX_SECONDS) for r in runs)):
+        raise InputError("expected a list of runs, each with run, filter and wall_seconds", shown, field="runs")
     return report
+
+
+def _brief(value) -> str:
+    """A value of a results file in an error message: short, one line."""
+    if value is None or isinstance(value, bool):
+        return json.dumps(value)
+    if isinstance(value, int):
+        return str(value) if abs(value) < 10 ** 20 else f"an integer of {len(str(abs(value)))} digits"
+    if isinstance(value, float):
+        return repr(value)
+    if isinstance(value, str):
+        return f"'{printable(value)[:40]}'"
+    return "a list" if isinstance(value, list) else "a mapping"
+
+
+def _write_text(path: Path, text: str) -> None:
+    """``text`` into ``path``, checked again (:func:`reach.paths.writable_file`) and opened with
+    ``O_NOFOLLOW``: a symbolic link planted there since is refused, not written through."""
+    writable_file(path, "--out")
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW, 0o644)
+    except OSError as exc:
+        raise InputError(f"cannot write {printable(path)} ({exc.__class__.__name__}; a symbolic link is "
+                         "not written through)", field="--out") from None
+    with os.fdopen(fd, "w", encoding="utf-8") as handle:
+        handle.write(text)
 
 
 @contextmanager
@@ -148,7 +261,13 @@ def _results_lock(out: Path):
     """An exclusive lock on ``out``'s results while a run merges its rows into them and writes
     them (another run writing the same folder waits, then keeps these rows)."""
     out.mkdir(parents=True, exist_ok=True)
-    with open(out / ".results.lock", "a") as handle:
+    path = writable_file(out / ".results.lock", "--out", probe=False)
+    try:                            # O_NOFOLLOW: a link planted since the check is refused too
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND | os.O_NOFOLLOW, 0o644)
+    except OSError as exc:
+        raise InputError(f"cannot write {printable(path)} ({exc.__class__.__name__}; a symbolic link is "
+                         "not written through)", field="--out") from None
+    with os.fdopen(fd, "a") as handle:
         fcntl.flock(handle, fcntl.LOCK_EX)
         try:
             yield
@@ -188,7 +307,8 @@ def run_suite(suite_path, backends=None, instances=None, out="results", jobs=Non
     if not units:
         raise InputError(f"no unit to run: {', '.join(names) or 'no back-end'} runs on none of the chosen "
                          f"instances ({few([i.id for i in chosen])})", field="--backend" if backends else "--instance")
-    _read_inputs(chosen)
+    names, ids = _read_inputs(chosen)
+    check_outputs(Path(out), units, names, ids)
     executor = make_executor(jobs, scheduler)
     run_id = datetime.now(timezone.utc).isoformat(timespec="seconds")
     flags = [f"--backend {b}" for b in backends or []] + [f"--instance {i}" for i in instances or []]
@@ -202,8 +322,7 @@ def run_suite(suite_path, backends=None, instances=None, out="results", jobs=Non
     for done, (i, (state, value)) in enumerate(executor.map_unordered(run_unit, args, time_limit), start=1):
         inst, backend = units[i]
         if state == "timeout":
-            value = [{"backend": backend, "property": "*", "status": "timeout", "seconds": time_limit,
-                      "details": {"error": f"stopped after {time_limit} s"}}]
+            value = _timeout_rows(backend, time_limit)
         for r in value:
             r["run"] = run_id
             r["instance"] = inst.id
@@ -238,8 +357,8 @@ def run_suite(suite_path, backends=None, instances=None, out="results", jobs=Non
         }
         report["plots"] = plot_models(chosen, out / "plots", stream, executor) + plot_subdomains(
             [r for r in rows if r.get("run") == run_id], out / "plots")
-        (out / "results.json").write_text(json.dumps(report, indent=1))
-        (out / "results.md").write_text(markdown_table(report, out))
+        _write_text(out / "results.json", json.dumps(report, indent=1))
+        _write_text(out / "results.md", markdown_table(report, out))
     ran = {inst.id for inst, _ in units}
     gated = [c for c in checks if c.get("instance") in ran]       # kept rows' checks: reported only
     failures = [c for c in gated if c["level"] == "fail"]

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import sys
 from collections import defaultdict
 from pathlib import Path
+
+from reach.paths import few, printable, safe_name
 
 #: back-ends whose verdicts are proofs (Monte Carlo is the referee, not a formal method)
 FORMAL = ("star", "taylor", "fsr")
@@ -20,6 +23,13 @@ KEY_PICTURES = (
 )
 
 
+def md(value) -> str:
+    """``value`` as the text of one markdown table cell: control characters and line separators
+    escaped (:func:`reach.paths.printable`: a ``\\n`` in an instance name of a results file
+    cannot start a row of its own), ``|`` as ``\\|`` (it cannot add a column)."""
+    return printable(value).replace("|", "\\|")
+
+
 def _cell(row, run_marks: dict) -> str:
     status = row["status"].upper()
     if status == "UNSUPPORTED":
@@ -28,7 +38,7 @@ def _cell(row, run_marks: dict) -> str:
     if row.get("probability"):
         lo, hi = row["probability"]
         text += f" [{lo:.4f}, {hi:.4f}]"
-    return text + run_marks.get(row.get("run"), "")
+    return md(text + run_marks.get(row.get("run"), ""))
 
 
 def agreement(rows: dict) -> tuple[str, str]:
@@ -73,15 +83,14 @@ def _plot_names(report: dict, folder) -> set[str]:
 
 def _plot_links(names: set[str], instance: str, model: str) -> str:
     """Links to the pictures of an instance (its model's runs, its subdomain maps)."""
-    from reach.paths import safe_name
-
     links = []
     runs = f"{safe_name(model)}_runs.png"
     if runs in names:
-        links.append(f"[runs](plots/{runs})")
+        links.append(md(f"[runs](plots/{runs})"))
     for name in sorted(names):
-        if name.startswith(f"{instance}_") and name.endswith("_subdomains.png"):
-            links.append(f"[{name[len(instance) + 1:-len('_subdomains.png')]}](plots/{name})")
+        prefix = f"{safe_name(instance)}_"     # the runner's file names (runner.subdomain_picture)
+        if name.startswith(prefix) and name.endswith("_subdomains.png"):
+            links.append(md(f"[{name[len(prefix):-len('_subdomains.png')]}](plots/{name})"))
     return " ".join(links)
 
 
@@ -101,7 +110,7 @@ def markdown_table(report: dict, folder=None) -> str:
         expected[key] = r.get("expected") or ""
     runs = report.get("runs") or []
     run_marks = {}
-    lines = [f"# reach bench: {report['suite']}", "",
+    lines = [printable(f"# reach bench: {report['suite']}"), "",
              f"{report['started']}, {report['machine']['platform']}, executor {report['executor']}, "
              f"wall time {report['wall_seconds']:.1f} s.", ""]
     if len(runs) > 1:
@@ -109,10 +118,10 @@ def markdown_table(report: dict, folder=None) -> str:
         lines.append("")
         for k, run in enumerate(runs[:-1], start=1):
             run_marks[run["run"]] = f" ({k})"
-            lines.append(f"- ({k}) {run['run']}{', ' + run['filter'] if run.get('filter') else ' (whole suite)'}, "
-                         f"wall time {float(run.get('wall_seconds') or 0):.1f} s")
+            which = f", {run['filter']}" if run.get("filter") else " (whole suite)"
+            lines.append(printable(f"- ({k}) {run['run']}{which}, wall time {float(run.get('wall_seconds') or 0):.1f} s"))
         last = runs[-1]
-        lines += [f"- unmarked: {last['run']}{', ' + last['filter'] if last.get('filter') else ''}", ""]
+        lines += [printable(f"- unmarked: {last['run']}{', ' + last['filter'] if last.get('filter') else ''}"), ""]
     pictures = [(name, text) for name, text in KEY_PICTURES
                 if folder is not None and (Path(folder) / "plots" / name).is_file()]
     if pictures:
@@ -129,13 +138,13 @@ def markdown_table(report: dict, folder=None) -> str:
     for key in order:
         cells = [_cell(grid[key][b], run_marks) if b in grid[key] else "" for b in backends]
         agree, ratio = agreement(grid[key])
-        lines.append(f"| {key[0]} | {key[1]} | {expected[key]} | " + " | ".join(cells)
-                     + f" | {agree} | {ratio} | {_plot_links(names, key[0], models[key[0]])} |")
+        lines.append(f"| {md(key[0])} | {md(key[1])} | {md(expected[key])} | " + " | ".join(cells)
+                     + f" | {md(agree)} | {md(ratio)} | {_plot_links(names, key[0], models[key[0]])} |")
     lines += ["", "## Cross-checks", ""]
     if not report["cross_checks"]:
         lines.append("All back-ends agree with each other and with the expected verdicts.")
     for c in report["cross_checks"]:
-        lines.append(f"- **{c['level']}**: {c['message']}")
+        lines.append(printable(f"- **{c['level']}**: {c['message']}"))
     return "\n".join(lines) + "\n"
 
 
@@ -146,31 +155,48 @@ def _seconds(row) -> float:
         return float("nan")
 
 
-def compare_runs(old_path, new_path) -> str:
+def _by_key(report: dict, path, warn) -> dict:
+    """The rows of a results file by (instance, property, back-end). A key seen twice (a file
+    edited or pasted together: the runner writes each once) keeps its last row, the newest where
+    runs were merged, and ``warn`` gets one line naming the file and the duplicated rows."""
+    rows, again = {}, []
+    for i, r in enumerate(report["rows"]):
+        key = (r["instance"], r["property"], r["backend"])
+        if key in rows:
+            again.append(f"rows[{i}] {'/'.join(key)}")
+        rows[key] = r
+    if again:
+        warn(f"warning: {path}: {len(again)} duplicate row{'s' if len(again) > 1 else ''} "
+             f"(instance/property/back-end seen before; the last one is compared): {few(again, 5)}")
+    return rows
+
+
+def _warn(line: str) -> None:
+    print(printable(line), file=sys.stderr)
+
+
+def compare_runs(old_path, new_path, warn=_warn) -> str:
     """Verdict changes and time ratios (new/old) between two results.json files, and the rows of
-    the old one that the new one lacks ("gone")."""
+    the old one that the new one lacks ("gone"). Every cell is escaped (:func:`md`); a file with
+    a row twice is compared by its last one, with a warning (``warn``: one line on stderr)."""
     from reach.bench.runner import read_report
 
-    old = read_report(old_path)
-    new = read_report(new_path)
-    index = {(r["instance"], r["property"], r["backend"]): r for r in old["rows"]}
-    present = {(r["instance"], r["property"], r["backend"]) for r in new["rows"]}
+    old = _by_key(read_report(old_path), old_path, warn)
+    new = _by_key(read_report(new_path), new_path, warn)
     lines = ["| instance | property | back-end | verdict | seconds old -> new | ratio |", "|---|---|---|---|---|---|"]
-    for r in new["rows"]:
-        key = (r["instance"], r["property"], r["backend"])
-        before = index.get(key)
+    for key, r in new.items():
+        shown = " | ".join(md(k) for k in key)
+        before = old.get(key)
         if before is None:
-            lines.append(f"| {key[0]} | {key[1]} | {key[2]} | new: {r['status']} | {_seconds(r):.2f} | |")
+            lines.append(f"| {shown} | {md('new: ' + r['status'])} | {_seconds(r):.2f} | |")
             continue
         verdict = r["status"] if r["status"] == before["status"] else f"{before['status']} -> {r['status']}"
         ratio = (_seconds(r) / _seconds(before)) if _seconds(before) else float("nan")
-        lines.append(f"| {key[0]} | {key[1]} | {key[2]} | {verdict} | {_seconds(before):.2f} -> "
-                     f"{_seconds(r):.2f} | {ratio:.2f} |")
-    gone = [key for key in index if key not in present]
+        lines.append(f"| {shown} | {md(verdict)} | {_seconds(before):.2f} -> {_seconds(r):.2f} | {ratio:.2f} |")
+    gone = [key for key in old if key not in new]
     for key in gone:
-        lines.append(f"| {key[0]} | {key[1]} | {key[2]} | gone (was {index[key]['status']}) | "
-                     f"{_seconds(index[key]):.2f} -> | |")
+        lines.append(f"| {' | '.join(md(k) for k in key)} | {md('gone (was ' + old[key]['status'] + ')')} | "
+                     f"{_seconds(old[key]):.2f} -> | |")
     lines.append("")
-    lines.append(f"{len(new['rows'])} rows now, {len(old['rows'])} before: {len(present - set(index))} new, "
-                 f"{len(gone)} gone")
+    lines.append(f"{len(new)} rows now, {len(old)} before: {len(set(new) - set(old))} new, {len(gone)} gone")
     return "\n".join(lines)

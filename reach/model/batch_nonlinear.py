@@ -33,7 +33,8 @@ STABLE_STEP`` (``rho`` the spectral radius, :func:`jacobian_radius`): set from t
 runs start from (:func:`reach.model.simulate.stiff_substeps`), and checked again every
 :data:`STIFFNESS_CHECK` grid steps at states the runs reached, where a flow that stiffens along
 its runs gets more substeps and those grid steps are taken again (:class:`RK4Blocks`;
-``Simulator.more_substeps``). A mode that would need more than :data:`MAX_SUBSTEPS` is too
+``Simulator.more_substeps``) where one grid step at the two counts bears the estimate out (a
+large Jacobian alone, as a network controller's ripple gives, raises nothing). A mode that would need more than :data:`MAX_SUBSTEPS` is too
 stiff for RK4 at the step (:func:`beyond_rk4`): its runs are not simulated but made NaN at once,
 which the callers report as runs the flow left undefined (:func:`too_stiff_text`), rather than
 integrated unstably at a thousand times the cost.

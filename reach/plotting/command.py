@@ -40,6 +40,15 @@ def load(model_path: str, properties_path: str | None, only: list[str] | None):
     return model, props, False
 
 
+def default_file(model, backends: list[str], axes) -> Path:
+    """``MODEL_BACKENDS_X_Y.png`` in the working folder: a name reach makes, so a symbolic link
+    there is refused (:func:`reach.paths.writable_file`), never written through."""
+    from reach.paths import safe_name
+
+    return Path(f"{safe_name(model.name)}_{'_'.join(safe_name(b) for b in backends)}_"
+                f"{safe_name(axes[0].name)}_{safe_name(axes[1].name)}.png")
+
+
 def plot_files(model_path: str, properties_path: str, backends: list[str], variables: str | None,
                out: Path | None, options: dict, only: list[str] | None = None, exact: bool = True,
                stream=None):
@@ -47,7 +56,7 @@ def plot_files(model_path: str, properties_path: str, backends: list[str], varia
     InputError when nothing at all could be drawn (the picture, written, says why)."""
     from reach.checking import check_model, check_spaceex, exit_code, resolve_backend
     from reach.backends import validate_options
-    from reach.paths import safe_name
+    from reach.paths import writable_file
     from reach.plotting.axes import parse_vars
     from reach.plotting.reach_sets import missing_text, plot_reach_sets
 
@@ -62,6 +71,8 @@ def plot_files(model_path: str, properties_path: str, backends: list[str], varia
         validate_options(b, opts)
     model, bound, spaceex = load(model_path, properties_path, only)
     axes = None if spaceex else parse_vars(model, variables, bound)      # bad --vars before any work
+    if out is None and not spaceex:     # the default file, refused (a link there) before any work
+        out = writable_file(default_file(model, backends, axes), "--out")
     results = {}
     for b in backends:
         if spaceex:
@@ -74,9 +85,9 @@ def plot_files(model_path: str, properties_path: str, backends: list[str], varia
         if stream is not None:
             print(f"{b}: " + ", ".join(f"{r.property} {r.status.value} ({len(r.sets)} sets)" for r in res),
                   file=stream)
-    if out is None:
-        out = Path(f"{safe_name(model.name)}_{'_'.join(backends)}_{safe_name(axes[0].name)}_"
-                   f"{safe_name(axes[1].name)}.png")
+    # checked again now: the default name of a SpaceEx model is known only here, and a link may
+    # have appeared while the back-ends ran
+    out = writable_file(default_file(model, backends, axes) if out is None else out, "--out")
     start = time.perf_counter()
     summary = plot_reach_sets(model, results, bound, axes, out, exact=exact)
     seconds = time.perf_counter() - start
