@@ -33,19 +33,21 @@ def guarded(fn, args, time_limit):
     """Run ``fn(*args)`` under a time limit; return ``("ok", value)`` or ``("timeout", None)``.
     The timer is armed and disarmed inside the guarded region: a limit so short that the alarm
     comes before ``setitimer`` returns (``--time-limit 1e-6``), or one that runs out while the
-    timer is being disarmed, is a timeout like any other."""
-    if time_limit:
-        signal.signal(signal.SIGALRM, _alarm)
+    timer is being disarmed, is a timeout like any other. The previous SIGALRM handler is put
+    back."""
+    if not time_limit:
+        return "ok", fn(*args)
+    previous = signal.signal(signal.SIGALRM, _alarm)
     try:
         try:
-            if time_limit:
-                signal.setitimer(signal.ITIMER_REAL, time_limit)
+            signal.setitimer(signal.ITIMER_REAL, time_limit)
             return "ok", fn(*args)
         finally:
-            if time_limit:
-                signal.setitimer(signal.ITIMER_REAL, 0)
+            signal.setitimer(signal.ITIMER_REAL, 0)
     except UnitTimeout:
         return "timeout", None
+    finally:
+        signal.signal(signal.SIGALRM, previous)
 
 
 def _worker_start():
