@@ -63,8 +63,8 @@ def thinned(trajectory: dict, violation_time: float) -> dict:
 def _drawable(trajectory) -> bool:
     """Whether a counterexample file's ``trajectory`` is what :func:`thinned` and the pictures
     read: an object whose ``t`` (finite numbers), ``mode`` (names) and ``x`` (lists of numbers:
-    a run that left the real numbers is drawn up to there), where given, have one entry per point (the replay simulates the run again; the
-    trajectory only draws it)."""
+    a run that left the real numbers is drawn up to there), where given, have one entry per
+    point (the replay simulates the run again; the trajectory only draws it)."""
     if trajectory is None:
         return True
     if not isinstance(trajectory, dict):

@@ -906,6 +906,20 @@ def test_an_unmapped_param_named_like_a_network_param_is_warned_about(tmp_path, 
     assert "ignored" not in load_spaceex(xml, cfg)[2].model["notes"]
 
 
+# a component whose constant k its bind in sys maps by {map_k} (or leaves unmapped: "")
+BOUND_K = f'''  <component id="base">
+    {REAL.format("x")}
+    <param name="k" type="real" local="false" d1="1" d2="1" dynamics="const"/>
+    <location id="1" name="A"><flow>x' == k</flow></location>
+  </component>
+  <component id="sys">
+    {REAL.format("x")}
+    <bind component="base" as="b"><map key="x">x</map>{{map_k}}</bind>
+  </component>
+'''
+X_CFG = 'system = sys\ninitially = "x == 0"\nforbidden = "x >= 5"\ntime-horizon = 1\n'
+
+
 def test_a_number_of_too_many_digits_is_refused_in_the_projects_words(tmp_path, capsys):
     """Python's 'Exceeds the limit (4300 digits) for integer string conversion' was quoted."""
     big = "9" * 5000
@@ -913,18 +927,7 @@ def test_a_number_of_too_many_digits_is_refused_in_the_projects_words(tmp_path, 
     assert refusal(xml, cfg, capsys).startswith(
         f"{xml}:13: component 'sys': transition A -> B: guard: construct not supported or malformed: the number "
         f"'{big[:20]}...' has too many digits (5000; at most 4000) (in '")
-    body = f'''  <component id="base">
-    {REAL.format("x")}
-    <param name="k" type="real" local="false" d1="1" d2="1" dynamics="const"/>
-    <location id="1" name="A"><flow>x' == k</flow></location>
-  </component>
-  <component id="sys">
-    {REAL.format("x")}
-    <bind component="base" as="b"><map key="x">x</map><map key="k">{big}</map></bind>
-  </component>
-'''
-    xml, cfg = write(tmp_path, body, 'system = sys\ninitially = "x == 0"\nforbidden = "x >= 5"\ntime-horizon = 1\n',
-                     "map")
+    xml, cfg = write(tmp_path, BOUND_K.format(map_k=f'<map key="k">{big}</map>'), X_CFG, "map")
     assert refusal(xml, cfg, capsys) == (f"{xml}:10: bind 'b': map 'k': the number '{big[:20]}...' has too many "
                                          "digits (5000; at most 4000)")
 
@@ -941,7 +944,7 @@ def test_a_real_mapped_to_a_label_is_refused_at_the_map(tmp_path, capsys):
     <bind component="h" as="h"><map key="x">L</map></bind>
   </component>
 '''
-    xml, cfg = write(tmp_path, body, 'system = sys\ninitially = "x == 0"\nforbidden = "x >= 5"\ntime-horizon = 1\n')
+    xml, cfg = write(tmp_path, body, X_CFG)
     assert refusal(xml, cfg, capsys) == (f"{xml}:10: bind 'h': map 'x': binds the real 'x' to the label 'L' of "
                                          "component 'sys' (a real maps to a real, a label to a label)")
 
@@ -958,16 +961,6 @@ def test_cfg_names_that_sanitise_to_nothing_import_to_distinct_files(tmp_path, c
 
 
 def test_a_constant_without_a_value_names_its_param(tmp_path, capsys):
-    body = f'''  <component id="A">
-    {REAL.format("x")}
-    <param name="k" type="real" local="false" d1="1" d2="1" dynamics="const"/>
-    <location id="1" name="a1"><flow>x' == k</flow></location>
-  </component>
-  <component id="sys">
-    {REAL.format("x")}
-    <bind component="A" as="pa"><map key="x">x</map></bind>
-  </component>
-'''
-    xml, cfg = write(tmp_path, body, 'system = sys\ninitially = "x == 0"\nforbidden = "x >= 5"\ntime-horizon = 1\n')
-    assert refusal(xml, cfg, capsys) == (f"{xml}:5: component 'A': param 'k': the constant 'pa.k' has no value "
+    xml, cfg = write(tmp_path, BOUND_K.format(map_k=""), X_CFG)
+    assert refusal(xml, cfg, capsys) == (f"{xml}:5: component 'base': param 'k': the constant 'b.k' has no value "
                                          "(map it to a number in a bind, or give it one in the cfg's initially)")

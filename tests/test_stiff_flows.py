@@ -1,4 +1,4 @@
-"""Stiff nonlinear flows in the simulator (reach.model.simulate.stiff_substeps) and in replays
+"""Stiff nonlinear flows in the simulator (reach.model.batch_nonlinear, Stability) and in replays
 (reach.backends.montecarlo.replays.replay): explicit RK4 past its stability region grows
 without bound, which must never make a violation. Held against the closed form of
 x' = -1000 (x - 1) (+ y^2, y fixed), whose runs relax monotonically to 1 + y^2 / 1000."""
@@ -55,7 +55,7 @@ def test_a_violation_only_the_coarse_integration_makes_does_not_replay(tmp_path,
     x0 = 1.75 "violates" x <= 2.5 at t = 0.01; a quarter of the step does not, so the replay
     is no violation and says why."""
     m, p = files(tmp_path)
-    monkeypatch.setattr(simulate, "stiff_substeps", lambda model, mode, dt, substeps: substeps)
+    monkeypatch.setattr(simulate, "jacobian_radius", lambda rhs, X: float("nan"))
     monkeypatch.setattr(simulate.Simulator, "more_substeps", lambda self, mode, *states: False)
     model = load_model(m)
     prop = bind(load_properties(p)[0], model)

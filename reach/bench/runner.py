@@ -244,16 +244,22 @@ def _brief(value) -> str:
 
 
 def _write_text(path: Path, text: str) -> None:
-    """``text`` into ``path``, checked again (:func:`reach.paths.writable_file`) and opened with
-    ``O_NOFOLLOW``: a symbolic link planted there since is refused, not written through."""
+    """``text`` into ``path``, checked again (:func:`reach.paths.writable_file`) and opened by
+    :func:`_open_unlinked`."""
     writable_file(path, "--out")
+    with _open_unlinked(path, os.O_TRUNC, "w") as handle:
+        handle.write(text)
+
+
+def _open_unlinked(path: Path, flag: int, mode: str):
+    """``path`` opened for writing (``flag``: ``O_TRUNC`` or ``O_APPEND``) with ``O_NOFOLLOW``: a
+    symbolic link planted there since it was checked is refused, not written through."""
     try:
-        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_NOFOLLOW, 0o644)
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | flag | os.O_NOFOLLOW, 0o644)
     except OSError as exc:
         raise InputError(f"cannot write {printable(path)} ({exc.__class__.__name__}; a symbolic link is "
                          "not written through)", field="--out") from None
-    with os.fdopen(fd, "w", encoding="utf-8") as handle:
-        handle.write(text)
+    return os.fdopen(fd, mode, encoding="utf-8")
 
 
 @contextmanager
@@ -262,12 +268,7 @@ def _results_lock(out: Path):
     them (another run writing the same folder waits, then keeps these rows)."""
     out.mkdir(parents=True, exist_ok=True)
     path = writable_file(out / ".results.lock", "--out", probe=False)
-    try:                            # O_NOFOLLOW: a link planted since the check is refused too
-        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_APPEND | os.O_NOFOLLOW, 0o644)
-    except OSError as exc:
-        raise InputError(f"cannot write {printable(path)} ({exc.__class__.__name__}; a symbolic link is "
-                         "not written through)", field="--out") from None
-    with os.fdopen(fd, "a") as handle:
+    with _open_unlinked(path, os.O_APPEND, "a") as handle:
         fcntl.flock(handle, fcntl.LOCK_EX)
         try:
             yield

@@ -13,7 +13,7 @@ together:
   the states and those margins come together, block by block of grid steps
   (:mod:`reach.model.batch`), and observers with a ``block`` method take whole blocks;
 * nonlinear modes step classical RK4 (``substeps`` per grid step, more where the flow is
-  stiff: :func:`stiff_substeps`), stopping once every run
+  stiff: :mod:`reach.model.batch_nonlinear`, Stability), stopping once every run
   of the group has met an event; where their urgent guards and invariant are linear, in
   blocks over all the runs at once (:mod:`reach.model.batch_nonlinear`);
 * an urgent transition is taken at the first instant its guard holds, located by bisection
@@ -71,8 +71,8 @@ import sympy
 
 from reach.model import batch
 from reach.model.automaton import HybridAutomaton
-from reach.model.batch_nonlinear import (MAX_SUBSTEPS, STABLE_STEP, STIFFNESS_CHECK, STIFFNESS_PROBES, beyond_rk4,
-                                         jacobian_radius, probe_rows, rk4_step, substeps_for)
+from reach.model.batch_nonlinear import (STABLE_STEP, STIFFNESS_CHECK, STIFFNESS_PROBES, beyond_rk4, jacobian_radius,
+                                         probe_rows, rk4_steps, substeps_for)
 from reach.model.constraints import affine_coefficients, lambdify_margins, row_magnitudes
 from reach.model.crossing import Crossings
 
@@ -198,19 +198,9 @@ def linear_with(mode, fixed: dict):
     return A, b
 
 
-def stiff_substeps(model: HybridAutomaton, mode: str, dt: float, substeps: int, states: np.ndarray | None = None) -> int:
-    """RK4 substeps per grid step ``dt`` for a nonlinear ``mode``: at least ``substeps``, and
-    enough that ``h rho(J) <= STABLE_STEP`` for the spectral radius of the flow's Jacobian ``J``
-    (:mod:`reach.model.batch_nonlinear`, Stability) at ``states``, by default the initial box's centre, face centres
-    and some corners (the states its runs start from). Explicit RK4 past its stability region
-    grows without bound: ``x' = -1000 (x - 1)`` at ``h = 0.005`` went from 1.75 to 141.9 in one
-    grid step, a "violation" no run of the model makes."""
-    return substeps_for(dt, jacobian_radius(model.modes[mode].rhs, _start_probes(model) if states is None else states),
-                        substeps)
-
-
 def _start_probes(model: HybridAutomaton) -> np.ndarray:
-    """The initial box's centre, its face centres (12 coordinates at most) and 8 random corners."""
+    """The initial box's centre, its face centres (12 coordinates at most) and 8 random corners:
+    the states where the RK4 substeps of a nonlinear mode are first set (the runs start there)."""
     low, high = np.asarray(model.initial.low, float), np.asarray(model.initial.high, float)
     finite = np.isfinite(low) & np.isfinite(high)
     centre = np.where(finite, (low + high) / 2, np.where(np.isfinite(low), low, np.where(np.isfinite(high), high, 0.0)))
@@ -388,14 +378,13 @@ class Simulator:
             else:
                 self.exits[tr.source].append((tr, lambdify_margins(tr.guard, model.symbols)))
         self.calm = {}                                  # checks of the substeps to pass (more_substeps)
-        self.mode_substeps = {m: stiff_substeps(model, m, self.dt, substeps)
-                              for m in model.modes if m not in self.generators and not model.modes[m].timeless}
-        self.too_stiff = {}                             # modes RK4 cannot take at this step: their rho
-        for m, count in self.mode_substeps.items():
-            if count >= MAX_SUBSTEPS:
-                rho = jacobian_radius(model.modes[m].rhs, _start_probes(model))
-                if beyond_rk4(self.dt, rho):
-                    self.too_stiff[m] = rho
+        # RK4 substeps of the nonlinear modes, from their Jacobians where the runs start
+        # (batch_nonlinear, Stability), and the modes RK4 cannot take at this step (their rho)
+        start = _start_probes(model)
+        radius = {m: jacobian_radius(model.modes[m].rhs, start) for m in model.modes
+                  if m not in self.generators and not model.modes[m].timeless}
+        self.mode_substeps = {m: substeps_for(self.dt, rho, substeps) for m, rho in radius.items()}
+        self.too_stiff = {m: rho for m, rho in radius.items() if beyond_rk4(self.dt, rho)}
         self.resets = {tr.name: _reset_function(tr, model) for tr in model.transitions if tr.reset}
         self.sources, self.scales = value_sources(model), {}
         self.timeless = {m for m, mode in model.modes.items() if mode.timeless}
@@ -442,10 +431,7 @@ class Simulator:
         ends = []
         with np.errstate(all="ignore"):
             for count in (substeps, 2 * substeps):
-                Y = X.copy()
-                for _ in range(count):
-                    Y = rk4_step(rhs, Y, self.dt / count)
-                ends.append(Y)
+                ends.append(rk4_steps(rhs, X, self.dt / count, count))
         gap = np.abs(ends[0] - ends[1]).max(initial=0.0)
         return bool(not np.isfinite(gap) or gap > 1e-3 * (1.0 + np.abs(ends[1]).max(initial=0.0)))
 
@@ -488,11 +474,7 @@ class Simulator:
             return np.full_like(X, np.nan)
         rhs = self.model.modes[mode].rhs
         count = max(1, int(np.ceil(self.mode_substeps.get(mode, self.substeps) * np.max(h) / self.dt)))
-        step = (h / count)[:, None]
-        Y = X.copy()
-        for _ in range(count):
-            Y = rk4_step(rhs, Y, step)
-        return Y
+        return rk4_steps(rhs, X, (h / count)[:, None], count)
 
     def _grid_states(self, mode: str, Y0: np.ndarray, count: int, met=None) -> np.ndarray:
         """States at up to ``count`` successive grid points, ``Y0`` being the first: (N, K, n),

@@ -264,8 +264,7 @@ def _resolve_map(m, param, scope: _Scope) -> Binding:
     if value in scope.binding:
         declared = scope.component.params.get(value)
         if declared is not None and declared.type != param.type:
-            raise scope.error(m, f"binds the {param.type} '{param.name}' to the {declared.type} '{value}' of "
-                                 f"component '{scope.component.id}' (a real maps to a real, a label to a label)")
+            raise _mismatch(m, param, scope, declared.type, f"'{value}' of component '{scope.component.id}'")
         return scope.binding[value]
     if re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*(\.[A-Za-z_][A-Za-z0-9_]*)+", value):
         _check_dotted(m, param, scope)
@@ -299,8 +298,13 @@ def _check_dotted(m, param, scope: _Scope) -> None:
         raise scope.error(m, f"'{m.value}': the bind of '{bind.name}' maps '{name}' to '{mapped.value}' "
                              f"(line {mapped.line}); map to that instead")
     if target.type != param.type:
-        raise scope.error(m, f"binds the {param.type} '{param.name}' to the {target.type} '{m.value}' "
-                             "(a real maps to a real, a label to a label)")
+        raise _mismatch(m, param, scope, target.type, f"'{m.value}'")
+
+
+def _mismatch(m, param, scope: _Scope, other: str, named: str) -> InputError:
+    """A map that binds ``param`` to a param of the other type (``other``, ``named`` so)."""
+    return scope.error(m, f"binds the {param.type} '{param.name}' to the {other} {named} "
+                          "(a real maps to a real, a label to a label)")
 
 
 def compose(flat: Flat, initial_locations: list[set[str] | None]) -> None:
