@@ -656,9 +656,24 @@ def test_a_variable_a_flow_sets_cannot_be_mapped_to_a_number(tmp_path, capsys):
                      'time-horizon = 3\n')
     assert main(["check", str(xml), str(cfg), "-b", "star"]) == 2
     assert capsys.readouterr().err.strip() == (
-        f"reach: {xml}:6: the variable 'x' of component 'plant' is mapped to the number 1 (at instance 'p'), "
-        "but its flow in location 'run' sets it (only a variable that no flow or assignment sets, an input, "
+        f"reach: {xml}:6: component 'plant': location 'run': flow: the variable 'x' is mapped to the number 1 "
+        "(at instance 'p'), but this flow sets it (only a variable that no flow or assignment sets, an input, "
         "may be fixed to a number)")
+
+
+def test_a_variable_an_assignment_sets_cannot_be_mapped_to_a_number(tmp_path, capsys):
+    """The same refusal names the transition whose assignment sets the variable."""
+    jumping = DRIVEN.replace("<flow>x' == -x + u</flow></location>",
+                             "<flow>x' == -x</flow></location>\n  <param name=\"k\" type=\"real\" local=\"false\" "
+                             "d1=\"1\" d2=\"1\" dynamics=\"any\"/>\n  <location id=\"2\" name=\"rest\">"
+                             "<flow>x' == 0</flow></location>\n  <transition source=\"1\" target=\"2\">"
+                             "<guard>x &lt;= 0.5</guard><assignment>k := 2</assignment></transition>")
+    xml, cfg = write(tmp_path, jumping.replace("<map key=\"u\">U</map>", "<map key=\"u\">0</map><map key=\"k\">1</map>"),
+                     'system = sys\ninitially = "x == 1"\nforbidden = "x >= 2"\ntime-horizon = 3\n')
+    assert main(["check", str(xml), str(cfg), "-b", "star"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"reach: {xml}:")
+    assert ": component 'plant': transition run -> rest: assignment: the variable 'k' is mapped to the number 1" in err
 
 
 def test_an_alias_longer_than_a_page_imports_and_checks(tmp_path):

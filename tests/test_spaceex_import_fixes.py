@@ -964,3 +964,28 @@ def test_a_constant_without_a_value_names_its_param(tmp_path, capsys):
     xml, cfg = write(tmp_path, BOUND_K.format(map_k=""), X_CFG)
     assert refusal(xml, cfg, capsys) == (f"{xml}:5: component 'base': param 'k': the constant 'b.k' has no value "
                                          "(map it to a number in a bind, or give it one in the cfg's initially)")
+
+
+# ------------------------------------------------------------------ a local name taken by the system
+def test_an_instances_local_variable_named_like_a_dotted_system_param_is_refused_at_its_bind(tmp_path, capsys):
+    """The system declares ``T.k``; its instance ``T`` leaves its own ``k`` unmapped, whose
+    global name would then also be ``T.k``: one variable for two. Refused at the bind's line,
+    naming the bind and the param."""
+    body = f'''  <component id="plant">
+    {REAL.format("x")}
+    {REAL.format("k")}
+    <location id="1" name="run"><flow>x' == -x &amp; k' == 0</flow></location>
+  </component>
+  <component id="sys">
+    {REAL.format("x")}
+    {REAL.format("T.k")}
+    <bind component="plant" as="T">
+      <map key="x">x</map>
+    </bind>
+  </component>
+'''
+    xml, cfg = write(tmp_path, body, 'system = sys\ninitially = "x == 1 & T.k == 0"\nforbidden = "x >= 2"\n'
+                                     'time-horizon = 1\n')
+    assert refusal(xml, cfg, capsys) == (
+        f"{xml}:11: bind 'T': param 'k': the local variable 'T.k' of this instance has the name of a param "
+        "of the system 'sys' (two variables under one name)")

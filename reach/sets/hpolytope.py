@@ -102,3 +102,32 @@ class HPolytope:
         centre = unique.mean(axis=0)
         order = np.argsort(np.arctan2(unique[:, 1] - centre[1], unique[:, 0] - centre[0]))
         return unique[order]
+
+
+class LazyHPolytope(HPolytope):
+    """An :class:`HPolytope` over ``dim`` variables whose rows ``build() -> (A, b)`` are formed
+    on first use: a flowpipe segment's predicate (:func:`reach.sets.star.chord_hull`) is large
+    and dense, and most segments are cleared by their coefficient box alone, without it."""
+
+    def __init__(self, dim: int, build):
+        self._dim, self._build, self._rows = dim, build, None
+
+    def _formed(self) -> tuple[np.ndarray, np.ndarray]:
+        if self._rows is None:
+            self._rows = HPolytope(*self._build())
+            if self._rows.dim != self._dim:
+                raise ValueError(f"rows over {self._rows.dim} variables, expected {self._dim}")
+            self._build = None
+        return self._rows.A, self._rows.b
+
+    @property
+    def A(self) -> np.ndarray:
+        return self._formed()[0]
+
+    @property
+    def b(self) -> np.ndarray:
+        return self._formed()[1]
+
+    @property
+    def dim(self) -> int:
+        return self._dim

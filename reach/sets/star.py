@@ -27,7 +27,7 @@ import numpy as np
 
 from reach import lp
 from reach.sets.box import Box
-from reach.sets.hpolytope import HPolytope
+from reach.sets.hpolytope import HPolytope, LazyHPolytope
 
 
 class Star:
@@ -224,32 +224,31 @@ def chord_hull(start: Star, end_center, end_basis, error=None) -> Star:
         raise lp.LPError("a non-finite error radius (the flow overflows)")
     err = np.flatnonzero(r > 0)
     k = err.size
-
-    # predicate P a <= q, box rows included where finite
     lo, hi = start.box.low, start.box.high
-    eye = np.eye(m)
-    up, down = np.isfinite(hi), np.isfinite(lo)
-    P = np.vstack([start.predicate.A, eye[up], -eye[down]])
-    q = np.concatenate([start.predicate.b, hi[up], -lo[down]])
-    rows = P.shape[0]
-    zeros_k = np.zeros((rows, k))
-    A_blocks = [
-        np.hstack([np.zeros((rows, m)), P, -q[:, None], zeros_k]),       # P b - lam q <= 0
-        np.hstack([P, -P, q[:, None], zeros_k]),                          # P (a - b) + lam q <= q
-    ]
-    b_blocks = [np.zeros(rows), q]
-    if k:
-        tent_A, tent_b = [], []
-        for a in TENT_POINTS:
+
+    def rows():
+        """The homogenised predicate and the tent rows (formed only when an LP needs them)."""
+        eye = np.eye(m)
+        up, down = np.isfinite(hi), np.isfinite(lo)
+        P = np.vstack([start.predicate.A, eye[up], -eye[down]])     # P a <= q, finite box rows included
+        q = np.concatenate([start.predicate.b, hi[up], -lo[down]])
+        count = P.shape[0]
+        zeros_k = np.zeros((count, k))
+        A_blocks = [
+            np.hstack([np.zeros((count, m)), P, -q[:, None], zeros_k]),      # P b - lam q <= 0
+            np.hstack([P, -P, q[:, None], zeros_k]),                         # P (a - b) + lam q <= q
+        ]
+        b_blocks = [np.zeros(count), q]
+        for a in TENT_POINTS if k else ():
             for sign in (1.0, -1.0):
                 block = np.zeros((k, 2 * m + 1 + k))
                 block[:, 2 * m] = -4.0 * (1 - 2 * a)
                 block[:, 2 * m + 1:] = sign * np.eye(k)
-                tent_A.append(block)
-                tent_b.append(np.full(k, 4.0 * a * a))
-        A_blocks += tent_A
-        b_blocks += tent_b
-    predicate = HPolytope(np.vstack(A_blocks), np.concatenate(b_blocks))
+                A_blocks.append(block)
+                b_blocks.append(np.full(k, 4.0 * a * a))
+        return np.vstack(A_blocks), np.concatenate(b_blocks)
+
+    predicate = LazyHPolytope(2 * m + 1 + k, rows)
     box = Box(np.concatenate([lo, np.minimum(lo, 0.0), [0.0], -np.ones(k)]),
               np.concatenate([hi, np.maximum(hi, 0.0), [1.0], np.ones(k)]))
     E = np.zeros((start.dim, k))

@@ -160,7 +160,8 @@ def _walk(doc: Document, comp, path: str, binding: dict[str, Binding], flat: Fla
             gname = f"{path}.{p.name}" if path else p.name
             binding[p.name] = Binding(name=gname)
             if p.type == "real":
-                _new_local(flat, gname, p.dynamics, doc.file, line)
+                _new_local(flat, gname, p.dynamics, doc.file,
+                           f"bind '{path.rsplit('.', 1)[-1]}': param '{p.name}'", line)
                 flat.declared[gname] = p.line
     if isinstance(comp, Base):
         if len(flat.instances) >= MAX_INSTANCES:
@@ -168,10 +169,11 @@ def _walk(doc: Document, comp, path: str, binding: dict[str, Binding], flat: Fla
         for name, b in binding.items():
             written = b.number is not None and _written(comp, name)
             if written:
-                raise InputError(f"the variable '{name}' of component '{comp.id}' is mapped to the number {b.number} "
-                                 f"(at instance '{path}'), but its {written[0]} sets it (only a variable that no "
-                                 "flow or assignment sets, an input, may be fixed to a number)",
-                                 doc.file, line=written[1])
+                where, what, at = written
+                raise InputError(f"the variable '{name}' is mapped to the number {b.number} (at instance "
+                                 f"'{path}'), but this {what} sets it (only a variable that no flow or "
+                                 "assignment sets, an input, may be fixed to a number)",
+                                 doc.file, f"component '{comp.id}': {where}: {what}", at)
         flat.instances.append(Instance(path, comp, binding, line))
         return
     for bind in comp.binds:
@@ -208,28 +210,30 @@ def _shadowed(network, bind, child, mapped: dict[str, Binding], path: str, file:
     return found
 
 
-def _new_local(flat: Flat, name: str, dynamics: str, file: str, line: int) -> None:
+def _new_local(flat: Flat, name: str, dynamics: str, file: str, field: str, line: int) -> None:
     """Register the local variable ``name`` (``path.param``) of a new instance. Instance names
     are unique in their network and have no dot (:mod:`.components`), so the only name it can
     meet is a dotted param of the system itself (``T.k``): one variable would then stand for
     two, silently; that is bad input at the bind's line."""
     if name in flat.globals:
         raise InputError(f"the local variable '{name}' of this instance has the name of a param of the "
-                         f"system '{flat.system}' (two variables under one name)", file, line=line)
+                         f"system '{flat.system}' (two variables under one name)", file, field, line)
     flat.globals[name] = dynamics
 
 
-def _written(comp: Base, name: str) -> tuple[str, int] | None:
+def _written(comp: Base, name: str) -> tuple[str, str, int] | None:
     """Where a flow (``name' == ...``) or an assignment (``name := ...``, ``name' == ...``,
-    ``name = ...``) of ``comp`` sets the variable ``name``: ``(what, line)``, or None."""
+    ``name = ...``) of ``comp`` sets the variable ``name``: ``(location or transition, "flow"
+    or "assignment", line)``, or None."""
     derivative = re.compile(rf"(?<![\w.]){re.escape(name)}\s*'")
     target = re.compile(rf"^\s*{re.escape(name)}\s*(:=|'|=(?!=))")
     for loc in comp.locations.values():
         if loc.flow is not None and derivative.search(loc.flow.text):
-            return f"flow in location '{loc.name}'", loc.flow.line
+            return f"location '{loc.name}'", "flow", loc.flow.line
     for tr in comp.transitions:
         if tr.assignment is not None and any(target.match(part) for part in _AND.split(tr.assignment.text)):
-            return "assignment", tr.assignment.line
+            ends = comp.locations[tr.source].name, comp.locations[tr.target].name
+            return f"transition {ends[0]} -> {ends[1]}", "assignment", tr.assignment.line
     return None
 
 
