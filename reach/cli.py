@@ -301,8 +301,12 @@ def cmd_replay(args) -> int:
         return 1 if rep.violated else 3
     if rep.violated:
         there = margin_at(prop, rep.mode, rep.state)
-        depth = (f"deepest margin {margin_text(prop, rep.depth)} along the run" if there is None else
-                 f"margin {margin_text(prop, there)} there, deepest {margin_text(prop, rep.depth)} along the run")
+        if math.isnan(rep.depth):           # the run left the real numbers after the violation
+            depth = "the run leaves the real numbers later"
+        else:
+            depth = f"deepest{' margin' if there is None else ''} {margin_text(prop, rep.depth)} along the run"
+        if there is not None:
+            depth = f"margin {margin_text(prop, there)} there, {depth}"
         print(printable(f"replayed: {model.name} violates '{prop.id}' at t={rep.time:.6g} in mode {rep.mode} "
                         f"({depth}); state {state}"))
         return 1

@@ -77,8 +77,26 @@ def _drawable(trajectory) -> bool:
     if mode is not None and not (isinstance(mode, list) and len(mode) == len(t) and all(isinstance(m, str) for m in mode)):
         return False
     return x is None or (isinstance(x, list) and len(x) == len(t) and all(
-        isinstance(row, list) and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in row)
-        for row in x))
+        isinstance(row, list) and all(_number(v) for v in row) for row in x))
+
+
+#: how :func:`_plain` writes the non-finite floats (JSON has no NaN): a run that left the
+#: real numbers (``sqrt`` of a negative) keeps its rows past that point in the file
+NON_FINITE = {"nan": float("nan"), "inf": float("inf"), "-inf": float("-inf")}
+
+
+def _number(value) -> bool:
+    """A JSON number, or a non-finite float as :func:`_plain` wrote it."""
+    return (isinstance(value, (int, float)) and not isinstance(value, bool)) or (
+        isinstance(value, str) and value in NON_FINITE)
+
+
+def _decoded(trajectory):
+    """``trajectory`` (checked by :func:`_drawable`) with its ``x`` strings read back as floats."""
+    x = trajectory.get("x") if isinstance(trajectory, dict) else None
+    if not isinstance(x, list):
+        return trajectory
+    return {**trajectory, "x": [[NON_FINITE[v] if isinstance(v, str) else v for v in row] for row in x]}
 
 
 @dataclass
@@ -158,6 +176,8 @@ class Counterexample:
         if not _drawable(data.get("trajectory", {})):
             raise InputError("expected an object of lists t (numbers), mode (names) and x (states), one entry "
                              "per point", file, "trajectory")
+        if data.get("trajectory") is not None:
+            data["trajectory"] = _decoded(data["trajectory"])
         transitions = data.get("transitions")
         if transitions is not None and not (isinstance(transitions, list)
                                             and all(isinstance(name, str) for name in transitions)):

@@ -121,3 +121,29 @@ def test_a_replay_that_leaves_the_real_numbers_decides_nothing(tmp_path, capsys)
     assert main(["replay", _saved_counterexample(tmp_path, flow="-1e12*x + 0.001*x**2")]) == 3
     out = capsys.readouterr().out
     assert out.startswith("NOT decided") and "too stiff for RK4" in out and "-o dt=1.5e-09" in out
+
+
+def test_a_violation_before_the_run_leaves_the_real_numbers_replays(tmp_path, capsys):
+    """x' = -1, y' = sqrt(x) from x = 1: x >= 0.5 is violated at t = 0.5, and from t = 1 the
+    run is NaN (the square root of a negative). The file keeps those rows as JSON strings
+    ("nan"); replay read them as a malformed trajectory (exit 2). It replays the violation."""
+    import json
+
+    import yaml
+
+    from reach.cli import main
+
+    (tmp_path / "m.yaml").write_text(yaml.safe_dump({
+        "name": "m", "state": ["x", "y"], "horizon": 2,
+        "modes": {"a": {"flow": {"x": -1, "y": "sqrt(x)"}}}, "initial": {"mode": "a", "box": {"x": 1, "y": 0}}}))
+    (tmp_path / "p.yaml").write_text(yaml.safe_dump(
+        {"properties": [{"id": "low", "kind": "safety", "modes": ["a"], "require": ["x >= 0.5"]}]}))
+    folder = tmp_path / "cex"
+    assert main(["check", str(tmp_path / "m.yaml"), str(tmp_path / "p.yaml"), "-b", "montecarlo",
+                 "--counterexamples", str(folder)]) == 1
+    [path] = folder.glob("*.json")
+    assert "nan" in json.loads(path.read_text())["trajectory"]["x"][-1]
+    capsys.readouterr()
+    assert main(["replay", str(path)]) == 1
+    out = capsys.readouterr().out
+    assert out.startswith("replayed:") and "the run leaves the real numbers later" in out

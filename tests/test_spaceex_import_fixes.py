@@ -221,7 +221,8 @@ def test_a_system_param_named_like_an_instances_local_is_refused(tmp_path, capsy
         '<param name="o1"', '<param name="T.k" type="real" local="false" dynamics="const"/>\n    <param name="o1"')
     xml, cfg = write(tmp_path, body, 'system = "sys"\ninitially = "o1 == 0 & o2 == 0 & 1 <= T.k & T.k <= 2 & '
                                      'U.k == 1"\ntime-horizon = 1\nforbidden = "o1 - o2 >= 0.5"\n')
-    assert refusal(xml, cfg, capsys) == (f"{xml}:18: the local variable 'T.k' of this instance has the name of a "
+    assert refusal(xml, cfg, capsys) == (f"{xml}:18: bind 'T': param 'k': the local variable 'T.k' of this instance "
+                                         "has the name of a "
                                          "param of the system 'sys' (two variables under one name)")
 
 
@@ -966,26 +967,27 @@ def test_a_constant_without_a_value_names_its_param(tmp_path, capsys):
                                          "(map it to a number in a bind, or give it one in the cfg's initially)")
 
 
-# ------------------------------------------------------------------ a local name taken by the system
-def test_an_instances_local_variable_named_like_a_dotted_system_param_is_refused_at_its_bind(tmp_path, capsys):
-    """The system declares ``T.k``; its instance ``T`` leaves its own ``k`` unmapped, whose
-    global name would then also be ``T.k``: one variable for two. Refused at the bind's line,
-    naming the bind and the param."""
-    body = f'''  <component id="plant">
-    {REAL.format("x")}
-    {REAL.format("k")}
-    <location id="1" name="run"><flow>x' == -x &amp; k' == 0</flow></location>
-  </component>
-  <component id="sys">
-    {REAL.format("x")}
-    {REAL.format("T.k")}
-    <bind component="plant" as="T">
-      <map key="x">x</map>
-    </bind>
-  </component>
-'''
-    xml, cfg = write(tmp_path, body, 'system = sys\ninitially = "x == 1 & T.k == 0"\nforbidden = "x >= 2"\n'
-                                     'time-horizon = 1\n')
-    assert refusal(xml, cfg, capsys) == (
-        f"{xml}:11: bind 'T': param 'k': the local variable 'T.k' of this instance has the name of a param "
-        "of the system 'sys' (two variables under one name)")
+
+def test_a_number_past_the_doubles_is_refused_at_its_spaceex_field(tmp_path, capsys):
+    """A 400-digit bound in an invariant (fewer digits than the parser's cap, more than any
+    double): refused at the XML line naming the location's invariant, not the imported YAML's
+    ``modes.A.invariant[0]``."""
+    big = "9" * 400
+    xml, cfg = write(tmp_path, TWO_MODES.format(inv=f"x &lt;= {big}", guard="x &gt;= 1"), SAFE_CFG)
+    message = refusal(xml, cfg, capsys)
+    assert message.startswith(f"{xml}:") and ": location 'A': invariant: expression " in message
+    assert "modes." not in message
+
+
+def test_an_iter_max_past_a_count_is_refused_at_its_cfg_line(tmp_path, capsys):
+    xml, cfg = write(tmp_path, BOUND_K.format(map_k='<map key="k">1</map>'), X_CFG + "iter-max = 1e30\n")
+    assert refusal(xml, cfg, capsys) == f"{cfg}:5: iter-max: expected at most 1e+09 (-1 for no bound), got '1e30'"
+
+
+def test_other_tools_dotted_cfg_options_are_kept_unused(tmp_path):
+    """JuliaReach's ARCH cfgs carry ``zono.order`` and ``zono.nTaylor``: options of its own
+    algorithms, as SpaceEx's ``directions`` are; they were refused as no cfg key. x' = 1 from 0
+    reaches 1 at the horizon: x >= 5 is never met."""
+    xml, cfg = write(tmp_path, BOUND_K.format(map_k='<map key="k">1</map>'),
+                     X_CFG + "zono.order = 10\nzono.nTaylor = 5\n")
+    assert verdict(xml, cfg) == "SAFE"

@@ -85,7 +85,14 @@ def hint_problem(key: str, value) -> str | None:
         return "expected a positive time"
     if key == "iter-max" and (value != int(value) or value < -1):
         return "expected a whole number, -1 for no bound"
+    if key == "iter-max" and value > MAX_ITER:
+        return f"expected at most {MAX_ITER:g} (-1 for no bound)"
     return None
+
+
+#: the largest ``iter-max`` read: star takes it as its jump bound ``max_jumps``, a count that
+#: no option may set past 1e9 (:data:`reach.backends.options.MAX_COUNT`)
+MAX_ITER = 10 ** 9
 
 
 def bad_name(name) -> str | None:

@@ -89,10 +89,14 @@ class SafetyMonitor:
             margins = np.matmul(L, X)
             margins -= c[:, None]
         if seen.all() and starts.size == margins.shape[1]:        # one constraint per piece
-            low = margins.min(axis=(0, 1))
+            depth = margins.min(axis=1)
         else:
-            low = np.where(seen, _piece_depth(margins, starts), np.inf).min(axis=0)
-        self.min_depth[rows] = np.minimum(self.min_depth[rows], low)
+            depth = np.where(seen, _piece_depth(margins, starts), np.inf)
+        # a run that leaves the real numbers within the block (NaN states) keeps NaN as its
+        # depth (counted as undefined), but a violation at its real states before is still found
+        undefined = np.isnan(depth).any(axis=0)
+        low = (np.where(np.isnan(depth), np.inf, depth) if undefined.any() else depth).min(axis=0)
+        self.min_depth[rows] = np.where(undefined, np.nan, np.minimum(self.min_depth[rows], low))
         r = np.flatnonzero((low < -NUMERICAL_TOLERANCE) & np.isnan(self.violation_time[rows]))
         if r.size:
             B, k = margins.shape[:2]

@@ -2,7 +2,8 @@
 
 Read: ``system`` (the component to analyse), ``initially`` and ``forbidden`` (formulas),
 ``time-horizon``, ``iter-max`` and ``sampling-time`` (kept in the model's notes). The other keys are options of
-SpaceEx's own algorithms (scenario, directions, tolerances, output) and are kept but unused.
+SpaceEx's own algorithms (scenario, directions, tolerances, output) or of other tools reading the
+same files (JuliaReach's ``zono.order``) and are kept but unused.
 A key that is none of SpaceEx's and is spelt like one that is read (``forbiden``) is bad input:
 what it was meant to say would otherwise be dropped without a word.
 """
@@ -95,7 +96,7 @@ def parse_cfg(text: str, file: str) -> Config:
             value = text[k:j].split("#", 1)[0].strip()
             i = j + 1
         line += 1
-        if not key or not all(c.isalnum() or c in "-_" for c in key):
+        if not key or not all(c.isalnum() or c in "-_." for c in key):      # zono.order: other tools' options
             raise InputError(f"'{key}' is not a cfg key", file, line=start_line)
         if key in cfg.values and key in READ_KEYS:
             raise InputError(f"duplicate key '{key}' (first on line {cfg.values[key][1]})", file, line=start_line)

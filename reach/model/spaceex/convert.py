@@ -752,11 +752,12 @@ class DocumentBuilder(Converter):
             data["bounded_inputs"] = {self.yaml[v]: {"range": [lo, hi], "varying": varying}
                                       for v, (lo, hi, varying) in self.inputs.items()}
             for v in self.inputs:
-                lines[("bounded_inputs", self.yaml[v])] = (self.file, self._line_of(v) or 1)
+                lines[("bounded_inputs", self.yaml[v])] = (self.file, self._line_of(v) or 1, f"input '{v}'")
         data["modes"] = {}
         for key, loc in self.flat.locations.items():
             m = self.mode_of[key]
-            lines[("modes", m)] = (self.file, loc.line)
+            where = f"location '{self.flat.label(key)}'"          # the field a message on the mode names
+            lines[("modes", m)] = (self.file, loc.line, where)
             spec: dict = {}
             if key in self.timeless:
                 spec["flow"] = False
@@ -768,14 +769,14 @@ class DocumentBuilder(Converter):
                                          "leaves it free there; not supported)", self.file, line=loc.line)
                     tokens, line = self.flows[key][s]
                     flow[self.yaml[s]] = self.render(tokens, key, line)
-                    lines[("modes", m, "flow", self.yaml[s])] = (self.file, line)
+                    lines[("modes", m, "flow", self.yaml[s])] = (self.file, line, f"{where}: flow")
                 spec["flow"] = flow
             invariant = []
             for j, (rel, line) in enumerate(self.invariants[key]):
                 if j in self.dropped[key]:
                     continue
                 for text in self.as_constraints(self.relation_texts(rel, key, line)):
-                    lines[("modes", m, "invariant", len(invariant))] = (self.file, line)
+                    lines[("modes", m, "invariant", len(invariant))] = (self.file, line, f"{where}: invariant")
                     invariant.append(text)
             if invariant:
                 spec["invariant"] = invariant
@@ -832,12 +833,13 @@ class DocumentBuilder(Converter):
             base = tr.label.split(".")[-1] if tr.label else f"{src}_to_{dst}"
             name = names(base)
             path = ("transitions", name)
-            self.lines[path] = (self.file, tr.line)
+            where = f"transition {self.flat.label(tr.source)} -> {self.flat.label(tr.target)}"
+            self.lines[path] = (self.file, tr.line, where)
             spec: dict = {"from": src, "to": dst}
             texts = []
             for rel, line in guard:
                 for text in self.as_constraints(self.relation_texts(rel, tr.source, line)):
-                    self.lines[path + ("guard", len(texts))] = (self.file, line)
+                    self.lines[path + ("guard", len(texts))] = (self.file, line, f"{where}: guard")
                     texts.append(text)
             if texts:
                 spec["guard"] = texts
@@ -848,7 +850,7 @@ class DocumentBuilder(Converter):
                         raise InputError(f"assignment: '{var}' is an input and cannot be assigned",
                                          self.file, line=line)
                     reset[self.yaml[var]] = self.render(tokens, tr.source, line)
-                    self.lines[path + ("reset", self.yaml[var])] = (self.file, line)
+                    self.lines[path + ("reset", self.yaml[var])] = (self.file, line, f"{where}: assignment")
                 spec["reset"] = reset
             if tr.asap:
                 spec["urgent"] = True
