@@ -82,28 +82,35 @@ def _sigma_tables(order: int, nvars: int):
 
 
 @lru_cache(maxsize=None)
-def _shift_tables(order: int, nvars: int):
-    """For each monomial ``xi^b sigma^p`` and each ``j <= p``: its index, the index of
-    ``xi^b sigma^j``, ``p`` and ``j`` (the binomial expansion of ``(c + r sigma)^p``)."""
+def _shift_tables(order: int, nvars: int, var: int):
+    """For each monomial ``xi^b y^p`` (``y``: the variable ``var``) and each ``j <= p``: its
+    index, the index of ``xi^b y^j``, ``p`` and ``j`` (the binomial expansion of ``(c + r y)^p``)."""
     alg = algebra(order, nvars)
     rows = []
     for k, e in enumerate(alg.exps):
-        for j in range(e[-1] + 1):
+        for j in range(e[var] + 1):
             f = e.copy()
-            f[-1] = j
-            rows.append((k, alg.index[tuple(f)], e[-1], j))
+            f[var] = j
+            rows.append((k, alg.index[tuple(f)], e[var], j))
     source, target, power, j = np.array(rows, dtype=int).T
     return source, target, power, j, np.array([math.comb(a, b) for a, b in zip(power, j)], dtype=float)
 
 
-def sigma_in(p: DA, centre: float, radius: float) -> DA:
-    """``p(xi, centre + radius sigma)``: the step's time restricted to a slice, in the same
-    algebra (the degree of no term grows); a linear map of the coefficients."""
-    source, target, power, j, binomial = _shift_tables(p.alg.order, p.alg.nvars)
+def variable_in(p: DA, var: int, centre: float, radius: float) -> DA:
+    """``p`` with its variable ``var`` replaced by ``centre + radius y``: ``p`` on the slice
+    ``[centre - radius, centre + radius]`` of that variable, in the same algebra (the degree of
+    no term grows); a linear map of the coefficients."""
+    source, target, power, j, binomial = _shift_tables(p.alg.order, p.alg.nvars, var)
     weight = binomial * float(centre) ** (power - j) * float(radius) ** j
     c = np.zeros_like(p.c)
     np.add.at(c.T, target, (p.c[..., source] * weight).T)
     return DA(p.alg, c)
+
+
+def sigma_in(p: DA, centre: float, radius: float) -> DA:
+    """``p(xi, centre + radius sigma)``: the step's time (the last variable) restricted to a
+    slice (:func:`variable_in`)."""
+    return variable_in(p, p.alg.nvars - 1, centre, radius)
 
 
 def at_sigma(p: DA, value: float) -> DA:
@@ -171,24 +178,32 @@ def polynomial_steps(f, x0: list[DA], nodes: np.ndarray, stop=None, rel_tol: flo
                      max_halvings: int = 12) -> list[Step]:
     """Phase 1: the polynomials ``P_k`` and their defect bounds from ``nodes[0]`` to ``nodes[-1]``.
 
-    The first step is the nominal run's first step; a step is accepted when its defect is at
-    most ``rel_tol`` times the size of the rates (the time series converges on it). The time
-    part of the defect scales as ``h^n``, so the next (or retried) step is ``0.9 h (rel_tol
-    size/defect)^(1/n)``, at most doubling. Part of the defect does not shrink with ``h``: the
-    order-``n`` truncation of ``f(P)`` in the deviations (large for a wide subdomain of a
-    strongly nonlinear flow such as a network). When halving the step no longer halves the
-    defect, that floor is accepted (the defect bound is sound whatever its size; it enters the
-    error radius of phase 2) and later steps are held to twice the floor. ``stop(step)`` may end
-    the sweep after a step. A step shorter than ``MIN_STEP`` of the stretch (before its last
-    step) ends the sweep with ArithmeticError: the step size collapses geometrically when the
-    defect does not shrink with the step in a way the floor test misses (Van der Pol's
-    flow from a wide box: 15,000 steps down to 1e-320 before, 1.4 s to give up now)."""
+    The first step is the nominal run's first step; a step is accepted when its defect ratio
+    ``r`` (its defect over ``rel_tol`` times the size of the rates) is at most the threshold
+    (1 at first). The defect is modelled as ``r(h) = F + c h^n``: the time part of the
+    truncated Picard series scales as ``h^n``, and the floor ``F`` does not shrink with ``h``:
+    the order-``n`` terms of ``f(P)`` in the deviations alone, which the integral lifts to order
+    ``n + 1`` and the algebra drops, and the truncation remainder of ``f(P)`` (large for a wide
+    subdomain of a strongly nonlinear flow such as a network; 2.07e-5 = 2.02e-5 + 4.8e-7 on the
+    cubic term of an undamped Duffing oscillator from a box of width 0.2 x 0.4 at t = 0.13). The next (or retried) step is ``0.9 h
+    (threshold/r)^(1/n)``, at most doubling, which is right where ``F`` is negligible. Where it
+    is not, that rule shortens every accepted step by the same factor (``r`` stays put) and the
+    step size collapses geometrically; so before an accepted step shortens the next one, the
+    step is also taken at ``h/2`` (:func:`_floor`): when that does not halve ``r`` (it would
+    fall by ``2^-n``), the half step's ratio is taken as the floor ``F``. A floor, also when a
+    rejected step's retry at a shorter step no longer halves ``r``, is accepted (the defect bound
+    is sound whatever its size; it enters the error radius of phase 2) and later steps are held
+    to twice it. ``stop(step)`` may end the sweep after a step. A step shorter than
+    ``MIN_STEP`` of the stretch (before its last step) ends the sweep with ArithmeticError
+    (Van der Pol's flow from a wide box: 15,000 steps down to 1e-320 before, 1.4 s to give up
+    now)."""
     X, steps = list(x0), []
     n = x0[0].alg.order
     t, end = float(nodes[0]), float(nodes[-1])
     h = float(nodes[1] - nodes[0]) if len(nodes) > 1 else end - t
     floor = 0.0                                  # the defect ratio that steps cannot go below
     shortest = MIN_STEP * (end - t)
+    growth = lambda threshold, ratio: 0.9 * (threshold / ratio) ** (1.0 / max(n, 1)) if ratio > 0 else 2.0
     while t < end * (1 - 1e-15) - 1e-300:
         if h < shortest < end - t:
             raise ArithmeticError(f"the step size collapsed to {h:.3g} at t = {t:g} (the defect does not "
@@ -197,26 +212,44 @@ def polynomial_steps(f, x0: list[DA], nodes: np.ndarray, stop=None, rel_tol: flo
         threshold, previous = max(1.0, 2.0 * floor), None
         for _ in range(max_halvings + 1):
             step = polynomial_step(f, X, t, h)
-            with np.errstate(divide="ignore", invalid="ignore"):
-                ratio = float(np.max(step.defect / (rel_tol * step.rate_size + 1e-300)))
+            ratio = _defect_ratio(step, rel_tol)
             if np.isfinite(ratio) and ratio <= threshold:
                 break
             if previous is not None and np.isfinite(ratio) and ratio > 0.5 * previous:
                 floor, threshold = ratio, ratio          # the defect no longer shrinks with h
                 break
             previous = ratio if np.isfinite(ratio) else None
-            factor = 0.9 * (threshold / ratio) ** (1.0 / max(n, 1)) if np.isfinite(ratio) and ratio > 0 else 0.1
+            factor = growth(threshold, ratio) if np.isfinite(ratio) else 0.1
             h *= min(max(factor, 0.1), 0.5)
         else:
             raise ArithmeticError(f"the time series does not converge on a step at t = {t:g}")
+        if growth(threshold, ratio) < 1.0 and floor < ratio:
+            half = _floor(f, X, t, step.h, ratio, rel_tol)
+            if half is not None:
+                floor = max(floor, half)
+                threshold = max(threshold, 2.0 * floor)
         steps.append(step)
         X = [at_sigma(p, 1.0) for p in step.poly]
         t += step.h
-        factor = 0.9 * (threshold / ratio) ** (1.0 / max(n, 1)) if ratio > 0 else 2.0
-        h = step.h * min(max(factor, 0.5), 2.0)
+        h = step.h * min(max(growth(threshold, ratio), 0.5), 2.0)
         if stop is not None and stop(step):
             break
     return steps
+
+
+def _defect_ratio(step: Step, rel_tol: float) -> float:
+    """The step's defect over ``rel_tol`` times the size of the rates, its largest component."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return float(np.max(step.defect / (rel_tol * step.rate_size + 1e-300)))
+
+
+def _floor(f, X: list[DA], t: float, h: float, ratio: float, rel_tol: float) -> float | None:
+    """The defect ratio of the step from ``X`` at ``t`` of length ``h/2`` where it is more than
+    half ``ratio`` (the ratio at ``h``), else None. A defect ``c h^n`` falls by ``2^-n`` from
+    ``h`` to ``h/2``; one that keeps more than half is mostly the floor ``F`` of ``r(h) = F + c
+    h^n``, and ``r(h/2) = F + c (h/2)^n`` bounds it from above (:func:`polynomial_steps`)."""
+    half = _defect_ratio(polynomial_step(f, X, t, 0.5 * h), rel_tol)
+    return half if np.isfinite(half) and half > 0.5 * ratio else None
 
 
 def jacobian_box(f, low: np.ndarray, high: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -228,10 +261,30 @@ def jacobian_box(f, low: np.ndarray, high: np.ndarray) -> tuple[np.ndarray, np.n
 
 
 def lyapunov_metric(J0: np.ndarray, shift: float) -> np.ndarray | None:
-    """``S`` with ``(J0 - a I)' S + S (J0 - a I) = -I``, ``a = max(0, max Re eig J0) + shift rho(J0)``,
-    scaled to largest eigenvalue 1; None where it is not positive definite beyond rounding."""
+    """``S`` with ``(J0 - a I)' S + S (J0 - a I) = -I``, scaled to largest eigenvalue 1, for the
+    shift ``a = max(0, max Re eig J0) + shift s``; None where no such ``S`` is positive definite
+    beyond rounding.
+
+    The scale ``s`` is the spectral radius ``rho(J0)`` (at least 1e-12), else (no positive
+    definite ``S`` for it) the spectral norm ``||J0||_2``. Any ``a > max Re eig J0`` makes
+    ``J0 - a I`` Hurwitz and ``S`` positive definite, so ``mu_S(J0) = a - 1/(2 lambda_max(S))``
+    before scaling; only the conditioning depends on ``s``. A nilpotent ``J0 != 0`` (the double
+    integrator ``h' = v, v' = -g`` of a bouncing ball) has ``rho = 0``: a shift of 1e-12 leaves
+    ``S`` singular (condition 1e24), while ``||J0||_2`` sets the time scale of its growth
+    (``e^{J0 t} = I + J0 t``). A metric from either is a metric, so the error bound stays valid
+    (module docstring)."""
     eig = np.linalg.eigvals(J0)
-    a = max(0.0, float(np.max(eig.real))) + shift * max(float(np.max(np.abs(eig))), 1e-12)
+    base = max(0.0, float(np.max(eig.real)))
+    S = _shifted_lyapunov(J0, base + shift * max(float(np.max(np.abs(eig))), 1e-12))
+    norm = float(np.linalg.norm(J0, 2))
+    if S is None and norm > 0:
+        S = _shifted_lyapunov(J0, base + shift * norm)
+    return S
+
+
+def _shifted_lyapunov(J0: np.ndarray, a: float) -> np.ndarray | None:
+    """The solution ``S`` of ``(J0 - a I)' S + S (J0 - a I) = -I`` scaled to largest eigenvalue 1,
+    or None where it is not positive definite beyond ``MIN_METRIC_RATIO``."""
     A = J0 - a * np.eye(len(J0))
     try:
         S = scipy.linalg.solve_continuous_lyapunov(A.T, -np.eye(len(J0)))
