@@ -78,7 +78,7 @@ from reach.model.constraints import NUMERICAL_TOLERANCE, lambdify_margins, row_m
 from reach.model.simulate import Branches, Simulator, single_threaded
 from reach.result import Result, Status
 from reach.spec.properties import BoundEvent, BoundReach, BoundReachAvoid, BoundSafety
-from reach.stats import clopper_pearson_upper, wilson
+from reach.stats import VERDICT_CONFIDENCE, clopper_pearson_upper, wilson
 
 __all__ = ["BACKEND", "NAME", "MonteCarloBackend", "Options", "SafetyMonitor", "check_run",
            "constant_signal", "random_plan", "replay", "structured_plan", "switch_window"]
@@ -375,7 +375,8 @@ class MonteCarloBackend:
         """``samples`` runs under Gaussian kicks from initial states drawn from the initial set
         (uniform over the box, or over the polytope: :class:`.initial_sampling.PolytopeSampler`,
         ``details["initial"]`` says which law); the 95 % Wilson interval of the share that
-        meets the property."""
+        meets the property; a violation is judged by the Wilson interval at
+        :data:`reach.stats.VERDICT_CONFIDENCE` (``verdict_interval``)."""
         rng = np.random.default_rng(opts.seed)
         init = model.initial
         sampler = None if init.is_box else PolytopeSampler(init.polytope, init.low, init.high)
@@ -417,6 +418,7 @@ class MonteCarloBackend:
         status = Status.UNKNOWN
         details = {"samples": total, "successes": successes, "estimate": successes / total, "dt": sim.dt,
                    "seed": opts.seed, "interval": "95 % Wilson",
+                   "verdict_interval": wilson(successes, total, VERDICT_CONFIDENCE),
                    "initial": (sampler.law() if sampler is not None else "point"
                                if np.array_equal(init.low, init.high) else "uniform over the initial box")}
         return Result(NAME, model.name, prop.id, status, probability=(lo, hi), details=details)

@@ -1297,8 +1297,7 @@ class _Explorer:
             H = np.vstack([piece.H, horizon_row])
             g = np.append(piece.g, self.horizon)
             depth, alpha, lp_tol = _depth(seg, H, g, len(piece.g), self.opt.touch_tolerance)
-            tol = max(self.opt.touch_tolerance, 10 * lp_tol) * max(
-                1.0, np.abs(piece.g).max(initial=0.0), np.abs(piece.H @ seg.center).max(initial=0.0))
+            tol = max(self.opt.touch_tolerance, 10 * lp_tol) * _row_scale(piece, seg)
             self.stats.tolerance = max(self.stats.tolerance, tol)
             if depth <= tol if piece.strict else depth < -tol:
                 continue
@@ -1771,6 +1770,22 @@ class _Explorer:
         (the run stays in the mode as long as possible), or None if there is none."""
         his = [j.window[2] for j in self.jumps[mode] if j.window is not None and j.window[0] == self.clock]
         return max(his) if his else None
+
+
+def _row_scale(piece: _Piece, seg: Star) -> float:
+    """The scale a depth into ``piece`` is read at (times the touch tolerance). For a piece of
+    strict rows, whose depth up to the tolerance counts as a touch (not entered), it is the size
+    of the rows' terms over the segment, ``max_r max(|g_r|, |h_r| |c| + |h_r V| r)`` (``c``,
+    ``V`` the segment's centre and basis, ``r`` its coefficient box's radius): the rounding of
+    the grid stars is relative to it. A floor of 1 there read a rate of 1e-6 rad/s exceeding
+    its bound by 7e-11 as a touch: a SAFE that no rounding explains. A piece with a non-strict
+    row is met from minus the tolerance, where a larger one only errs towards met: there the
+    scale stays ``max(1, |g|, |h . c|)``, which also covers a ramp meeting ``x = 1`` at the
+    horizon through the rounding of thousands of products."""
+    if not piece.strict or not np.all(np.isfinite(seg.box.radius)):
+        return max(1.0, np.abs(piece.g).max(initial=0.0), np.abs(piece.H @ seg.center).max(initial=0.0))
+    terms = np.abs(piece.H) @ np.abs(seg.center) + np.abs(piece.H @ seg.basis) @ seg.box.radius
+    return float(np.max(np.maximum(np.abs(piece.g), terms), initial=0.0))
 
 
 def _consecutive(cells: list[int]) -> list[tuple[int, int]]:
