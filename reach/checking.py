@@ -117,11 +117,12 @@ def _vacuous(backend, model, prop) -> Result:
     return Result(backend.name, model.name, prop.id, Status.SAFE, details={"argument": EMPTY_UNSAFE_SET})
 
 
-def check_model(backend, model, bound: list, options: dict | None = None) -> list[Result]:
+def check_model(backend, model, bound: list, options: dict | None = None, done=None) -> list[Result]:
     """Check bound properties; back-ends with ``check_many`` share work across properties. For
     star, a SpaceEx cfg's hint that the model keeps (``iter-max``) becomes an option default
     (:func:`reach.backends.star.options.cfg_hints`), so an imported model is checked as its
-    SpaceEx files are."""
+    SpaceEx files are. ``done(prop, result)``, if given, is called as each result is final, in
+    the order of ``bound`` (a long property file shows its answers as they come)."""
     if backend.name == "star" and model.hints:
         from reach.backends.star.options import cfg_hints
         options = cfg_hints(model.hints, options)
@@ -142,15 +143,27 @@ def check_model(backend, model, bound: list, options: dict | None = None) -> lis
             results[id(prop)] = unsupported(backend.name, model, prop, reason)
         else:
             todo.append(prop)
+    shown = 0
+
+    def announce() -> None:             # the results now final at the head of ``bound``
+        nonlocal shown
+        while shown < len(bound) and id(bound[shown]) in results:
+            prop = bound[shown]
+            if getattr(prop, "at_least", None) is not None:
+                results[id(prop)].details.setdefault("at_least", float(prop.at_least))
+            if done is not None:
+                done(prop, results[id(prop)])
+            shown += 1
+
+    announce()
     if todo and hasattr(backend, "check_many"):
         for prop, result in zip(todo, backend.check_many(model, todo, options or {})):
             results[id(prop)] = result
     else:
         for prop in todo:
             results[id(prop)] = run(backend, model, prop, options)
-    for prop in bound:
-        if getattr(prop, "at_least", None) is not None:
-            results[id(prop)].details.setdefault("at_least", float(prop.at_least))
+            announce()
+    announce()
     return [results[id(p)] for p in bound]
 
 

@@ -78,7 +78,7 @@ def _parse_options(pairs: list[str], backend: str | None = None) -> dict:
 
 def cmd_check(args) -> int:
     from reach.backends import validate_options
-    from reach.checking import check_model, is_spaceex, load_bound, resolve_backend
+    from reach.checking import check_model, exit_code, is_spaceex, load_bound, resolve_backend
 
     _no_file_in_the_way(args.counterexamples)
     if is_spaceex(args.model):
@@ -90,18 +90,28 @@ def cmd_check(args) -> int:
     model, props = load_bound(find_model(args.model), args.properties, args.property)
     for finding in model.warnings:          # after every input is read: bad input is one line
         print(printable(f"warning: {finding}"), file=sys.stderr)
-    results = check_model(backend, model, props, options)
     bound = {p.id: p for p in props}
     saved = {}
-    if args.counterexamples:
-        out = Path(args.counterexamples)
-        for r in results:
-            if r.counterexample is not None:
-                path = out / (safe_name(f"{r.model}_{r.property}_{r.backend}") + ".json")
-                writable_file(path, "--counterexamples")
-                r.counterexample.save(path)
-                saved[r.property] = str(path)
-    return _report(args, results, bound, model, saved, results[0].model if results else args.model)
+
+    def done(prop, r) -> None:          # save its counterexample; in text, print its line at once
+        if args.counterexamples and r.counterexample is not None:
+            path = Path(args.counterexamples) / (safe_name(f"{r.model}_{r.property}_{r.backend}") + ".json")
+            writable_file(path, "--counterexamples")
+            r.counterexample.save(path)
+            saved[r.property] = str(path)
+        if not args.json:
+            if not printed:
+                print(printable(f"{r.model} with {args.backend}:"), flush=True)
+            _print_result(r, bound, model, saved)
+            printed.append(r)
+
+    printed: list = []
+    results = check_model(backend, model, props, options, done)
+    if args.json:
+        return _report(args, results, bound, model, saved, results[0].model if results else args.model)
+    if not printed:
+        print(printable(f"{args.model} with {args.backend}:"))
+    return exit_code(results)
 
 
 def _verbose(args) -> None:
@@ -113,9 +123,8 @@ def _verbose(args) -> None:
 
 def _report(args, results, bound: dict, model, saved: dict, title: str, empty: str | None = None) -> int:
     """Print the results (text or ``--json``) in the requirement's units; the exit code."""
-    from reach.checking import exit_code, violated
+    from reach.checking import exit_code
     from reach.report import json_row
-    from reach.result import Status
 
     if args.json:
         rows = [json_row(r, bound.get(r.property), model, saved.get(r.property)) for r in results]
@@ -125,13 +134,22 @@ def _report(args, results, bound: dict, model, saved: dict, title: str, empty: s
     if not results and empty:
         print(printable(f"  {empty}"))
     for r in results:
-        status = "VIOLATED" if r.status == Status.UNKNOWN and violated(r) else r.status.value   # no run to show
-        print(printable(f"  {r.property:<16} {status:<11} {r.seconds:8.2f} s  "
-                        f"{summary(r, bound.get(r.property), model)}"))
-        if r.property in saved:
-            print(printable(f"  {'':<16} counterexample: {saved[r.property]}  "
-                            f"(reach replay {shlex.quote(str(saved[r.property]))})"))
+        _print_result(r, bound, model, saved)
     return exit_code(results)
+
+
+def _print_result(r, bound: dict, model, saved: dict) -> None:
+    """One result's line (and its counterexample's), in the requirement's units."""
+    from reach.checking import violated
+    from reach.result import Status
+
+    status = "VIOLATED" if r.status == Status.UNKNOWN and violated(r) else r.status.value   # no run to show
+    print(printable(f"  {r.property:<16} {status:<11} {r.seconds:8.2f} s  "
+                    f"{summary(r, bound.get(r.property), model)}"))
+    if r.property in saved:
+        print(printable(f"  {'':<16} counterexample: {saved[r.property]}  "
+                        f"(reach replay {shlex.quote(str(saved[r.property]))})"))
+    sys.stdout.flush()
 
 
 def cmd_check_spaceex(args) -> int:
