@@ -32,6 +32,15 @@ clock is one value up to rounding), the successor is instead the image of the ce
 star at that instant, bloated by the instant's width times a bound on ``|x'|``
 (:meth:`_Explorer._at_instant`): no chord, no interpolation error and no second copy of the
 coefficients, so a schedule of switches keeps its stars small.
+Urgent guards. A guard of one row (or a slab) ends the flow of its mode: its negation is a
+row every run keeps while it flows there, and it cuts the chain like an invariant. The outside
+of a guard of several rows is a union of half-spaces, so each segment is split by them instead,
+and the chain itself flows on; but a row ``h x >= c`` of such a guard (its far side) is kept
+where no run can cross it outside the guard -- on its face, wherever another row of the guard
+is not met, the flow enters it strictly, whatever the inputs (one LP per other row,
+:func:`.explorer._barrier_rows`) -- and the entry star lies on its side. The deadband's coast
+mode (``th >= 0.1 & w >= 0``, ``th' = w``) keeps ``th <= 0.1``: without it the chain flowed on
+to the horizon and fired from every cell, a cover of ``th`` up to 1.05 for a true 0.11.
 Invariants are intersected exactly (predicate rows). Every unsafe convex piece of the
 property is checked per segment: cheap support bounds first (vectorised over the chain),
 an LP on the segment only where they do not exclude the piece. The chain's screening takes
@@ -189,7 +198,7 @@ import numpy as np
 
 from reach import lp
 from reach.deep import call_deep
-from reach.backends.star.explorer import LOG, OUT_OF_TIME, _Explorer, _Stop, budget_text
+from reach.backends.star.explorer import BARRIER_SLOPE, LOG, OUT_OF_TIME, _Explorer, _Stop, budget_text
 from reach.backends.star.flowpipe import AffineFlow, flowpipe
 from reach.backends.star.hull import check_hull
 from reach.backends.star.linearise import LinearisedModel, check_linearised
@@ -590,6 +599,13 @@ def _run_details(explorer: _Explorer) -> dict:
     if s.instants:
         soundness += (f"; {s.instants} jumps at a single instant taken from the image of their cell's start "
                       f"star at that instant, bloated by the instant's width times a bound on |x'|")
+    if explorer.barrier_guards:
+        soundness += (f"; urgent guards of several rows cut by one of their rows ("
+                      f"{', '.join(sorted(explorer.barrier_guards)[:3])}): a row h x >= c every state of the "
+                      f"entry star meets and on whose face the flow enters strictly wherever another row of the "
+                      f"guard is not met (an LP per other row over the face, the invariant and the inputs' "
+                      f"ranges: the rate of h x is at least {BARRIER_SLOPE:g} |h A| times that row's excess), "
+                      f"so a run reaches the guard, and leaves, before it could cross the row")
     if s.returns:
         soundness += (f"; {s.returns} jumps back to the mode a chain's runs had just left not taken from "
                       f"its first cell: the guard's row rises strictly there, so only runs that had not "

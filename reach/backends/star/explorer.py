@@ -16,7 +16,7 @@ from reach.backends.star.aggregation import _Aggregate, interval_hull, one_coord
 from reach.backends.star.fixpoint import Covered, applies, enlarged, time_invariant
 from reach.backends.star.flowpipe import (ChainInputs, _block_spreads, _chain_abs_bounds, _chain_bounds, _depth,
                                           _hull_abs_bounds, _plus_box, _segment, _tightened, chunk_cells, folded)
-from reach.backends.star.options import (CHATTER_JUMPS, ERROR_RATIO, INSTANT_STEP_FRACTION, INSTANT_WIDTH,
+from reach.backends.star.options import (CHATTER_JUMPS, DEPTH_LP_TOLERANCE, ERROR_RATIO, INSTANT_STEP_FRACTION, INSTANT_WIDTH,
                                          MAX_CELLS, MAX_CHAIN_BYTES, MEMORY_FRACTION, MEMORY_PERIOD, NAME,
                                          PROGRESS_SECONDS, STALL_JUMPS, TIGHT_RATIO, StarOptions)
 from reach.backends.star.returns import entry_rows, rising, undone
@@ -166,7 +166,10 @@ def _urgent_keeps(model, data, options) -> tuple[dict[str, list], dict[str, list
     run that flows in the mode is, at every instant, in the closure of one of them (it leaves
     the instant it reaches ``G``), so each segment is checked as the union of its parts in those
     half-spaces (:meth:`_Explorer._split`), except where the mode's invariant already keeps
-    one of them (:func:`_invariant_keeps`). Discrete time keeps neither (a run jumps from the
+    one of them (:func:`_invariant_keeps`). Each split guard carries its rows that no run can
+    cross outside it (:func:`_barrier_rows`, on plain linear models): a chain whose entry star
+    lies on such a row's far side keeps that row instead of splitting by the guard
+    (:meth:`_Explorer._barriers_of`). Discrete time keeps neither (a run jumps from the
     first grid state inside the guard, which the cut would remove)."""
     if options.discrete_time:
         return {}, {}
@@ -182,8 +185,66 @@ def _urgent_keeps(model, data, options) -> tuple[dict[str, list], dict[str, list
             if jump.H.shape[0] == 1 or slab:
                 keeps.setdefault(mode, []).extend((-a, -b) for a, b in zip(jump.H, jump.g))
             elif jump.H.shape[0] > 1 and not _invariant_keeps(data.invariants[mode], jump):
-                splits.setdefault(mode, []).append((jump.name, jump.H, jump.g))
+                barriers = _barrier_rows(data, mode, jump) if type(data) is _LinearModel else []
+                splits.setdefault(mode, []).append((jump.name, jump.H, jump.g, barriers))
     return keeps, splits
+
+
+#: the slope ``kappa`` of :func:`_barrier_rows`, relative to the size of the row's rate
+BARRIER_SLOPE = 1e-6
+
+
+def _barrier_rows(data, mode: str, jump) -> list:
+    """The rows ``-h_i x <= -g_i`` (``h_i x >= g_i``, the far side of the guard row
+    ``h_i x <= g_i``) of an urgent guard ``G = {H x <= g}`` of several rows that no run of
+    ``mode`` can cross while it flows there, whatever its (bounded) inputs: on the face
+    ``h_i x = g_i``, wherever another row ``j`` of the guard is not met (``h_j x > g_j``, so
+    the state is not in ``G``), the flow enters ``h_i x > g_i`` strictly.
+
+    Argument. Let a run start in ``K = {h_i x >= g_i}`` and flow in ``mode`` up to ``T`` (it
+    leaves the instant it reaches ``G``: ``x(t)`` is outside ``G`` for ``t < T``). Were
+    ``h_i x(t1) < g_i`` for some ``t1 <= T``, take ``tau`` the last instant before ``t1`` with
+    ``h_i x = g_i``: ``tau < T``, so ``x(tau)`` is on the face outside ``G``, where the rate
+    of ``h_i x`` is at least ``L(x) = h_i (A x + b) - |h_i B| u_r > 0`` (any input signal);
+    ``L`` is continuous, so ``h_i x`` rises right after ``tau``: a contradiction. So every such
+    run keeps ``h_i x >= g_i``, and the row cuts the chain as a single-row guard's keep does.
+
+    The condition is one LP per other row ``j`` over the face cut by ``h_j x >= g_j``, the
+    mode's invariant and the ranges of the constant inputs (and the clock, at least 0):
+    ``min L(x) - kappa (h_j x - g_j) >= 0`` with ``kappa = BARRIER_SLOPE |h_i A| > 0`` (so
+    ``L >= kappa (h_j x - g_j) > 0`` where row ``j`` is not met; a constant rate must be
+    positive). The deadband's coast mode and its guard ``th >= 0.1 & w >= 0`` (``th' = w``):
+    on ``th = 0.1`` with ``w < 0``, ``th`` falls, so a run that enters with ``th <= 0.1``
+    keeps it. An LP without an optimal value (unbounded, infeasible, failed) proves nothing."""
+    flow = data.flows[mode]
+    H_inv, g_inv = data.invariants[mode]
+    lo, hi = data.ranges.low, data.ranges.high
+    out = []
+    for i, (h, c) in enumerate(zip(jump.H, jump.g)):
+        rate = h @ flow.A
+        const = float(h @ flow.b)
+        if flow.B is not None and flow.u_radius is not None and flow.B.size:
+            const -= float(np.abs(h @ flow.B) @ flow.u_radius)
+        kappa = BARRIER_SLOPE * float(np.linalg.norm(rate))
+        proved = True
+        for j in range(jump.H.shape[0]):
+            if j == i:
+                continue
+            A_ub = np.vstack([-jump.H[j][None], H_inv]) if H_inv.shape[0] else -jump.H[j][None]
+            b_ub = np.concatenate([[-jump.g[j]], g_inv])
+            try:
+                res = lp.minimize(rate - kappa * jump.H[j], A_ub, b_ub, A_eq=h[None], b_eq=np.array([c]),
+                                  bounds=(lo, hi), tolerance=DEPTH_LP_TOLERANCE)
+            except lp.LPError:
+                proved = False
+                break
+            value = None if not res.optimal else res.value + const + kappa * float(jump.g[j])
+            if value is None or not (value > 0.0 or (kappa > 0.0 and value >= 0.0)):
+                proved = False
+                break
+        if proved:
+            out.append((-h, -c))
+    return out
 
 
 def _invariant_keeps(invariant, jump) -> bool:
@@ -236,6 +297,7 @@ class _Explorer:
         self._kept: dict[str, list] = {}          # per mode, the keeps of the chains under way
         self._split_by: dict[str, list] = {}      # per mode, the splitting guards of the chains under way
         self.uncut_urgent: list[str] = []       # urgent guards an entry star reaches inside (_splits_of)
+        self.barrier_guards: set[str] = set()   # urgent guards of several rows cut by a row (_barriers_of)
         self.cancel = threading.Event()         # set by the caller that stopped waiting (reach.deep)
         self.deadline = np.inf if options.max_seconds is None else time.perf_counter() + options.max_seconds
         self.replay_seconds: float | None = None        # the last replay's (a finer one's cost scales with it)
@@ -363,28 +425,45 @@ class _Explorer:
         if self.linearise is not None and mode in self.linearise.curved:
             self.linearise.chain(self, mode, star, path, guess, direction)
             return
-        self._kept.setdefault(mode, []).append(self._keeps_of(mode, star))
-        self._split_by.setdefault(mode, []).append(self._splits_of(mode, star))
+        barriers = self._barriers_of(mode, star)
+        self._kept.setdefault(mode, []).append(self._keeps_of(mode, star, barriers))
+        self._split_by.setdefault(mode, []).append(self._splits_of(mode, star, barriers))
         try:
             self._chain_blocks(mode, star, path, guess, direction)
         finally:
             self._kept[mode].pop()
             self._split_by[mode].pop()
 
-    def _keeps_of(self, mode: str, star: Star):
+    def _barriers_of(self, mode: str, star: Star) -> dict[str, list]:
+        """Per urgent guard of several rows, its rows of :func:`_barrier_rows` that every state
+        of the entry ``star`` meets (as :meth:`_keeps_of`): every run from ``star`` keeps them
+        while it flows in ``mode``, so they cut its chain and the guard needs no split."""
+        out: dict[str, list] = {}
+        if mode in self.data.timeless or not star.box.bounded:
+            return out
+        for name, _, _, barriers in self._splits.get(mode, ()):
+            rows = [(a, b) for a, b in barriers if star.depth(-a[None], np.array([-b]))[0] <= 0.0]
+            if rows:
+                out[name] = rows
+                self.barrier_guards.add(f"{name} (from {mode})")
+        return out
+
+    def _keeps_of(self, mode: str, star: Star, barriers: dict | None = None):
         """``(H, g)``: the invariant of ``mode`` and the rows ``a x <= b`` of :func:`_urgent_keeps`
         that every state of the entry ``star`` meets (its depth into ``a x >= b`` at most 0, a
         weak-duality bound: no state is strictly inside the urgent guard, so none leaves at
         once). Every run from ``star`` then meets them as long as it stays in ``mode``: it
-        leaves the instant it reaches the guard."""
+        leaves the instant it reaches the guard. ``barriers``: rows of guards of several rows
+        (:meth:`_barriers_of`), kept likewise."""
         Hi, gi = self.invariants[mode]
         rows = [(a, b) for a, b in self._keeps.get(mode, ())
                 if star.box.bounded and star.depth(-a[None], np.array([-b]))[0] <= 0.0]
+        rows += [row for kept in (barriers or {}).values() for row in kept]
         if not rows:
             return Hi, gi
         return np.vstack([Hi] + [a[None] for a, _ in rows]), np.concatenate([gi, [b for _, b in rows]])
 
-    def _splits_of(self, mode: str, star: Star) -> list:
+    def _splits_of(self, mode: str, star: Star, barriers: dict | None = None) -> list:
         """The guards of :func:`_urgent_keeps`'s ``splits`` whose interior the entry ``star``
         does not reach (its depth into ``G`` at most 0, a weak-duality bound), as lists of the
         rows ``-h_i x <= -g_i`` one of which each run meets while it stays in ``mode``. A
@@ -393,7 +472,9 @@ class _Explorer:
         out = []
         if mode in self.data.timeless:          # one instant: no flow to split
             return out
-        for name, H, g in self._splits.get(mode, ()):
+        for name, H, g, _ in self._splits.get(mode, ()):
+            if barriers and name in barriers:       # a kept row: every run is on its side
+                continue
             outside = np.any(-star.support_bounds(-H) >= g)        # wholly on one row's far side
             if star.box.bounded and (outside or star.depth(H, g)[0] <= 0.0):
                 out.append([(-a, -b) for a, b in zip(H, g)])
