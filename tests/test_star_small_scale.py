@@ -48,3 +48,16 @@ def test_a_drift_of_5e_10_past_zero_is_never_safe(tmp_path):
 def test_a_quantity_that_only_touches_zero_is_safe(tmp_path):
     """``w' = -5e-10`` from 0 meets ``w = 0`` at t = 0 only: the touch of a strict bound."""
     assert _check(tmp_path, "-5e-10", 0, "w <= 0") == "SAFE"
+
+
+def test_a_wide_set_does_not_widen_a_strict_bounds_tolerance(tmp_path):
+    """A box of +-1e6 cut by ``x - y <= 1e-3`` against ``x <= y``: the point (1e-3, 0) violates
+    it by 1e-3. Read at the size of the segment's terms (1e6) alone, that depth was a touch."""
+    (tmp_path / "m.yaml").write_text(yaml.safe_dump({
+        "name": "wide", "state": ["x", "y"], "horizon": 1, "modes": {"m": {"flow": {"x": 0, "y": 0}}},
+        "initial": {"mode": "m", "box": {"x": [-1e6, 1e6], "y": [-1e6, 1e6]}, "constraints": ["x - y <= 1e-3"]}}))
+    (tmp_path / "p.yaml").write_text(yaml.safe_dump(
+        {"properties": [{"id": "p", "kind": "safety", "modes": ["m"], "require": ["x <= y"]}]}))
+    model = load_model(tmp_path / "m.yaml")
+    prop = bind(load_properties(tmp_path / "p.yaml")[0], model)
+    assert BACKEND.check(model, prop, {"max_seconds": 20}).status.value != "SAFE"

@@ -173,7 +173,10 @@ class MonteCarloBackend:
                        "assumes": "states checked at grid points and event instants only "
                                   "(a falsifier, not a proof)"}
             fails = int(np.count_nonzero(np.isfinite(monitor.violation_time[n_structured:])))
-            undefined = int(np.count_nonzero(np.isnan(monitor.min_depth[n_structured:])))
+            # runs that left the real numbers (NaN states) without a violation before: a violating
+            # run that does so later counts as violating, not as undefined
+            undefined = int(np.count_nonzero(np.isnan(monitor.min_depth[n_structured:])
+                                             & np.isnan(monitor.violation_time[n_structured:])))
             details["violating_runs"] = fails
             # a run cut short by the budget was not watched to the horizon: not counted as clean
             details["violation_probability_upper_95"] = clopper_pearson_upper(fails, sampled - undefined - cut_random)

@@ -155,7 +155,10 @@ class SafetyMonitor:
     def first_violation(self) -> int | None:
         """The violating run that went deepest into the unsafe set, if any."""
         hit = np.flatnonzero(np.isfinite(self.violation_time))
-        return None if hit.size == 0 else int(hit[np.argmin(self.min_depth[hit])])
+        if hit.size == 0:
+            return None
+        depth = self.min_depth[hit]         # NaN: the run left the real numbers after its violation
+        return int(hit[np.argmin(np.where(np.isnan(depth), np.inf, depth))])
 
 
 def _beyond(G: np.ndarray, size: np.ndarray, starts: np.ndarray) -> np.ndarray:

@@ -112,11 +112,11 @@ a check in UNKNOWN with the reason, and progress goes to the ``reach.star`` logg
 Strict and non-strict bounds. With piece rows of unit norm, the depth LP (HiGHS, primal
 feasibility 1e-10, its value the weak-duality bound) is trusted to ``tol = touch_tolerance *
 scale``: a piece of strict inequalities (the negation of ``x >= -100``) counts as entered only
-above ``tol`` (a set that meets ``x = -100`` only touches it), with the scale the size of the
-rows' terms over the segment, ``max(|g|, |h| |c| + |h V| r)`` (no floor: a quantity of 1e-6
-is read at its own scale); a piece with a non-strict row as met from ``-tol``, with the scale
-``max(1, |g|, |h . c|)``; the details state the largest ``tol`` used. An LP failure answers
-UNKNOWN.
+above ``tol`` (a set that meets ``x = -100`` only touches it), with the scale ``max(1, |g|,
+|h . c|)``, or the size of the rows' terms over the segment, ``max(|g|, |h| |c| + |h V| r)``,
+where that is smaller (a quantity of 1e-6 is read at its own scale); a piece with a non-strict
+row as met from ``-tol``, with the scale ``max(1, |g|, |h . c|)``; the details state the
+largest ``tol`` used. An LP failure answers UNKNOWN.
 
 Inputs. A time-varying bounded input (``model.bounded_inputs`` with ``varying``) is taken out
 of the flow: the run is the input-free run (input at the box centre) plus a deviation ``d``
@@ -227,9 +227,9 @@ _SOUNDNESS = (
     "instant is covered; invariants and guards are exact LP rows; depth LPs by HiGHS with primal "
     "feasibility tolerance {lp_tol:g} (100 times that, then HiGHS's default 1e-7, where it fails; "
     "other LPs ~1e-7); a piece of strict inequalities counts as entered at a depth above "
-    "max({rel:g}, 10 x the LP's tolerance) x max(|g|, |h| |c| + |h V| r) (the size of its rows' terms "
-    "over the segment), a piece with a non-strict row as met at a depth of at least minus that "
-    "tolerance x max(1, |g|, |h.c|) (largest used: {tol:g}); matrix exponentials in floating "
+    "max({rel:g}, 10 x the LP's tolerance) x min(max(1, |g|, |h.c|), max(|g|, |h| |c| + |h V| r)) (at "
+    "most the size of its rows' terms over the segment), a piece with a non-strict row as met at a depth "
+    "of at least minus that tolerance x max(1, |g|, |h.c|) (largest used: {tol:g}); matrix exponentials in floating "
     "point (rounding not enclosed)")
 
 

@@ -1854,19 +1854,22 @@ class _Explorer:
 
 
 def _row_scale(piece: _Piece, seg: Star) -> float:
-    """The scale a depth into ``piece`` is read at (times the touch tolerance). For a piece of
-    strict rows, whose depth up to the tolerance counts as a touch (not entered), it is the size
-    of the rows' terms over the segment, ``max_r max(|g_r|, |h_r| |c| + |h_r V| r)`` (``c``,
-    ``V`` the segment's centre and basis, ``r`` its coefficient box's radius): the rounding of
-    the grid stars is relative to it. A floor of 1 there read a rate of 1e-6 rad/s exceeding
-    its bound by 7e-11 as a touch: a SAFE that no rounding explains. A piece with a non-strict
-    row is met from minus the tolerance, where a larger one only errs towards met: there the
-    scale stays ``max(1, |g|, |h . c|)``, which also covers a ramp meeting ``x = 1`` at the
-    horizon through the rounding of thousands of products."""
+    """The scale a depth into ``piece`` is read at (times the touch tolerance):
+    ``max(1, |g|, |h . c|)`` over the piece's rows (``c`` the segment's centre), which covers a
+    ramp meeting ``x = 1`` at the horizon through the rounding of thousands of products. A piece
+    of strict rows, whose depth up to the tolerance counts as a touch (not entered), is read at
+    the smaller of that and the size of its rows' terms over the segment, ``max(|g|, |h| |c| +
+    |h V| r)`` (``V`` the basis, ``r`` the coefficient box's radius): the grid stars' rounding
+    is relative to it, and the floor of 1 read a rate of 1e-6 rad/s exceeding its bound by
+    7e-11 as a touch, a SAFE no rounding explains. Never larger than the first: a wide segment
+    (a box of +-1e6 cut by ``x - y <= 1e-3`` against ``x <= y``) must not widen it. A piece
+    with a non-strict row is met from minus the tolerance, where a larger one only errs towards
+    met."""
+    scale = max(1.0, np.abs(piece.g).max(initial=0.0), np.abs(piece.H @ seg.center).max(initial=0.0))
     if not piece.strict or not np.all(np.isfinite(seg.box.radius)):
-        return max(1.0, np.abs(piece.g).max(initial=0.0), np.abs(piece.H @ seg.center).max(initial=0.0))
+        return scale
     terms = np.abs(piece.H) @ np.abs(seg.center) + np.abs(piece.H @ seg.basis) @ seg.box.radius
-    return float(np.max(np.maximum(np.abs(piece.g), terms), initial=0.0))
+    return min(scale, float(np.max(np.maximum(np.abs(piece.g), terms), initial=0.0)))
 
 
 def _consecutive(cells: list[int]) -> list[tuple[int, int]]:

@@ -933,7 +933,8 @@ def _refined_top(value, sign: float, floor: float) -> float:
         ends = [polynomial_range(p) for p in polys]
         lo = max(float(a) + float(t.lo) for (a, _), t in zip(ends, parts))
         hi = max(float(b) + float(t.hi) for (_, b), t in zip(ends, parts))
-        return (hi if sign > 0 else -lo) + ROUNDING * (1 + level) * size
+        top = (hi if sign > 0 else -lo) + ROUNDING * (1 + level) * size
+        return np.inf if np.isnan(top) else top         # NaN bounds nothing (max() would drop it)
 
     root = [t.poly for t in parts]
     frontier, count = [(-upper(root, 0), 0, root, 0)], 1
