@@ -13,22 +13,22 @@ import pytest
 import yaml
 
 from reach.backends.star import BACKEND
-from reach.model.loader import load_model
-from reach.spec import bind, load_properties
+from model_files import load_files
 
 TRUE_MAX = 1e-6 - 9e-7 * math.exp(-2.0)
 
 
-def _check(tmp_path, flow_w: str, w0, require: str):
-    (tmp_path / "m.yaml").write_text(yaml.safe_dump({
-        "name": "small", "state": ["x", "w"], "horizon": 2,
-        "modes": {"m": {"flow": {"x": 1, "w": flow_w}}},
-        "initial": {"mode": "m", "box": {"x": [7.0e6, 7.001e6], "w": w0}}}))
-    (tmp_path / "p.yaml").write_text(yaml.safe_dump(
+def _verdict(tmp_path, model: dict, require: str, options: dict | None = None) -> str:
+    """star's verdict on ``model`` (a YAML document) for the bound ``require`` in mode m."""
+    model, props = load_files(tmp_path, yaml.safe_dump(model), yaml.safe_dump(
         {"properties": [{"id": "p", "kind": "safety", "modes": ["m"], "require": [require]}]}))
-    model = load_model(tmp_path / "m.yaml")
-    prop = bind(load_properties(tmp_path / "p.yaml")[0], model)
-    return BACKEND.check(model, prop, {}).status.value
+    return BACKEND.check(model, props["p"], options or {}).status.value
+
+
+def _check(tmp_path, flow_w: str, w0, require: str):
+    return _verdict(tmp_path, {"name": "small", "state": ["x", "w"], "horizon": 2,
+                               "modes": {"m": {"flow": {"x": 1, "w": flow_w}}},
+                               "initial": {"mode": "m", "box": {"x": [7.0e6, 7.001e6], "w": w0}}}, require)
 
 
 @pytest.mark.parametrize("factor", [1 - 1e-4, 1 - 1e-2])
@@ -53,11 +53,6 @@ def test_a_quantity_that_only_touches_zero_is_safe(tmp_path):
 def test_a_wide_set_does_not_widen_a_strict_bounds_tolerance(tmp_path):
     """A box of +-1e6 cut by ``x - y <= 1e-3`` against ``x <= y``: the point (1e-3, 0) violates
     it by 1e-3. Read at the size of the segment's terms (1e6) alone, that depth was a touch."""
-    (tmp_path / "m.yaml").write_text(yaml.safe_dump({
-        "name": "wide", "state": ["x", "y"], "horizon": 1, "modes": {"m": {"flow": {"x": 0, "y": 0}}},
-        "initial": {"mode": "m", "box": {"x": [-1e6, 1e6], "y": [-1e6, 1e6]}, "constraints": ["x - y <= 1e-3"]}}))
-    (tmp_path / "p.yaml").write_text(yaml.safe_dump(
-        {"properties": [{"id": "p", "kind": "safety", "modes": ["m"], "require": ["x <= y"]}]}))
-    model = load_model(tmp_path / "m.yaml")
-    prop = bind(load_properties(tmp_path / "p.yaml")[0], model)
-    assert BACKEND.check(model, prop, {"max_seconds": 20}).status.value != "SAFE"
+    wide = {"name": "wide", "state": ["x", "y"], "horizon": 1, "modes": {"m": {"flow": {"x": 0, "y": 0}}},
+            "initial": {"mode": "m", "box": {"x": [-1e6, 1e6], "y": [-1e6, 1e6]}, "constraints": ["x - y <= 1e-3"]}}
+    assert _verdict(tmp_path, wide, "x <= y", {"max_seconds": 20}) != "SAFE"

@@ -235,17 +235,15 @@ def test_a_quantity_whose_bound_is_nan_is_never_safe(tmp_path):
     """``1e200 x^2 - 1e200 y^2`` from states of 1e60 overflows: the step's bound is NaN. The
     refinement of a step's upper end read NaN as nothing (Python's ``max`` keeps the other
     argument) and the rigorous check said SAFE; the true maximum is about 2e319."""
-    import yaml
-
-    from reach.model.loader import load_model
-    from reach.spec import bind, load_properties
-
-    (tmp_path / "m.yaml").write_text(yaml.safe_dump({
-        "name": "ovf", "state": ["x", "y"], "horizon": 1,
-        "modes": {"m": {"flow": {"x": "0.001*y", "y": "-0.001*x"}}},
-        "initial": {"mode": "m", "box": {"x": [1e60, 1.1e60], "y": [1e60, 1.1e60]}}}))
-    (tmp_path / "p.yaml").write_text(yaml.safe_dump({"properties": [
-        {"id": "q", "kind": "event", "modes": ["m"], "maximize": "1e200*x**2 - 1e200*y**2", "require": "<= 1"}]}))
-    model = load_model(tmp_path / "m.yaml")
-    prop = bind(load_properties(tmp_path / "p.yaml")[0], model)
-    assert BACKEND.check(model, prop, {"remainder": "rigorous"}).status.value != "SAFE"
+    model, props = load_files(tmp_path, """
+        name: ovf
+        state: [x, y]
+        modes:
+          m: {flow: {x: "0.001*y", y: "-0.001*x"}}
+        initial: {mode: m, box: {x: [1e60, 1.1e60], y: [1e60, 1.1e60]}}
+        horizon: 1
+        """, """
+        properties:
+          - {id: q, kind: event, modes: [m], maximize: "1e200*x**2 - 1e200*y**2", require: "<= 1"}
+        """)
+    assert BACKEND.check(model, props["q"], {"remainder": "rigorous"}).status.value != "SAFE"

@@ -95,7 +95,7 @@ class SafetyMonitor:
         # a run that leaves the real numbers within the block (NaN states) keeps NaN as its
         # depth (counted as undefined), but a violation at its real states before is still found
         undefined = np.isnan(depth).any(axis=0)
-        low = (np.where(np.isnan(depth), np.inf, depth) if undefined.any() else depth).min(axis=0)
+        low = np.fmin.reduce(depth, axis=0)             # the least over the real states
         self.min_depth[rows] = np.where(undefined, np.nan, np.minimum(self.min_depth[rows], low))
         r = np.flatnonzero((low < -NUMERICAL_TOLERANCE) & np.isnan(self.violation_time[rows]))
         if r.size:

@@ -185,7 +185,8 @@ def _urgent_keeps(model, data, options) -> tuple[dict[str, list], dict[str, list
             if jump.H.shape[0] == 1 or slab:
                 keeps.setdefault(mode, []).extend((-a, -b) for a, b in zip(jump.H, jump.g))
             elif jump.H.shape[0] > 1 and not _invariant_keeps(data.invariants[mode], jump):
-                barriers = _barrier_rows(data, mode, jump) if type(data) is _LinearModel else []
+                plain = type(data) is _LinearModel and mode not in data.timeless    # timeless: no flow to cross
+                barriers = _barrier_rows(data, mode, jump) if plain else []
                 splits.setdefault(mode, []).append((jump.name, jump.H, jump.g, barriers))
     return keeps, splits
 
@@ -217,8 +218,6 @@ def _barrier_rows(data, mode: str, jump) -> list:
     on ``th = 0.1`` with ``w < 0``, ``th`` falls, so a run that enters with ``th <= 0.1``
     keeps it. An LP without an optimal value (unbounded, infeasible, failed) proves nothing."""
     flow = data.flows[mode]
-    H_inv, g_inv = data.invariants[mode]
-    lo, hi = data.ranges.low, data.ranges.high
     out = []
     for i, (h, c) in enumerate(zip(jump.H, jump.g)):
         rate = h @ flow.A
@@ -226,25 +225,29 @@ def _barrier_rows(data, mode: str, jump) -> list:
         if flow.B is not None and flow.u_radius is not None and flow.B.size:
             const -= float(np.abs(h @ flow.B) @ flow.u_radius)
         kappa = BARRIER_SLOPE * float(np.linalg.norm(rate))
-        proved = True
-        for j in range(jump.H.shape[0]):
-            if j == i:
-                continue
-            A_ub = np.vstack([-jump.H[j][None], H_inv]) if H_inv.shape[0] else -jump.H[j][None]
-            b_ub = np.concatenate([[-jump.g[j]], g_inv])
-            try:
-                res = lp.minimize(rate - kappa * jump.H[j], A_ub, b_ub, A_eq=h[None], b_eq=np.array([c]),
-                                  bounds=(lo, hi), tolerance=DEPTH_LP_TOLERANCE)
-            except lp.LPError:
-                proved = False
-                break
-            value = None if not res.optimal else res.value + const + kappa * float(jump.g[j])
-            if value is None or not (value > 0.0 or (kappa > 0.0 and value >= 0.0)):
-                proved = False
-                break
-        if proved:
+        if all(_enters_beyond(data, mode, h, c, rate, const, kappa, jump.H[j], jump.g[j])
+               for j in range(jump.H.shape[0]) if j != i):
             out.append((-h, -c))
     return out
+
+
+def _enters_beyond(data, mode: str, h, c: float, rate, const: float, kappa: float, hj, gj: float) -> bool:
+    """Whether ``min L(x) - kappa (hj x - gj) >= 0`` (``> 0`` where ``kappa = 0``) over the face
+    ``h x = c`` cut by ``hj x >= gj``, the invariant of ``mode`` and the ranges of
+    :func:`_barrier_rows` (``L(x) = rate . x + const``): one LP, False when it has no optimal
+    value."""
+    H_inv, g_inv = data.invariants[mode]
+    A_ub = np.vstack([-hj[None], H_inv]) if H_inv.shape[0] else -hj[None]
+    b_ub = np.concatenate([[-gj], g_inv])
+    try:
+        res = lp.minimize(rate - kappa * hj, A_ub, b_ub, A_eq=h[None], b_eq=np.array([c]),
+                          bounds=(data.ranges.low, data.ranges.high), tolerance=DEPTH_LP_TOLERANCE)
+    except lp.LPError:
+        return False
+    if not res.optimal:
+        return False
+    value = res.value + const + kappa * float(gj)
+    return value > 0.0 or (kappa > 0.0 and value >= 0.0)
 
 
 def _invariant_keeps(invariant, jump) -> bool:
@@ -442,7 +445,7 @@ class _Explorer:
         if mode in self.data.timeless or not star.box.bounded:
             return out
         for name, _, _, barriers in self._splits.get(mode, ()):
-            rows = [(a, b) for a, b in barriers if star.depth(-a[None], np.array([-b]))[0] <= 0.0]
+            rows = [(a, b) for a, b in barriers if _meets_row(star, a, b)]
             if rows:
                 out[name] = rows
                 self.barrier_guards.add(f"{name} (from {mode})")
@@ -456,8 +459,7 @@ class _Explorer:
         leaves the instant it reaches the guard. ``barriers``: rows of guards of several rows
         (:meth:`_barriers_of`), kept likewise."""
         Hi, gi = self.invariants[mode]
-        rows = [(a, b) for a, b in self._keeps.get(mode, ())
-                if star.box.bounded and star.depth(-a[None], np.array([-b]))[0] <= 0.0]
+        rows = [(a, b) for a, b in self._keeps.get(mode, ()) if star.box.bounded and _meets_row(star, a, b)]
         rows += [row for kept in (barriers or {}).values() for row in kept]
         if not rows:
             return Hi, gi
@@ -1851,6 +1853,12 @@ class _Explorer:
         (the run stays in the mode as long as possible), or None if there is none."""
         his = [j.window[2] for j in self.jumps[mode] if j.window is not None and j.window[0] == self.clock]
         return max(his) if his else None
+
+
+def _meets_row(star: Star, a, b: float) -> bool:
+    """Whether every state of ``star`` meets ``a x <= b``: its depth into ``a x >= b`` is at
+    most 0 (a weak-duality bound)."""
+    return star.depth(-a[None], np.array([-b]))[0] <= 0.0
 
 
 def _row_scale(piece: _Piece, seg: Star) -> float:
