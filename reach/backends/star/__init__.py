@@ -100,8 +100,11 @@ hull keeps ``a`` and ``lam a``), so a path with many jumps -- a thermostat switc
 few minutes -- would need LPs of exponential size. Past the first ``aggregate_after`` jumps
 of a path, the successors one chain sends through one transition (the stars entering a
 mode in that chain's time window) are replaced by their interval hull, a box star with
-fresh coefficients intersected with the target invariant; it contains every member, so a
-proof under it covers them. When a check under an aggregate fails, its witness is traced
+fresh coefficients intersected with the target invariant and with the rows every successor
+of the transition meets (:func:`.transitions.kept_rows`: the rows of its guard and of the
+source's invariant and kept urgent rows whose normal lies in the reset's row space, ``h = a
+R``, as ``a y <= g + a r``; ``v := 0.8 v`` keeps the switching line ``x + v = -0.2`` as ``x +
+1.25 v = -0.2``); it contains every member, so a proof under it covers them. When a check under an aggregate fails, its witness is traced
 back through the nearest point of a member (one LP per member, per aggregate level) to an
 initial state and replayed; if that run does not violate, the aggregate is refined into
 its members, explored with their exact histories. A constant flow's segments are exact and

@@ -568,11 +568,14 @@ class _Explorer:
         return 8 * 3 * self.n * (nvars + 1)
 
     def _aggregate_pending(self, mode: str, pending: dict[int, list] | None):
-        """Aggregate the successors a chain in ``mode`` collected, per transition."""
-        Hi, gi = self.invariants[mode]
+        """Aggregate the successors a chain in ``mode`` collected, per transition, cut by the
+        rows of :func:`.transitions.kept_rows` from the rows the chain's segments were cut by
+        (:meth:`_flow_invariant`: every run that jumps meets them)."""
+        Hi, gi = self._flow_invariant(mode)
         for index, members in (pending or {}).items():
             jump = self.jumps[mode][index]
-            self._aggregate(jump.target, members, kept_rows(jump, Hi, gi))
+            rows = kept_rows(jump, Hi, gi, self._inputs_read(jump), self.opt.touch_tolerance)
+            self._aggregate(jump.target, members, rows)
 
     def _rebase_cells(self, mode: str) -> int | None:
         """Cells per block of a chain whose input effect restarts at each block end, or None.

@@ -272,13 +272,35 @@ def _modes_leading_to(model, targets: set[str]) -> set[str]:
     return reach
 
 
-def kept_rows(jump: _Jump, H_inv, g_inv):
-    """``(H, g)``: the rows of the jump's guard and of the source invariant over states its
-    reset leaves alone (``x_i+ = x_i``): every successor of the jump satisfies them (an
-    aggregate keeps what a guard pins down, e.g. ``T = 21`` from ``T >= 21`` and ``T <= 21``)."""
-    H = np.vstack([jump.H, H_inv]) if H_inv.shape[0] else jump.H
-    g = np.concatenate([jump.g, g_inv])
+def kept_rows(jump: _Jump, H_src, g_src, frozen=(), tolerance: float = 1e-9):
+    """``(K, k)``: rows every successor ``y = R x + r`` of the jump satisfies, from the rows
+    ``h x <= g`` of its guard and of ``(H_src, g_src)`` (rows every state that takes it meets:
+    the source's invariant and the rows its chain was cut by), an aggregate keeping what a
+    guard pins down (``T = 21`` from ``T >= 21`` and ``T <= 21``; with ``v := 0.8 v``, the
+    switching line ``x + v = -0.2`` as ``x + 1.25 v = -0.2``).
+
+    A row whose ``h`` lies in the row space of the reset, ``h = a R`` (``a`` by least squares,
+    kept where ``|a R - h| <= 1e-12 |h|``), gives ``a (y - r) = h x <= g``: the row
+    ``a y <= g + a r``, relaxed by ``tolerance * max(1, |g|, |a r|)`` against the rounding of
+    ``a`` (none where ``a = h`` over states the reset leaves alone, ``x+ = x``: no rounding).
+    A row over a state the reset overwrites (``x := 0``) is not in the row space, and is dropped. So is a row that
+    reads, or would constrain, a coordinate in ``frozen`` (the time-varying inputs the reset
+    reads: it takes any value of their ranges, and after the jump their coordinates are
+    independent of what they were, :meth:`.explorer._Explorer._fresh_inputs`)."""
+    H = np.vstack([jump.H, H_src]) if H_src.shape[0] else jump.H
+    g = np.concatenate([jump.g, g_src])
     n = jump.R.shape[0]
+    free = np.setdiff1d(np.arange(n), list(frozen))         # a is 0 on the frozen coordinates
+    if not H.shape[0] or not free.size:
+        return H[:0], g[:0]
     alone = np.all(jump.R == np.eye(n), axis=1) & (jump.r == 0)
-    keep = np.all((H == 0) | alone[None, :], axis=1) if H.shape[0] else np.zeros(0, dtype=bool)
-    return H[keep], g[keep]
+    exact = np.all((H == 0) | alone[None, :], axis=1)       # a = h, no rounding
+    A = H.copy()
+    A[~exact] = 0.0
+    A[np.ix_(~exact, free)] = np.linalg.lstsq(jump.R[free].T, H[~exact].T, rcond=None)[0].T
+    residual = np.linalg.norm(A @ jump.R - H, axis=1)
+    keep = np.all(np.isfinite(A), axis=1) & (residual <= 1e-12 * np.linalg.norm(H, axis=1))
+    keep &= np.all(H[:, list(frozen)] == 0, axis=1)
+    A, g, shift, exact = A[keep], g[keep], A[keep] @ jump.r, exact[keep]
+    slack = np.where(exact, 0.0, tolerance * np.maximum(1.0, np.maximum(np.abs(g), np.abs(shift))))
+    return A, g + shift + slack
