@@ -36,8 +36,8 @@ modes:
   fire_neg: {{flow: {{th: w, w: "p - 0.05"}}, invariant: ["w >= -0.01"]}}
   fire_pos: {{flow: {{th: w, w: "p + 0.05"}}, invariant: ["w <= 0.01"]}}
 transitions:
-  - {{from: coast, to: fire_neg, guard: ["th >= 0.1", "w >= {offset}"], urgent: true}}
-  - {{from: coast, to: fire_pos, guard: ["th <= -0.1", "w <= -{offset}"], urgent: true}}
+  - {{from: coast, to: fire_neg, guard: ["th >= 0.1", "w >= {offset}"{cap}], urgent: true}}
+  - {{from: coast, to: fire_pos, guard: ["th <= -0.1", "w <= -{offset}"{floor}], urgent: true}}
   - {{from: fire_neg, to: coast, guard: ["w <= -0.01"], urgent: true}}
   - {{from: fire_pos, to: coast, guard: ["w >= 0.01"], urgent: true}}
 initial: {{mode: coast, box: {{th: [-0.05, 0.05], w: [0.02, 0.03]}}}}
@@ -51,10 +51,13 @@ EXTREMES = {"maxth": ("th <=", MAX_TH), "minth": ("th >=", MIN_TH),
             "maxw": ("w <=", MAX_W), "minw": ("w >=", MIN_W)}
 
 
-def _model(tmp_path, name="deadband", varying=False, coast_th="w", offset="0"):
+def _model(tmp_path, name="deadband", varying=False, coast_th="w", offset="0", capped=False):
+    """``capped``: each guard gains a third row, ``th <= 0.2`` and ``th >= -0.2``, which no run
+    reaches (the extremes stay)."""
     path = tmp_path / f"{name}.yaml"
     path.write_text(MODEL.format(name=name, varying=", varying: true" if varying else "",
-                                 coast_th=coast_th, offset=offset))
+                                 coast_th=coast_th, offset=offset, cap=', "th <= 0.2"' if capped else "",
+                                 floor=', "th >= -0.2"' if capped else ""))
     return load_model(path)
 
 
@@ -153,3 +156,19 @@ def test_time_varying_disturbance(tmp_path):
     assert result.status is Status.UNSAFE
     ce = result.counterexample
     assert replay(model, prop, ce.initial_state, ce.switch_time, ce.dt, ce.input_signal).violated
+
+
+def test_a_guard_row_met_all_over_the_face_needs_no_rate(tmp_path):
+    """With ``th <= 0.2`` in the guard, the face ``th = 0.1`` meets that row everywhere: the LP
+    over the face where it is not met is infeasible, which proves the row ``th <= 0.1`` keeps
+    as much as the rate on ``w < 0`` does. The other face, ``th = 0.2``, is crossed (``th' = w``
+    falls there outside the guard, ``w < 0``): its row is not kept. SAFE 1 % beyond the largest
+    angle, as with two rows."""
+    model = _model(tmp_path, capped=True)
+    data = _LinearModel.of(model)
+    rows = {jump.target: [(np.round(a[:2], 12).tolist(), round(float(b), 12))
+                          for a, b in _barrier_rows(data, "coast", jump)] for jump in data.jumps["coast"]}
+    assert rows == {"fire_neg": [([1.0, 0.0], 0.1)], "fire_pos": [([-1.0, 0.0], 0.1)]}
+    prop, _ = _prop(tmp_path, model, "maxth", 0.01)
+    result = BACKEND.check(model, prop)
+    assert result.status is Status.SAFE, result.details.get("reason")

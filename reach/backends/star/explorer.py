@@ -216,7 +216,9 @@ def _barrier_rows(data, mode: str, jump) -> list:
     ``L >= kappa (h_j x - g_j) > 0`` where row ``j`` is not met; a constant rate must be
     positive). The deadband's coast mode and its guard ``th >= 0.1 & w >= 0`` (``th' = w``):
     on ``th = 0.1`` with ``w < 0``, ``th`` falls, so a run that enters with ``th <= 0.1``
-    keeps it. An LP without an optimal value (unbounded, infeasible, failed) proves nothing."""
+    keeps it. An infeasible LP (that part of the face empty: ``th <= 0.2`` in ``th >= 0.1 & w >= 0
+    & th <= 0.2`` is met all over ``th = 0.1``) needs no rate; an unbounded or failed one
+    proves nothing."""
     flow = data.flows[mode]
     out = []
     for i, (h, c) in enumerate(zip(jump.H, jump.g)):
@@ -234,8 +236,10 @@ def _barrier_rows(data, mode: str, jump) -> list:
 def _enters_beyond(data, mode: str, h, c: float, rate, const: float, kappa: float, hj, gj: float) -> bool:
     """Whether ``min L(x) - kappa (hj x - gj) >= 0`` (``> 0`` where ``kappa = 0``) over the face
     ``h x = c`` cut by ``hj x >= gj``, the invariant of ``mode`` and the ranges of
-    :func:`_barrier_rows` (``L(x) = rate . x + const``): one LP, False when it has no optimal
-    value."""
+    :func:`_barrier_rows` (``L(x) = rate . x + const``): one LP. True when that part of the
+    face is empty (the LP infeasible: no point meets its rows even to the solver's tolerance,
+    so on the face row ``j`` is always met and no run is outside ``G`` there for that row);
+    False when it is unbounded or fails."""
     H_inv, g_inv = data.invariants[mode]
     A_ub = np.vstack([-hj[None], H_inv]) if H_inv.shape[0] else -hj[None]
     b_ub = np.concatenate([[-gj], g_inv])
@@ -244,6 +248,8 @@ def _enters_beyond(data, mode: str, h, c: float, rate, const: float, kappa: floa
                           bounds=(data.ranges.low, data.ranges.high), tolerance=DEPTH_LP_TOLERANCE)
     except lp.LPError:
         return False
+    if res.infeasible:
+        return True
     if not res.optimal:
         return False
     value = res.value + const + kappa * float(gj)
