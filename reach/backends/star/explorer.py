@@ -117,6 +117,21 @@ class _Path:
                      self.stalled, self.origin, self.since, self.nested + refinements)
 
 
+class _Pending(dict):
+    """The successors a chain collects for aggregation: per transition index, a list of
+    ``(member, path)``; ``sizes[index]``: a bound of ``|x|`` per coordinate over the states
+    that took it (their box bounds, no LP), for :func:`.transitions.kept_rows`."""
+
+    def __init__(self):
+        super().__init__()
+        self.sizes: dict[int, np.ndarray] = {}
+
+    def note_size(self, index: int, entered: Star):
+        bound = entered.box_bound()
+        size = np.maximum(np.abs(bound.low), np.abs(bound.high))
+        self.sizes[index] = np.maximum(self.sizes[index], size) if index in self.sizes else size
+
+
 class _Stop(Exception):
     """Abort the exploration: a replayed counterexample, or the LP budget is spent.
     ``imprecise``: undecided for want of precision, which a finer step may bring
@@ -529,7 +544,7 @@ class _Explorer:
         if cells is None and fit is None:
             self._flow_chain(mode, star, path, guess, direction)
             return
-        pending: dict[int, list] = {}
+        pending = _Pending()
         inherited = None
         while star is not None:
             block = min(c for c in (cells, fit) if c is not None) if (cells or fit) else None
@@ -574,14 +589,15 @@ class _Explorer:
         three arrays of centre and basis, ``n (nvars + 1)`` numbers each."""
         return 8 * 3 * self.n * (nvars + 1)
 
-    def _aggregate_pending(self, mode: str, pending: dict[int, list] | None):
+    def _aggregate_pending(self, mode: str, pending: _Pending | None):
         """Aggregate the successors a chain in ``mode`` collected, per transition, cut by the
         rows of :func:`.transitions.kept_rows` from the rows the chain's segments were cut by
         (:meth:`_flow_invariant`: every run that jumps meets them)."""
         Hi, gi = self._flow_invariant(mode)
         for index, members in (pending or {}).items():
             jump = self.jumps[mode][index]
-            rows = kept_rows(jump, Hi, gi, self._inputs_read(jump), self.opt.touch_tolerance)
+            rows = kept_rows(jump, Hi, gi, self._inputs_read(jump), self.opt.touch_tolerance,
+                             pending.sizes.get(index))
             self._aggregate(jump.target, members, rows)
 
     def _rebase_cells(self, mode: str) -> int | None:
@@ -774,7 +790,7 @@ class _Explorer:
                      and (path.jumps >= self.aggregate_after or wide)) or \
                     (self.aggregate_after is not None and flow.drift and drift_limit is not None
                      and star.nvars > drift_limit)
-        pending: dict[int, list] | None = None if not aggregate else {} if collect is None else collect
+        pending: _Pending | None = None if not aggregate else _Pending() if collect is None else collect
         runs = _consecutive(sorted(candidates)) if merged else [(j, 1) for j in sorted(candidates)]
         returns = self._returns(mode, star, path) if inherited is None and 0 in candidates else ()
         while runs:
@@ -1540,6 +1556,7 @@ class _Explorer:
                 member = _tightened(successor, len(g) + len(self.invariants[jump.target][1]))
                 if member is not None:
                     pending.setdefault(index, []).append((member, descended))
+                    pending.note_size(index, entered)
                 continue
             # the known point's own chord: (a, lam a, lam, 0) from lam = 0 to 1, or its ray
             # (a, s) from s = 0 to 1 in a constant-flow mode

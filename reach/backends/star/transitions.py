@@ -223,9 +223,14 @@ def _unsubsumed(jumps: list[_Jump], H_inv, g_inv) -> list[_Jump]:
     """The jumps worth firing: ``j`` is dropped when an earlier kept jump ``k`` has the same
     target and reset and ``guard_j and invariant`` implies every row of ``guard_k`` (one LP
     per row over the state space); the successors of ``j`` are then contained in those of
-    ``k``, whatever the segment. A jump whose guard misses the invariant is dropped too."""
+    ``k``, whatever the segment. A row of ``guard_k`` is implied when ``guard_j`` or the
+    invariant holds it as stored (bound no larger), else by the LP's maximum at most its bound,
+    with no allowance: a state of ``guard_j`` outside ``guard_k`` by a hair takes ``j``, and
+    the successors of ``k`` would not hold it. A jump whose guard misses the invariant is
+    dropped too."""
     def implies(region: HPolytope, k: _Jump) -> bool:
-        return all((res := region.maximize(row)).optimal and res.value <= bound + 1e-9 * (1 + abs(bound))
+        return all(np.any(np.all(region.A == row, axis=1) & (region.b <= bound))
+                   or ((res := region.maximize(row)).optimal and res.value <= bound)
                    for row, bound in zip(k.H, k.g))
 
     kept = []
@@ -272,18 +277,20 @@ def _modes_leading_to(model, targets: set[str]) -> set[str]:
     return reach
 
 
-def kept_rows(jump: _Jump, H_src, g_src, frozen=(), tolerance: float = 1e-9):
+def kept_rows(jump: _Jump, H_src, g_src, frozen=(), tolerance: float = 1e-9, size=None):
     """``(K, k)``: rows every successor ``y = R x + r`` of the jump satisfies, from the rows
     ``h x <= g`` of its guard and of ``(H_src, g_src)`` (rows every state that takes it meets:
     the source's invariant and the rows its chain was cut by), an aggregate keeping what a
     guard pins down (``T = 21`` from ``T >= 21`` and ``T <= 21``; with ``v := 0.8 v``, the
     switching line ``x + v = -0.2`` as ``x + 1.25 v = -0.2``).
 
-    A row whose ``h`` lies in the row space of the reset, ``h = a R`` (``a`` by least squares,
-    kept where ``|a R - h| <= 1e-12 |h|``), gives ``a (y - r) = h x <= g``: the row
-    ``a y <= g + a r``, relaxed by ``tolerance * max(1, |g|, |a r|)`` against the rounding of
-    ``a`` (none where ``a = h`` over states the reset leaves alone, ``x+ = x``: no rounding).
-    A row over a state the reset overwrites (``x := 0``) is not in the row space, and is dropped. So is a row that
+    A row over states the reset leaves alone (``x+ = x``) is kept as it is (``a = h``, exact).
+    Any other row ``h`` is written ``h = a R + e`` (``a`` by least squares, kept where ``|e| <=
+    1e-12 |h|``): ``a y = h x - e x + a r <= g + a r + |e| s`` with ``s`` a bound of ``|x|``
+    over the states that took the jump (``size``, per coordinate; without it, no such row).
+    ``e`` is computed, so the slack adds four roundings of ``|a| |R| + |h|`` to ``|e|``, and
+    ``tolerance * max(1, |g|, |a r|)`` for the rounding of ``a r``. A row over a state the
+    reset overwrites (``x := 0``) is not in the row space, and is dropped. So is a row that
     reads, or would constrain, a coordinate in ``frozen`` (the time-varying inputs the reset
     reads: it takes any value of their ranges, and after the jump their coordinates are
     independent of what they were, :meth:`.explorer._Explorer._fresh_inputs`)."""
@@ -295,12 +302,16 @@ def kept_rows(jump: _Jump, H_src, g_src, frozen=(), tolerance: float = 1e-9):
         return H[:0], g[:0]
     alone = np.all(jump.R == np.eye(n), axis=1) & (jump.r == 0)
     exact = np.all((H == 0) | alone[None, :], axis=1)       # a = h, no rounding
+    if size is None or not np.all(np.isfinite(size)):
+        keep = exact & np.all(H[:, list(frozen)] == 0, axis=1)
+        return H[keep], g[keep]
     A = H.copy()
     A[~exact] = 0.0
     A[np.ix_(~exact, free)] = np.linalg.lstsq(jump.R[free].T, H[~exact].T, rcond=None)[0].T
-    residual = np.linalg.norm(A @ jump.R - H, axis=1)
-    keep = np.all(np.isfinite(A), axis=1) & (residual <= 1e-12 * np.linalg.norm(H, axis=1))
+    E = np.abs(A @ jump.R - H) + 4 * np.finfo(float).eps * (np.abs(A) @ np.abs(jump.R) + np.abs(H))
+    keep = np.all(np.isfinite(A), axis=1) & (np.linalg.norm(A @ jump.R - H, axis=1) <= 1e-12 * np.linalg.norm(H, axis=1))
     keep &= np.all(H[:, list(frozen)] == 0, axis=1)
-    A, g, shift, exact = A[keep], g[keep], A[keep] @ jump.r, exact[keep]
-    slack = np.where(exact, 0.0, tolerance * np.maximum(1.0, np.maximum(np.abs(g), np.abs(shift))))
+    A, g, E, exact = A[keep], g[keep], E[keep], exact[keep]
+    shift = A @ jump.r
+    slack = np.where(exact, 0.0, E @ np.abs(size) + tolerance * np.maximum(1.0, np.maximum(np.abs(g), np.abs(shift))))
     return A, g + shift + slack
