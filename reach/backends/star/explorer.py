@@ -20,7 +20,7 @@ from reach.backends.star.flowpipe import (ChainInputs, _block_spreads, _chain_ab
 from reach.backends.star.options import (CHATTER_JUMPS, DEPTH_LP_TOLERANCE, ERROR_RATIO, INSTANT_STEP_FRACTION, INSTANT_WIDTH,
                                          MAX_CELLS, MAX_CHAIN_BYTES, MEMORY_FRACTION, MEMORY_PERIOD, NAME,
                                          PROGRESS_SECONDS, STALL_JUMPS, TIGHT_RATIO, StarOptions)
-from reach.backends.star.returns import entry_rows, fixed_on_face, rising, undone
+from reach.backends.star.returns import entry_rows, rising, undone
 from reach.backends.star.stops import meets, stop_pieces, stop_rows
 from reach.backends.star.switching import group_pieces
 from reach.backends.star.transitions import (_LinearModel, _modes_leading_to, _Piece,
@@ -1292,10 +1292,9 @@ class _Explorer:
         """``(jump, rows)`` for each jump of ``mode`` that may return the runs of a chain's
         ``start`` to the mode they all came from, undoing the reset they came by, with the rows of
         its guard that every run meets from outside at its entry: conditions (a) of
-        :mod:`.returns` (``_cell`` checks (b) on the first cell's segment); and each self-loop
-        with the rows among those on whose face its reset changes nothing. No undoing jump where
-        the runs came by different jumps (an aggregate of several) or from the initial star;
-        none at all where the mode's flow is a linearisation (valid only in its block's region)."""
+        :mod:`.returns` (``_cell`` checks (b) on the first cell's segment). Empty where the runs
+        came by different jumps (an aggregate of several), from the initial star, or where the
+        mode's flow is a linearisation (valid only in its block's region)."""
         if self.linearise is not None and mode in self.linearise.curved:
             return ()
         if path.entries:
@@ -1303,20 +1302,12 @@ class _Explorer:
         elif path.origin is not None:
             name = self._entered_by(path.origin.members)
         else:
-            name = None
-        came = self._sources.get(name, []) if name is not None else []
-        came = came[0][1] if len(came) == 1 else None
+            return ()
         out = []
         for jump in self._undoing(mode, name):
-            rows = entry_rows(jump, self.invariants[mode], start, came)
+            rows = entry_rows(jump, self.invariants[mode], start)
             if rows:
                 out.append((jump, rows))
-        undoing = {jump.name for jump, _ in out}
-        for jump in self.jumps[mode]:           # self-loops fixed on a face, however the runs came
-            if jump.target == mode and jump.H.shape[0] and jump.name not in undoing:
-                rows = [k for k in entry_rows(jump, self.invariants[mode], start, came) if fixed_on_face(jump, k)]
-                if rows:
-                    out.append((jump, rows))
         return tuple(out)
 
     def _undoing(self, mode: str, name: str | None) -> list:

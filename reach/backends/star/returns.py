@@ -1,5 +1,4 @@
-"""Zero-dwell returns: a jump straight back to the mode a run has just left, at the same state
-(or a self-loop that leaves it there).
+"""Zero-dwell returns: a jump straight back to the mode a run has just left, at the same state.
 
 A saturated controller written as three modes (``lin`` and ``sat`` on either side of
 ``|k x| = 1``), with closed guards on the shared boundary, lets a run that reaches the boundary
@@ -13,10 +12,7 @@ undo it: ``R2 R1 = I`` and ``R2 r1 + r2 = 0``. Let one row ``h x <= g`` of ``J2`
 
 (a) ``h x >= g`` for every run at its entry: ``M``'s invariant holds the row ``-h x <= c`` with
     ``c <= -g`` (rows normalised; exactly opposite, as rows from one expression are), or ``S``
-    reaches no deeper than 0 into ``h x <= g`` (the weak-duality bound of :meth:`.Star.depth`),
-    or the jump the runs came by implies it: a row ``h1 x <= g1`` of its guard with ``h R1 =
-    -lam h1``, ``lam >= 0``, and ``h r1 - lam g1 >= g`` gives ``h (R1 x + r1) >= -lam g1 + h r1
-    >= g`` for every state that takes it (a touch the LP reads as 1e-13 deep, exactly 0);
+    reaches no deeper than 0 into ``h x <= g`` (the weak-duality bound of :meth:`.Star.depth`);
 (b) ``h x`` strictly increases along every run while it is in the segment ``Q`` of the chain's
     first cell: ``d/dt (h x) = h (A x + b) + h B (u - u_c) >= min_Q h A x + h b - |h B| u_r > 0``
     (the minimum by the coefficient box, else by :meth:`.Star.depth` against
@@ -28,13 +24,6 @@ Then ``h x(tau) > h x(0) >= g`` for ``0 < tau <= `` the cell's length, so no run
 which the exploration of ``P`` already follows (flow, checks and jumps). So ``J2`` need not be
 taken from the first cell (nor from its halves, whose runs are the cell's), and every run is
 still covered. Later cells take ``J2`` as any jump.
-
-Self-loops fixed on a face. The same holds for a jump ``J2: M -> M`` whatever the runs came
-by, if its reset leaves the face of the row unchanged: ``R2 - I = k h`` and ``r2 = -k g`` for
-a vector ``k``, so ``R2 x + r2 = x + k (h x - g) = x`` where ``h x = g``. A run that takes it
-at ``tau = 0`` stays at its state, in its mode, at its instant: the run that did not. A ball
-on a wall, ``x >= 1 & v >= 0`` with ``v := -0.5 v``, grazes it at ``(1, 0)``, where the reset
-changes nothing and would otherwise be taken again without end.
 """
 from __future__ import annotations
 
@@ -47,40 +36,15 @@ def undone(first, second) -> bool:
     return bool(np.array_equal(R, np.eye(R.shape[0])) and not np.any(r))
 
 
-def fixed_on_face(jump, k: int) -> bool:
-    """Whether ``jump``'s reset leaves every state of the face ``h x = g`` of its guard row
-    ``k`` unchanged: ``R - I = k h``, ``r = -k g`` (up to 1e-14 of their size)."""
-    h, g = jump.H[k], float(jump.g[k])
-    D = jump.R - np.eye(jump.R.shape[0])
-    kappa = D @ h / float(h @ h)
-    scale = 1e-14 * (1.0 + np.abs(D).max() + np.abs(jump.r).max(initial=0.0))
-    return bool(np.all(np.abs(np.outer(kappa, h) - D) <= scale) and np.all(np.abs(jump.r + kappa * g) <= scale))
-
-
-def entry_rows(jump, invariant, start, came=None) -> list[int]:
-    """The rows of ``jump``'s guard that every run of ``start`` meets from outside, (a) above;
-    ``came``: the jump every run of ``start`` entered by, or None."""
+def entry_rows(jump, invariant, start) -> list[int]:
+    """The rows of ``jump``'s guard that every run of ``start`` meets from outside, (a) above."""
     H, g = invariant
     rows = []
     for k, (a, b) in enumerate(zip(jump.H, jump.g)):
         kept = any(np.array_equal(H[i], -a) and g[i] <= -b for i in range(H.shape[0]))
-        if kept or (came is not None and _implied(came, a, float(b))) or \
-                (start.box.bounded and start.depth(a[None], np.array([b]))[0] <= 0.0):
+        if kept or (start.box.bounded and start.depth(a[None], np.array([b]))[0] <= 0.0):
             rows.append(k)
     return rows
-
-
-def _implied(came, h, g: float) -> bool:
-    """Whether every successor ``R1 x + r1`` of a state meeting the guard of ``came`` meets
-    ``h x >= g``: a guard row ``h1 x <= g1`` with ``h R1 = -lam h1`` (up to 1e-14 of its
-    size), ``lam >= 0``, ``h r1 - lam g1 >= g``."""
-    w = h @ came.R
-    for h1, g1 in zip(came.H, came.g):
-        lam = -float(w @ h1) / float(h1 @ h1)
-        if lam >= 0.0 and np.all(np.abs(w + lam * h1) <= 1e-14 * (1.0 + np.abs(w).max())) \
-                and float(h @ came.r) - lam * float(g1) >= g:
-            return True
-    return False
 
 
 def rising(flow, jump, rows, segment) -> bool:
