@@ -121,8 +121,8 @@ def writable_folder(folder, option: str) -> Path:
 
 def writable_file(path, option: str, probe: bool = True) -> Path:
     """``path`` can be written: its folder exists or is made (:func:`writable_folder`), and it is
-    not a folder, a read-only file nor a symbolic link (writing would go through it, to wherever
-    it points); a file is opened (and removed again if it was new), so that a place that takes
+    not a folder, a read-only file, a symbolic link (writing would go through it, to wherever
+    it points) nor another non-regular file (a FIFO, which would block the write, or a device); a file is opened (and removed again if it was new), so that a place that takes
     no file (``/proc``) is bad input before any computation, not after it. ``probe=False`` skips
     that opening: for a file another process may be creating and locking at the same time (a
     lock file, which the probe could remove under it)."""
@@ -132,6 +132,8 @@ def writable_file(path, option: str, probe: bool = True) -> Path:
         raise InputError(f"{printable(path)} is a symbolic link: not written through", field=option)
     if path.is_dir():
         raise InputError(f"{printable(path)} is a folder (give a file name)", field=option)
+    if path.exists() and not path.is_file():        # a FIFO would block the write, a device take it
+        raise InputError(f"{printable(path)} is not a regular file: not written", field=option)
     if path.exists() and not os.access(path, os.W_OK):
         raise InputError(f"cannot write {printable(path)}", field=option)
     if not probe:

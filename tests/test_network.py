@@ -1,6 +1,7 @@
 """SIREN network controller: forward pass, DA evaluation, model law, shipped weights, errors."""
 
 import math
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -40,7 +41,7 @@ def reference(arrays, s):
 
 
 def load(path):
-    return Siren.load(path, Where("test.yaml", "control.network", 3))
+    return Siren.load(path, Where(str(Path(path).parent / "test.yaml"), "control.network", 3))
 
 
 @pytest.fixture
@@ -188,6 +189,32 @@ def test_network_errors_are_one_located_line(tmp_path, arrays, net, feedback, wo
     assert message.startswith(f"{path}:7: modes.m.control.network: ")
     for word in words:
         assert word in message
+
+
+def test_a_compressed_bomb_is_refused_before_it_is_unpacked(tmp_path):
+    """60 MB of zeros pack into 60 kB: refused by the unpacked sizes the archive states, before
+    any array is read (300 million zeros in 2.3 MB took more than 3 GB)."""
+    arrays = random_arrays(np.random.default_rng(8))
+    (tmp_path / "inner").mkdir()
+    np.save(tmp_path / "inner" / "W1.npy", np.zeros((3000, 2500)))
+    with zipfile.ZipFile(tmp_path / "net.npz", "w", zipfile.ZIP_DEFLATED) as archive:
+        archive.write(tmp_path / "inner" / "W1.npy", "W1.npy")
+        for name, value in arrays.items():
+            if name != "W1":
+                np.save(tmp_path / "inner" / f"{name}.npy", value)
+                archive.write(tmp_path / "inner" / f"{name}.npy", f"{name}.npy")
+    assert (tmp_path / "net.npz").stat().st_size < 1_000_000
+    with pytest.raises(InputError, match=r"net\.npz: its arrays take \d+ bytes unpacked, more than 50000000"):
+        load_model(write_model(tmp_path))
+
+
+def test_weights_outside_the_model_folder_and_the_working_folder_are_not_read(tmp_path, monkeypatch):
+    (tmp_path / "model").mkdir()
+    (tmp_path / "elsewhere").mkdir()
+    np.savez(tmp_path / "elsewhere" / "net.npz", **random_arrays(np.random.default_rng(9)))
+    monkeypatch.chdir(tmp_path / "model")
+    with pytest.raises(InputError, match="lies outside the folder of the model file and the working folder"):
+        load_model(write_model(tmp_path / "model", net="../elsewhere/net.npz"))
 
 
 def test_pickled_arrays_are_refused(tmp_path):

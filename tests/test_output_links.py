@@ -4,6 +4,7 @@ picture, everything ``reach bench`` writes), ``reach compare`` reads results fil
 timeout, and a crowded run picture says nothing on stderr."""
 
 import json
+import os
 import shutil
 import signal
 import warnings
@@ -198,3 +199,29 @@ def test_a_crowded_run_picture_says_nothing_on_stderr(tmp_path, capsys):
     out, err = capsys.readouterr()
     assert err == "" and out.strip() == f"wrote {tmp_path / 'x.png'}"
     assert (tmp_path / "x.png").stat().st_size > 10_000
+
+
+# 3. a FIFO (or any other non-regular file) at an output path: refused, never opened (a FIFO
+#    would block the write for ever)
+
+@pytest.mark.parametrize("command,name", [
+    (["plot", "thermostat.yaml", "thermostat_props.yaml", "-b", "star", "-p", "band", "--out", "pic.png"], "pic.png"),
+    (["bench", "--suite", "suite.yaml", "--instance", "thermostat", "-j", "1", "--out", "bs"], "bs/results.json"),
+    (["bench", "--suite", "suite.yaml", "--instance", "thermostat", "-j", "1", "--out", "bs"],
+     "bs/plots/thermostat_runs.png"),
+])
+def test_a_fifo_at_an_output_path_is_bad_input(thermostat, capsys, command, name):
+    (thermostat / name).parent.mkdir(parents=True, exist_ok=True)
+    os.mkfifo(thermostat / name)
+    assert main(command) == 2
+    assert _one_line(capsys.readouterr().err) == f"reach: --out: {name} is not a regular file: not written"
+
+
+def test_a_fifo_where_a_counterexample_goes_is_bad_input(thermostat, capsys):
+    (thermostat / "props.yaml").write_text(
+        "properties:\n  - {id: hot, kind: safety, modes: [heating, \"off\"], require: [\"T <= 20.5\"]}\n")
+    (thermostat / "counterexamples").mkdir()
+    os.mkfifo(thermostat / "counterexamples" / "thermostat_hot_star.json")
+    assert main(["check", "thermostat.yaml", "props.yaml", "-b", "star"]) == 2
+    assert capsys.readouterr().err.strip().endswith(
+        "--counterexamples: counterexamples/thermostat_hot_star.json is not a regular file: not written")

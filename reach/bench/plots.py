@@ -9,6 +9,7 @@ import numpy as np
 
 from reach.backends.montecarlo import random_plan, structured_plan, switch_window
 from reach.model.simulate import Simulator
+from reach.paths import writable_file
 
 
 def _pyplot():
@@ -30,7 +31,7 @@ def _save(fig, out: Path) -> None:
         for message in LAYOUT_WARNINGS:
             warnings.filterwarnings("ignore", message=message, category=UserWarning)
         fig.tight_layout()
-        out.parent.mkdir(parents=True, exist_ok=True)
+        writable_file(out, "--out", probe=False)
         fig.savefig(out, dpi=110)
 
 

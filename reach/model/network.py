@@ -28,6 +28,7 @@ such models can be sent to worker processes.
 from __future__ import annotations
 
 import hashlib
+import io
 import re
 import zipfile
 from pathlib import Path
@@ -36,7 +37,11 @@ import numpy as np
 import sympy
 from sympy.core.function import UndefinedFunction
 
-from reach.errors import Where
+from reach.errors import InputError, Where
+from reach.paths import read_bytes, within
+
+#: the largest network weights file, packed and unpacked (a SIREN of 256 x 256 layers is 0.5 MB)
+MAX_NETWORK_BYTES = 50_000_000
 
 
 class Siren:
@@ -81,8 +86,20 @@ class Siren:
             found = False
         if not found:
             raise fail("network weights file not found")
+        home = Path(where.file).resolve().parent if where.file else Path.cwd()
+        if not within(path, [home, Path.cwd()]):
+            raise fail("lies outside the folder of the model file and the working folder: network "
+                       "weights are read only from there")
         try:
-            with np.load(path, allow_pickle=False) as data:
+            raw = read_bytes(path, (".npz",), "network weights file", MAX_NETWORK_BYTES)
+        except InputError as exc:
+            raise fail(exc.message) from None
+        try:
+            with zipfile.ZipFile(io.BytesIO(raw)) as archive:
+                unpacked = sum(info.file_size for info in archive.infolist())
+            if unpacked > MAX_NETWORK_BYTES:
+                raise fail(f"its arrays take {unpacked} bytes unpacked, more than {MAX_NETWORK_BYTES}")
+            with np.load(io.BytesIO(raw), allow_pickle=False) as data:
                 arrays = {k: data[k] for k in data.files}
         except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
             raise fail(f"not a readable .npz of plain arrays ({str(exc).splitlines()[0]})") from None
@@ -130,7 +147,7 @@ class Siren:
         scale = numeric("input_scale", (n_inputs,))
         if np.any(scale <= 0):
             raise fail("array 'input_scale' must be positive")
-        digest = hashlib.sha256(path.read_bytes()).hexdigest()[:10]
+        digest = hashlib.sha256(raw).hexdigest()[:10]
         tag = re.sub(r"\W", "_", path.stem) + "_" + digest
         return cls(weights, biases, omega, offset, scale, tag)
 
