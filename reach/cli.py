@@ -303,7 +303,12 @@ def cmd_replay(args) -> int:
         raise InputError(exc.message, args.counterexample, exc.field) from None
     prop = bind(props[0], model)
     branches = None if cex.transitions is None else Branches(prescribed=[cex.transitions])
-    rep = replay(model, prop, cex.initial_state, cex.switch_time, cex.dt or None, cex.input_signal, branches)
+    try:
+        rep = replay(model, prop, cex.initial_state, cex.switch_time, cex.dt or None, cex.input_signal, branches)
+    except InputError as exc:               # a step the replay cannot hold (the file's dt)
+        if exc.file:
+            raise
+        raise InputError(exc.message, args.counterexample, exc.field) from None
     state = ", ".join(f"{n}={v:.6g}" for n, v in zip(model.state, rep.state))
     if cex.transitions is not None and rep.transitions[:len(cex.transitions)] != cex.transitions:
         print(printable(f"note: the run took the transitions {few(rep.transitions, 8, '(none)')}; "

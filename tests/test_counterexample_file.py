@@ -147,3 +147,52 @@ def test_a_violation_before_the_run_leaves_the_real_numbers_replays(tmp_path, ca
     assert main(["replay", str(path)]) == 1
     out = capsys.readouterr().out
     assert out.startswith("replayed:") and "the run leaves the real numbers later" in out
+
+
+def test_a_replay_too_large_to_hold_is_bad_input_at_the_file(tmp_path, capsys):
+    """151 states at dt = 6e-5 over 300 s: 5e6 recorded steps (inside the step cap), 45 GiB of
+    recorded states; the replay grew past 18 GB. It is refused before it runs, naming the file
+    and its dt."""
+    import json
+
+    import yaml
+
+    from reach.cli import main
+
+    names = [f"x{i}" for i in range(151)]
+    (tmp_path / "m.yaml").write_text(yaml.safe_dump({
+        "name": "wide", "state": names, "horizon": 300,
+        "modes": {"a": {"flow": {n: f"-0.01*{n}" for n in names}}},
+        "initial": {"mode": "a", "box": {n: 1 for n in names}}}))
+    (tmp_path / "p.yaml").write_text(yaml.safe_dump(
+        {"properties": [{"id": "low", "kind": "safety", "modes": ["a"], "require": ["x0 <= 0.5"]}]}))
+    (tmp_path / "cx.json").write_text(json.dumps({
+        "model": "wide", "property": "low", "model_file": "m.yaml", "property_file": "p.yaml",
+        "initial_state": [1.0] * 151, "switch_time": None, "dt": 6e-5}))
+    assert main(["replay", str(tmp_path / "cx.json")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "cx.json: dt:" in err and "GiB" in err
+
+
+def test_an_overflowing_requirement_is_a_violation_not_a_touch(tmp_path, capsys):
+    """``exp(exp(t)) <= 1e300`` with a step that jumps from below the bound to an overflow: the
+    margin is -inf and the row's magnitude inf, and ``1e-9 * (1 + inf)`` read it as a touch
+    (UNKNOWN, exit 3). The bound is passed at t = ln(ln(1e300)) = 6.5377: UNSAFE, replayed."""
+    import math
+
+    import yaml
+
+    from reach.cli import main
+
+    (tmp_path / "m.yaml").write_text(yaml.safe_dump({
+        "name": "m", "state": ["x", "t"], "horizon": 8,
+        "modes": {"a": {"flow": {"x": 0, "t": 1}}}, "initial": {"mode": "a", "box": {"x": 0, "t": 0}}}))
+    (tmp_path / "p.yaml").write_text(yaml.safe_dump(
+        {"properties": [{"id": "big", "kind": "safety", "modes": ["a"], "require": ["exp(exp(t)) <= 1e300"]}]}))
+    code = main(["check", str(tmp_path / "m.yaml"), str(tmp_path / "p.yaml"), "-b", "montecarlo",
+                 "-o", "dt=0.125", "--counterexamples", str(tmp_path / "cx")])
+    out = capsys.readouterr().out
+    assert code == 1, out
+    t = float(out.split("violated at t=")[1].split()[0])
+    assert math.log(math.log(1e300)) <= t <= math.log(math.log(1e300)) + 0.125 + 1e-9
+    assert main(["replay", str(tmp_path / "cx" / "m_big_montecarlo.json")]) == 1

@@ -205,7 +205,10 @@ def affine_magnitudes(H: np.ndarray, g: np.ndarray, sources: np.ndarray | None =
 def _magnitudes(rows: list, n: int, sources: np.ndarray | None):
     """``X (N, n) -> (N, m)`` from ``rows`` of ``(weights, constant, terms)``: the largest of the
     constant, of ``weights_i s_i`` (:func:`row_magnitudes`) and, where ``terms`` is not None (a
-    function of the states giving the row's additive terms), of the terms' magnitudes."""
+    function of the states giving the row's additive terms), of the terms' magnitudes. An
+    infinite magnitude (an overflow, ``exp(exp(t))``) is read as 0: the margin it comes with is
+    no rounding of a finite number, and ``-inf`` must count as beyond the bound, not within a
+    tolerance of ``1e-9 * inf``."""
     columns = [np.flatnonzero(w) for w, _, _ in rows]
     read = np.zeros(n, dtype=bool)
     for cols in columns:
@@ -228,6 +231,7 @@ def _magnitudes(rows: list, n: int, sources: np.ndarray | None):
                 for term in terms(X.T):
                     np.maximum(out[:, r], np.abs(np.broadcast_to(np.asarray(term, dtype=float), X.shape[:1])),
                                out=out[:, r])
+        out[np.isinf(out)] = 0.0            # an infinite value is no rounding: -inf is beyond any bound
         return out
 
     return magnitudes

@@ -24,7 +24,7 @@ from reach.errors import InputError
 from reach.model.automaton import HybridAutomaton
 from reach.model.constraints import row_magnitudes
 from reach.model.batch_nonlinear import probe_rows, too_stiff_text
-from reach.model.simulate import MAX_STEPS, Branches, Simulator, single_threaded, value_sources
+from reach.model.simulate import MAX_STEPS, MEMORY_BUDGET, Branches, Simulator, single_threaded, value_sources
 from reach.result import Counterexample
 from reach.spec.properties import BoundEvent, BoundSafety
 
@@ -140,8 +140,18 @@ def _replay_simulator(model: HybridAutomaton, dt: float | None, signal) -> Simul
     sim = Simulator(model, dt)
     if signal is not None and not sim.on_grid(signal[0]):
         sim = Simulator(model, signal[0] / math.ceil(signal[0] / sim.dt - 1e-9))
+    recorded = model.horizon / sim.dt * (model.n + 2) * RECORD_BYTES_PER_VALUE
+    if recorded > MEMORY_BUDGET:
+        raise InputError(f"{model.name}: a replay at step {sim.dt:g} records {model.horizon / sim.dt:.3g} "
+                         f"states of {model.n} values, about {recorded / 2 ** 30:.1f} GiB; at most "
+                         f"{MEMORY_BUDGET / 2 ** 30:.0f} GiB are planned for (use a larger dt)", field="dt")
     sim.tables = dict.fromkeys(model.modes)
     return sim
+
+
+#: bytes a replay holds per recorded value (its time, mode and states per grid step: the
+#: recorder's lists and the arrays made from them)
+RECORD_BYTES_PER_VALUE = 64
 
 
 def _replay_safety(model: HybridAutomaton, prop: BoundSafety, initial_state, switch_time: float | None,
