@@ -175,3 +175,13 @@ def test_both_faces_of_an_absolute_bound_are_stop_faces(tmp_path):
     assert len([f for f in model.stop_faces if f.mode == "go"]) == 2
     (finding, _), = blocking_faces(model)
     assert finding.count("abs(x) <= 1") == 1
+
+
+def test_looser_copies_of_an_invariant_row_are_not_faces_of_their_own(tmp_path):
+    """``x <= 5`` and 2999 looser ``x <= k``: only ``x <= 5`` has an exit face (the others lie
+    beyond it), and only it is examined; each of the 3000 rows took two LPs of 3000 rows (40 s
+    for the lint, a check never started)."""
+    rows = ["x <= 5"] + [f"x <= {k}" for k in range(6, 3005)]
+    findings = blocking_faces(write(tmp_path, one_mode(rows, {"x": 1, "t": 1})))
+    assert len(findings) == 1
+    assert "boundary of x <= 5 stop there" in findings[0][0]

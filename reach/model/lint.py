@@ -423,7 +423,12 @@ def stop_faces(model) -> list[StopFace]:
                     targets.append(f"'{tr.target}': {', '.join(dict.fromkeys(texts))}")
         if any(guard is None or not len(guard[1]) for guard in guards):
             continue                            # a transition always enabled, or one not told
+        shadowed = _shadowed(H, g)
+        if H.shape[0] - len(shadowed) > MAX_FACE_ROWS:
+            continue                            # too many faces to examine (LPs of that many rows each)
         for i, constraint in enumerate(mode.invariant):   # each row (abs(x) <= 1 has two faces)
+            if i in shadowed:
+                continue
             nz = set(np.flatnonzero(H[i]).tolist())
             if clock in nz and H[i, clock] > 0 and nz - {clock} <= fixed:
                 continue                        # an end of time the model sets itself
@@ -440,6 +445,21 @@ def stop_faces(model) -> list[StopFace]:
             faces.append(StopFace(name, constraint.text, meets, targets if by_target else [], (A, b, strict, E, f),
                                   guards))
     return faces
+
+
+#: a mode whose invariant has more distinct rows is not examined for faces that stop runs
+MAX_FACE_ROWS = 200
+
+
+def _shadowed(H, g) -> set[int]:
+    """The rows of ``H x <= g`` whose face lies outside another row with the same normal and a
+    smaller bound (or the same bound, earlier): their exit face is empty or another row's."""
+    out = set()
+    for i in range(H.shape[0]):
+        same = np.flatnonzero(np.all(H == H[i], axis=1))
+        if np.any((g[same] < g[i]) | ((g[same] == g[i]) & (same < i))):
+            out.add(i)
+    return out
 
 
 def blocking_faces(model) -> list[tuple[str, bool]]:
