@@ -411,6 +411,7 @@ def test_strict_initial_constraints_that_leave_no_point_are_bad_input(tmp_path, 
     (["th >= 0"], "[-2, -1]", "refused"),                     # the box on the wrong side
     (["th >= 0"], "[-1, 1.2]", "lint"),                       # partly outside: those states start no run
     (["th >= 0"], "[0, 1.2]", "clean"),
+    (["th <= 1.5"], "[1e200, 1e201]", "refused"),              # the LP failed on 1e200 (exit 3 later)
 ])
 def test_an_initial_set_outside_its_modes_invariant(tmp_path, invariant, box, outcome):
     """No initial state in the initial mode's invariant is bad input (every property would hold

@@ -302,8 +302,18 @@ class _Builder:
         if rows is None:
             return
         A, b, E, f = rows
+        halves = mode.invariant_halfspaces
+        low, high = np.asarray(model.initial.low, float), np.asarray(model.initial.high, float)
+        if halves is not None and len(halves[1]) and np.all(np.isfinite(low)) and np.all(np.isfinite(high)):
+            H, g = np.asarray(halves[0], float).reshape(-1, model.n), np.asarray(halves[1], float).reshape(-1)
+            with np.errstate(all="ignore"):     # one row beyond the whole box: no LP needed (nor
+                least = H @ ((low + high) / 2) - np.abs(H) @ ((high - low) / 2)   # one of 1e200s)
+            outside = np.isfinite(least) & (least > g + 1e-9 * (1 + np.abs(g)))
+        else:
+            outside = np.zeros(0, dtype=bool)
         try:
-            point = lp.feasible_point(A, b, A_eq=E if E.shape[0] else None, b_eq=f if E.shape[0] else None)
+            point = None if np.any(outside) else \
+                lp.feasible_point(A, b, A_eq=E if E.shape[0] else None, b_eq=f if E.shape[0] else None)
         except lp.LPError:
             return
         if point is None:
