@@ -54,7 +54,28 @@ def test_a_suite_expecting_a_property_the_file_lacks_is_bad_input(tmp_path, caps
              "instances": [{"id": "T", "model": "tank.yaml", "properties": "level.yaml", "expect": {"nosuch": "safe"}}]}
     (tmp_path / "suite.yaml").write_text(yaml.safe_dump(suite))
     assert main(["bench", "--suite", str(tmp_path / "suite.yaml"), "--out", str(tmp_path / "out"), "-j", "1"]) == 2
-    assert "expects a verdict of 'nosuch', which is no property" in capsys.readouterr().err
+    err = capsys.readouterr().err.strip()
+    assert "expects a verdict of 'nosuch', which is no property" in err
+    assert err.startswith(f"reach: {tmp_path / 'suite.yaml'}:") and ": instances[0].expect: " in err   # file and line
+
+
+def test_an_instance_with_no_back_end_is_bad_input_at_its_line(tmp_path, capsys):
+    (tmp_path / "tank.yaml").write_text(TANK)
+    (tmp_path / "level.yaml").write_text(LEVEL.read_text())
+    suite = {"backends": {"star": {}},
+             "instances": [{"id": "T", "model": "tank.yaml", "properties": "level.yaml", "backends": []}]}
+    (tmp_path / "suite.yaml").write_text(yaml.safe_dump(suite))
+    assert main(["bench", "--suite", str(tmp_path / "suite.yaml"), "--out", str(tmp_path / "out"), "-j", "1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"reach: {tmp_path / 'suite.yaml'}:") and \
+        err.endswith("instances[0].backends: expected a non-empty list of the suite's back-ends")
+
+
+def test_a_transition_from_no_mode_is_bad_input(tmp_path, capsys):
+    (tmp_path / "m.yaml").write_text(TANK.replace("from: fill", "from: []", 1))
+    assert "from: []" in (tmp_path / "m.yaml").read_text()
+    assert main(["lint", str(tmp_path / "m.yaml")]) == 2
+    assert "from: expected a mode name or a non-empty list of mode names" in capsys.readouterr().err
 
 
 def overflowing(tmp_path, flow: str) -> Path:

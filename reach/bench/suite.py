@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from reach.backends import BACKENDS, validate_options
-from reach.errors import InputError
+from reach.errors import InputError, Where
 from reach.paths import printable, within
 from reach.yamlio import load
 
@@ -37,6 +37,7 @@ class Instance:
     source: str = ""
     backends: list[str] | None = None
     options: dict[str, dict] = field(default_factory=dict)
+    expect_where: Where | None = None       # the suite file's line of ``expect``, for its errors
 
 
 @dataclass
@@ -88,8 +89,8 @@ def load_suite(path) -> Suite:
         if not isinstance(expect, dict) or any(v not in EXPECTATIONS for v in expect.values()):
             raise doc.where("instances", i, "expect").error("expected {property: safe|unsafe}")
         chosen = item.get("backends")
-        if chosen is not None and (not isinstance(chosen, list) or set(chosen) - set(backends)):
-            raise doc.where("instances", i, "backends").error("expected a list of the suite's back-ends")
+        if chosen is not None and (not isinstance(chosen, list) or not chosen or set(chosen) - set(backends)):
+            raise doc.where("instances", i, "backends").error("expected a non-empty list of the suite's back-ends")
         options = item.get("options", {}) or {}
         if not isinstance(options, dict) or set(options) - set(backends) or \
                 not all(isinstance(v, dict) for v in options.values()):
@@ -104,7 +105,8 @@ def load_suite(path) -> Suite:
                 raise doc.where("instances", i, key).error(
                     f"{printable(item[key])} lies outside the suite's folder and the working folder: not read")
         instances.append(Instance(str(item["id"]), base / item["model"], base / item["properties"],
-                                  dict(expect), str(item.get("source", "")), chosen, options))
+                                  dict(expect), str(item.get("source", "")), chosen, options,
+                                  doc.where("instances", i, "expect")))
     return Suite(str(data.get("description", "")), {k: dict(v or {}) for k, v in backends.items()},
                  instances, doc.file)
 

@@ -484,6 +484,8 @@ class _Builder:
                 if k not in spec:
                     raise w.error(f"missing '{k}'")
             sources = spec["from"] if isinstance(spec["from"], list) else [spec["from"]]
+            if not sources:
+                raise self.where(*path, "from").error("expected a mode name or a non-empty list of mode names")
             for field, names in (("from", sources), ("to", [spec["to"]])):
                 for s in names:
                     if not isinstance(s, str) or s not in modes:
