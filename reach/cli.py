@@ -237,8 +237,11 @@ def cmd_lint(args) -> int:
     for name in args.models:
         path = Path(name)
         if path.is_dir():                   # its models: property files are passed over
-            files.extend(sorted(p for p in path.glob("*.yaml")      # a link may point anywhere: not read
-                                if not p.name.startswith("_") and not p.is_symlink() and not _is_property_file(p)))
+            found = sorted(p for p in path.glob("*.yaml")      # a link may point anywhere: not read
+                           if not p.name.startswith("_") and not p.is_symlink() and not _is_property_file(p))
+            if not found:                   # nothing to lint is no clean bill
+                raise InputError(f"{printable(name)} holds no model file (*.yaml)", field="models")
+            files.extend(found)
         else:
             files.append(find_model(name))
     findings = [line for f in files for line in load_model(f).lints]

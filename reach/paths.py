@@ -5,7 +5,8 @@ cannot leave their folder.
   most ``MAX_BYTES``, with an allowed suffix, and refuses text with NUL bytes. Its errors name the
   file and never quote its content.
 * :func:`safe_name` turns a model or property name into one file-name component: letters and
-  digits of any script, ``.``, ``-`` and ``_`` only, no leading dot, at most 80 characters, so
+  digits of any script, ``.``, ``-`` and ``_`` only, no leading dot, at most 80 characters (a
+  longer name cut and ended by its hash), so
   ``name: "../../x"`` writes ``x`` inside the output folder, never outside it.
 * :func:`printable` escapes control characters (and the Unicode line separators) of a user's name
   for terminal output and table cells.
@@ -13,6 +14,7 @@ cannot leave their folder.
 
 from __future__ import annotations
 
+import hashlib
 import os
 import re
 import stat
@@ -75,9 +77,13 @@ _UNSAFE_CHARS = re.compile(r"[^\w.-]+")
 
 
 def safe_name(name, fallback: str = "unnamed") -> str:
-    """One file-name component made from ``name`` (see the module docstring)."""
+    """One file-name component made from ``name`` (see the module docstring); a longer one is
+    cut to 71 characters and ends in 8 hex digits of its hash, so two long names that share
+    their first 80 characters still name two files."""
     text = _UNSAFE_CHARS.sub("_", str(name)).strip("._")
-    return text[:80] or fallback
+    if len(text) > 80:
+        text = f"{text[:71]}_{hashlib.sha256(str(name).encode('utf-8', 'surrogatepass')).hexdigest()[:8]}"
+    return text or fallback
 
 
 _CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f\u2028\u2029]")       # and the line separators splitlines() splits at

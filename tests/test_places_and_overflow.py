@@ -167,6 +167,8 @@ def test_file_names_keep_letters_of_any_script_and_never_a_path():
     assert safe_name("水槽") == "水槽"
     assert safe_name("../../x") == "x" and safe_name("a/b") == "a_b" and safe_name("ｘ／y") == "ｘ_y"
     assert safe_name(".hidden") == "hidden" and safe_name("///") == "unnamed"
+    long_a, long_b = "m_" + "b" * 100 + "_one_star", "m_" + "b" * 100 + "_two_star"
+    assert len(safe_name(long_a)) == 80 and safe_name(long_a) != safe_name(long_b)   # no two files in one
 
 
 def test_taylors_expansion_of_a_stiff_flow_stops_at_the_budget(tmp_path, capsys):
@@ -185,3 +187,10 @@ def test_taylors_expansion_of_a_stiff_flow_stops_at_the_budget(tmp_path, capsys)
                  "-o", "max_seconds=3"]) == 3
     assert "time budget of 3 s (option max_seconds) exhausted" in capsys.readouterr().out
     assert time.perf_counter() - start < 60
+
+
+def test_linting_a_folder_without_models_is_bad_input(tmp_path, capsys):
+    """``reach lint /`` said "no findings (0 models)", exit 0: a clean bill for nothing."""
+    (tmp_path / "props.yaml").write_text("properties:\n  - {id: p, kind: safety, modes: [a], require: [\"x <= 1\"]}\n")
+    assert main(["lint", str(tmp_path)]) == 2
+    assert capsys.readouterr().err.strip().endswith(f"{tmp_path} holds no model file (*.yaml)")
