@@ -8,6 +8,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+import pytest
 import yaml
 
 from reach.cli import main
@@ -194,3 +195,12 @@ def test_linting_a_folder_without_models_is_bad_input(tmp_path, capsys):
     (tmp_path / "props.yaml").write_text("properties:\n  - {id: p, kind: safety, modes: [a], require: [\"x <= 1\"]}\n")
     assert main(["lint", str(tmp_path)]) == 2
     assert capsys.readouterr().err.strip().endswith(f"{tmp_path} holds no model file (*.yaml)")
+
+
+@pytest.mark.parametrize("value,kind", [("!!binary aGVsbG8=", "bytes"), ("2001-12-14t21:59:43.10-05:00", "a date"),
+                                        ("12", "a number")])
+def test_a_name_yaml_reads_as_no_text_says_what_it_read(tmp_path, capsys, value, kind):
+    (tmp_path / "m.yaml").write_text(TANK.replace("name: tank", f"name: {value}", 1))
+    assert f"name: {value}" in (tmp_path / "m.yaml").read_text()
+    assert main(["lint", str(tmp_path / "m.yaml")]) == 2
+    assert capsys.readouterr().err.strip().endswith(f"name: expected a name in text, got {kind} (quote it)")

@@ -159,6 +159,20 @@ def model_from_doc(doc: Doc) -> HybridAutomaton:
     return _Builder(Doc(copy.deepcopy(doc.data), doc.lines, doc.file), doc.file).build()
 
 
+
+def _yaml_kind(value) -> str:
+    """What YAML made of a scalar, for a message: ``a date``, ``bytes``, ``a number`` ..."""
+    import datetime
+    if isinstance(value, (datetime.date, datetime.datetime)):
+        return "a date"
+    if isinstance(value, bytes):
+        return "bytes"
+    if isinstance(value, bool):
+        return "a boolean"
+    if isinstance(value, (int, float)):
+        return "a number"
+    return "a list" if isinstance(value, list) else "a mapping" if isinstance(value, dict) else "nothing"
+
 class _Builder:
     def __init__(self, doc: Doc, file: str):
         self.doc = doc
@@ -240,7 +254,9 @@ class _Builder:
             key = sorted(extra)[0]
             raise self.where(key).error(f"unknown field '{key}'")
         name = self.need("name")
-        if not isinstance(name, str) or not name.strip():
+        if not isinstance(name, str):       # YAML read it as a date, bytes, a number ...
+            raise self.where("name").error(f"expected a name in text, got {_yaml_kind(name)} (quote it)")
+        if not name.strip():
             raise self.where("name").error("expected a non-empty name")
         self.units = self.read_units()
         self.declared: dict = {}
