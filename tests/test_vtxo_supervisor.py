@@ -145,7 +145,8 @@ def test_lint_finds_the_zeno_cycle_and_cli_reports_it(capsys):
     assert cli(["lint", "models/thermostat.yaml"]) == 0
     assert "no findings" in capsys.readouterr().out
     assert cli(["lint", "models/no_such_model.yaml"]) == 2
-    assert cli(["lint", "properties"]) == 0           # a folder's property files are no models
+    assert cli(["lint", "properties"]) == 2           # a folder of property files holds no model to lint
+    assert "properties holds no model file" in capsys.readouterr().err
 
 
 def test_shipped_models_lint_clean_except_the_zeno_variant():
