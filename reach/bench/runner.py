@@ -54,11 +54,9 @@ def _read_inputs(instances) -> tuple[dict[str, str], dict[tuple, set]]:
             names[key[0]] = model.name
         unknown = sorted(set(inst.expect) - ids[key])
         if unknown:                             # an expectation that would never be checked
-            message = (f"instance '{inst.id}' expects a verdict of '{unknown[0]}', which is no property "
-                       f"of {printable(inst.properties)} (it has {', '.join(sorted(ids[key]))[:200]})")
-            if inst.expect_where is not None:
-                raise inst.expect_where.error(message)
-            raise InputError(message, field=f"instances.{inst.id}.expect")
+            raise inst.expect_where.error(f"instance '{inst.id}' expects a verdict of '{unknown[0]}', which is no "
+                                          f"property of {printable(inst.properties)} (it has "
+                                          f"{', '.join(sorted(ids[key]))[:200]})")
     return names, ids
 
 

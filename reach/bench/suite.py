@@ -33,11 +33,11 @@ class Instance:
     id: str
     model: Path
     properties: Path
+    expect_where: Where                     # the suite file's line of ``expect``, for its errors
     expect: dict[str, str] = field(default_factory=dict)
     source: str = ""
     backends: list[str] | None = None
     options: dict[str, dict] = field(default_factory=dict)
-    expect_where: Where | None = None       # the suite file's line of ``expect``, for its errors
 
 
 @dataclass
@@ -105,8 +105,8 @@ def load_suite(path) -> Suite:
                 raise doc.where("instances", i, key).error(
                     f"{printable(item[key])} lies outside the suite's folder and the working folder: not read")
         instances.append(Instance(str(item["id"]), base / item["model"], base / item["properties"],
-                                  dict(expect), str(item.get("source", "")), chosen, options,
-                                  doc.where("instances", i, "expect")))
+                                  doc.where("instances", i, "expect"), dict(expect),
+                                  str(item.get("source", "")), chosen, options))
     return Suite(str(data.get("description", "")), {k: dict(v or {}) for k, v in backends.items()},
                  instances, doc.file)
 

@@ -57,6 +57,7 @@ import sympy
 from reach import lp
 from reach.errors import InputError, Where, not_a_mode
 from reach.paths import printable, within
+from reach.sets import Box
 from reach.model.automaton import (MAX_VARIABLES, BoundedInput, Controller, Disturbance, HybridAutomaton, InitialSet,
                                    LinearSet, Mode, Transition)
 from reach.model.constraints import affine_coefficients, from_comparisons
@@ -318,17 +319,13 @@ class _Builder:
         if rows is None:
             return
         A, b, E, f = rows
-        halves = mode.invariant_halfspaces
-        low, high = np.asarray(model.initial.low, float), np.asarray(model.initial.high, float)
-        if halves is not None and len(halves[1]) and np.all(np.isfinite(low)) and np.all(np.isfinite(high)):
-            H, g = np.asarray(halves[0], float).reshape(-1, model.n), np.asarray(halves[1], float).reshape(-1)
-            with np.errstate(all="ignore"):     # one row beyond the whole box: no LP needed (nor
-                least = H @ ((low + high) / 2) - np.abs(H) @ ((high - low) / 2)   # one of 1e200s)
-            outside = np.isfinite(least) & (least > g + 1e-9 * (1 + np.abs(g)))
-        else:
-            outside = np.zeros(0, dtype=bool)
+        box = Box(model.initial.low, model.initial.high)       # holds the initial set
+        invariant = zip(A[:len(mode.invariant_halfspaces[1])], b)       # the first rows of A
+        with np.errstate(all="ignore"):     # a row beyond the whole box needs no LP (nor one of 1e200s)
+            least = [(-box.support(-h), c) for h, c in invariant]
+        beyond = any(np.isfinite(v) and v > c + 1e-9 * (1 + abs(c)) for v, c in least)
         try:
-            point = None if np.any(outside) else \
+            point = None if beyond else \
                 lp.feasible_point(A, b, A_eq=E if E.shape[0] else None, b_eq=f if E.shape[0] else None)
         except lp.LPError:
             return

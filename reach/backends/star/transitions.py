@@ -302,15 +302,17 @@ def kept_rows(jump: _Jump, H_src, g_src, frozen=(), tolerance: float = 1e-9, siz
         return H[:0], g[:0]
     alone = np.all(jump.R == np.eye(n), axis=1) & (jump.r == 0)
     exact = np.all((H == 0) | alone[None, :], axis=1)       # a = h, no rounding
+    unfrozen = np.all(H[:, list(frozen)] == 0, axis=1)      # rows reading no frozen coordinate
     if size is None or not np.all(np.isfinite(size)):
-        keep = exact & np.all(H[:, list(frozen)] == 0, axis=1)
+        keep = exact & unfrozen
         return H[keep], g[keep]
     A = H.copy()
     A[~exact] = 0.0
     A[np.ix_(~exact, free)] = np.linalg.lstsq(jump.R[free].T, H[~exact].T, rcond=None)[0].T
-    E = np.abs(A @ jump.R - H) + 4 * np.finfo(float).eps * (np.abs(A) @ np.abs(jump.R) + np.abs(H))
-    keep = np.all(np.isfinite(A), axis=1) & (np.linalg.norm(A @ jump.R - H, axis=1) <= 1e-12 * np.linalg.norm(H, axis=1))
-    keep &= np.all(H[:, list(frozen)] == 0, axis=1)
+    e = A @ jump.R - H
+    E = np.abs(e) + 4 * np.finfo(float).eps * (np.abs(A) @ np.abs(jump.R) + np.abs(H))
+    keep = np.all(np.isfinite(A), axis=1) & (np.linalg.norm(e, axis=1) <= 1e-12 * np.linalg.norm(H, axis=1))
+    keep &= unfrozen
     A, g, E, exact = A[keep], g[keep], E[keep], exact[keep]
     shift = A @ jump.r
     slack = np.where(exact, 0.0, E @ np.abs(size) + tolerance * np.maximum(1.0, np.maximum(np.abs(g), np.abs(shift))))
