@@ -41,7 +41,7 @@ import yaml
 
 from reach.errors import InputError
 from reach.locate import find_model
-from reach.paths import few, printable, safe_name, writable_file
+from reach.paths import file_in_the_way, few, folder_name_message, names_folder, printable, safe_name, writable_file
 
 EXIT_CODES = """exit codes: 0 every property SAFE; 1 a violation (UNSAFE with a replayed counterexample, a
 probability below its threshold; bench: a failed cross-check); 2 bad input or options (one line
@@ -198,6 +198,7 @@ def cmd_import(args) -> int:
     describe has been built from them: a model its own loader would refuse is bad input here."""
     from reach.model.spaceex import load_spaceex, write_yaml
 
+    _named_folder(args.out, "--out")
     model, _, docs = load_spaceex(args.model, args.config)
     model_file, prop_file = write_yaml(docs, args.out)
     for finding in _import_findings(docs) + model.warnings:
@@ -213,11 +214,19 @@ def _import_findings(docs) -> list[str]:
     return [f"{notes['source']}: {line}" for line in notes.get("blocked", [])] + list(notes.get("ignored", []))
 
 
+def _named_folder(folder: str, option: str) -> None:
+    """An output folder given as an empty name is bad input: it would be the working folder,
+    which the user did not name."""
+    if not folder:
+        raise InputError("an empty folder name (give a folder)", field=option)
+
+
 def _no_file_in_the_way(folder) -> None:
-    """``--counterexamples DIR`` naming an existing file is bad input before any check runs
-    (after it, the verdicts would be lost to the error)."""
-    if folder and Path(folder).exists() and not Path(folder).is_dir():
-        raise InputError(f"{printable(folder)} is a file, not a folder", field="--counterexamples")
+    """``--counterexamples DIR`` naming an existing file, or a folder below one, is bad input
+    before any check runs (after it, the verdicts would be lost to the error)."""
+    blocking = file_in_the_way(folder) if folder else None
+    if blocking is not None:
+        raise InputError(f"{printable(blocking)} is a file, not a folder", field="--counterexamples")
 
 
 def summary(result, prop, model) -> str:
@@ -363,10 +372,15 @@ def _figure_path(out: str | None, default: Path) -> Path:
     """The output file of a picture: a format matplotlib writes, in a folder that can be written."""
     from matplotlib.figure import Figure
 
-    path = Path(out) if out else default
+    if out is not None and not out:
+        raise InputError(f"an empty file name (give one such as {printable(default.name)})", field="--out")
+    path = Path(out) if out is not None else default
     if path.is_dir():
         raise InputError(f"{printable(path)} is a folder (give a file name such as {printable(path / default.name)})",
                          field="--out")
+    if out is not None and names_folder(out):        # x.png/ that does not exist yet: not the file x.png
+        raise InputError(f"{folder_name_message(out)} (give a file name such as "
+                         f"{printable(path / default.name)})", field="--out")
     # pgf needs a LaTeX installation (xelatex) to write: not one the tool can rely on
     formats = {k: v for k, v in Figure().canvas.get_supported_filetypes().items() if k != "pgf"}
     if path.suffix.lstrip(".").lower() not in formats:
@@ -405,7 +419,7 @@ def cmd_plot_sets(args) -> int:
     """The reachable sets of one or more back-ends (:mod:`reach.plotting.command`)."""
     from reach.plotting.command import plot_files
 
-    out = _figure_path(args.out, Path("reach_sets.png")) if args.out else None
+    out = _figure_path(args.out, Path("reach_sets.png")) if args.out is not None else None
     code, out, summary, seconds = plot_files(args.model, args.properties, args.backend or ["montecarlo"],
                                              args.vars, out, _parse_options(args.option), args.property,
                                              exact=not args.fast, stream=sys.stdout)
@@ -420,6 +434,7 @@ def cmd_bench(args) -> int:
         _number(args.time_limit, "--time-limit", 0.0, 7 * 86400.0, open_low=True)
     if args.jobs is not None:
         _number(args.jobs, "--jobs", 1, 256)
+    _named_folder(args.out, "--out")
     return run_suite(args.suite, backends=args.backend, instances=args.instance, out=args.out,
                      jobs=args.jobs, scheduler=args.scheduler, time_limit=args.time_limit)
 
@@ -569,7 +584,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--fast", action="store_true", help="coefficient-box bounds only (no LPs to tighten)")
     p.add_argument("--runs", type=int, default=20)
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--out")
+    p.add_argument("--out", metavar="FILE", help="the picture's file (.png, .pdf, .svg, ...; not a folder): "
+                   "by default results/plots/MODEL_runs.png, or MODEL_BACKENDS_X_Y.png with PROPS")
     p.set_defaults(func=cmd_plot)
     p = sub.add_parser("bench", help="run the benchmark suite (exit 1 on a failed cross-check)", epilog=EXIT_CODES)
     p.add_argument("--suite", default="suite.yaml")
@@ -591,7 +607,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--end", type=float, default=270.0, help="arc end angle, degrees")
     p.add_argument("--jobs", "-j", type=int, default=None)
     p.add_argument("--scheduler", help="Dask scheduler address")
-    p.add_argument("--out")
+    p.add_argument("--out", metavar="FILE", help="the map's file (.png, .pdf, .svg, ...; not a folder): "
+                   "by default results/plots/MODEL_abort_map.png")
     p.set_defaults(func=cmd_sweep)
     p = sub.add_parser("compare", help="what changed between two results.json files (rows added, changed, gone)")
     p.add_argument("old")

@@ -104,9 +104,43 @@ def printable(text) -> str:
     return _CONTROL.sub(lambda m: m.group().encode("unicode_escape").decode("ascii"), str(text))
 
 
+def names_folder(text) -> bool:
+    """Whether the output name ``text``, as the user wrote it, names a folder: it ends in a path
+    separator (``x.png/``) or in ``.`` or ``..`` (``x.png/.``). :class:`~pathlib.Path` drops a
+    trailing ``/`` and a last ``.``, so this is asked of the text, before it becomes a path."""
+    text = os.fspath(text)
+    separators = os.sep + (os.altsep or "")
+    return text.endswith(tuple(separators)) or os.path.basename(text) in (".", "..")
+
+
+def folder_name_message(text) -> str:
+    """``x.png/ names a folder (it ends in '/')``: why the output name ``text`` is not a file's."""
+    text = os.fspath(text)
+    if text.endswith(tuple(os.sep + (os.altsep or ""))):
+        ending = text[-1]
+    else:
+        ending = os.path.basename(text) if text in (".", "..") else os.sep + os.path.basename(text)
+    return f"{printable(text)} names a folder (it ends in '{printable(ending)}'), not a file"
+
+
+def file_in_the_way(folder) -> Path | None:
+    """The nearest existing one of ``folder`` and the folders above it, if that is not a folder
+    (``out`` for ``out/plots`` where ``out`` is a file): then ``folder`` cannot be made."""
+    folder = Path(folder)
+    for above in (folder, *folder.parents):
+        try:
+            if not above.exists():
+                continue
+            return None if above.is_dir() else above
+        except OSError:                                 # (a name too long, no permission): mkdir says
+            return None
+    return None
+
+
 def writable_folder(folder, option: str) -> Path:
     """``folder``, created if needed; one that cannot be made or written is bad input (``option``
-    names the command-line option it came from). A relative folder reached through a symbolic
+    names the command-line option it came from), and so is one below a file (``out/plots`` where
+    ``out`` is a file), named as such. A relative folder reached through a symbolic
     link (a default ``counterexamples/`` linked elsewhere) is bad input too: what is written
     below the working folder stays there; an absolute folder is the user's to name."""
     folder = Path(folder)
@@ -115,6 +149,9 @@ def writable_folder(folder, option: str) -> Path:
             prefix = Path(*folder.parts[:depth])
             if prefix.is_symlink():
                 raise InputError(f"{printable(prefix)} is a symbolic link: not written through", field=option)
+    blocking = file_in_the_way(folder)
+    if blocking is not None:
+        raise InputError(f"{printable(blocking)} is a file, not a folder", field=option)
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -131,7 +168,10 @@ def writable_file(path, option: str, probe: bool = True) -> Path:
     it points) nor another non-regular file (a FIFO, which would block the write, or a device); a file is opened (and removed again if it was new), so that a place that takes
     no file (``/proc``) is bad input before any computation, not after it. ``probe=False`` skips
     that opening: for a file another process may be creating and locking at the same time (a
-    lock file, which the probe could remove under it)."""
+    lock file, which the probe could remove under it). A name written as a folder's
+    (:func:`names_folder`: ``x.png/``) is bad input, not the file ``x.png``."""
+    if names_folder(path):
+        raise InputError(f"{folder_name_message(path)} (give a file name)", field=option)
     path = Path(path)
     writable_folder(path.parent, option)
     if path.is_symlink():

@@ -552,3 +552,29 @@ def test_the_method_reported_is_the_one_that_ran():
     from reach.checking import check_files
     results = check_files("models/fsr_burn.yaml", "properties/fsr_burn.yaml", "fsr", {"method": "genz"})
     assert [r.details["method"] for r in results] == ["genz", "genz"]
+
+
+@pytest.mark.parametrize("mean, cov", [("[0]", '["(0.05[m/s])**2"]'),
+                                       ("[0, 0]", '["(0.05[m/s])**2", "(0.05[m/s])**2"]')])
+def test_a_state_entered_twice_is_bad_input_naming_it(tmp_path, capsys, mean, cov):
+    """``enters: [vy, vy]`` is one state listed twice: bad input at the ``enters`` line naming
+    ``vy``, whether the mean and covariance have one entry (it was read as a mean of the wrong
+    length) or two (it was accepted, and the kick counted twice)."""
+    from pathlib import Path
+
+    from reach.cli import main
+
+    root = Path(__file__).resolve().parents[1]
+    text = (root / "models" / "fsr_burn.yaml").read_text()
+    for old, new in (("enters: [vy]", "enters: [vy, vy]"), ("mean: [0]", f"mean: {mean}"),
+                     ('cov: ["(0.05[m/s])**2"]', f"cov: {cov}")):
+        assert old in text
+        text = text.replace(old, new)
+    model = tmp_path / "burn.yaml"
+    model.write_text(text)
+    line = text.splitlines().index("  enters: [vy, vy]") + 1
+    assert main(["check", str(model), str(root / "properties" / "fsr_burn.yaml"), "-b", "fsr"]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""
+    assert captured.err == (f"reach: {model}:{line}: disturbance.enters[1]: 'vy' is listed twice "
+                            f"(list each state the kicks enter once)\n")

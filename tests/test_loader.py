@@ -67,6 +67,9 @@ MALFORMED = [
      "LQR design failed"),
     ("bad covariance", "name: x\nstate: [x]\nmodes: {a: {flow: {x: 0}}}\ninitial: {mode: a, box: {x: 0}}\nhorizon: 1\n"
      "disturbance: {gaussian: {cov: [[1, 2], [2, 1]]}, enters: [x], step: 1}\n", "expected a 1x1 matrix"),
+    ("state entered twice", "name: x\nstate: [x, v]\nmodes: {a: {flow: {x: v, v: 0}}}\ninitial: {mode: a, box: {x: 0, v: 0}}\n"
+     "horizon: 1\ndisturbance: {gaussian: {mean: [0, 0], cov: [1, 1]}, enters: [v, v], step: 1}\n",
+     ":6: disturbance.enters[1]: 'v' is listed twice"),
     ("bad units base", "name: x\nunits: {time: kg}\n", "'kg' is not a unit of time"),
     ("cyclic constants", "name: x\nstate: [x]\nconstants: {a: b, b: a}\n", "cycle"),
     ("control character", "name: x\nstate: [x]\nhorizon: 1\u0086\n", ":3: invalid YAML: special characters are not "

@@ -1,13 +1,14 @@
 """Inputs read and outputs written only in their places, and overflowing numbers as answers,
 not crashes: a template outside the model's and the working folder, a symbolic link where the
 import writes its models/ folder, a suite expectation of a property that does not exist, a
-flow too large for double precision (star), a flow taylor's nominal run cannot follow."""
+flow too large for double precision (star), a flow taylor's nominal run cannot follow, a requirement that overflows."""
 
 from __future__ import annotations
 
 import os
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
@@ -204,3 +205,74 @@ def test_a_name_yaml_reads_as_no_text_says_what_it_read(tmp_path, capsys, value,
     assert f"name: {value}" in (tmp_path / "m.yaml").read_text()
     assert main(["lint", str(tmp_path / "m.yaml")]) == 2
     assert capsys.readouterr().err.strip().endswith(f"name: expected a name in text, got {kind} (quote it)")
+
+
+def clock_model(tmp_path, requirements: list, events: list = ()) -> tuple[Path, Path]:
+    """A clock ``t`` over 7 s (``exp(exp(t))`` passes the largest float at t = 6.566) and a
+    property file of safety ``requirements`` (ids r0, r1, ...) and event properties ``events``."""
+    (tmp_path / "m.yaml").write_text(yaml.safe_dump({
+        "name": "clock", "units": {"time": "s"}, "state": {"x": "1", "t": "s"}, "horizon": 7,
+        "modes": {"run": {"flow": {"x": 0, "t": 1}}}, "initial": {"mode": "run", "box": {"x": [1, 1.1], "t": 0}}}))
+    props = [{"id": f"r{i}", "kind": "safety", "modes": ["run"], "require": [text]} for i, text in enumerate(requirements)]
+    props += [{"id": f"e{i}", "kind": "event", "modes": ["run"], **event} for i, event in enumerate(events)]
+    (tmp_path / "p.yaml").write_text(yaml.safe_dump({"properties": props}))
+    return tmp_path / "m.yaml", tmp_path / "p.yaml"
+
+
+def test_enclosures_that_overflow_are_unbounded_not_dropped():
+    """A candidate whose series holds ``inf - inf`` (NaN) encloses nothing: both ends unbounded,
+    so the extremum over it and a finite candidate is unbounded on its outer side instead of
+    being the finite candidate's value (``max(1, nan)`` is 1)."""
+    from reach.backends.taylor.bound import enclose, extremum_bound, overflows
+    from reach.backends.taylor.da import DA, algebra
+
+    alg = algebra(3, 1)
+    finite = DA(alg, np.array([1.0, 0.5, 0.0, 0.0]))
+    blown = DA(alg, np.array([np.inf, np.nan, np.nan, 0.0]))
+    assert not overflows(finite) and overflows(blown)
+    lo, hi = enclose(blown, np.array(0.0))
+    assert (float(lo), float(hi)) == (-np.inf, np.inf)
+    ends = {"start": tuple(float(v) for v in enclose(finite, np.array(0.0))), "end": (float(lo), float(hi))}
+    assert extremum_bound(ends, "max") == (0.5, np.inf)
+    assert extremum_bound(ends, "min") == (-np.inf, 1.5)
+
+
+@pytest.mark.parametrize("remainder", ["estimated", "rigorous"])
+def test_a_requirement_that_overflows_says_so_and_is_never_safe(tmp_path, capsys, remainder):
+    """``exp(exp(t)) >= 1`` holds, but its margin overflows before the horizon: its bound is not
+    the finite start's ``[1.718, 1.718]`` (the overflowed end dropped) but unbounded below, and
+    the result says that the margin overflows (exit 3, not SAFE)."""
+    import json
+
+    model, props = clock_model(tmp_path, ["exp(exp(t/(1[s]))) >= 1"])
+    code = main(["check", str(model), str(props), "-b", "taylor", "-o", f"remainder={remainder}"])
+    out = capsys.readouterr().out
+    assert code == 3, out
+    assert "smallest margin in [-inf, 1.718]" in out and "[1.718, 1.718]" not in out
+    assert "overflows (is not finite) at run:horizon: the bound's lower end is unbounded" in out
+    assert "refine" not in out                  # halving the initial set does not undo an overflow
+    main(["check", str(model), str(props), "-b", "taylor", "-o", f"remainder={remainder}", "--json"])
+    (row,) = json.loads(capsys.readouterr().out)
+    assert row["status"] == "unknown" and float(row["details"]["margin_bound"][0]) == -np.inf
+
+
+def test_overflowing_requirements_are_violations_or_open_never_the_overflow_sentinel(tmp_path, capsys):
+    """``exp(exp(t)) <= 1e300`` is passed at t = 6.538: with the estimated remainder the margin
+    was the finite start's ``[1e+300, 1e+300]`` and the maximum of ``exp(exp(t))`` the start's
+    2.718; now both reach the overflow, and the replayed run is the counterexample (exit 1). A
+    ratio that is NaN past the overflow (``inf / inf``) is open, exit 3, naming the overflow."""
+    model, props = clock_model(tmp_path, ["exp(exp(t/(1[s]))) <= 1e300"],
+                               [{"maximize": "exp(exp(t/(1[s])))", "require": "<= 1e300"}])
+    code = main(["check", str(model), str(props), "-b", "taylor", "--counterexamples", str(tmp_path / "cx")])
+    out = capsys.readouterr().out
+    assert code == 1, out
+    assert "1e+300, 1e+300]" not in out and "smallest margin in [-inf, 1e+300]" in out
+    assert "max exp(exp(t/(1[s]))) in [2.718, inf]" in out
+    assert out.count("UNSAFE") == 2 and "violated at t=" in out
+    ratio = "exp(exp(t/(1[s])))/(1e306 + exp(exp(t/(1[s]))))"       # passes 0.999 only past the overflow
+    model, props = clock_model(tmp_path, [f"{ratio} <= 0.999"])
+    for remainder in ("estimated", "rigorous"):
+        code = main(["check", str(model), str(props), "-b", "taylor", "-o", f"remainder={remainder}"])
+        out = capsys.readouterr().out
+        assert code == 3, out
+        assert "smallest margin in [-inf, 0.999]" in out and "overflows (is not finite)" in out

@@ -106,3 +106,26 @@ def test_results_table_links_plots_and_embeds_pictures(tmp_path):
     line = next(l for l in text.splitlines() if l.startswith("| I | p |"))
     assert "| yes | taylor/star 3.0x | [runs](plots/M_runs.png) |" in line
     json.dumps(report)
+
+
+@pytest.mark.parametrize("name", ["x.png/", "x.png/.", "sub/x.png/"])
+def test_out_written_as_a_folder_is_refused_and_nothing_is_written(tmp_path, capsys, name):
+    """``--out x.png/`` names a folder: bad input (one line naming the option and the name), never
+    the file ``x.png`` that the name without its slash would be."""
+    out = f"{tmp_path}/{name}"
+    code = main(["plot", str(ROOT / "models" / "thermostat.yaml"), "--runs", "2", "--out", out])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert err.count("\n") == 1 and err.startswith(f"reach: --out: {out} names a folder (it ends in '/"), err
+    assert "thermostat_runs.png" in err                  # the file name it suggests
+    assert not list(tmp_path.iterdir()), "nothing is written (no x.png, no folder)"
+
+
+def test_out_that_is_an_existing_folder_is_refused_and_a_file_path_still_works(tmp_path, capsys):
+    code = main(["plot", str(ROOT / "models" / "thermostat.yaml"), "--runs", "2", "--out", str(tmp_path)])
+    err = capsys.readouterr().err
+    assert code == 2 and f"--out: {tmp_path} is a folder (give a file name such as {tmp_path}/thermostat_runs.png)" in err
+    assert not list(tmp_path.iterdir())
+    assert main(["plot", str(ROOT / "models" / "thermostat.yaml"), "--runs", "2",
+                 "--out", str(tmp_path / "x.png")]) == 0
+    assert [p.name for p in tmp_path.iterdir()] == ["x.png"]

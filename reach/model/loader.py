@@ -615,6 +615,10 @@ class _Builder:
         enters = raw["enters"]
         if not isinstance(enters, list) or not enters or any(e not in self.state for e in enters):
             raise self.where("disturbance", "enters").error("expected a non-empty list of state variables")
+        for i, e in enumerate(enters):          # before mean and cov, whose lengths follow the list
+            if e in enters[:i]:
+                raise self.where("disturbance", "enters", i).error(
+                    f"'{e}' is listed twice (list each state the kicks enter once)")
         p = len(enters)
         g = raw["gaussian"]
         if not isinstance(g, dict) or set(g) - {"mean", "cov"} or "cov" not in g:

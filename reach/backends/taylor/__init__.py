@@ -55,7 +55,7 @@ import numpy as np
 from reach.backends.options import option_error, parse_options, ranged
 from reach.backends.taylor.ads import Subdomain, split_domain, truncation_estimate
 from reach.backends.taylor.bound import (contenders, enclose, estimated_remainder, extremum_bound,
-                                         next_order_remainder)
+                                         next_order_remainder, overflows)
 from reach.backends.taylor.da import DA, algebra, stack
 from reach.backends.taylor.deadline import Deadline, OutOfTime
 from reach.backends.taylor.flow import Unsmooth
@@ -248,7 +248,8 @@ class TaylorBackend:
             for sub, sweep in zip(subs, sweeps):
                 if sub.poly is None:       # no candidate maps (avoid set)
                     out.append({"low": sub.low, "high": sub.high, "splits": sub.splits, "truncation_estimate": None,
-                                "converged": True, "candidates": {}, "bound": sweep["bound"], "verified": sweep})
+                                "converged": True, "candidates": {}, "bound": _no_nan(sweep["bound"]),
+                                "verified": sweep})
                     continue
                 polys, full = sub.poly
                 bounds = {}
@@ -263,7 +264,10 @@ class TaylorBackend:
                     estimated = (estimated[0], np.inf) if prop.sense == "max" else (-np.inf, estimated[1])
                 row = {"low": sub.low, "high": sub.high, "splits": sub.splits,
                        "truncation_estimate": sub.error, "converged": sub.converged, "candidates": bounds,
-                       "bound": sweep["bound"] if rigorous else estimated}
+                       "bound": _no_nan(sweep["bound"] if rigorous else estimated)}
+                overflowed = sorted(name for name, p in polys.items() if overflows(p))
+                if overflowed:              # their enclosures are unbounded (enclose)
+                    row["overflow"] = overflowed
                 if polys.gap is not None:
                     row["gap"] = polys.gap
                 if polys.partial:           # candidates some runs may not reach before the horizon
@@ -374,9 +378,14 @@ class TaylorBackend:
                 # the budget first where it cut a sweep short: the other reasons may not be all
                 whys = sorted({r["verified"]["why"] for r in rows if r["verified"].get("why")},
                               key=lambda why: (not deadline.cut(why), why))
+                # a sweep that ran to its end with an outer end at infinity: the quantity overflowed
+                blown = [r for r in rows if not r["verified"].get("why") and outer(r) == np.inf]
+                if blown:
+                    details["overflow"] = sorted({name for r in blown for name in r.get("overflow", [])})
+                    whys.insert(0, overflow_note(prop, details["overflow"]))
                 details["note"] = (f"the bound is open on {1 - meets - violates:.0%} of the box"
                                    + (f" ({'; '.join(whys[:2])})" if whys else "")
-                                   + ("" if deadline.passed() or not len(u) or (whys and all(
+                                   + ("" if deadline.passed() or not len(u) or len(blown) == len(rows) or (whys and all(
                                        "mode switches" in why for why in whys)) else
                                       f"; -o refine={opts.refine + 2} halves the subdomains that hold it open"))
         else:
@@ -397,9 +406,31 @@ class TaylorBackend:
                                    f"{'upper' if prop.sense == 'max' else 'lower'} end is open")
             if PAST_STOPS in details["assumptions"]:
                 details["note"] = "; ".join(filter(None, [details.get("note"), PAST_STOPS]))
+            overflowed = sorted({name for r in rows for name in r.get("overflow", [])})
+            if overflowed:
+                details["overflow"] = overflowed
+                details["note"] = "; ".join(filter(None, [overflow_note(prop, overflowed), details.get("note")]))
             status, coverage = Status.UNKNOWN, 0.0
         return Result(self.name, model.name, prop.id, status, bound=(lo, hi), coverage=coverage,
                       details=details, sets=kept_sets)
+
+
+def _no_nan(bound) -> tuple[float, float]:
+    """A bound with an end that is not a number (an overflow) made unbounded on that end."""
+    lo, hi = (float(v) for v in bound)
+    return (-np.inf if np.isnan(lo) else lo, np.inf if np.isnan(hi) else hi)
+
+
+def overflow_note(prop, names: list[str]) -> str:
+    """Why a bound is unbounded: the quantity overflows the floating-point numbers, at the
+    candidates ``names`` where they are known (its value there is not finite: no number to
+    report, and no end to prove)."""
+    from reach.paths import few
+
+    end = "upper" if prop.sense == "max" else "lower"
+    where = f" at {few(names)}" if names else " in the enclosure of the runs"
+    return (f"the {prop.text or 'quantity'} overflows (is not finite){where}: "
+            f"the bound's {end} end is unbounded")
 
 
 def _set_pieces(model, boxes) -> list:

@@ -89,9 +89,20 @@ def next_order_remainder(poly_high: DA) -> np.ndarray:
 
 
 def enclose(poly: DA, remainder: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``I_P + [-R, R]`` (eq. 28)."""
+    """``I_P + [-R, R]`` (eq. 28). An end that is not a number (a series that overflowed:
+    ``inf - inf`` among its coefficients, :func:`overflows`) is unbounded: ``-inf`` below,
+    ``inf`` above, so that no extremum taken over the candidates passes over it."""
     lo, hi = polynomial_range(poly)
-    return lo - remainder, hi + remainder
+    lo, hi = lo - remainder, hi + remainder
+    return np.where(np.isnan(lo), -np.inf, lo), np.where(np.isnan(hi), np.inf, hi)
+
+
+def overflows(poly: DA) -> bool:
+    """Whether the enclosure ``I_P`` of ``poly`` is not finite: the quantity overflows the
+    floating-point numbers somewhere on the subdomain (``exp(exp(t))`` for ``t`` past about 6.5),
+    so its bound says nothing but that it is unbounded."""
+    lo, hi = polynomial_range(poly)
+    return not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)))
 
 
 def extremum_bound(ends: dict, sense: str, partial=frozenset(), alternatives=()) -> tuple[float, float]:
