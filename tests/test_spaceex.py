@@ -256,7 +256,8 @@ def test_names_the_system_lacks_in_initially_are_bad_input(tmp_path, extra, mess
 
 @pytest.mark.parametrize("body,cfg,needle", [
     (NETWORK.replace("x' == k", "x' == k | x' == 1"), "", "disjunction"),
-    (NETWORK.replace("x' == k", "x' &gt;= k"), "", "flow: construct"),
+    (NETWORK.replace("x' == k", "x' &gt;= x"), "", "flow: construct"),
+    (NETWORK.replace("x' == k", "x' &gt;= k"), "", "flow: 'x'' is bounded on one side only"),
     (NETWORK.replace("x := 2*x", "x + 1 := 2"), "", "assignment: construct"),
     (NETWORK.replace('<location id="3"', '<foo/><location id="3"'), "", "construct <foo>"),
     (NETWORK.replace('type="label" local="false"/>\n <location id="1" name="idle"',

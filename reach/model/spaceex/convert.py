@@ -7,6 +7,11 @@ Variables. A real with a flow in some location is a state. A real with no flow a
 * a varying bounded input when the invariants only bound it by numbers (``0.8 <= u <= 1``), the
   same interval in every location where it occurs;
 * otherwise bad input (an unbounded input).
+A flow that bounds a derivative by numbers (``1 <= x' & x' <= 2``, a rectangular automaton) lets
+``x`` move at any rate in the interval, changing at any instant: ``x' == x_rate`` for a varying
+bounded input ``x_rate`` (one per variable, its range the first such location's; another
+location's interval is the same input mapped onto it). A bound on one side only, one that
+couples derivatives (``x' + y' <= 1``) or reads the state, is bad input.
 A state with flow 0 in every location that no transition assigns, the cfg's initial set does not
 mention, and the invariants only bound by the same interval everywhere, is a constant bounded
 input (Building BLDC01's ``u1' == 0``). Constants bound to numbers are substituted. A constant
@@ -369,8 +374,10 @@ class DocumentBuilder(Converter):
         # (or on a jump from it) that reads the name, for a message about a name that means
         # nothing there
         self.read_at: dict[tuple, tuple[str, str, int]] = {}
+        self.rate_inputs: dict[str, tuple[str, float, float, int]] = {}     # var -> (input, lo, hi, line)
         for key, loc in self.flat.locations.items():
             flows = {}
+            rates: dict[str, list] = {}             # var -> [lo, hi, line, part] of x' bounded by numbers
             for part in loc.flows:
                 atoms = self.parse(part, "flow")
                 if atoms.false:
@@ -378,8 +385,8 @@ class DocumentBuilder(Converter):
                 for rel, _ in atoms.relations:
                     var = is_primed_name(rel.parts[0]) if rel.ops in (["=="], ["="]) else None
                     if var is None:
-                        raise InputError(f"construct '{self._show(rel)}' is not supported (expected x' == "
-                                         "expression)", self.file, self.field_of(part, "flow"), part.text.line)
+                        self._rate_bound(rel, part, key, rates)
+                        continue
                     if var in flows:
                         raise InputError(f"two derivatives given for '{var}' in location '{self.flat.label(key)}'",
                                          self.file, self.field_of(part, "flow"), part.text.line)
@@ -389,6 +396,8 @@ class DocumentBuilder(Converter):
                                                  f"{rhs} contradicts it, only {local}' == 0 agrees", rel.parts[1])
                     flows[var] = (rel.parts[1], part.text.line)
                     self._reads(rel.parts[1:], key, part, "flow")
+            for var, (lo, hi, line, part) in rates.items():
+                flows[var] = self._rate_flow(var, lo, hi, line, part, flows)
             self.flows[key] = flows
             invariant, fields = [], []
             for part in loc.invariants:
@@ -432,6 +441,71 @@ class DocumentBuilder(Converter):
             parts = g.split(".")
             for k in range(len(parts)):
                 self.suffixes.setdefault(".".join(parts[k:]), []).append(g)
+
+    def _rate_bound(self, rel: Relation, part: Part, key, rates: dict) -> None:
+        """Note a flow relation that bounds one derivative by numbers (``x' <= 10``,
+        ``-x' <= -36``, ``0 <= x' <= 10``; strict bounds read as their closure, as invariants
+        are) in ``rates``; any other relation of a flow is bad input."""
+        primed = {t.text for p in rel.parts for i, t in enumerate(p)
+                  if t.kind == "name" and i + 1 < len(p) and p[i + 1].text == "'"}
+        bound = None
+        if len(primed) == 1:
+            var = primed.pop()
+            marker = "primed_rate_"
+            parts = []
+            for p in rel.parts:
+                out = []
+                for i, t in enumerate(p):
+                    if t.text == "'" and i > 0 and p[i - 1].text == var:
+                        continue
+                    out.append(Token("name", marker) if t.kind == "name" and t.text == var
+                               and i + 1 < len(p) and p[i + 1].text == "'" else t)
+                parts.append(out)
+            if not any(t.text == var for p in parts for t in p):      # x read unprimed too: not a bound
+                bound = _bound_of(Relation(parts, rel.ops), marker)
+        if bound is None:
+            raise InputError(f"construct '{self._show(rel)}' is not supported (expected x' == expression, "
+                             "or numbers bounding one derivative: 0 <= x' <= 10)", self.file,
+                             self.field_of(part, "flow"), part.text.line)
+        lo, hi, _, _ = rates.setdefault(var, [-np.inf, np.inf, part.text.line, part])
+        rates[var][:2] = [max(lo, bound[0]), min(hi, bound[1])]
+        self._reads(rel.parts, key, part, "flow")
+
+    def _rate_flow(self, var: str, lo: float, hi: float, line: int, part: Part, flows: dict):
+        """The flow of ``var`` whose derivative the location bounds by numbers, ``lo <= var' <= hi``
+        (a rectangular flow): ``var' == u`` for a time-varying input ``u`` in ``[lo, hi]``, one
+        input per variable (its range that of the first location that bounds it; in a location
+        with other bounds, ``var' == lo + (hi - lo) (u - lo0) / (hi0 - lo0)``, the same set of
+        rates). Equal bounds are the rate itself."""
+        field = self.field_of(part, "flow")
+        if var in flows:
+            raise InputError(f"'{var}'' is given by an equality and bounded too (give one or the other)",
+                             self.file, field, line)
+        if not (np.isfinite(lo) and np.isfinite(hi)):
+            raise InputError(f"'{var}'' is bounded on one side only (an unbounded rate is not supported; "
+                             f"give lo <= {var}' <= hi)", self.file, field, line)
+        if lo > hi:
+            raise InputError(f"the bounds of '{var}'' admit no rate ({lo:g} > {hi:g})", self.file, field, line)
+        self._refuse_change_of_const(var, part, "flow", lambda local: f"the flow bound on {local}' changes it",
+                                     [Token("num", repr(hi))] if lo == hi == 0 else None)
+        if lo == hi:
+            return [Token("num", repr(float(lo)))], line
+        if var not in self.rate_inputs:
+            taken = set(self.flat.globals) | {v for v, *_ in self.rate_inputs.values()}
+            name, k = f"{var}_rate", 1
+            while name in taken:
+                k += 1
+                name = f"{var}_rate{k}"
+            self.rate_inputs[var] = (name, lo, hi, line)
+        name, lo0, hi0, _ = self.rate_inputs[var]
+        if (lo, hi) == (lo0, hi0):
+            return [Token("name", name)], line
+        scale = (hi - lo) / (hi0 - lo0)
+        text = [Token("op", "("), Token("num", repr(float(lo))), Token("op", ")"), Token("op", "+"),
+                Token("op", "("), Token("num", repr(float(scale))), Token("op", ")"), Token("op", "*"),
+                Token("op", "("), Token("name", name), Token("op", "-"), Token("op", "("),
+                Token("num", repr(float(lo0))), Token("op", ")"), Token("op", ")")]
+        return text, line
 
     def _reads(self, parts, key, part: Part, what: str) -> None:
         """Note the names the token lists ``parts`` of ``part`` read in location ``key``."""
@@ -537,9 +611,10 @@ class DocumentBuilder(Converter):
         self.aliases: dict[tuple, dict[str, list]] = {key: {} for key in self.flat.locations}
         # where each alias is defined: (line, field) of its equality, for messages about it
         self.alias_at: dict[tuple, dict[str, tuple[int, str]]] = {key: {} for key in self.flat.locations}
-        self.inputs: dict[str, tuple[float, float, bool]] = {}
+        self.inputs: dict[str, tuple[float, float, bool]] = {
+            name: (lo, hi, True) for name, lo, hi, _ in self.rate_inputs.values()}
         self.dropped: dict[tuple, set[int]] = {key: set() for key in self.flat.locations}
-        for var in sorted(set(used_where) - states):
+        for var in sorted(set(used_where) - states - set(self.inputs)):
             self._classify_free(var, used_where[var])
         for var in sorted(states):
             self._maybe_constant_input(var, cfg_names)
@@ -665,7 +740,8 @@ class DocumentBuilder(Converter):
         self.inputs[var] = (lo, hi, False)
 
     def _line_of(self, var: str) -> int | None:
-        return self._declared_at(var)[1]
+        rate = next((line for name, _, _, line in self.rate_inputs.values() if name == var), None)
+        return rate if rate is not None else self._declared_at(var)[1]
 
     def _declared_at(self, var: str) -> tuple[str | None, int | None]:
         """The field and line of the param that ``var`` stands for in the first instance that
