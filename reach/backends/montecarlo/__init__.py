@@ -1,9 +1,12 @@
 """The Monte Carlo referee: vectorised sampling of the same model, falsification first.
 
-Safety properties. Runs are drawn in three rounds, each one numpy batch:
+Safety properties. Runs are drawn in rounds of numpy batches:
 
 1. *structured*: corners, face centres and the centre of the initial box, crossed with the
-   ends and middle of the abort window;
+   ends and middle of the abort window; at most :func:`.sampling.structured_cap` of them
+   (option ``structured``; by default the larger of 8 per sample and what fits in
+   :data:`.sampling.STRUCTURED_WORK` state-steps), spread over the plan where it has more,
+   simulated in timed batches that the time budget stops (:class:`.sampling.Batches`);
 2. *random*: ``samples`` i.i.d. uniform initial states and switch instants;
 3. *search*: a cross-entropy falsifier that resamples around the runs that came closest to
    the unsafe set (``search_rounds`` generations);
@@ -70,8 +73,10 @@ from reach.backends.montecarlo.initial_sampling import PolytopeSampler, extremal
 from reach.backends.montecarlo.monitors import SafetyMonitor
 from reach.backends.montecarlo.options import NAME, Options
 from reach.backends.montecarlo.replays import check_run, constant_signal, replay, signal_record
-from reach.backends.montecarlo.sampling import (SWITCH_PROBABILITY, _kicks, _simulate_rounds, random_plan, run_plan,
-                                                sampled_runs, structured_plan, switch_window)
+from reach.backends.montecarlo.sampling import (STRUCTURED_PER_SAMPLE, STRUCTURED_WORK, SWITCH_PROBABILITY, Batches,
+                                                _kicks, _simulate_rounds, initial_points, random_plan, run_plan,
+                                                sampled_runs, structured_cap, structured_plan, switch_window,
+                                                take_rows)
 from reach.model.automaton import HybridAutomaton
 from reach.model.batch_nonlinear import too_stiff_text
 from reach.model.constraints import NUMERICAL_TOLERANCE, lambdify_margins, row_magnitudes
@@ -142,21 +147,28 @@ class MonteCarloBackend:
         window = switch_window(model)
         sim = Simulator(model, opts.dt)
         kicks = _kicks(model, rng)
-        X, tau, signal, choice, n_structured, seeding = run_plan(model, sim, window, opts, rng)
-        LOG.info("%d structured and %d random runs of %d steps (%.1f s)", n_structured, X.shape[0] - n_structured,
-                 sim.steps, time.perf_counter() - start)
-        parts, kept = _simulate_rounds(model, props, sim, opts, X, tau, signal, choice, n_structured, kicks,
-                                       time.time() + (deadline - time.perf_counter()))
-        if kept.size < X.shape[0]:          # the time budget left i.i.d. blocks unsimulated
-            X, tau, choice = X[kept], None if tau is None else tau[kept], None if choice is None else choice[kept]
-            if signal is not None:
-                signal = (signal[0], signal[1][kept], None if signal[2] is None else signal[2][kept])
+        X, tau, signal, choice, n_structured, seeding, planned, points = run_plan(model, sim, window, opts, rng)
+        LOG.info("%s and %d random runs of %d steps (%.1f s)", _structured_text(opts, sim, planned, n_structured),
+                 X.shape[0] - n_structured, sim.steps, time.perf_counter() - start)
+        wall = _wall(deadline)
+        parts, kept, structured_parts = _simulate_rounds(model, props, sim, opts, X, tau, signal, choice,
+                                                         n_structured, kicks, wall)
+        planned_random = X.shape[0] - n_structured
+        ran_structured = int(np.count_nonzero(kept < n_structured))
+        if kept.size < X.shape[0]:          # the time budget left runs unsimulated
+            X, tau, signal, choice = take_rows(X, tau, signal, choice, kept)
+            seeding = seeding[kept]
+        unstarted = n_structured - ran_structured
+        n_structured = ran_structured
         sampled = X.shape[0] - n_structured
-        monitors = [SafetyMonitor.merged(model, p, [q[0][i] for q in parts]) for i, p in enumerate(props)]
+        monitors = [SafetyMonitor.merged(model, p, [q[0][i] for q in parts]) if parts else SafetyMonitor(model, p, 0)
+                    for i, p in enumerate(props)]
         blocked = sum(q[1] for q in parts)
         cut = sum(q[3] for q in parts)              # runs the time budget stopped under way
-        cut_random = sum(q[3] for q in parts[1:])   # (parts[0]: the structured runs)
+        cut_random = sum(q[3] for q in parts[structured_parts:])
         branching = choice is not None and sum(q[2] for q in parts) > 0    # a choice met, not only possible
+        structured = _structured_details(opts, sim, planned, points, n_structured, unstarted, X[:n_structured])
+        per_run = (time.perf_counter() - start) / max(1, X.shape[0])     # seconds a run took, about
         runs = []
         if opts.keep_sets:
             pictured_kicks = _kicks(model, np.random.default_rng(np.random.SeedSequence(opts.seed, spawn_key=(2 ** 32,))))
@@ -167,7 +179,7 @@ class MonteCarloBackend:
         for prop, monitor in zip(props, monitors):
             begin = time.perf_counter()
             rounds = [("structured+random", X, tau, monitor, signal, choice)]
-            details = {"dt": sim.dt, "seed": opts.seed, "structured_runs": int(n_structured),
+            details = {"dt": sim.dt, "seed": opts.seed, **structured,
                        "random_runs": int(sampled),
                        "blocked_runs": int(blocked),
                        "assumes": "states checked at grid points and event instants only "
@@ -187,9 +199,11 @@ class MonteCarloBackend:
                                         f"invariant can keep it in), or the RK4 steps of a nonlinear flow diverged "
                                         f"(a stiff flow: a smaller -o dt); the violation bound counts the other runs"
                                         + (f" ({too_stiff_text(sim.dt, sim.too_stiff)})" if sim.too_stiff else ""))
-            if sampled < opts.samples or cut:
+            if sampled < planned_random or cut or unstarted:
                 details["note"] = (f"time budget of {opts.max_seconds:.3g} s (option max_seconds) ended the "
-                                   f"sampling after {sampled} of {opts.samples} random runs"
+                                   + (f"structured runs after {n_structured} of {n_structured + unstarted} and the "
+                                      if unstarted else "")
+                                   + f"sampling after {sampled} of {planned_random} random runs"
                                    + (f", {cut} of the runs simulated cut short before the horizon (left out "
                                       "of the violation bound)" if cut else ""))
             if cut:
@@ -198,15 +212,17 @@ class MonteCarloBackend:
             found = None if found is None else (0, found)
             monitors_of = partial(SafetyMonitor, model, prop)
             closest = _least(monitor.min_depth)
-            if found is None and model.disturbance is None:
-                found, depth = self._extremal(model, prop, sim, rounds, n_structured, monitors_of)
+            if found is None and model.disturbance is None and time.perf_counter() <= deadline:
+                found, depth = self._extremal(model, prop, sim, rounds, n_structured, monitors_of, wall)
                 closest = min(closest, depth)
-            if found is None and model.disturbance is None:
-                LOG.info("%s: no violation sampled (closest margin %.4g, model units); searching", prop.id, closest)
+            if found is None and model.disturbance is None and time.perf_counter() <= deadline:
+                LOG.info("%s: no violation sampled (closest margin %.4g, model units); searching (%s)", prop.id,
+                         closest, _search_work(opts, sim, per_run))
                 found = self._search(model, window, sim, rounds, opts, rng, branching, deadline, monitors_of,
                                      seeding)
             if found is None and model.disturbance is None and opts.optimise and time.perf_counter() <= deadline:
-                LOG.info("%s: optimising the robustness (%.1f s)", prop.id, time.perf_counter() - start)
+                LOG.info("%s: optimising the robustness (%.1f s; %s)", prop.id, time.perf_counter() - start,
+                         _optimiser_work(opts, sim, per_run))
                 found = self._optimise(model, prop, window, sim, rounds, opts, branching, deadline, monitors_of,
                                        seeding)
                 details["optimiser_runs"] = int(rounds[-1][3].runs)
@@ -227,12 +243,16 @@ class MonteCarloBackend:
             results.append(result)
         return results
 
-    def _extremal(self, model, prop, sim, rounds, structured: int, monitors_of):
+    def _extremal(self, model, prop, sim, rounds, structured: int, monitors_of, wall: float = math.inf):
         """The runs aimed into ``prop``'s unsafe set by the inputs
         (:func:`.initial_sampling.extremal_runs`) from the first round's structured starts, a
         round of their own (their pieces are finer than the sampled signals'): ``((round, row),
-        depth)`` with the round appended when one violates, else ``(None, closest depth)``."""
+        depth)`` with the round appended when one violates, else ``(None, closest depth)``. None
+        without structured runs to start from; the runs under way at ``wall`` (a ``time.time()``
+        instant) stop there."""
         _, X, tau, _, signal, choice = rounds[0]
+        if structured == 0:
+            return None, math.inf
         plan = extremal_runs(model, prop, X[:structured], sim.dt)
         if plan is None:
             return None, math.inf
@@ -240,14 +260,27 @@ class MonteCarloBackend:
         switch = None if signal[2] is None else np.zeros(values.shape[:2], dtype=bool)
         taue = None if tau is None else tau[owner]
         choicee = None if choice is None else choice[owner]
-        monitor = monitors_of(Xe.shape[0])
-        sim.run(Xe, taue, observers=[monitor], signal=(step, values, switch),
-                branches=None if choicee is None else Branches(values=choicee))
+        parts, i = [], None
+        batches = Batches(Xe.shape[0], sim.steps, model.n, wall, f"{prop.id}: runs of input signals aimed at "
+                                                                 f"the unsafe set", model.horizon)
+        for a, b in batches:                # in batches, up to the first that violates
+            monitor = monitors_of(b - a)
+            sim.run(Xe[a:b], None if taue is None else taue[a:b], observers=[monitor, batches.watcher(a, b)],
+                    signal=(step, values[a:b], None if switch is None else switch[a:b]),
+                    branches=None if choicee is None else Branches(values=choicee[a:b]), deadline=wall)
+            parts.append(monitor.arrays())
+            if monitor.first_violation() is not None:
+                break
+        done = sum(p[0].size for p in parts)
+        monitor = SafetyMonitor.merged(model, prop, parts)
+        depth = float(np.min(monitor.min_depth, initial=np.inf))
         i = monitor.first_violation()
         if i is None:
-            return None, float(np.min(monitor.min_depth))
-        rounds.append(("extremal inputs", Xe, taue, monitor, (step, values, switch), choicee))
-        return (len(rounds) - 1, i), float(np.min(monitor.min_depth))
+            return None, depth
+        rounds.append(("extremal inputs", Xe[:done], None if taue is None else taue[:done], monitor,
+                       (step, values[:done], None if switch is None else switch[:done]),
+                       None if choicee is None else choicee[:done]))
+        return (len(rounds) - 1, i), depth
 
     def _search(self, model, window, sim, rounds, opts: Options, rng, branching: bool, deadline: float,
                 monitors_of, seeding: np.ndarray):
@@ -268,6 +301,8 @@ class MonteCarloBackend:
             d_all = np.concatenate([r[3].min_depth for r in rounds])
             may_seed = np.concatenate([seeding, np.ones(d_all.size - seeding.size, dtype=bool)])
             elite = np.flatnonzero(may_seed)[np.argsort(d_all[may_seed])][:max(5, opts.search_size // 10)]
+            if elite.size == 0:                         # no run to search around
+                break
             scale = 0.25 * 0.6 ** g
             pick = rng.choice(elite, opts.search_size)
             X = np.clip(X_all[pick] + rng.normal(size=(opts.search_size, model.n)) * span * scale, low, high)
@@ -295,7 +330,7 @@ class MonteCarloBackend:
                 choice = np.where(rng.random(C.shape) < scale, rng.random(C.shape), C)
             monitor = monitors_of(opts.search_size)
             sim.run(X, tau, observers=[monitor], signal=signal,
-                    branches=None if choice is None else Branches(values=choice))
+                    branches=None if choice is None else Branches(values=choice), deadline=_wall(deadline))
             rounds.append((f"search{g + 1}", X, tau, monitor, signal, choice))
             i = monitor.first_violation()
             if i is not None:
@@ -336,19 +371,59 @@ class MonteCarloBackend:
         violating run is replayed alone before it is reported."""
         start = time.perf_counter()
         deadline = math.inf if opts.max_seconds is None else start + opts.max_seconds
+        wall = _wall(deadline)
         rng = np.random.default_rng(opts.seed)
         sim = Simulator(model, opts.dt)
-        X, _, signal, choice, n_structured, seeding = run_plan(model, sim, None, opts, rng)
-        monitors = [EventMonitor(model, prop, X.shape[0]) for prop in props]
-        sim.run(X, None, observers=monitors, signal=signal,
-                branches=None if choice is None else Branches(values=choice))
+        X, _, signal, choice, n_structured, seeding, planned, points = run_plan(model, sim, None, opts, rng)
+        LOG.info("%s and %d random runs of %d steps (%.1f s)", _structured_text(opts, sim, planned, n_structured),
+                 X.shape[0] - n_structured, sim.steps, time.perf_counter() - start)
+        parts = [[] for _ in props]
+        cut, cut_random = 0, np.empty(0, dtype=int)
+        batches = Batches(n_structured, sim.steps, model.n, wall, horizon=model.horizon)
+        for a, b in batches:                    # the structured runs, in batches
+            Xs, _, signals, choices = take_rows(X, None, signal, choice, slice(a, b))
+            batch = [EventMonitor(model, prop, b - a) for prop in props]
+            traj = sim.run(Xs, None, observers=batch + [batches.watcher(a, b)], signal=signals,
+                           branches=None if choices is None else Branches(values=choices), deadline=wall)
+            cut += traj.cut
+            for i, m in enumerate(batch):
+                parts[i].append(m)
+        kept = np.arange(batches.done)
+        if X.shape[0] > n_structured and time.time() <= wall:      # the i.i.d. runs
+            Xr, _, signalr, choicer = take_rows(X, None, signal, choice, slice(n_structured, None))
+            batch = [EventMonitor(model, prop, Xr.shape[0]) for prop in props]
+            traj = sim.run(Xr, None, observers=batch, signal=signalr,
+                           branches=None if choicer is None else Branches(values=choicer), deadline=wall)
+            cut, cut_random = cut + traj.cut, traj.cut_rows
+            for i, m in enumerate(batch):
+                parts[i].append(m)
+            kept = np.r_[kept, np.arange(n_structured, X.shape[0])]
+        planned_random = X.shape[0] - n_structured
+        unstarted = n_structured - batches.done
+        if kept.size < X.shape[0]:              # the time budget left runs unsimulated
+            X, _, signal, choice = take_rows(X, None, signal, choice, kept)
+            seeding = seeding[kept]
+        n_structured = batches.done
+        monitors = [EventMonitor.merged(model, prop, part) for prop, part in zip(props, parts)]
         runs = sampled_runs(model, sim, X, None, signal, choice, n_structured) if opts.keep_sets else []
         LOG.info("simulated %d runs (%.1f s)", X.shape[0], time.perf_counter() - start)
         shared = (time.perf_counter() - start) / len(props)
         results = []
         for prop, monitor in zip(props, monitors):
             begin = time.perf_counter()
-            details = event_details(prop, monitor, X.shape[0], n_structured, X.shape[0] - n_structured, sim.dt)
+            details = event_details(prop, monitor, X.shape[0], n_structured, X.shape[0] - n_structured, sim.dt,
+                                    cut_random)
+            details.update(_structured_details(opts, sim, planned, points, n_structured, unstarted,
+                                               X[:n_structured]))
+            if X.shape[0] - n_structured < planned_random or cut or unstarted:
+                details["note"] = (f"time budget of {opts.max_seconds:.3g} s (option max_seconds) ended the "
+                                   + (f"structured runs after {n_structured} of {n_structured + unstarted} and the "
+                                      if unstarted else "")
+                                   + f"sampling after {X.shape[0] - n_structured} of {planned_random} random runs"
+                                   + (f", {cut} of the runs simulated cut short before the horizon (left out "
+                                      "of the violation bound)" if cut else ""))
+                if cut:
+                    details["cut_runs"] = int(cut)
             rounds = [("structured+random", X, None, monitor, signal, choice)]
             found = monitor.first_violation()
             found = None if found is None else (0, found)
@@ -361,9 +436,9 @@ class MonteCarloBackend:
                 found = self._optimise(model, prop, None, sim, rounds, opts, choice is not None, deadline,
                                        monitors_of, seeding)
                 details["optimiser_runs"] = int(rounds[-1][3].runs)
-            if found is None and time.perf_counter() > deadline:
+            if found is None and time.perf_counter() > deadline and "note" not in details:
                 details["note"] = f"time budget of {opts.max_seconds:.3g} s (option max_seconds) ended the search"
-            details["closest_margin"] = min(float(np.min(r[3].margins())) for r in rounds)
+            details["closest_margin"] = min(float(np.min(r[3].margins(), initial=np.inf)) for r in rounds)
             extrema = np.concatenate([r[3].extrema() for r in rounds])      # every round's runs
             if np.isfinite(extrema).any():
                 details["sampled_range"] = (float(np.nanmin(extrema)), float(np.nanmax(extrema)))
@@ -470,3 +545,62 @@ def _least(depths) -> float:
     NaN ones, which say nothing of a margin); ``inf`` if there is none."""
     depths = np.asarray(depths, dtype=float)
     return float(np.min(depths[~np.isnan(depths)], initial=np.inf))
+
+
+def _wall(deadline: float) -> float:
+    """The ``time.time()`` instant of a ``time.perf_counter()`` deadline (what the simulator and
+    worker processes read)."""
+    return math.inf if math.isinf(deadline) else time.time() + (deadline - time.perf_counter())
+
+
+def _cap_text(opts: Options, sim: Simulator) -> str:
+    """Where the cap on the structured runs comes from (:func:`.sampling.structured_cap`)."""
+    cap = structured_cap(opts, sim.steps, sim.n)
+    if opts.structured is not None:
+        return f"option structured={cap}"
+    return (f"{cap}: by default the larger of {STRUCTURED_PER_SAMPLE} x samples and the runs of "
+            f"{sim.steps} steps on {sim.n} states that fit in {STRUCTURED_WORK:.3g} state-steps; option structured")
+
+
+def _structured_text(opts: Options, sim: Simulator, planned: int, kept: int) -> str:
+    """The structured runs of a check in words, with the cap where it left some out."""
+    if kept >= planned:
+        return f"{kept} structured runs"
+    return f"{kept} of {planned} planned structured runs (at most {_cap_text(opts, sim)})"
+
+
+def _structured_details(opts: Options, sim: Simulator, planned: int, points: int, ran: int, unstarted: int,
+                        X) -> dict:
+    """``details`` of the structured runs: how many were planned and simulated, and where some
+    were left out, how many by the cap (:func:`.sampling.structured_cap`) and by the time budget,
+    which ones, and how many of the plan's initial states the simulated ones start from."""
+    out = {"structured_runs": int(ran), "structured_planned": int(planned)}
+    capped = planned - ran - unstarted
+    if not (capped or unstarted):
+        return out
+    out["structured_left_out"] = {"cap": int(capped), "time_budget": int(unstarted)}
+    why = []
+    if capped:
+        why.append(f"{capped} by the cap (at most {_cap_text(opts, sim)}): one run kept in each of "
+                   f"{ran + unstarted} equal stretches of the plan, drawn by the seed")
+    if unstarted:
+        why.append(f"{unstarted} by the time budget (option max_seconds: the last of the kept runs)")
+    out["structured_note"] = (f"{ran} of {planned} planned structured runs (the initial set's corners or "
+                              f"vertices, face points and centre, with the abort instants, input extremes, "
+                              f"switch decisions and branches) were simulated, from {initial_points(X)} of "
+                              f"its {points} initial states; left out: " + "; ".join(why)
+                              + ". The violation bound counts the random runs only")
+    return out
+
+
+def _search_work(opts: Options, sim: Simulator, per_run: float) -> str:
+    """The cross-entropy search's work in words, its time from the seconds a run took so far."""
+    runs = opts.search_rounds * opts.search_size
+    return f"up to {opts.search_rounds} x {opts.search_size} runs of {sim.steps} steps, about {runs * per_run:.3g} s"
+
+
+def _optimiser_work(opts: Options, sim: Simulator, per_run: float) -> str:
+    """The optimiser's work in words (:class:`.falsify.Budget`), its time as :func:`_search_work`."""
+    runs = (opts.generations + 1) * max(5, opts.population) + opts.polish
+    return (f"up to {opts.generations + 1} x {max(5, opts.population)} + {opts.polish} runs of {sim.steps} steps, "
+            f"about {runs * per_run:.3g} s")

@@ -79,6 +79,17 @@ class EventMonitor:
                 self.state[rr] = X[idx]
                 self.mode[rr] = m_index
 
+    @classmethod
+    def merged(cls, model: HybridAutomaton, prop: BoundEvent, parts: list) -> "EventMonitor":
+        """One monitor over the runs of several (monitors of the same property, in run order)."""
+        out = cls(model, prop, 0)
+        if parts:
+            for name in ("best", "time", "state", "mode"):
+                setattr(out, name, np.concatenate([getattr(p, name) for p in parts]))
+            out.last = {m: np.concatenate([p.last[m] for p in parts]) for m in out.q}
+            out.slack = max(p.slack for p in parts)
+        return out
+
     def extrema(self) -> np.ndarray:
         """Sampled extremum of ``q`` per run (``nan`` for runs that never visited a listed mode;
         an infinite value, where ``q`` overflowed, is kept: it is past any finite requirement)."""
@@ -206,10 +217,11 @@ def replay_event(model: HybridAutomaton, prop: BoundEvent, initial_state, dt: fl
 
 
 def event_details(prop: BoundEvent, monitor: EventMonitor, runs: int, n_structured: int, samples: int,
-                  step: float) -> dict:
+                  step: float, cut=()) -> dict:
     """What the sampled runs (``n_structured`` structured first, then ``samples`` i.i.d.) say of
     the extremum: its sampled range, the closest margin, the grid slack and a 95 % upper bound
-    of the violation probability over the i.i.d. runs."""
+    of the violation probability over the i.i.d. runs, those a time budget stopped before the
+    horizon (``cut``, indices among the i.i.d. runs) left out."""
     values = monitor.extrema()
     details = {"runs": int(runs), "iid_runs": int(samples), "dt": step, "sense": prop.sense,
                "grid_slack": monitor.slack,
@@ -218,6 +230,8 @@ def event_details(prop: BoundEvent, monitor: EventMonitor, runs: int, n_structur
     if np.isfinite(values).any():
         details["sampled_range"] = (float(np.nanmin(values)), float(np.nanmax(values)))
         details["closest_margin"] = float(np.min(monitor.margins()))
-    iid_bad = int(violates(prop, values[n_structured:n_structured + samples]).sum())
-    details["violation_probability_upper_95"] = clopper_pearson_upper(iid_bad, samples)
+    whole = np.ones(samples, dtype=bool)
+    whole[np.asarray(cut, dtype=int)] = False
+    iid_bad = int(violates(prop, values[n_structured:n_structured + samples])[whole].sum())
+    details["violation_probability_upper_95"] = clopper_pearson_upper(iid_bad, int(whole.sum()))
     return details

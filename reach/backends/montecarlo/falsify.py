@@ -61,6 +61,10 @@ class Budget:
     def spent(self) -> bool:
         return time.perf_counter() > self.deadline
 
+    def wall(self) -> float:
+        """The deadline as a ``time.time()`` instant (the simulator's: runs under way stop there)."""
+        return math.inf if math.isinf(self.deadline) else time.time() + (self.deadline - time.perf_counter())
+
 
 class Parameterisation:
     """The map ``u in [0, 1]^d -> (x0, tau, input values)`` of the module docstring."""
@@ -144,12 +148,13 @@ def falsify(model, prop, window, sim, monitor_factory, elite, budget: Budget, se
     """
     param = Parameterisation(model, window, step, pieces, switching, choices)
     best = {"depth": np.inf, "run": None, "violated": False, "runs": 0}
+    wall = budget.wall()
 
     def evaluate(U: np.ndarray) -> np.ndarray:
         X, tau, signal, choice = param.runs(U)
         monitor = monitor_factory(X.shape[0])
         sim.run(X, tau, observers=[monitor], signal=signal,
-                branches=None if choice is None else Branches(values=choice))
+                branches=None if choice is None else Branches(values=choice), deadline=wall)
         best["runs"] += X.shape[0]
         hit = monitor.first_violation()
         i = hit if hit is not None else int(np.argmin(monitor.min_depth))

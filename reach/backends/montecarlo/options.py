@@ -12,6 +12,7 @@ NAME = "montecarlo"
 @dataclass
 class Options:
     samples: int = ranged(1000, 1, 10_000_000)           # i.i.d. runs (safety) or runs (stochastic reach)
+    structured: int | None = ranged(None, 0, 10_000_000)  # most structured runs (None: structured_cap)
     search_rounds: int = ranged(3, 0, 1000)        # cross-entropy generations after the i.i.d. round
     search_size: int = ranged(200, 1, 100_000)          # runs per generation (one batch: no deadline inside)
     seed: int = 0

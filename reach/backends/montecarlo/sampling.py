@@ -5,6 +5,16 @@ corners, face centres and centre of the initial set crossed with the ends and mi
 abort window, :func:`switch_window`) and the i.i.d. ones (:func:`random_plan`), with their input
 signals, switching signals and choice values (:mod:`.initial_sampling`).
 
+The structured runs are at most :func:`structured_cap` (option ``structured``; by default the
+larger of ``STRUCTURED_PER_SAMPLE * samples`` and what fits in :data:`STRUCTURED_WORK`
+state-steps, runs x grid steps x states): where the plan has more, one run of
+each of that many equal stretches of the plan is kept, drawn by the seed (:func:`spread`), so
+every family of the plan (initial points, abort instants, input signals, switch decisions,
+branches) keeps its share. They run in this process in batches (:class:`Batches`): a first one
+of about :data:`FIRST_BATCH_WORK` state-steps (runs x grid steps x states), timed, then batches
+four times larger up to :data:`BATCH_WORK`; under a time budget a batch is cut down to what the
+budget has left by the times so far, none starts past it, and the runs under way stop there.
+
 The structured and i.i.d. runs are one simulation shared by all safety properties of the call
 (one monitor each, :class:`~.monitors.SafetyMonitor`). The i.i.d. runs are simulated in fixed
 blocks of :data:`SAMPLE_BLOCK`, grouped into batches of ``batch`` runs that run in this process,
@@ -18,6 +28,7 @@ import itertools
 import logging
 import math
 import time
+from typing import NamedTuple
 
 import numpy as np
 
@@ -31,6 +42,12 @@ from reach.model.simulate import Branches, Simulator, check_size, single_threade
 LOG = logging.getLogger("reach.montecarlo")
 KEPT_RUNS = 40                 # sampled runs kept for pictures (option keep_sets)
 SWITCH_PROBABILITY = 0.3       # chance that a random run takes an enabled may-transition at a piece start
+STRUCTURED_WORK = 2e8         # state-steps of structured runs allowed whatever the samples (structured_cap)
+STRUCTURED_PER_SAMPLE = 8      # structured runs allowed per i.i.d. sample (structured_cap)
+STRUCTURED_KEY = 2 ** 32 + 1   # spawn key of the seed's draw of the structured runs kept (spread)
+FIRST_BATCH_WORK = 5e7         # state-steps of the first batch of structured runs (Batches)
+BATCH_WORK = 2e9               # state-steps of a batch of structured runs at most (Batches)
+PROGRESS_SECONDS = 10.0        # a batch under way says how far its runs are at most this often (-v)
 
 
 # ------------------------------------------------------------------ the abort window
@@ -110,17 +127,31 @@ def random_plan(model: HybridAutomaton, window, count: int, rng):
     return X, tau
 
 
-def run_plan(model: HybridAutomaton, sim: Simulator, window, opts: Options, rng):
-    """The runs of the first round, ``(X, tau, signal, choice, n_structured, seeding)``: the
-    structured initial states (with the structured signals of the time-varying inputs,
-    :func:`.initial_sampling.structured_signals`) and ``opts.samples`` i.i.d. ones (uniform
-    signals); where the model has may-transitions, each structured run twice, staying in a
-    mode as long as it can and leaving where a guard is first entered (every piece asks for a
-    switch: :meth:`reach.model.simulate.Simulator.run`), and the random runs ask in random
-    pieces; where transitions can be enabled together, each structured run once per branch
-    (:func:`branch_plan`). ``seeding`` marks the runs the search and the optimiser may start
-    from: all but those of one-switch signals, a family of neighbours that would fill their
-    populations around one local minimum (they are tried as they are)."""
+class Plan(NamedTuple):
+    """The runs of the first round (:func:`run_plan`)."""
+
+    X: np.ndarray                   # (N, n) initial states, the structured runs first
+    tau: np.ndarray | None          # (N,) switch instants of the abort window
+    signal: tuple | None            # (step, values (N, K, m), switch (N, K) or None)
+    choice: np.ndarray | None       # (N, CHOICE_SLOTS) choice values
+    structured: int                 # structured runs kept (the first rows)
+    seeding: np.ndarray             # (N,) runs the search and the optimiser may start from
+    planned: int                    # structured runs planned, before structured_cap
+    planned_points: int             # distinct initial states of the planned structured runs
+
+
+def run_plan(model: HybridAutomaton, sim: Simulator, window, opts: Options, rng) -> Plan:
+    """The runs of the first round (:class:`Plan`): the structured initial states (with the
+    structured signals of the time-varying inputs, :func:`.initial_sampling.structured_signals`)
+    and ``opts.samples`` i.i.d. ones (uniform signals); where the model has may-transitions,
+    each structured run twice, staying in a mode as long as it can and leaving where a guard is
+    first entered (every piece asks for a switch: :meth:`reach.model.simulate.Simulator.run`),
+    and the random runs ask in random pieces; where transitions can be enabled together, each
+    structured run once per branch (:func:`branch_plan`); at most :func:`structured_cap`
+    structured runs, spread over the plan (:func:`spread`). ``seeding`` marks the runs the
+    search and the optimiser may start from: all but those of one-switch signals, a family of
+    neighbours that would fill their populations around one local minimum (they are tried as
+    they are)."""
     Xs, taus = structured_plan(model, window, rng=rng)
     Xr, taur = random_plan(model, window, opts.samples, rng)
     signal = None
@@ -156,8 +187,176 @@ def run_plan(model: HybridAutomaton, sim: Simulator, window, opts: Options, rng)
     if sim.max_options > 1:
         seeding = np.r_[np.repeat(seeding[:n_structured], sim.max_options), seeding[n_structured:]]
         X, tau, signal, choice, n_structured = branch_plan(sim.max_options, n_structured, X, tau, signal, rng)
+    planned, points = n_structured, initial_points(X[:n_structured])
+    cap = structured_cap(opts, sim.steps, model.n)
+    if n_structured > cap:                      # one run of each of ``cap`` stretches of the plan
+        keep = np.r_[spread(n_structured, cap, opts.seed), np.arange(n_structured, X.shape[0])]
+        X, tau, signal, choice = take_rows(X, tau, signal, choice, keep)
+        seeding, n_structured = seeding[keep], cap
     check_size(model, sim.dt, X.shape[0])      # all the runs' arrays are held at once
-    return X, tau, signal, choice, n_structured, seeding
+    return Plan(X, tau, signal, choice, n_structured, seeding, planned, points)
+
+
+def structured_cap(opts: Options, steps: int, states: int) -> int:
+    """The most structured runs of a check of runs of ``steps`` grid steps on ``states`` states:
+    the option ``structured``, by default the larger of ``STRUCTURED_PER_SAMPLE * samples`` and
+    the runs whose work (runs x steps x states) fits in :data:`STRUCTURED_WORK` (about a second
+    on a linear model). A plan of cheap runs runs whole whatever the samples; one of long runs
+    is held to what the samples asked for (the suite's plans, at most a few thousand runs for
+    500 samples, run whole)."""
+    if opts.structured is not None:
+        return int(opts.structured)
+    return max(STRUCTURED_PER_SAMPLE * int(opts.samples),
+               int(STRUCTURED_WORK // (max(1, steps) * max(1, states))))
+
+
+def spread(total: int, count: int, seed: int) -> np.ndarray:
+    """``count`` increasing indices of ``range(total)`` (``count <= total``), one drawn uniformly
+    in each of ``count`` equal stretches ``[floor(k total / count), floor((k + 1) total /
+    count))`` by ``SeedSequence(seed, spawn_key=(STRUCTURED_KEY,))``: spread over the whole plan,
+    and unlike every ``total / count``-th run not locked on a period of the plan (the copies of a
+    run per branch, per abort instant, per input corner lie next to each other)."""
+    edges = np.floor(np.linspace(0, total, count + 1)).astype(int)
+    rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(STRUCTURED_KEY,)))
+    return edges[:-1] + np.floor(rng.random(count) * (edges[1:] - edges[:-1])).astype(int)
+
+
+def take_rows(X, tau, signal, choice, rows):
+    """The runs ``rows`` of a plan: ``(X, tau, signal, choice)`` restricted to them."""
+    return (X[rows], None if tau is None else tau[rows],
+            None if signal is None else (signal[0], signal[1][rows], None if signal[2] is None else signal[2][rows]),
+            None if choice is None else choice[rows])
+
+
+def initial_points(X: np.ndarray) -> int:
+    """How many distinct initial states the runs ``X`` start from."""
+    return 0 if X.shape[0] == 0 else int(np.unique(X, axis=0).shape[0])
+
+
+class Batches:
+    """The batches ``(a, b)`` of ``total`` structured runs of ``steps`` grid steps on ``states``
+    states, in this process: iterating yields them one by one, timing each (the time between a
+    yield and the next request is the batch's).
+
+    Without a budget the sizes depend on the plan only (a seed draws the same disturbance kicks
+    whatever the machine): all at once where the whole work (runs x steps x states) is at most
+    :data:`BATCH_WORK`, else a first batch of about :data:`FIRST_BATCH_WORK` (at least one run),
+    then each four times the one before, at most :data:`BATCH_WORK`. Under a budget
+    (``deadline``, a ``time.time()`` instant) all at once only up to :data:`FIRST_BATCH_WORK`;
+    no batch after the first starts past it, and a batch is cut down to the runs that the time
+    left allows by the line ``seconds = c0 + c1 runs`` fitted to the batches so far (``c0``:
+    what a batch costs whatever its runs, as the per-step work of one linear mode); the runs
+    under way stop at the deadline (one linear mode without events, which the simulator steps
+    to the horizon at once, only at the batch's end). ``-v`` shows the plan, each batch's end
+    with the time the rest should take by that line, and, while a batch runs long, how far its
+    runs are (:meth:`watcher`)."""
+
+    def __init__(self, total: int, steps: int, states: int, deadline: float = math.inf,
+                 what: str = "structured runs", horizon: float | None = None):
+        self.total, self.what, self.horizon = int(total), what, horizon
+        self.per_run = float(max(1, steps)) * max(1, states)
+        self.deadline = deadline
+        self.timings: list[tuple[int, float]] = []
+        self.done = 0
+        self.steps, self.states = int(steps), int(states)
+        self.begin = time.perf_counter()
+
+    def sizes(self, size: int, left: int) -> list[int]:
+        """The sizes of the batches of ``left`` runs from one of ``size`` on, without a budget."""
+        top = max(1, int(BATCH_WORK // self.per_run))
+        out = []
+        while left > 0:
+            out.append(min(size, left))
+            left -= out[-1]
+            size = max(size, min(4 * size, top))
+        return out
+
+    def first_size(self) -> int:
+        if self.total * self.per_run <= (BATCH_WORK if math.isinf(self.deadline) else FIRST_BATCH_WORK):
+            return self.total
+        return int(min(self.total, max(1, FIRST_BATCH_WORK // self.per_run)))
+
+    def line(self) -> tuple[float, float]:
+        """``(c0, c1)`` of the batches so far: ``c0`` from a least-squares line, held between 0
+        and the quickest batch's time, then ``c1`` the pooled time per run beyond it (one batch:
+        ``c0 = 0`` and its time per run, which overestimates the larger batches after it)."""
+        runs = np.array([n for n, _ in self.timings], dtype=float)
+        secs = np.array([s for _, s in self.timings], dtype=float)
+        c0 = 0.0
+        if np.unique(runs).size >= 2:
+            c0 = float(np.clip(np.polyfit(runs, secs, 1)[1], 0.0, secs.min()))
+        return c0, max(float((secs - c0).sum() / runs.sum()), 1e-9)
+
+    def estimate(self, size: int) -> float:
+        """Seconds the runs left should take in batches from one of ``size`` on."""
+        c0, c1 = self.line()
+        left = self.total - self.done
+        return len(self.sizes(size, left)) * c0 + c1 * left
+
+    def __iter__(self):
+        size = self.first_size()
+        if self.total:
+            LOG.info("%s: %d x %d steps (%d states, %.3g state-steps)%s", self.what, self.total, self.steps,
+                     self.states, self.total * self.per_run,
+                     "" if size >= self.total else f"; a first batch of {size} timed, then batches of up to "
+                                                   f"{max(1, int(BATCH_WORK // self.per_run))}")
+        while self.done < self.total:
+            if self.timings and time.time() > self.deadline:
+                return
+            size = min(size, self.total - self.done)
+            if self.timings and math.isfinite(self.deadline):       # what the time left allows
+                c0, c1 = self.line()
+                size = int(max(1, min(size, (self.deadline - time.time() - c0) // c1)))
+            start = time.perf_counter()
+            yield self.done, self.done + size
+            self.timings.append((size, time.perf_counter() - start))
+            self.done += size
+            if self.done < self.total:
+                grown = max(size, min(4 * size, max(1, int(BATCH_WORK // self.per_run))))
+                c0, c1 = self.line()
+                LOG.info("%s: %d of %d simulated (%.1f s); %s %.3g s for the other %d", self.what, self.done,
+                         self.total, time.perf_counter() - self.begin,
+                         "about" if len(self.timings) > 1 else "at most about", self.estimate(grown),
+                         self.total - self.done)
+                size = grown
+            elif len(self.timings) > 1:
+                LOG.info("%s: all %d simulated (%.1f s)", self.what, self.total, time.perf_counter() - self.begin)
+
+    def watcher(self, a: int, b: int):
+        """An observer of the batch ``(a, b)`` that says under ``-v``, at most every
+        :data:`PROGRESS_SECONDS`, the latest instant its runs have reached (the runs of a batch
+        need not move together: those of a stiffer flow take more substeps)."""
+        return _Progress(f"{self.what} {a + 1}-{b} of {self.total}", self.horizon, self.begin)
+
+
+class _Progress:
+    """Says under ``-v`` how far the runs of a batch are, at most every :data:`PROGRESS_SECONDS`
+    (an observer of :meth:`reach.model.simulate.Simulator.run`: it reads only the times)."""
+
+    def __init__(self, label: str, horizon: float | None, begin: float):
+        self.label, self.horizon, self.begin = label, horizon, begin
+        self.next = time.perf_counter() + PROGRESS_SECONDS
+        self.latest = -math.inf
+
+    def _seen(self, t) -> None:
+        t = np.asarray(t, dtype=float)
+        if t.size:
+            latest = float(np.max(t))          # NaN where a time is NaN: kept out below
+            if latest > self.latest:
+                self.latest = latest
+        now = time.perf_counter()
+        if now < self.next:
+            return
+        self.next = now + PROGRESS_SECONDS
+        LOG.info("%s: the first runs have reached t = %.6g%s (%.1f s)", self.label,
+                 self.latest if self.horizon is None else min(self.latest, self.horizon),
+                 "" if self.horizon is None else f" of {self.horizon:g}", now - self.begin)
+
+    def __call__(self, t, X, mode, rows) -> None:
+        self._seen(t)
+
+    def block(self, t, S, seen, m_index, rows, margins=None) -> None:
+        self._seen(t[-1] if np.ndim(t) > 1 else t)
 
 
 # ------------------------------------------------------------------ simulating the runs
@@ -190,14 +389,15 @@ SAMPLE_BLOCK = 1000     # i.i.d. runs always simulated together: the unit of bat
 
 
 def _simulate_rounds(model, props, sim, opts: Options, X, tau, signal, choice, n_structured: int, kicks,
-                     deadline: float = math.inf) -> tuple[list, np.ndarray]:
-    """Simulate the structured runs (in this process) and the i.i.d. ones, monitoring every
-    property; ``([(monitor arrays per property, blocked runs, runs that met a choice, runs cut
-    by the deadline)], rows)``: the parts in the order of ``rows``, the indices of the runs
-    simulated. No block of i.i.d. runs starts after ``deadline`` (a ``time.time()`` instant,
-    which worker processes share), and the runs under way when it passes stop there (counted
-    as blocked and as cut): those simulated are the structured ones and a leading part of each
-    batch's blocks.
+                     deadline: float = math.inf) -> tuple[list, np.ndarray, int]:
+    """Simulate the structured runs (in this process, in :class:`Batches`) and the i.i.d. ones,
+    monitoring every property; ``([(monitor arrays per property, blocked runs, runs that met a
+    choice, runs cut by the deadline)], rows, structured parts)``: the parts in the order of
+    ``rows``, the indices of the runs simulated, the first ``structured parts`` of the parts
+    those of the structured runs. No batch of structured runs after the first and no block of
+    i.i.d. runs starts after ``deadline`` (a ``time.time()`` instant, which worker processes
+    share), and the runs under way when it passes stop there (counted as blocked and as cut):
+    those simulated are a leading part of the structured runs and of each batch's blocks.
 
     The i.i.d. runs are simulated in blocks of :data:`SAMPLE_BLOCK`, each block on its own
     (disturbance kicks from ``SeedSequence(seed, spawn_key=(k,))`` for block ``k``): a run's
@@ -205,15 +405,17 @@ def _simulate_rounds(model, props, sim, opts: Options, X, tau, signal, choice, n
     batches of ``batch`` runs nor on where a batch runs (in this process, on ``jobs`` local
     processes, or on a Dask ``scheduler``)."""
     def rows(a, b):
-        return (X[a:b], None if tau is None else tau[a:b],
-                None if signal is None else (signal[0], signal[1][a:b], None if signal[2] is None else signal[2][a:b]),
-                None if choice is None else choice[a:b])
+        return take_rows(X, tau, signal, choice, slice(a, b))
 
-    monitors = [SafetyMonitor(model, p, n_structured) for p in props]
-    Xs, taus, signals, choices = rows(0, n_structured)
-    traj = sim.run(Xs, taus, observers=monitors, kicks=kicks, signal=signals,
-                   branches=None if choices is None else Branches(values=choices), deadline=deadline)
-    parts = [([m.arrays() for m in monitors], *_counts(traj))]
+    parts = []
+    batches = Batches(n_structured, sim.steps, model.n, deadline, horizon=model.horizon)
+    for a, b in batches:
+        monitors = [SafetyMonitor(model, p, b - a) for p in props]
+        Xs, taus, signals, choices = rows(a, b)
+        traj = sim.run(Xs, taus, observers=monitors + [batches.watcher(a, b)], kicks=kicks, signal=signals,
+                       branches=None if choices is None else Branches(values=choices), deadline=deadline)
+        parts.append(([m.arrays() for m in monitors], *_counts(traj)))
+    structured_parts = len(parts)
     starts = list(range(n_structured, X.shape[0], SAMPLE_BLOCK))
     blocks = [(k,) + rows(a, min(a + SAMPLE_BLOCK, X.shape[0])) for k, a in enumerate(starts)]
     per_unit = max(1, -(-opts.batch // SAMPLE_BLOCK))
@@ -236,9 +438,9 @@ def _simulate_rounds(model, props, sim, opts: Options, X, tau, signal, choice, n
             out[i] = value
             _progress(done, len(units), begin)
     done = [j for i, unit in enumerate(out) for j in range(i * per_unit, i * per_unit + len(unit))]
-    kept = np.concatenate([np.arange(n_structured)] + [np.arange(starts[j], min(starts[j] + SAMPLE_BLOCK, X.shape[0]))
+    kept = np.concatenate([np.arange(batches.done)] + [np.arange(starts[j], min(starts[j] + SAMPLE_BLOCK, X.shape[0]))
                                                        for j in done]).astype(int)
-    return parts + [part for unit in out for part in unit], kept
+    return parts + [part for unit in out for part in unit], kept, structured_parts
 
 
 def _progress(done: int, total: int, begin: float) -> None:
