@@ -519,3 +519,14 @@ def test_a_constant_only_the_cfg_reads_takes_its_range_from_initially(tmp_path, 
     xml, cfg = write(tmp_path, body, f'system = toy\ninitially = "k >= 5 & k <= 7 & t == 0"\n'
                                      f'forbidden = "{forbidden}"\ntime-horizon = 20\n')
     assert main(["check", str(xml), str(cfg), "-b", "star", "--counterexamples", str(tmp_path / "out")]) == code
+
+
+@pytest.mark.parametrize("drop,hint", [("time-horizon", "give a positive time: time-horizon = 10"),
+                                       ("initially", 'initially = "x == 0 & loc(sys) == l0"')])
+def test_a_missing_required_cfg_key_says_what_to_write(tmp_path, capsys, drop, hint):
+    """SpaceEx reads a cfg without time-horizon as "up to a fixpoint"; the message says what
+    to add instead of only naming the key."""
+    cfg = "".join(line + "\n" for line in CFG.splitlines() if not line.startswith(drop))
+    xml, cfg_path = write(tmp_path, THERMOSTAT, cfg)
+    err = bad_input(check(xml, cfg_path), capsys)
+    assert err.startswith(f"reach: {cfg_path}:1: no '{drop}' (") and hint in err, err

@@ -27,6 +27,16 @@ OTHER_KEYS = ("scenario", "directions", "set-aggregation", "clustering", "flowpi
               "simu-init-sampling-points", "fixpoint-check", "time-step")
 
 
+#: what a missing required key of the cfg should say (SpaceEx's own default horizon explores
+#: until a fixpoint, which reach does not do)
+MISSING_HINTS = {
+    "time-horizon": "SpaceEx's default explores up to a fixpoint, without a bound; give a positive "
+                    "time: time-horizon = 10",
+    "initially": "the initial set: initially = \"x == 0 & loc(sys) == l0\"",
+    "system": "the component to analyse: system = \"sys\"",
+}
+
+
 @dataclass
 class Config:
     file: str
@@ -39,8 +49,9 @@ class Config:
         return self.values[key][1] if key in self.values else None
 
     def missing(self, key: str) -> InputError:
-        """The error for a required key the file lacks (a key spelt like it is refused on reading)."""
-        return InputError(f"no '{key}'", self.file, line=1)
+        """The error for a required key the file lacks (a key spelt like it is refused on reading),
+        saying what to write."""
+        return InputError(f"no '{key}' ({MISSING_HINTS.get(key, 'add it')})", self.file, line=1)
 
     def number(self, key: str) -> float | None:
         if key not in self.values:
