@@ -530,3 +530,22 @@ def test_a_missing_required_cfg_key_says_what_to_write(tmp_path, capsys, drop, h
     xml, cfg_path = write(tmp_path, THERMOSTAT, cfg)
     err = bad_input(check(xml, cfg_path), capsys)
     assert err.startswith(f"reach: {cfg_path}:1: no '{drop}' (") and hint in err, err
+
+
+@pytest.mark.parametrize("read,code", [("", 0), (" &amp; w &lt;= 1", 2)])
+def test_a_variable_only_jumps_write_is_kept_frozen_or_refused_where_read(tmp_path, capsys, read, code):
+    """``w`` has no flow and is set on a jump. Read nowhere, it changes no run: kept as a state
+    with flow 0, with a warning, and the thermostat's bound holds (T <= 22 by its invariant).
+    Read by a guard, its value would matter (SpaceEx lets it move freely): bad input."""
+    body = (THERMOSTAT.replace('<param name="c"', '<param name="w" type="real" local="false" dynamics="any"/>\n'
+                                                 ' <param name="c"')
+            .replace("<assignment>c := 0</assignment>", "<assignment>c := 0 &amp; w := 3</assignment>")
+            .replace("<guard>T &lt;= 19</guard>", f"<guard>T &lt;= 19{read}</guard>"))
+    xml, cfg = write(tmp_path, body, CFG)
+    got = main(["check", str(xml), str(cfg), "-b", "star"])
+    out, err = capsys.readouterr()
+    assert got == code, out + err
+    if code == 0:
+        assert "'w' has no flow and nothing reads it: kept as a state with flow 0" in err + out
+    else:
+        assert "assignment: 'w' has no flow anywhere" in err

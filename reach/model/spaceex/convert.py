@@ -594,11 +594,9 @@ class DocumentBuilder(Converter):
                     for n in names_in(p):
                         used_where.setdefault(n, set()).add(tr.source)
             for var, (tokens, line) in assign.items():
-                if var not in states:
-                    raise InputError(f"assignment: '{var}' has no flow anywhere (only states can be assigned)",
-                                     self.file, line=line)
                 for n in names_in(tokens):
                     used_where.setdefault(n, set()).add(tr.source)
+        self._frozen_if_unread(states, used_where)
         for var in sorted((set(used_where) | cfg_names) - states):
             if self.flat.globals.get(var) == "const" and var in cfg_names:
                 # a constant the cfg's initially gives its value (or range): flow 0 everywhere
@@ -619,6 +617,32 @@ class DocumentBuilder(Converter):
         for var in sorted(states):
             self._maybe_constant_input(var, cfg_names)
         self.states = [g for g in self._order() if g in states and g not in self.inputs]
+
+    def _frozen_if_unread(self, states: set, read: dict) -> None:
+        """A variable that jumps assign but that has no flow anywhere: bad input where a flow,
+        invariant, guard, assignment or the cfg's forbidden set reads it. Where none does (a
+        timer written on each jump and never read), its value changes no run: SpaceEx lets it
+        move freely between jumps, and any motion gives the other variables the same runs, so it
+        is kept as a state with flow 0 (its initial value from the cfg, else 0; its resets as written),
+        and a warning says so."""
+        self.unread: set[str] = set()      # such variables (their initial value, where the cfg gives none: 0)
+        forbidden = {g for term in self.cfg_formula("forbidden") for a in term if isinstance(a, Relation)
+                     for p in a.parts for n in names_in(p) for g in self.lookup(n)}
+        for assign in self.assignments:
+            for var, (_, line) in assign.items():
+                if var in states:
+                    continue
+                if var in read or var in forbidden:
+                    raise InputError(f"assignment: '{var}' has no flow anywhere (only states can be assigned)",
+                                     self.file, line=line)
+                states.add(var)
+                self.unread.add(var)
+                for key in self.flat.locations:
+                    if key not in self.timeless:
+                        self.flows[key][var] = ([Token("num", "0")], line)
+                self.flat.warnings.append(
+                    f"{self.file}:{line}: '{var}' has no flow and nothing reads it: kept as a state with flow 0 "
+                    "(SpaceEx lets it move freely; its value changes no run; 0 at the start where the cfg gives none)")
 
     def check_size(self) -> None:
         """Refuse more variables, or flow matrices, than the import handles (the module docstring)."""
@@ -1034,6 +1058,8 @@ class DocumentBuilder(Converter):
                 continue
             texts += own
         self._inputs_can_start(on_inputs)
+        given = {n for _, t in texts for n in _NAME.findall(t)}
+        texts += [("==", f"{self.yaml[v]} == 0") for v in sorted(self.unread) if self.yaml[v] not in given]
         return texts
 
     def _inputs_can_start(self, texts) -> None:
