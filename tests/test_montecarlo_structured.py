@@ -175,3 +175,47 @@ def test_batches_depend_on_the_plan_only_without_a_budget(monkeypatch):
     assert list(Batches(200, 100, 10)) == runs
     assert list(Batches(200, 100, 10, deadline=0.0)) == [(0, 1)]
     assert list(Batches(0, 100, 10)) == []
+
+
+BUSY = """name: busy
+state: [x, t, c]
+modes:
+  start:
+    flow: {x: '0', t: '1', c: '0'}
+    invariant: [t <= 0]
+  calm:
+    flow: {x: '0', t: '1', c: '0'}
+  busy:
+    flow: {x: '0', t: '1', c: '1'}
+initial:
+  mode: start
+  constraints: [x >= 0, x <= 1, t == 0, c == 0]
+transitions:
+  to_calm: {from: start, to: calm, guard: [x <= 0.6], urgent: true}
+  to_calm2: {from: start, to: calm, guard: [x >= 0.8], urgent: true}
+  to_busy: {from: start, to: busy, guard: [x >= 0.6, x <= 0.8], urgent: true}
+  tick: {from: busy, to: busy, guard: [c >= 0.01], reset: {c: '0'}, urgent: true}
+horizon: 20
+"""
+
+
+@pytest.mark.parametrize("kind,body", [("safety", "avoid: [t >= 19.9]"),
+                                       ("event", "maximize: t\n    require: '<= 19.9'")])
+def test_runs_a_budget_cuts_count_as_violating_in_the_bound(tmp_path, kind, body):
+    """The runs from x in [0.6, 0.8] (P = 0.2) enter 'busy', jump every 0.01 and violate at
+    t = 19.9; the others idle in 'calm' and finish at once. A budget cuts the slow, violating
+    runs: left out of the bound, they would leave only clean runs behind it (a bound of 0.004
+    against a probability of 0.2). Counted as violating, the bound is at least the one of the
+    same runs without a budget, whatever the machine's speed (the one block of random runs starts
+    at once, or none does and the bound is 1)."""
+    (tmp_path / "m.yaml").write_text(BUSY)
+    (tmp_path / "p.yaml").write_text(f"properties:\n  - id: late\n    kind: {kind}\n    modes: [busy]\n    {body}\n")
+    options = {"dt": 0.005, "search_rounds": 0, "optimise": False, "structured": 4}
+    free = check_files(tmp_path / "m.yaml", tmp_path / "p.yaml", "montecarlo", options)[0]
+    cut = check_files(tmp_path / "m.yaml", tmp_path / "p.yaml", "montecarlo", {**options, "max_seconds": 0.05})[0]
+    assert free.status is Status.UNSAFE
+    assert cut.status is not Status.SAFE
+    if cut.status is Status.UNKNOWN:
+        bound = cut.details["violation_probability_upper_95"]
+        violating = free.details.get("violating_runs", free.details.get("iid_violations"))
+        assert bound >= clopper_pearson_upper(violating or 0, 1000) - 1e-12, cut.details

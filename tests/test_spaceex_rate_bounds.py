@@ -49,12 +49,13 @@ def test_each_bounded_derivative_becomes_a_varying_input_over_its_interval(tmp_p
     xml, cfg = write(tmp_path, RECT, "y <= -1.9", 2)
     model, _, _ = load_spaceex(xml, cfg)
     ranges = {u.name: (u.low, u.high, u.varying) for u in model.bounded_inputs}
-    assert ranges == {"x_rate": (1.0, 2.0, True), "y_rate": (-1.0, 1.0, True)}
-    for u in (1.0, 1.5, 2.0):
-        assert rates(model, "up", "x", {"x_rate": u}) == u
-    # 'down' bounds x' by [-3, -1]: the same input, mapped onto that interval end to end
-    assert rates(model, "down", "x", {"x_rate": 1.0}) == -3.0
-    assert rates(model, "down", "x", {"x_rate": 2.0}) == -1.0
+    # y' has one interval: its input ranges over it; x' has two: a share of each location's
+    assert ranges == {"x_rate_share": (0.0, 1.0, True), "y_rate": (-1.0, 1.0, True)}
+    for share, up, down in ((0.0, 1.0, -3.0), (0.5, 1.5, -2.0), (1.0, 2.0, -1.0)):
+        assert rates(model, "up", "x", {"x_rate_share": share}) == up
+        assert rates(model, "down", "x", {"x_rate_share": share}) == down
+    for u in (-1.0, 0.25, 1.0):
+        assert rates(model, "up", "y", {"y_rate": u}) == u
     assert rates(model, "down", "y", {}) == 1.0
 
 
@@ -94,22 +95,45 @@ def test_equal_bounds_are_the_rate_itself(tmp_path):
     body = RECT.replace("1 &lt;= x' &amp; x' &lt;= 2", "2 &lt;= x' &amp; x' &lt;= 2")
     xml, cfg = write(tmp_path, body, "y <= -1.9", 2)
     model, _, _ = load_spaceex(xml, cfg)
-    assert "x_rate" in {u.name for u in model.bounded_inputs}       # 'down' still ranges over [-3, -1]
-    assert rates(model, "up", "x", {"x_rate": 1.0}) == 2.0
-    assert rates(model, "up", "x", {"x_rate": 2.0}) == 2.0
+    (u,) = [u for u in model.bounded_inputs if u.name == "x_rate"]      # 'down' alone ranges: [-3, -1]
+    assert (u.low, u.high) == (-3.0, -1.0)
+    assert rates(model, "up", "x", {"x_rate": -3.0}) == 2.0
+    assert rates(model, "down", "x", {"x_rate": -2.5}) == -2.5
+
+
+def test_bounds_that_cross_by_rounding_only_hold_both_readings(tmp_path):
+    """``0.1*3 <= x'`` and ``x' <= 0.3`` cross by one rounding (0.30000000000000004 > 0.3): the
+    rates between them; bounds that truly cross are bad input."""
+    body = RECT.replace("1 &lt;= x' &amp; x' &lt;= 2", "0.1*3 &lt;= x' &amp; x' &lt;= 0.3")
+    xml, cfg = write(tmp_path, body, "y <= -1.9", 2)
+    model, _, _ = load_spaceex(xml, cfg)
+    ends = sorted(rates(model, "up", "x", {"x_rate_share": v}) for v in (0.0, 1.0))
+    assert ends == [0.3, 0.1 * 3]
+    assert max(abs(rates(model, "down", "x", {"x_rate_share": v}) - e) for v, e in ((0.0, -3.0), (1.0, -1.0))) == 0
+
+
+def test_a_variable_named_like_the_internal_marker_is_read_as_a_variable(tmp_path, capsys):
+    """``x' + primed_rate_ <= 3`` reads a state: bad input, whatever the state's name."""
+    body = RECT.replace('<param name="y"', '<param name="primed_rate_" type="real" local="false" dynamics="any"/>\n'
+                                           ' <param name="y"')
+    body = body.replace("1 &lt;= x' &amp; x' &lt;= 2", "x' + primed_rate_ &lt;= 3 &amp; x' &gt;= 0 &amp; "
+                                                         "primed_rate_' == 0")
+    xml, cfg = write(tmp_path, body, "y <= -1.9", 2)
+    err = bad_input(["check", str(xml), str(cfg), "-b", "star"], capsys)
+    assert "construct 'x' + primed_rate_ <= 3' is not supported" in err, err
 
 
 def test_a_rate_input_name_never_shadows_a_variable(tmp_path):
     body = RECT.replace('<param name="y" type="real" local="false" dynamics="any"/>',
                         '<param name="y" type="real" local="false" dynamics="any"/>\n'
-                        ' <param name="x_rate" type="real" local="false" dynamics="any"/>')
-    body = body.replace("y' == 1</flow>", "y' == 1 &amp; x_rate' == 0</flow>")
-    body = body.replace("-y' &gt;= -1</flow>", "-y' &gt;= -1 &amp; x_rate' == 0</flow>")
+                        ' <param name="y_rate" type="real" local="false" dynamics="any"/>')
+    body = body.replace("y' == 1</flow>", "y' == 1 &amp; y_rate' == 0</flow>")
+    body = body.replace("-y' &gt;= -1</flow>", "-y' &gt;= -1 &amp; y_rate' == 0</flow>")
     xml, cfg = write(tmp_path, body, "y <= -1.9", 2)
-    (tmp_path / "m.cfg").write_text((tmp_path / "m.cfg").read_text().replace("y == 0", "y == 0 & x_rate == 5"))
+    (tmp_path / "m.cfg").write_text((tmp_path / "m.cfg").read_text().replace("y == 0", "y == 0 & y_rate == 5"))
     model, _, _ = load_spaceex(xml, cfg)
-    assert {u.name for u in model.bounded_inputs} == {"x_rate2", "y_rate"}
-    assert rates(model, "up", "x", {"x_rate2": 1.5, "x_rate": 5.0}) == 1.5
+    assert {u.name for u in model.bounded_inputs} == {"x_rate_share", "y_rate2"}
+    assert rates(model, "up", "y", {"y_rate2": 0.5, "y_rate": 5.0}) == 0.5
 
 
 @pytest.mark.parametrize("flow,line,message", [
@@ -145,7 +169,9 @@ def test_every_location_keeps_its_own_interval_of_rates(tmp_path_factory, interv
                                   'time-horizon = 1\n')
     model, _, _ = load_spaceex(folder / "m.xml", folder / "m.cfg")
     (u,) = model.bounded_inputs
-    assert u.varying and (u.low, u.high) == (intervals[0][0] / 4, (intervals[0][0] + intervals[0][1]) / 4)
+    one = len({(lo, w) for lo, w in intervals}) == 1
+    assert u.varying and (u.low, u.high) == ((intervals[0][0] / 4, (intervals[0][0] + intervals[0][1]) / 4)
+                                             if one else (0.0, 1.0))
     for k, (lo, w) in enumerate(intervals):
         ends = sorted(rates(model, f"l{k}", "x", {u.name: v}) for v in (u.low, u.high))
         assert abs(ends[0] - lo / 4) <= 1e-12 * (1 + abs(lo)) and abs(ends[1] - (lo + w) / 4) <= 1e-12 * (1 + abs(lo + w))

@@ -9,8 +9,8 @@ Variables. A real with a flow in some location is a state. A real with no flow a
 * otherwise bad input (an unbounded input).
 A flow that bounds a derivative by numbers (``1 <= x' & x' <= 2``, a rectangular automaton) lets
 ``x`` move at any rate in the interval, changing at any instant: ``x' == x_rate`` for a varying
-bounded input ``x_rate`` (one per variable, its range the first such location's; another
-location's interval is the same input mapped onto it). A bound on one side only, one that
+bounded input ``x_rate`` in that interval (one per variable); where locations bound ``x'`` by
+different intervals, ``x' == lo + (hi - lo) x_rate_share`` with ``x_rate_share`` in ``[0, 1]``. A bound on one side only, one that
 couples derivatives (``x' + y' <= 1``) or reads the state, is bad input.
 A state with flow 0 in every location that no transition assigns, the cfg's initial set does not
 mention, and the invariants only bound by the same interval everywhere, is a constant bounded
@@ -374,6 +374,7 @@ class DocumentBuilder(Converter):
         # (or on a jump from it) that reads the name, for a message about a name that means
         # nothing there
         self.read_at: dict[tuple, tuple[str, str, int]] = {}
+        self.rate_bounds: dict[tuple, dict] = {}     # location -> var -> (lo, hi, line) of rectangular flows
         self.rate_inputs: dict[str, tuple[str, float, float, int]] = {}     # var -> (input, lo, hi, line)
         for key, loc in self.flat.locations.items():
             flows = {}
@@ -396,8 +397,8 @@ class DocumentBuilder(Converter):
                                                  f"{rhs} contradicts it, only {local}' == 0 agrees", rel.parts[1])
                     flows[var] = (rel.parts[1], part.text.line)
                     self._reads(rel.parts[1:], key, part, "flow")
-            for var, (lo, hi, line, part) in rates.items():
-                flows[var] = self._rate_flow(var, lo, hi, line, part, flows)
+            self.rate_bounds[key] = {var: self._rate_checked(var, lo, hi, line, part, flows)
+                                     for var, (lo, hi, line, part) in rates.items()}
             self.flows[key] = flows
             invariant, fields = [], []
             for part in loc.invariants:
@@ -411,6 +412,7 @@ class DocumentBuilder(Converter):
                     self._reads(rel.parts, key, part, "invariant")
             self.invariants[key] = invariant
             self.invariant_fields[key] = fields
+        self._rate_flows()
         self.guards, self.assignments = [], []
         for tr in self.flat.transitions:
             guard = []
@@ -452,6 +454,8 @@ class DocumentBuilder(Converter):
         if len(primed) == 1:
             var = primed.pop()
             marker = "primed_rate_"
+            while any(marker in names_in(p) for p in rel.parts):      # a variable of that name: another
+                marker += "_"
             parts = []
             for p in rel.parts:
                 out = []
@@ -471,12 +475,12 @@ class DocumentBuilder(Converter):
         rates[var][:2] = [max(lo, bound[0]), min(hi, bound[1])]
         self._reads(rel.parts, key, part, "flow")
 
-    def _rate_flow(self, var: str, lo: float, hi: float, line: int, part: Part, flows: dict):
-        """The flow of ``var`` whose derivative the location bounds by numbers, ``lo <= var' <= hi``
-        (a rectangular flow): ``var' == u`` for a time-varying input ``u`` in ``[lo, hi]``, one
-        input per variable (its range that of the first location that bounds it; in a location
-        with other bounds, ``var' == lo + (hi - lo) (u - lo0) / (hi0 - lo0)``, the same set of
-        rates). Equal bounds are the rate itself."""
+    def _rate_checked(self, var: str, lo: float, hi: float, line: int, part: Part, flows: dict):
+        """``(lo, hi, line)``: the rates ``lo <= var' <= hi`` a location allows (a rectangular
+        flow), checked: bad input where an equality gives ``var'`` too, where a side is open,
+        where the interval is empty, or where a ``dynamics="const"`` variable could move. Bounds
+        that cross by rounding only (``0.1*3 <= x' & x' <= 0.3``) are read as the interval between
+        them, which holds every rate either reading allows."""
         field = self.field_of(part, "flow")
         if var in flows:
             raise InputError(f"'{var}'' is given by an equality and bounded too (give one or the other)",
@@ -485,27 +489,50 @@ class DocumentBuilder(Converter):
             raise InputError(f"'{var}'' is bounded on one side only (an unbounded rate is not supported; "
                              f"give lo <= {var}' <= hi)", self.file, field, line)
         if lo > hi:
-            raise InputError(f"the bounds of '{var}'' admit no rate ({lo:g} > {hi:g})", self.file, field, line)
+            if lo - hi > 8 * np.finfo(float).eps * max(abs(lo), abs(hi)):
+                raise InputError(f"the bounds of '{var}'' admit no rate ({lo:.17g} > {hi:.17g})", self.file,
+                                 field, line)
+            lo, hi = hi, lo
         self._refuse_change_of_const(var, part, "flow", lambda local: f"the flow bound on {local}' changes it",
                                      [Token("num", repr(hi))] if lo == hi == 0 else None)
-        if lo == hi:
-            return [Token("num", repr(float(lo)))], line
-        if var not in self.rate_inputs:
-            taken = set(self.flat.globals) | {v for v, *_ in self.rate_inputs.values()}
-            name, k = f"{var}_rate", 1
+        return lo, hi, line
+
+    def _rate_flows(self) -> None:
+        """The flows of the rectangular variables (:meth:`_rate_checked`), one time-varying input
+        per variable. Where every location that bounds ``x'`` by an interval (of positive width)
+        bounds it by the same ``[lo, hi]``, ``x' == x_rate`` with ``x_rate`` in ``[lo, hi]``;
+        where they differ, ``x' == lo + (hi - lo) x_rate_share`` in each location, with
+        ``x_rate_share`` in ``[0, 1]`` (at any instant the same share of each location's
+        interval, so each location's rates are exactly its own). Equal bounds are the rate
+        itself."""
+        intervals: dict[str, set] = {}
+        for bounds in self.rate_bounds.values():
+            for var, (lo, hi, line) in bounds.items():
+                if lo < hi:
+                    intervals.setdefault(var, {})[(lo, hi)] = line
+        taken = set(self.flat.globals)
+        for var, seen in intervals.items():
+            shared = len(seen) == 1
+            stem = f"{var}_rate" if shared else f"{var}_rate_share"
+            name, k = stem, 1
             while name in taken:
                 k += 1
-                name = f"{var}_rate{k}"
-            self.rate_inputs[var] = (name, lo, hi, line)
-        name, lo0, hi0, _ = self.rate_inputs[var]
-        if (lo, hi) == (lo0, hi0):
-            return [Token("name", name)], line
-        scale = (hi - lo) / (hi0 - lo0)
-        text = [Token("op", "("), Token("num", repr(float(lo))), Token("op", ")"), Token("op", "+"),
-                Token("op", "("), Token("num", repr(float(scale))), Token("op", ")"), Token("op", "*"),
-                Token("op", "("), Token("name", name), Token("op", "-"), Token("op", "("),
-                Token("num", repr(float(lo0))), Token("op", ")"), Token("op", ")")]
-        return text, line
+                name = f"{stem}{k}"
+            taken.add(name)
+            (lo, hi), line = next(iter(seen.items()))
+            self.rate_inputs[var] = (name, lo, hi, line) if shared else (name, 0.0, 1.0, line)
+        for key, bounds in self.rate_bounds.items():
+            for var, (lo, hi, line) in bounds.items():
+                if lo == hi:
+                    self.flows[key][var] = [Token("num", repr(float(lo)))], line
+                    continue
+                name, low, high, _ = self.rate_inputs[var]
+                if (low, high) == (lo, hi):
+                    self.flows[key][var] = [Token("name", name)], line
+                    continue
+                self.flows[key][var] = ([Token("op", "("), Token("num", repr(float(lo))), Token("op", ")"),
+                                         Token("op", "+"), Token("op", "("), Token("num", repr(float(hi - lo))),
+                                         Token("op", ")"), Token("op", "*"), Token("name", name)], line)
 
     def _reads(self, parts, key, part: Part, what: str) -> None:
         """Note the names the token lists ``parts`` of ``part`` read in location ``key``."""
