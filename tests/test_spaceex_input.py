@@ -158,19 +158,34 @@ def test_a_transition_label_that_is_not_a_declared_label_is_bad_input(tmp_path, 
     assert err.startswith(f"reach: {xml}:{line}: component 'heater': transition label 'go' is not declared"), err
 
 
-def test_the_line_of_an_input_bounded_differently_per_location_is_the_same_every_run(tmp_path, capsys):
-    """The message names the first location (in one fixed order) whose bounds differ, at its
-    invariant's line, not a line that depends on a set's iteration order."""
+def test_an_input_bounded_differently_per_location_takes_each_location_s_interval(tmp_path, capsys):
+    """``w`` in [0, 1] in 'on' and in [-1, 0] in 'off' (HyST's hybridisation writes such
+    intervals): one input ``w_share`` in [0, 1], and ``w`` in each location its own interval;
+    the imported YAML is the same automaton."""
     body = THERMOSTAT.replace('<param name="c" type="real" local="false" dynamics="any"/>',
                               '<param name="c" type="real" local="false" dynamics="any"/>\n'
                               ' <param name="w" type="real" local="false" dynamics="any"/>', 1)
     body = body.replace("<invariant>T &lt;= 22</invariant>", "<invariant>T &lt;= 22 &amp; 0 &lt;= w &lt;= 1</invariant>")
     body = body.replace("<invariant>T &gt;= 18</invariant>", "<invariant>T &gt;= 18 &amp; -1 &lt;= w &lt;= 0</invariant>")
     body = body.replace("T' == -0.1*(T - 10) + 3", "T' == -0.1*(T - 10) + 3 + w")
+    body = body.replace("T' == -0.1*(T - 10) &amp;", "T' == -0.1*(T - 10) + 2*w &amp;")
     xml, cfg = write(tmp_path, body, CFG)
-    errors = {bad_input(check(xml, cfg), capsys) for _ in range(4)}
-    assert errors == {f"reach: {xml}:8: the input 'w' has different bounds in different locations "
-                      "(not supported): in 'off' they differ from 'on'"}, errors
+    model, _, docs = load_spaceex(xml, cfg)
+    (u,) = model.bounded_inputs
+    assert (u.name, u.low, u.high, u.varying) == ("w_share", 0.0, 1.0, True)
+
+    def rate(mode, share):
+        m = model.modes[mode]
+        values = {str(s): 0.0 for s in m.symbols}
+        values.update(T=10.0, w_share=share)
+        return float(m.flow[[str(s) for s in m.symbols].index("T")].subs({s: values[str(s)] for s in m.symbols}))
+
+    assert [rate("on", v) for v in (0.0, 0.5, 1.0)] == [3.0, 3.5, 4.0]        # w in [0, 1]
+    assert [rate("off", v) for v in (0.0, 0.5, 1.0)] == [-2.0, -1.0, 0.0]     # 2 w, w in [-1, 0]
+    model_file, prop_file = write_yaml(docs, tmp_path / "out")
+    again = load_model(model_file)
+    assert [sympy.simplify(a - b) for m in model.modes for a, b in zip(model.modes[m].flow, again.modes[m].flow)] == \
+        [0] * sum(len(model.modes[m].flow) for m in model.modes)
 
 
 def test_an_input_also_read_by_another_invariant_names_that_invariant(tmp_path, capsys):
@@ -549,3 +564,11 @@ def test_a_variable_only_jumps_write_is_kept_frozen_or_refused_where_read(tmp_pa
         assert "'w' has no flow and nothing reads it: kept as a state with flow 0" in err + out
     else:
         assert "assignment: 'w' has no flow anywhere" in err
+
+
+def test_a_forbidden_set_of_too_many_disjuncts_says_the_limit(tmp_path, capsys):
+    """Each forbidden term is a property of its own: more than 256 are refused, saying so."""
+    terms = " | ".join(f"T >= {30 + k}" for k in range(300))
+    xml, cfg = write(tmp_path, THERMOSTAT, CFG.replace('forbidden = "T >= 22.01"', f'forbidden = "{terms}"'))
+    err = bad_input(check(xml, cfg), capsys)
+    assert err.startswith(f"reach: {cfg}:3: forbidden: ") and "more than 256 disjuncts (the import reads at most 256" in err, err

@@ -4,8 +4,9 @@ loaders read, so that the normal loader and its checks build the automaton.
 Variables. A real with a flow in some location is a state. A real with no flow anywhere is
 * an alias when a location's invariant defines it, ``y == e`` (``e`` free of ``y``): ``y`` is
   replaced by ``e`` there (outputs such as Building's ``y1 == x25``);
-* a varying bounded input when the invariants only bound it by numbers (``0.8 <= u <= 1``), the
-  same interval in every location where it occurs;
+* a varying bounded input when the invariants only bound it by numbers (``0.8 <= u <= 1``); where
+  locations bound it by different intervals, ``u`` stands in each for ``lo + (hi - lo) u_share``,
+  ``u_share`` in ``[0, 1]`` the input;
 * otherwise bad input (an unbounded input).
 A flow that bounds a derivative by numbers (``1 <= x' & x' <= 2``, a rectangular automaton) lets
 ``x`` move at any rate in the interval, changing at any instant: ``x' == x_rate`` for a varying
@@ -726,7 +727,7 @@ class DocumentBuilder(Converter):
             var in names_in(p) and j not in {i for i, _ in bounds.get(key, [])}
             for key in where for j, (rel, _) in enumerate(self.invariants[key]) for p in rel.parts)
         if bounds and not aliased and not uses_outside_flows:
-            intervals = {}
+            intervals, per_location = {}, {}
             for key in where:
                 if key not in bounds:
                     raise InputError(f"'{var}' has no flow and is unbounded in location "
@@ -737,16 +738,15 @@ class DocumentBuilder(Converter):
                 for j, (a, b) in bounds[key]:
                     lo, hi = max(lo, a), min(hi, b)
                     self.dropped[key].add(j)
+                if not (np.isfinite(lo) and np.isfinite(hi)) or lo > hi:
+                    raise InputError(f"the input '{var}' needs finite bounds low <= {var} <= high", self.file,
+                                     line=self.invariants[key][bounds[key][0][0]][1])
                 intervals.setdefault((lo, hi), key)
+                per_location[key] = (lo, hi)
             if len(intervals) != 1:
-                other = list(intervals.values())[1]         # the first location that differs
-                raise InputError(f"the input '{var}' has different bounds in different locations "
-                                 f"(not supported): in '{self.flat.label(other)}' they differ from "
-                                 f"'{self.flat.label(list(intervals.values())[0])}'", self.file,
-                                 line=self.invariants[other][bounds[other][0][0]][1])
+                self._input_share(var, per_location, bounds)
+                return
             (lo, hi), = intervals
-            if not (np.isfinite(lo) and np.isfinite(hi)) or lo > hi:
-                raise InputError(f"the input '{var}' needs finite bounds low <= {var} <= high", self.file, line=line)
             self.inputs[var] = (lo, hi, True)
             return
         if bounds and uses_outside_flows:           # bounded, but also read by another invariant
@@ -760,6 +760,24 @@ class DocumentBuilder(Converter):
         field, declared = (None, line) if line else self._declared_at(var)
         raise InputError(f"'{var}' has no flow and is neither bounded by numbers in the invariants nor "
                          f"defined by an equality (construct not supported)", self.file, field, declared)
+
+    def _input_share(self, var: str, per_location: dict, bounds: dict) -> None:
+        """A time-varying input bounded by other numbers in other locations (HyST's
+        hybridisation writes one such interval per location): one input ``var_share`` in
+        ``[0, 1]``, and in each location ``var`` stands for ``lo + (hi - lo) var_share``, its own
+        interval there (an alias of that location, :meth:`render`)."""
+        taken = set(self.flat.globals) | set(self.inputs) | {v for v, *_ in self.rate_inputs.values()}
+        name, k = f"{var}_share", 1
+        while name in taken:
+            k += 1
+            name = f"{var}_share{k}"
+        self.inputs[name] = (0.0, 1.0, True)
+        for key, (lo, hi) in per_location.items():
+            j = bounds[key][0][0]
+            self.aliases[key][var] = [Token("op", "("), Token("num", repr(float(lo))), Token("op", ")"),
+                                      Token("op", "+"), Token("op", "("), Token("num", repr(float(hi - lo))),
+                                      Token("op", ")"), Token("op", "*"), Token("name", name)]
+            self.alias_at[key][var] = (self.invariants[key][j][1], self.invariant_fields[key][j])
 
     def _maybe_constant_input(self, var: str, cfg_names: set[str]):
         if var in cfg_names or any(var in a for a in self.assignments):

@@ -112,7 +112,7 @@ class _Parser:
             self.take()
             terms = terms + self.conj()
             if len(terms) > MAX_TERMS:
-                raise FormulaError(f"more than {MAX_TERMS} disjuncts")
+                raise FormulaError(f"more than {MAX_TERMS} disjuncts (the import reads at most {MAX_TERMS}: each becomes a property of its own)")
         return terms
 
     def conj(self) -> list[list]:
@@ -125,7 +125,7 @@ class _Parser:
             else:
                 terms = [a + b for a in terms for b in right]
             if len(terms) > MAX_TERMS:
-                raise FormulaError(f"more than {MAX_TERMS} disjuncts")
+                raise FormulaError(f"more than {MAX_TERMS} disjuncts (the import reads at most {MAX_TERMS}: each becomes a property of its own)")
         return terms
 
     def unit(self) -> list[list]:
