@@ -572,3 +572,38 @@ def test_a_forbidden_set_of_too_many_disjuncts_says_the_limit(tmp_path, capsys):
     xml, cfg = write(tmp_path, THERMOSTAT, CFG.replace('forbidden = "T >= 22.01"', f'forbidden = "{terms}"'))
     err = bad_input(check(xml, cfg), capsys)
     assert err.startswith(f"reach: {cfg}:3: forbidden: ") and "more than 256 disjuncts (the import reads at most 256" in err, err
+
+
+JUMPING_INPUT = '''<component id="c">
+ <param name="x" type="real" local="false" dynamics="any"/>
+ <param name="y" type="real" local="false" dynamics="any"/>
+ <param name="w" type="real" local="false" dynamics="any"/>
+ <location id="1" name="a"><invariant>0 &lt;= w &lt;= 1 &amp; x &lt;= 1</invariant><flow>x' == w &amp; y' == 0</flow></location>
+ <location id="2" name="b"><invariant>LOW &lt;= w &lt;= HIGH</invariant><flow>x' == w &amp; y' == 0</flow></location>
+ <transition source="1" target="2"><guard>x &gt;= 1</guard>RESET</transition>
+</component>
+'''
+
+
+@pytest.mark.parametrize("low,high,reset,outcome", [
+    (2, 3, "", 0),                  # the intervals do not meet: the jump never fires, x stays <= 1
+    (0.5, 3, "", 1),                # they meet: the jump fires (with w in [0.5, 1]), then x grows past 1.5
+    (-1, 0, "<assignment>y := w</assignment>", 2),     # the reset would read w in {0} only
+    (0, 1, "<assignment>y := w</assignment>", 1),      # the same interval: a plain input, read as it is
+])
+def test_a_jump_keeps_an_input_bounded_per_location(tmp_path, capsys, low, high, reset, outcome):
+    """SpaceEx keeps a variable no assignment sets through a jump: ``w`` must lie in both
+    locations' intervals as the run jumps. x grows at rate w in [0, 1] to the guard x >= 1;
+    in 'b', at rate w in [LOW, HIGH]; the horizon 3 lets it pass 1.5 only in 'b'."""
+    body = JUMPING_INPUT.replace("LOW", str(low)).replace("HIGH", str(high)).replace("RESET", reset)
+    forbidden = "y >= 0.5" if reset and high == 1 else "x >= 1.5"
+    xml, cfg = write(tmp_path, body, f'system = c\ninitially = "loc(c) == a & x == 0 & y == 0"\n'
+                                     f'forbidden = "{forbidden}"\ntime-horizon = 3\n')
+    if outcome == 2:
+        err = bad_input(["check", str(xml), str(cfg), "-b", "star"], capsys)
+        assert "an assignment reads the input 'w', which keeps its value through the jump" in err, err
+        return
+    got = main(["check", str(xml), str(cfg), "-b", "star", "--counterexamples", str(tmp_path / "cx")])
+    out, err = capsys.readouterr()
+    assert got == outcome, out + err
+    assert ("transition a -> b never fires" in err) == (low == 2), err

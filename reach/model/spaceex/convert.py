@@ -771,6 +771,7 @@ class DocumentBuilder(Converter):
         while name in taken:
             k += 1
             name = f"{var}_share{k}"
+        self._jumps_keep_input(var, per_location)
         self.inputs[name] = (0.0, 1.0, True)
         for key, (lo, hi) in per_location.items():
             j = bounds[key][0][0]
@@ -778,6 +779,31 @@ class DocumentBuilder(Converter):
                                       Token("op", "+"), Token("op", "("), Token("num", repr(float(hi - lo))),
                                       Token("op", ")"), Token("op", "*"), Token("name", name)]
             self.alias_at[key][var] = (self.invariants[key][j][1], self.invariant_fields[key][j])
+
+    def _jumps_keep_input(self, var: str, per_location: dict) -> None:
+        """A jump keeps the input's value (SpaceEx: a variable no assignment sets is unchanged),
+        so a run jumps only while ``var`` lies in both locations' intervals. Where they do not
+        meet, the jump never fires: it is left out, and said. Where they meet in part of the
+        source's interval, the value only matters to an assignment that reads it: such a jump
+        is bad input (the share would hand it values the jump cannot have). Otherwise the
+        runs can bring the input into the common part as they jump (its signal is free), and
+        the jump is taken as written."""
+        for k, tr in enumerate(self.flat.transitions):
+            source, target = per_location.get(tr.source), per_location.get(tr.target)
+            if source is None or target is None or self.guards[k] is None:
+                continue
+            lo, hi = max(source[0], target[0]) + 0.0, min(source[1], target[1]) + 0.0     # no -0
+            where = f"transition {self.flat.label(tr.source)} -> {self.flat.label(tr.target)}"
+            if lo > hi:
+                self.guards[k] = None
+                self.flat.warnings.append(
+                    f"{self.file}:{tr.line}: {where} never fires: the input '{var}' keeps its value through "
+                    f"a jump and lies in [{source[0]:g}, {source[1]:g}] before it, in [{target[0]:g}, "
+                    f"{target[1]:g}] after it")
+            elif (lo, hi) != source and any(var in names_in(tokens) for tokens, _ in self.assignments[k].values()):
+                raise InputError(f"{where}: an assignment reads the input '{var}', which keeps its value through the "
+                                 f"jump and so lies in [{lo:g}, {hi:g}] there, not in the whole of the source's "
+                                 f"[{source[0]:g}, {source[1]:g}] (not supported)", self.file, line=tr.line)
 
     def _maybe_constant_input(self, var: str, cfg_names: set[str]):
         if var in cfg_names or any(var in a for a in self.assignments):
