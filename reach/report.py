@@ -301,9 +301,10 @@ def line(result, prop, model) -> str:
         parts.append(f"P(violation) <= {d['violation_probability_upper_95']:.2g} (95 %)")
     if d.get("undefined") and f.get("margin_note") != d["undefined"]:
         parts.append(d["undefined"])
-    if d.get("blocked_runs"):
+    stopped = d.get("blocked_runs", 0) - d.get("cut_runs", 0)     # the budget's cuts are counted as blocked too
+    if stopped > 0:
         total = d.get("structured_runs", 0) + d.get("random_runs", 0)
-        parts.append(f"{d['blocked_runs']} of {total} runs stopped before the horizon and were watched "
+        parts.append(f"{stopped} of {total} runs stopped before the horizon and were watched "
                      f"up to there only (no transition allowed, or too many jumps in one step of "
                      f"{number(d['dt'])}: a smaller -o dt may carry them on)")
     if result.status == Status.SAFE and d.get("stopped_runs"):

@@ -215,6 +215,12 @@ def test_runs_a_budget_cuts_count_as_violating_in_the_bound(tmp_path, kind, body
     cut = check_files(tmp_path / "m.yaml", tmp_path / "p.yaml", "montecarlo", {**options, "max_seconds": 0.05})[0]
     assert free.status is Status.UNSAFE
     assert cut.status is not Status.SAFE
+    if kind == "safety" and cut.details.get("cut_runs"):       # said as cut short, not as stopped runs
+        from reach.checking import load_bound
+        from reach.report import line
+        model, props = load_bound(tmp_path / "m.yaml", tmp_path / "p.yaml")
+        text = line(cut, props[0], model)
+        assert "cut short before the horizon" in text and "runs stopped before the horizon" not in text, text
     if cut.status is Status.UNKNOWN:
         bound = cut.details["violation_probability_upper_95"]
         violating = free.details.get("violating_runs", free.details.get("iid_violations"))
