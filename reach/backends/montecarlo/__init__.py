@@ -203,15 +203,7 @@ class MonteCarloBackend:
                                         f"invariant can keep it in), or the RK4 steps of a nonlinear flow diverged "
                                         f"(a stiff flow: a smaller -o dt); the violation bound counts the other runs"
                                         + (f" ({too_stiff_text(sim.dt, sim.too_stiff)})" if sim.too_stiff else ""))
-            if sampled < planned_random or cut or unstarted:
-                details["note"] = (f"time budget of {opts.max_seconds:.3g} s (option max_seconds) ended the "
-                                   + (f"structured runs after {n_structured} of {n_structured + unstarted} and the "
-                                      if unstarted else "")
-                                   + f"sampling after {sampled} of {planned_random} random runs"
-                                   + (f", {cut} of the runs simulated cut short before the horizon (counted "
-                                      "as violating in the violation bound)" if cut else ""))
-            if cut:
-                details["cut_runs"] = int(cut)
+            details.update(_budget_details(opts, n_structured, unstarted, sampled, planned_random, cut))
             found = monitor.first_violation()
             found = None if found is None else (0, found)
             monitors_of = partial(SafetyMonitor, model, prop)
@@ -419,15 +411,8 @@ class MonteCarloBackend:
                                     cut_random)
             details.update(_structured_details(opts, sim, planned, points, n_structured, unstarted,
                                                X[:n_structured]))
-            if X.shape[0] - n_structured < planned_random or cut or unstarted:
-                details["note"] = (f"time budget of {opts.max_seconds:.3g} s (option max_seconds) ended the "
-                                   + (f"structured runs after {n_structured} of {n_structured + unstarted} and the "
-                                      if unstarted else "")
-                                   + f"sampling after {X.shape[0] - n_structured} of {planned_random} random runs"
-                                   + (f", {cut} of the runs simulated cut short before the horizon (counted "
-                                      "as violating in the violation bound)" if cut else ""))
-                if cut:
-                    details["cut_runs"] = int(cut)
+            details.update(_budget_details(opts, n_structured, unstarted, X.shape[0] - n_structured,
+                                           planned_random, cut))
             rounds = [("structured+random", X, None, monitor, signal, choice)]
             found = monitor.first_violation()
             found = None if found is None else (0, found)
@@ -571,6 +556,22 @@ def _structured_text(opts: Options, sim: Simulator, planned: int, kept: int) -> 
     if kept >= planned:
         return f"{kept} structured runs"
     return f"{kept} of {planned} planned structured runs (at most {_cap_text(opts, sim)})"
+
+
+def _budget_details(opts: Options, structured: int, unstarted: int, sampled: int, planned_random: int,
+                    cut: int) -> dict:
+    """``note`` and ``cut_runs`` where the time budget ended the runs early (structured runs left
+    unstarted, random runs not sampled, runs cut short under way); empty otherwise."""
+    if not (sampled < planned_random or cut or unstarted):
+        return {}
+    out = {"note": (f"time budget of {opts.max_seconds:.3g} s (option max_seconds) ended the "
+                    + (f"structured runs after {structured} of {structured + unstarted} and the " if unstarted else "")
+                    + f"sampling after {sampled} of {planned_random} random runs"
+                    + (f", {cut} of the runs simulated cut short before the horizon (counted as violating in "
+                       "the violation bound)" if cut else ""))}
+    if cut:
+        out["cut_runs"] = int(cut)
+    return out
 
 
 def _structured_details(opts: Options, sim: Simulator, planned: int, points: int, ran: int, unstarted: int,

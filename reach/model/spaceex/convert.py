@@ -173,6 +173,24 @@ def yaml_names(used: list[str]) -> dict[str, str]:
     return out
 
 
+def _fresh(stem: str, taken: set) -> str:
+    """``stem``, or ``stem2``, ``stem3``, ... : the first not in ``taken`` (a name the import
+    makes for an input of its own, beside the model's variables)."""
+    name, k = stem, 1
+    while name in taken:
+        k += 1
+        name = f"{stem}{k}"
+    return name
+
+
+def _share_of(lo: float, hi: float, share: str) -> list[Token]:
+    """The tokens of ``(lo) + (hi - lo)*share``: the value in ``[lo, hi]`` that the input
+    ``share`` (in ``[0, 1]``) picks."""
+    return [Token("op", "("), Token("num", repr(float(lo))), Token("op", ")"), Token("op", "+"),
+            Token("op", "("), Token("num", repr(float(hi - lo))), Token("op", ")"), Token("op", "*"),
+            Token("name", share)]
+
+
 class Identifiers:
     """Unique identifiers made from texts: ``a``, then ``a_2``, ``a_3``, ... Each base keeps
     its next number, so n equal texts cost n steps, not n squared."""
@@ -514,11 +532,7 @@ class DocumentBuilder(Converter):
         taken = set(self.flat.globals)
         for var, seen in intervals.items():
             shared = len(seen) == 1
-            stem = f"{var}_rate" if shared else f"{var}_rate_share"
-            name, k = stem, 1
-            while name in taken:
-                k += 1
-                name = f"{stem}{k}"
+            name = _fresh(f"{var}_rate" if shared else f"{var}_rate_share", taken)
             taken.add(name)
             (lo, hi), line = next(iter(seen.items()))
             self.rate_inputs[var] = (name, lo, hi, line) if shared else (name, 0.0, 1.0, line)
@@ -531,9 +545,7 @@ class DocumentBuilder(Converter):
                 if (low, high) == (lo, hi):
                     self.flows[key][var] = [Token("name", name)], line
                     continue
-                self.flows[key][var] = ([Token("op", "("), Token("num", repr(float(lo))), Token("op", ")"),
-                                         Token("op", "+"), Token("op", "("), Token("num", repr(float(hi - lo))),
-                                         Token("op", ")"), Token("op", "*"), Token("name", name)], line)
+                self.flows[key][var] = _share_of(lo, hi, name), line
 
     def _reads(self, parts, key, part: Part, what: str) -> None:
         """Note the names the token lists ``parts`` of ``part`` read in location ``key``."""
@@ -766,18 +778,13 @@ class DocumentBuilder(Converter):
         hybridisation writes one such interval per location): one input ``var_share`` in
         ``[0, 1]``, and in each location ``var`` stands for ``lo + (hi - lo) var_share``, its own
         interval there (an alias of that location, :meth:`render`)."""
-        taken = set(self.flat.globals) | set(self.inputs) | {v for v, *_ in self.rate_inputs.values()}
-        name, k = f"{var}_share", 1
-        while name in taken:
-            k += 1
-            name = f"{var}_share{k}"
+        name = _fresh(f"{var}_share", set(self.flat.globals) | set(self.inputs)
+                      | {v for v, *_ in self.rate_inputs.values()})
         self._jumps_keep_input(var, per_location)
         self.inputs[name] = (0.0, 1.0, True)
         for key, (lo, hi) in per_location.items():
             j = bounds[key][0][0]
-            self.aliases[key][var] = [Token("op", "("), Token("num", repr(float(lo))), Token("op", ")"),
-                                      Token("op", "+"), Token("op", "("), Token("num", repr(float(hi - lo))),
-                                      Token("op", ")"), Token("op", "*"), Token("name", name)]
+            self.aliases[key][var] = _share_of(lo, hi, name)
             self.alias_at[key][var] = (self.invariants[key][j][1], self.invariant_fields[key][j])
 
     def _jumps_keep_input(self, var: str, per_location: dict) -> None:
